@@ -1,0 +1,62 @@
+//! Library errors. Each names the file (or input) and the problem.
+
+use std::path::PathBuf;
+
+/// Errors from loading, rendering and saving.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// A file could not be read or written.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The cause.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The SVG could not be parsed.
+    #[error("{path}: malformed SVG: {message}")]
+    Svg {
+        /// The file (or `<string>`).
+        path: PathBuf,
+        /// What the parser said.
+        message: String,
+    },
+    /// The SVG uses something diffsvg does not render.
+    #[error("{path}: unsupported: {what}")]
+    Unsupported {
+        /// The file.
+        path: PathBuf,
+        /// The element or feature, with its id when it has one.
+        what: String,
+    },
+    /// A number is NaN, infinite or out of range.
+    #[error("{path}: invalid value: {what}")]
+    InvalidValue {
+        /// The file or input.
+        path: PathBuf,
+        /// Which value and why.
+        what: String,
+    },
+    /// An image could not be decoded or encoded, or has the wrong size.
+    #[error("{path}: {message}")]
+    Image {
+        /// The file.
+        path: PathBuf,
+        /// The problem.
+        message: String,
+    },
+}
+
+/// Result with [`Error`].
+pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+impl Error {
+    /// Wraps an I/O error with its file.
+    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        Error::Io {
+            path: path.into(),
+            source,
+        }
+    }
+}

@@ -1,0 +1,214 @@
+//! Images in memory and on disk.
+//!
+//! In memory an [`Image`] holds **premultiplied** RGBA `f32` in `[0, 1]`, sRGB values (no
+//! linearization, as browsers and resvg composite), row-major, y down. Files hold straight
+//! (not premultiplied) 8-bit RGBA or RGB: PNG and JPEG are read, PNG is written.
+
+use std::io::Write as _;
+use std::path::Path;
+
+use crate::error::{Error, Result};
+
+/// A premultiplied RGBA image.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Image {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// `width × height` premultiplied RGBA pixels, row-major.
+    pub data: Vec<[f32; 4]>,
+}
+
+impl Image {
+    /// A transparent image.
+    pub fn new(width: u32, height: u32) -> Self {
+        Image::filled(width, height, [0.0; 4])
+    }
+
+    /// An image filled with one premultiplied color.
+    pub fn filled(width: u32, height: u32, c: [f32; 4]) -> Self {
+        Image {
+            width,
+            height,
+            data: vec![c; width as usize * height as usize],
+        }
+    }
+
+    /// The pixel at `(x, y)`.
+    pub fn get(&self, x: u32, y: u32) -> [f32; 4] {
+        self.data[y as usize * self.width as usize + x as usize]
+    }
+
+    /// Builds an image from straight 8-bit RGBA bytes.
+    pub fn from_rgba8(width: u32, height: u32, bytes: &[u8]) -> Self {
+        let data = bytes
+            .chunks_exact(4)
+            .map(|p| {
+                let a = p[3] as f32 / 255.0;
+                [
+                    p[0] as f32 / 255.0 * a,
+                    p[1] as f32 / 255.0 * a,
+                    p[2] as f32 / 255.0 * a,
+                    a,
+                ]
+            })
+            .collect();
+        Image {
+            width,
+            height,
+            data,
+        }
+    }
+
+    /// Builds an image from premultiplied 8-bit RGBA bytes (tiny-skia's pixmap layout).
+    pub fn from_premultiplied_rgba8(width: u32, height: u32, bytes: &[u8]) -> Self {
+        let data = bytes
+            .chunks_exact(4)
+            .map(|p| [0, 1, 2, 3].map(|i| p[i] as f32 / 255.0))
+            .collect();
+        Image {
+            width,
+            height,
+            data,
+        }
+    }
+
+    /// Straight 8-bit RGBA bytes (rounded, clamped).
+    pub fn to_rgba8(&self) -> Vec<u8> {
+        let mut out = Vec::with_capacity(self.data.len() * 4);
+        for p in &self.data {
+            let a = p[3].clamp(0.0, 1.0);
+            let un = |c: f32| {
+                if a > 0.0 {
+                    (c / a).clamp(0.0, 1.0)
+                } else {
+                    0.0
+                }
+            };
+            out.extend_from_slice(&[
+                to_u8(un(p[0])),
+                to_u8(un(p[1])),
+                to_u8(un(p[2])),
+                to_u8(a),
+            ]);
+        }
+        out
+    }
+
+    /// Composites the image over an opaque or translucent straight color (in `[0, 1]`).
+    pub fn over_background(&mut self, bg: [f32; 4]) {
+        let b = [bg[0] * bg[3], bg[1] * bg[3], bg[2] * bg[3], bg[3]];
+        for p in &mut self.data {
+            let t = 1.0 - p[3];
+            for c in 0..4 {
+                p[c] += t * b[c];
+            }
+        }
+    }
+
+    /// Reads a PNG or JPEG file (straight alpha in the file), premultiplying.
+    pub fn load(path: impl AsRef<Path>) -> Result<Image> {
+        let path = path.as_ref();
+        let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        let img = image::load_from_memory(&bytes).map_err(|e| Error::Image {
+            path: path.to_path_buf(),
+            message: format!("not a readable PNG or JPEG image: {e}"),
+        })?;
+        let rgba = img.to_rgba8();
+        Ok(Image::from_rgba8(rgba.width(), rgba.height(), rgba.as_raw()))
+    }
+
+    /// Writes a PNG (straight alpha) atomically: a temporary file beside the target, then
+    /// a rename, so that no half-written file is ever left under the final name.
+    pub fn save_png(&self, path: impl AsRef<Path>) -> Result<()> {
+        let path = path.as_ref();
+        let mut buf = Vec::new();
+        let enc = image::codecs::png::PngEncoder::new(&mut buf);
+        image::ImageEncoder::write_image(
+            enc,
+            &self.to_rgba8(),
+            self.width,
+            self.height,
+            image::ExtendedColorType::Rgba8,
+        )
+        .map_err(|e| Error::Image {
+            path: path.to_path_buf(),
+            message: format!("cannot encode PNG: {e}"),
+        })?;
+        write_atomic(path, &buf)
+    }
+
+    /// Resamples to `width × height` with a triangle filter (premultiplied, so edges do
+    /// not pick up the color of transparent pixels).
+    pub fn resized(&self, width: u32, height: u32) -> Image {
+        let mut buf = image::Rgba32FImage::new(self.width, self.height);
+        for (i, px) in buf.pixels_mut().enumerate() {
+            px.0 = self.data[i];
+        }
+        let r = image::imageops::resize(&buf, width, height, image::imageops::FilterType::Triangle);
+        Image {
+            width,
+            height,
+            data: r.pixels().map(|p| p.0).collect(),
+        }
+    }
+}
+
+/// `[0, 1]` → `0..=255`, rounded.
+#[inline]
+pub fn to_u8(v: f32) -> u8 {
+    (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u8
+}
+
+/// Writes `bytes` to `path` through a temporary file in the same folder and a rename.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => std::path::PathBuf::from("."),
+    };
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "out".into());
+    let tmp = dir.join(format!(".{name}.{}.tmp", std::process::id()));
+    let res = (|| {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+        std::fs::rename(&tmp, path)
+    })();
+    if let Err(e) = res {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(Error::io(path, e));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rgba8_round_trip_premultiplies() {
+        let bytes = [255, 0, 0, 128, 10, 20, 30, 255, 0, 0, 0, 0];
+        let img = Image::from_rgba8(3, 1, &bytes);
+        assert!((img.data[0][0] - 128.0 / 255.0).abs() < 1e-6);
+        assert_eq!(img.to_rgba8(), bytes.to_vec());
+    }
+
+    #[test]
+    fn atomic_write_leaves_no_temp_and_reports_bad_dirs() {
+        let dir = std::env::temp_dir().join(format!("diffsvg-io-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let f = dir.join("a.png");
+        Image::filled(2, 2, [0.5, 0.0, 0.0, 0.5]).save_png(&f).unwrap();
+        let back = Image::load(&f).unwrap();
+        assert_eq!((back.width, back.height), (2, 2));
+        assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1);
+        let bad = dir.join("missing/dir/x.png");
+        let e = Image::new(1, 1).save_png(&bad).unwrap_err().to_string();
+        assert!(e.contains("x.png"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}

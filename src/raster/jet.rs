@@ -1,0 +1,191 @@
+//! A small forward-mode dual number for local Jacobians.
+//!
+//! Stroke outline vertices are short closed-form functions of at most three centerline
+//! points and the half width. The stroker is written once, generic over [`Scalar`]; the
+//! forward pass runs it on `f64`, the backward pass on [`Jet`] seeded on those seven inputs
+//! to get the exact local Jacobian.
+
+use std::ops::{Add, Div, Mul, Neg, Sub};
+
+/// Number of seeded inputs of a [`Jet`]: three points (six numbers) and the half width.
+pub const N: usize = 7;
+
+/// Arithmetic the stroker needs.
+pub trait Scalar:
+    Copy
+    + Add<Output = Self>
+    + Sub<Output = Self>
+    + Mul<Output = Self>
+    + Div<Output = Self>
+    + Neg<Output = Self>
+{
+    /// A constant.
+    fn c(v: f64) -> Self;
+    /// The value, without derivatives.
+    fn v(self) -> f64;
+    /// Square root.
+    fn sqrt(self) -> Self;
+    /// Sine.
+    fn sin(self) -> Self;
+    /// Cosine.
+    fn cos(self) -> Self;
+    /// `atan2(self, x)`.
+    fn atan2(self, x: Self) -> Self;
+}
+
+impl Scalar for f64 {
+    #[inline]
+    fn c(v: f64) -> Self {
+        v
+    }
+    #[inline]
+    fn v(self) -> f64 {
+        self
+    }
+    #[inline]
+    fn sqrt(self) -> Self {
+        f64::sqrt(self)
+    }
+    #[inline]
+    fn sin(self) -> Self {
+        f64::sin(self)
+    }
+    #[inline]
+    fn cos(self) -> Self {
+        f64::cos(self)
+    }
+    #[inline]
+    fn atan2(self, x: Self) -> Self {
+        f64::atan2(self, x)
+    }
+}
+
+/// A value with its derivatives with respect to [`N`] inputs.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Jet {
+    /// Value.
+    pub v: f64,
+    /// Partial derivatives.
+    pub d: [f64; N],
+}
+
+impl Jet {
+    /// The input number `i` with value `v`.
+    pub fn var(v: f64, i: usize) -> Jet {
+        let mut d = [0.0; N];
+        d[i] = 1.0;
+        Jet { v, d }
+    }
+
+    #[inline]
+    fn chain(self, v: f64, dv: f64) -> Jet {
+        Jet {
+            v,
+            d: self.d.map(|x| x * dv),
+        }
+    }
+}
+
+impl Add for Jet {
+    type Output = Jet;
+    #[inline]
+    fn add(self, o: Jet) -> Jet {
+        let mut d = self.d;
+        for (a, b) in d.iter_mut().zip(o.d) {
+            *a += b;
+        }
+        Jet { v: self.v + o.v, d }
+    }
+}
+
+impl Sub for Jet {
+    type Output = Jet;
+    #[inline]
+    fn sub(self, o: Jet) -> Jet {
+        self + (-o)
+    }
+}
+
+impl Neg for Jet {
+    type Output = Jet;
+    #[inline]
+    fn neg(self) -> Jet {
+        Jet {
+            v: -self.v,
+            d: self.d.map(|x| -x),
+        }
+    }
+}
+
+impl Mul for Jet {
+    type Output = Jet;
+    #[inline]
+    fn mul(self, o: Jet) -> Jet {
+        let mut d = [0.0; N];
+        for (i, x) in d.iter_mut().enumerate() {
+            *x = self.d[i] * o.v + self.v * o.d[i];
+        }
+        Jet { v: self.v * o.v, d }
+    }
+}
+
+impl Div for Jet {
+    type Output = Jet;
+    #[inline]
+    fn div(self, o: Jet) -> Jet {
+        let v = self.v / o.v;
+        let mut d = [0.0; N];
+        for (i, x) in d.iter_mut().enumerate() {
+            *x = (self.d[i] - v * o.d[i]) / o.v;
+        }
+        Jet { v, d }
+    }
+}
+
+impl Scalar for Jet {
+    fn c(v: f64) -> Self {
+        Jet { v, d: [0.0; N] }
+    }
+    fn v(self) -> f64 {
+        self.v
+    }
+    fn sqrt(self) -> Self {
+        let s = self.v.sqrt();
+        self.chain(s, if s > 0.0 { 0.5 / s } else { 0.0 })
+    }
+    fn sin(self) -> Self {
+        self.chain(self.v.sin(), self.v.cos())
+    }
+    fn cos(self) -> Self {
+        self.chain(self.v.cos(), -self.v.sin())
+    }
+    fn atan2(self, x: Self) -> Self {
+        let r2 = self.v * self.v + x.v * x.v;
+        let v = self.v.atan2(x.v);
+        if r2 == 0.0 {
+            return Jet::c(v);
+        }
+        let mut d = [0.0; N];
+        for (i, o) in d.iter_mut().enumerate() {
+            *o = (x.v * self.d[i] - self.v * x.d[i]) / r2;
+        }
+        Jet { v, d }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn derivatives_match_differences() {
+        let f = |x: Jet, y: Jet| (x * y + x.sin()) / (y.sqrt() + Jet::c(1.0)) + y.atan2(x).cos();
+        let (x0, y0) = (0.7, 1.3);
+        let j = f(Jet::var(x0, 0), Jet::var(y0, 1));
+        let fv = |x: f64, y: f64| f(Jet::c(x), Jet::c(y)).v;
+        let e = 1e-6;
+        let dx = (fv(x0 + e, y0) - fv(x0 - e, y0)) / (2.0 * e);
+        let dy = (fv(x0, y0 + e) - fv(x0, y0 - e)) / (2.0 * e);
+        assert!((j.d[0] - dx).abs() < 1e-6 && (j.d[1] - dy).abs() < 1e-6);
+    }
+}

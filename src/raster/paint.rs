@@ -1,0 +1,268 @@
+//! Paint evaluation at pixel centers.
+//!
+//! Solid colors and gradients give a straight RGBA color; gradient stops are interpolated
+//! straight (not premultiplied) and premultiplied afterwards, as tiny-skia does. The item's
+//! opacity multiplies alpha. Gradient geometry lives in gradient space; pixel centers are
+//! mapped there by the inverse of [`Gradient::transform`].
+//!
+//! The radial gradient is SVG's two-point conical gradient: `t` is the largest value for
+//! which the pixel lies on the circle interpolated between the focal circle `(f, fr)` at
+//! `t = 0` and the end circle `(c, r)` at `t = 1` with a non-negative radius. Where no such
+//! circle exists the pixel is left unpainted.
+
+use super::jet::Scalar;
+use crate::scene::{Affine, Gradient, GradientKind, Paint, Point, Spread, Stop, apply, invert};
+
+/// A paint ready for per-pixel evaluation.
+#[derive(Clone, Debug)]
+pub enum PaintEval {
+    /// Premultiplied color, opacity included.
+    Solid([f32; 4]),
+    /// A gradient.
+    Gradient(GradientEval),
+}
+
+/// A gradient ready for evaluation.
+#[derive(Clone, Debug)]
+pub struct GradientEval {
+    /// Device → gradient space.
+    pub inv: Affine,
+    /// Geometry.
+    pub kind: GradientKind,
+    /// Spread.
+    pub spread: Spread,
+    /// Stops.
+    pub stops: Vec<Stop>,
+    /// Item opacity.
+    pub opacity: f64,
+}
+
+impl PaintEval {
+    /// Prepares `paint` drawn with `opacity`. `None` when nothing would be painted (a
+    /// singular gradient transform, no stops).
+    pub fn new(paint: &Paint, opacity: f64) -> Option<PaintEval> {
+        match paint {
+            Paint::Solid(c) => {
+                let a = opacity.clamp(0.0, 1.0);
+                Some(PaintEval::Solid([
+                    (c[0] * a) as f32,
+                    (c[1] * a) as f32,
+                    (c[2] * a) as f32,
+                    a as f32,
+                ]))
+            }
+            Paint::Gradient(g) => Some(PaintEval::Gradient(GradientEval::new(g, opacity)?)),
+        }
+    }
+
+    /// Premultiplied color at device point `p` (a pixel center).
+    #[inline]
+    pub fn at(&self, p: Point) -> [f32; 4] {
+        match self {
+            PaintEval::Solid(c) => *c,
+            PaintEval::Gradient(g) => g.at(p),
+        }
+    }
+
+    /// Whether the paint is one color everywhere.
+    pub fn is_solid(&self) -> bool {
+        matches!(self, PaintEval::Solid(_))
+    }
+}
+
+impl GradientEval {
+    /// Prepares a gradient; `None` when its transform is singular or it has no stops.
+    pub fn new(g: &Gradient, opacity: f64) -> Option<GradientEval> {
+        if g.stops.is_empty() {
+            return None;
+        }
+        Some(GradientEval {
+            inv: invert(&g.transform)?,
+            kind: g.kind.clone(),
+            spread: g.spread,
+            stops: g.stops.clone(),
+            opacity: opacity.clamp(0.0, 1.0),
+        })
+    }
+
+    /// Premultiplied color at device point `p`.
+    pub fn at(&self, p: Point) -> [f32; 4] {
+        let q = apply(&self.inv, p);
+        let Some(t) = gradient_t(&geometry(&self.kind), q) else {
+            return [0.0; 4];
+        };
+        let c = stop_color(&self.stops, spread(self.spread, t).0);
+        let a = c[3] * self.opacity;
+        [
+            (c[0] * a) as f32,
+            (c[1] * a) as f32,
+            (c[2] * a) as f32,
+            a as f32,
+        ]
+    }
+}
+
+/// Geometry parameters as a flat array: linear `x1 y1 x2 y2`, radial `cx cy r fx fy fr`.
+pub fn geometry(kind: &GradientKind) -> Geometry<f64> {
+    match *kind {
+        GradientKind::Linear { p1, p2 } => Geometry::Linear([p1[0], p1[1], p2[0], p2[1]]),
+        GradientKind::Radial { c, r, f, fr } => Geometry::Radial([c[0], c[1], r, f[0], f[1], fr]),
+    }
+}
+
+/// Gradient geometry over any scalar (so the backward pass can differentiate it).
+#[derive(Clone, Copy, Debug)]
+pub enum Geometry<S> {
+    /// `x1 y1 x2 y2`.
+    Linear([S; 4]),
+    /// `cx cy r fx fy fr`.
+    Radial([S; 6]),
+}
+
+/// The gradient parameter `t` at gradient-space point `q`, before spreading. `None` where
+/// a two-point conical gradient is undefined.
+pub fn gradient_t<S: Scalar>(g: &Geometry<S>, q: Point) -> Option<S> {
+    match *g {
+        Geometry::Linear([x1, y1, x2, y2]) => {
+            let (dx, dy) = (x2 - x1, y2 - y1);
+            let len2 = dx * dx + dy * dy;
+            if len2.v() <= 0.0 {
+                // Degenerate: SVG paints the last stop's color.
+                return Some(S::c(1.0));
+            }
+            Some(((S::c(q[0]) - x1) * dx + (S::c(q[1]) - y1) * dy) / len2)
+        }
+        Geometry::Radial([cx, cy, r, fx, fy, fr]) => {
+            // |q − f − t·cd| = fr + t·dr with cd = c − f, dr = r − fr.
+            let (cdx, cdy) = (cx - fx, cy - fy);
+            let dr = r - fr;
+            let (px, py) = (S::c(q[0]) - fx, S::c(q[1]) - fy);
+            let a = cdx * cdx + cdy * cdy - dr * dr;
+            let b = px * cdx + py * cdy + fr * dr;
+            let c = px * px + py * py - fr * fr;
+            let radius_ok = |t: S| (fr + t * dr).v() >= 0.0;
+            if a.v().abs() < 1e-9 * (r.v() * r.v()).max(1e-12) {
+                // Linear case: 2bt = c.
+                if b.v() == 0.0 {
+                    return None;
+                }
+                let t = c / (S::c(2.0) * b);
+                return radius_ok(t).then_some(t);
+            }
+            let disc = b * b - a * c;
+            if disc.v() < 0.0 {
+                return None;
+            }
+            let s = disc.sqrt();
+            let (t1, t2) = ((b + s) / a, (b - s) / a);
+            let (hi, lo) = if t1.v() >= t2.v() { (t1, t2) } else { (t2, t1) };
+            if radius_ok(hi) {
+                Some(hi)
+            } else if radius_ok(lo) {
+                Some(lo)
+            } else {
+                None
+            }
+        }
+    }
+}
+
+/// Applies the spread method; returns `t` in `[0, 1]` and `∂t'/∂t` (±1, or 0 where padded).
+#[inline]
+pub fn spread<S: Scalar>(mode: Spread, t: S) -> (f64, f64) {
+    let v = t.v();
+    match mode {
+        Spread::Pad => {
+            if v <= 0.0 {
+                (0.0, 0.0)
+            } else if v >= 1.0 {
+                (1.0, 0.0)
+            } else {
+                (v, 1.0)
+            }
+        }
+        Spread::Repeat => (v - v.floor(), 1.0),
+        Spread::Reflect => {
+            let m = v.rem_euclid(2.0);
+            if m <= 1.0 { (m, 1.0) } else { (2.0 - m, -1.0) }
+        }
+    }
+}
+
+/// Which stops bracket `t` and the interpolation weight: `(i, j, u)` with the color
+/// `stops[i] + u·(stops[j] − stops[i])`.
+#[inline]
+pub fn bracket(stops: &[Stop], t: f64) -> (usize, usize, f64) {
+    let n = stops.len();
+    if t <= stops[0].offset {
+        return (0, 0, 0.0);
+    }
+    if t >= stops[n - 1].offset {
+        return (n - 1, n - 1, 0.0);
+    }
+    // First stop with offset > t.
+    let j = stops.partition_point(|s| s.offset <= t).clamp(1, n - 1);
+    let i = j - 1;
+    let span = stops[j].offset - stops[i].offset;
+    let u = if span > 0.0 {
+        (t - stops[i].offset) / span
+    } else {
+        1.0
+    };
+    (i, j, u)
+}
+
+/// Straight RGBA at `t` in `[0, 1]` (stop opacity in alpha).
+pub fn stop_color(stops: &[Stop], t: f64) -> [f64; 4] {
+    let (i, j, u) = bracket(stops, t);
+    let a = &stops[i];
+    let b = &stops[j];
+    let ca = [a.color[0], a.color[1], a.color[2], a.opacity];
+    let cb = [b.color[0], b.color[1], b.color[2], b.opacity];
+    [0, 1, 2, 3].map(|k| ca[k] + u * (cb[k] - ca[k]))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn stop(o: f64, c: f64) -> Stop {
+        Stop {
+            offset: o,
+            color: [c, c, c],
+            opacity: 1.0,
+        }
+    }
+
+    #[test]
+    fn linear_t_and_spread() {
+        let g = Geometry::Linear([0.0, 0.0, 10.0, 0.0]);
+        assert_eq!(gradient_t(&g, [2.5, 7.0]), Some(0.25));
+        assert_eq!(spread(Spread::Pad, 1.5).0, 1.0);
+        assert!((spread(Spread::Repeat, 1.25).0 - 0.25).abs() < 1e-12);
+        assert!((spread(Spread::Reflect, 1.25).0 - 0.75).abs() < 1e-12);
+        assert!((spread(Spread::Reflect, -0.25).0 - 0.25).abs() < 1e-12);
+    }
+
+    #[test]
+    fn radial_t_on_circles() {
+        // Concentric: t = distance / r.
+        let g = Geometry::Radial([5.0, 5.0, 4.0, 5.0, 5.0, 0.0]);
+        let t = gradient_t(&g, [7.0, 5.0]).unwrap();
+        assert!((t - 0.5).abs() < 1e-12);
+        // Focal point: t = 0 there, 1 on the end circle.
+        let g = Geometry::Radial([5.0, 5.0, 4.0, 3.0, 5.0, 0.0]);
+        assert!(gradient_t(&g, [3.0, 5.0]).unwrap().abs() < 1e-12);
+        assert!((gradient_t(&g, [9.0, 5.0]).unwrap() - 1.0).abs() < 1e-12);
+        assert!((gradient_t(&g, [1.0, 5.0]).unwrap() - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn stops_interpolate_and_clamp() {
+        let stops = [stop(0.2, 0.0), stop(0.6, 1.0), stop(0.6, 0.5), stop(1.0, 0.0)];
+        assert_eq!(stop_color(&stops, 0.0)[0], 0.0);
+        assert!((stop_color(&stops, 0.4)[0] - 0.5).abs() < 1e-12);
+        assert!((stop_color(&stops, 0.7)[0] - 0.375).abs() < 1e-12);
+        assert_eq!(stop_color(&stops, 1.0)[0], 0.0);
+    }
+}

@@ -1,0 +1,468 @@
+//! The 2D scene model.
+//!
+//! # Contract
+//!
+//! * **Device space.** Every coordinate stored in a [`Scene`] is in device pixels of the
+//!   canvas `width × height`: x to the right, **y down**, the origin at the top-left corner
+//!   of the top-left pixel. Pixel `(i, j)` covers `[i, i+1] × [j, j+1]`; its center is
+//!   `(i + 0.5, j + 0.5)`. SVG transforms and the viewBox are baked in when the scene is
+//!   loaded; only stroke frames and paint transforms keep a matrix (see [`Stroke::frame`],
+//!   [`Gradient::transform`]).
+//! * **Geometry.** A path is a list of subpaths; each subpath is a start point followed by
+//!   cubic Bézier segments (three points each). Lines and quadratics are elevated to cubics
+//!   exactly and remember their original kind only to be written back compactly.
+//! * **Colors** are straight (not premultiplied) sRGB values in `[0, 1]`, stored as `f64`.
+//!   Opacities are separate scalars in `[0, 1]`. Rendering premultiplies.
+//! * **Paint order.** [`Scene::nodes`] is in paint order (first drawn first); a [`Group`]
+//!   with opacity < 1 is composited as one layer, like resvg.
+//!
+//! The flat parameter vector that the optimizer moves is described in [`params`].
+
+pub mod params;
+pub mod svg_in;
+pub mod svg_out;
+
+pub use params::{ParamGroup, ParamLayout, ParamSlot};
+
+/// A 2D point or vector in device pixels.
+pub type Point = [f64; 2];
+
+/// An affine transform `[a, b, c, d, e, f]` mapping `(x, y)` to
+/// `(a·x + c·y + e, b·x + d·y + f)`, as in SVG's `matrix(a b c d e f)`.
+pub type Affine = [f64; 6];
+
+/// The identity [`Affine`].
+pub const IDENTITY: Affine = [1.0, 0.0, 0.0, 1.0, 0.0, 0.0];
+
+/// Applies an affine transform to a point.
+#[inline]
+pub fn apply(t: &Affine, p: Point) -> Point {
+    [t[0] * p[0] + t[2] * p[1] + t[4], t[1] * p[0] + t[3] * p[1] + t[5]]
+}
+
+/// Composes two transforms: the result applies `b` first, then `a`.
+pub fn concat(a: &Affine, b: &Affine) -> Affine {
+    [
+        a[0] * b[0] + a[2] * b[1],
+        a[1] * b[0] + a[3] * b[1],
+        a[0] * b[2] + a[2] * b[3],
+        a[1] * b[2] + a[3] * b[3],
+        a[0] * b[4] + a[2] * b[5] + a[4],
+        a[1] * b[4] + a[3] * b[5] + a[5],
+    ]
+}
+
+/// Inverts an affine transform; `None` when it is singular or not finite.
+pub fn invert(t: &Affine) -> Option<Affine> {
+    let det = t[0] * t[3] - t[1] * t[2];
+    if !det.is_finite() || det.abs() < 1e-12 {
+        return None;
+    }
+    let inv = 1.0 / det;
+    let a = t[3] * inv;
+    let b = -t[1] * inv;
+    let c = -t[2] * inv;
+    let d = t[0] * inv;
+    Some([a, b, c, d, -(a * t[4] + c * t[5]), -(b * t[4] + d * t[5])])
+}
+
+/// A whole drawing: canvas size and nodes in paint order.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Scene {
+    /// Canvas width in pixels.
+    pub width: u32,
+    /// Canvas height in pixels.
+    pub height: u32,
+    /// Top-level nodes, first drawn first.
+    pub nodes: Vec<Node>,
+}
+
+/// One node of the scene tree.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Node {
+    /// A filled and/or stroked path.
+    Path(Path),
+    /// A group composited as a layer with an opacity.
+    Group(Group),
+}
+
+/// A group of nodes rendered into a transparent layer, then composited with `opacity`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Group {
+    /// The SVG id (may be empty).
+    pub id: String,
+    /// Layer opacity in `[0, 1]`.
+    pub opacity: f64,
+    /// Children in paint order.
+    pub children: Vec<Node>,
+}
+
+/// How a segment was written in the source, so SVG out can write it back compactly.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SegmentKind {
+    /// A straight line (control points at 1/3 and 2/3).
+    Line,
+    /// A quadratic elevated to a cubic.
+    Quad,
+    /// A cubic.
+    Cubic,
+}
+
+/// A run of connected cubic segments.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Subpath {
+    /// Index of the start point in [`Path::points`]; segment `k` uses the points
+    /// `start + 3k + 1 ..= start + 3k + 3` with the previous end point as its first point.
+    pub start: usize,
+    /// How each segment was written; its length is the number of segments.
+    pub kinds: Vec<SegmentKind>,
+    /// Whether the subpath is closed by a straight line back to its start.
+    pub closed: bool,
+}
+
+impl Subpath {
+    /// Number of cubic segments (not counting the closing line).
+    pub fn segments(&self) -> usize {
+        self.kinds.len()
+    }
+
+    /// Index one past the last point of this subpath.
+    pub fn end(&self) -> usize {
+        self.start + 1 + 3 * self.kinds.len()
+    }
+}
+
+/// Fill rule.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FillRule {
+    /// Nonzero winding.
+    NonZero,
+    /// Even-odd.
+    EvenOdd,
+}
+
+/// Spread method of a gradient outside `[0, 1]`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Spread {
+    /// Clamp to the end stops.
+    Pad,
+    /// Mirror back and forth.
+    Reflect,
+    /// Repeat.
+    Repeat,
+}
+
+/// A gradient stop.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Stop {
+    /// Offset in `[0, 1]`; offsets are non-decreasing along a gradient.
+    pub offset: f64,
+    /// Straight sRGB color in `[0, 1]`.
+    pub color: [f64; 3],
+    /// Stop opacity in `[0, 1]`.
+    pub opacity: f64,
+}
+
+/// Geometry of a gradient paint, in gradient space.
+#[derive(Clone, Debug, PartialEq)]
+pub enum GradientKind {
+    /// `t` is the projection onto `p1 → p2`.
+    Linear {
+        /// Start point.
+        p1: Point,
+        /// End point.
+        p2: Point,
+    },
+    /// Two-point conical gradient from the focal circle `(f, fr)` (t = 0) to the circle
+    /// `(c, r)` (t = 1), as SVG's `radialGradient`.
+    Radial {
+        /// Center of the end circle.
+        c: Point,
+        /// Radius of the end circle.
+        r: f64,
+        /// Focal point.
+        f: Point,
+        /// Focal radius.
+        fr: f64,
+    },
+}
+
+/// A linear or radial gradient.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Gradient {
+    /// The SVG id of the gradient element (may be empty).
+    pub id: String,
+    /// Geometry in gradient space.
+    pub kind: GradientKind,
+    /// Gradient space → device space.
+    pub transform: Affine,
+    /// Spread method.
+    pub spread: Spread,
+    /// At least one stop, offsets non-decreasing.
+    pub stops: Vec<Stop>,
+}
+
+/// What a fill or stroke is painted with.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Paint {
+    /// One straight sRGB color in `[0, 1]`.
+    Solid([f64; 3]),
+    /// A linear or radial gradient.
+    Gradient(Gradient),
+}
+
+/// Fill of a path.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Fill {
+    /// Paint.
+    pub paint: Paint,
+    /// Fill opacity in `[0, 1]`.
+    pub opacity: f64,
+    /// Fill rule.
+    pub rule: FillRule,
+}
+
+/// Stroke line join.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LineJoin {
+    /// Miter, falling back to bevel past the miter limit.
+    Miter,
+    /// Miter clipped at the miter limit (SVG 2 `miter-clip`).
+    MiterClip,
+    /// Round.
+    Round,
+    /// Bevel.
+    Bevel,
+}
+
+/// Stroke line cap.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LineCap {
+    /// Flat at the end point.
+    Butt,
+    /// Half disc.
+    Round,
+    /// Half square.
+    Square,
+}
+
+/// Stroke of a path.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Stroke {
+    /// Paint.
+    pub paint: Paint,
+    /// Stroke opacity in `[0, 1]`.
+    pub opacity: f64,
+    /// Width in stroke-frame units (device pixels when `frame` is the identity).
+    pub width: f64,
+    /// Line join.
+    pub join: LineJoin,
+    /// Line cap.
+    pub cap: LineCap,
+    /// Miter limit (ratio of miter length to width), ≥ 1.
+    pub miter_limit: f64,
+    /// Dash lengths in stroke-frame units, even count, all ≥ 0 and not all zero.
+    pub dash: Option<Vec<f64>>,
+    /// Dash offset in stroke-frame units.
+    pub dash_offset: f64,
+    /// Linear map `[a, b, c, d]` from stroke frame to device space. The identity unless
+    /// the path was drawn under a non-uniform scale or skew: then the outline is built in
+    /// the frame (where the pen is round) and mapped to device space.
+    pub frame: [f64; 4],
+}
+
+/// Linear identity for [`Stroke::frame`].
+pub const FRAME_IDENTITY: [f64; 4] = [1.0, 0.0, 0.0, 1.0];
+
+/// A filled and/or stroked path. Fill is painted before the stroke unless
+/// `stroke_first` is set (SVG `paint-order: stroke`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Path {
+    /// The SVG id (may be empty; SVG out invents none).
+    pub id: String,
+    /// All control points of all subpaths, device pixels.
+    pub points: Vec<Point>,
+    /// Subpaths indexing into `points`.
+    pub subpaths: Vec<Subpath>,
+    /// Fill, if any.
+    pub fill: Option<Fill>,
+    /// Stroke, if any.
+    pub stroke: Option<Stroke>,
+    /// Paint the stroke before the fill.
+    pub stroke_first: bool,
+}
+
+impl Path {
+    /// An empty path with no paint.
+    pub fn new(id: impl Into<String>) -> Self {
+        Path {
+            id: id.into(),
+            points: Vec::new(),
+            subpaths: Vec::new(),
+            fill: None,
+            stroke: None,
+            stroke_first: false,
+        }
+    }
+
+    /// Starts a new subpath at `p`.
+    pub fn move_to(&mut self, p: Point) {
+        self.subpaths.push(Subpath {
+            start: self.points.len(),
+            kinds: Vec::new(),
+            closed: false,
+        });
+        self.points.push(p);
+    }
+
+    fn last_point(&self) -> Point {
+        *self.points.last().expect("move_to must come first")
+    }
+
+    /// Appends a cubic segment to the current subpath.
+    pub fn cubic_to(&mut self, c1: Point, c2: Point, p: Point) {
+        self.push_segment([c1, c2, p], SegmentKind::Cubic);
+    }
+
+    /// Appends a straight segment, elevated to a cubic with control points at 1/3 and 2/3.
+    pub fn line_to(&mut self, p: Point) {
+        let a = self.last_point();
+        let c1 = [a[0] + (p[0] - a[0]) / 3.0, a[1] + (p[1] - a[1]) / 3.0];
+        let c2 = [a[0] + 2.0 * (p[0] - a[0]) / 3.0, a[1] + 2.0 * (p[1] - a[1]) / 3.0];
+        self.push_segment([c1, c2, p], SegmentKind::Line);
+    }
+
+    /// Appends a quadratic segment, elevated exactly to a cubic.
+    pub fn quad_to(&mut self, q: Point, p: Point) {
+        let a = self.last_point();
+        let c1 = [a[0] + 2.0 / 3.0 * (q[0] - a[0]), a[1] + 2.0 / 3.0 * (q[1] - a[1])];
+        let c2 = [p[0] + 2.0 / 3.0 * (q[0] - p[0]), p[1] + 2.0 / 3.0 * (q[1] - p[1])];
+        self.push_segment([c1, c2, p], SegmentKind::Quad);
+    }
+
+    fn push_segment(&mut self, pts: [Point; 3], kind: SegmentKind) {
+        let sp = self.subpaths.last_mut().expect("move_to must come first");
+        sp.kinds.push(kind);
+        self.points.extend_from_slice(&pts);
+    }
+
+    /// Closes the current subpath.
+    pub fn close(&mut self) {
+        if let Some(sp) = self.subpaths.last_mut() {
+            sp.closed = true;
+        }
+    }
+
+    /// Axis-aligned bounds of the control points, `[xmin, ymin, xmax, ymax]`; the curve lies
+    /// inside. `None` for a path without points.
+    pub fn control_bounds(&self) -> Option<[f64; 4]> {
+        let mut it = self.points.iter();
+        let first = it.next()?;
+        let mut b = [first[0], first[1], first[0], first[1]];
+        for p in it {
+            b[0] = b[0].min(p[0]);
+            b[1] = b[1].min(p[1]);
+            b[2] = b[2].max(p[0]);
+            b[3] = b[3].max(p[1]);
+        }
+        Some(b)
+    }
+}
+
+impl Scene {
+    /// An empty scene of the given size.
+    pub fn new(width: u32, height: u32) -> Self {
+        Scene {
+            width,
+            height,
+            nodes: Vec::new(),
+        }
+    }
+
+    /// Calls `f` on every path in paint order (depth first).
+    pub fn for_each_path<'a>(&'a self, mut f: impl FnMut(&'a Path)) {
+        fn walk<'a>(nodes: &'a [Node], f: &mut impl FnMut(&'a Path)) {
+            for n in nodes {
+                match n {
+                    Node::Path(p) => f(p),
+                    Node::Group(g) => walk(&g.children, f),
+                }
+            }
+        }
+        walk(&self.nodes, &mut f);
+    }
+
+    /// Calls `f` on every path in paint order (depth first), mutably.
+    pub fn for_each_path_mut(&mut self, mut f: impl FnMut(&mut Path)) {
+        fn walk(nodes: &mut [Node], f: &mut impl FnMut(&mut Path)) {
+            for n in nodes {
+                match n {
+                    Node::Path(p) => f(p),
+                    Node::Group(g) => walk(&mut g.children, f),
+                }
+            }
+        }
+        walk(&mut self.nodes, &mut f);
+    }
+
+    /// Number of paths in the scene.
+    pub fn path_count(&self) -> usize {
+        let mut n = 0;
+        self.for_each_path(|_| n += 1);
+        n
+    }
+
+    /// Scales the whole scene (geometry, widths, paint transforms) by `s` about the origin
+    /// and sets the canvas to `width × height`.
+    pub fn scale_to(&mut self, s: f64, width: u32, height: u32) {
+        self.width = width;
+        self.height = height;
+        let st: Affine = [s, 0.0, 0.0, s, 0.0, 0.0];
+        fn scale_paint(p: &mut Paint, st: &Affine) {
+            if let Paint::Gradient(g) = p {
+                g.transform = concat(st, &g.transform);
+            }
+        }
+        self.for_each_path_mut(|p| {
+            for q in &mut p.points {
+                q[0] *= s;
+                q[1] *= s;
+            }
+            if let Some(f) = &mut p.fill {
+                scale_paint(&mut f.paint, &st);
+            }
+            if let Some(st_) = &mut p.stroke {
+                scale_paint(&mut st_.paint, &st);
+                // The frame maps frame units to device units: scale it, keep the width.
+                for v in &mut st_.frame {
+                    *v *= s;
+                }
+                st_.normalize_frame();
+            }
+        });
+    }
+}
+
+impl Stroke {
+    /// If the frame is a similarity (uniform scale times a rotation or reflection), folds
+    /// its scale into the width and resets it to the identity, so that the stroke is
+    /// described in device pixels. Rotations do not change a round pen.
+    pub fn normalize_frame(&mut self) {
+        let [a, b, c, d] = self.frame;
+        let sx = a.hypot(b);
+        let sy = c.hypot(d);
+        let dot = a * c + b * d;
+        if sx > 0.0 && (sx - sy).abs() <= 1e-9 * sx && dot.abs() <= 1e-9 * sx * sy {
+            self.width *= sx;
+            if let Some(d) = &mut self.dash {
+                for v in d.iter_mut() {
+                    *v *= sx;
+                }
+            }
+            self.dash_offset *= sx;
+            // A reflection flips the pen's sides but a round pen does not care; the
+            // outline orientation is fixed later by the nonzero fill.
+            self.frame = FRAME_IDENTITY;
+        }
+    }
+}

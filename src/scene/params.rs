@@ -1,0 +1,412 @@
+//! The flat parameter vector of a scene.
+//!
+//! Every number the optimizer may move is one `f64` slot. The order is fixed by a single
+//! walk over the scene ([`walk`]) so that parameters, gradients and learning rates line up:
+//!
+//! * nodes in paint order, depth first; a [`Group`](super::Group) contributes its opacity;
+//! * per path: all control points (`x, y` per point, in [`Path::points`] order), then the
+//!   fill (paint, then opacity), then the stroke (paint, opacity, width);
+//! * a solid paint is `r, g, b`; a linear gradient is `x1, y1, x2, y2`, a radial one
+//!   `cx, cy, r, fx, fy, fr`, each followed by its stops as `offset, r, g, b, opacity`.
+//!
+//! Gradients returned by the backward pass use the same layout.
+
+use super::{GradientKind, Node, Paint, Path, Scene};
+
+/// What kind of quantity a parameter is; the optimizer gives each group its own learning
+/// rate and projection.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum ParamGroup {
+    /// Control point coordinates, device pixels.
+    Points,
+    /// Color channels (solid paints and gradient stops), `[0, 1]`.
+    Color,
+    /// Fill, stroke, stop and group opacities, `[0, 1]`.
+    Opacity,
+    /// Stroke widths, ≥ 0.
+    StrokeWidth,
+    /// Gradient geometry (end points, centers, radii) in gradient space.
+    PaintGeometry,
+    /// Gradient stop offsets, `[0, 1]`, kept ordered.
+    StopOffset,
+}
+
+impl ParamGroup {
+    /// All groups, in a fixed order.
+    pub const ALL: [ParamGroup; 6] = [
+        ParamGroup::Points,
+        ParamGroup::Color,
+        ParamGroup::Opacity,
+        ParamGroup::StrokeWidth,
+        ParamGroup::PaintGeometry,
+        ParamGroup::StopOffset,
+    ];
+
+    /// Lower-case name used on the command line and in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            ParamGroup::Points => "points",
+            ParamGroup::Color => "colors",
+            ParamGroup::Opacity => "opacities",
+            ParamGroup::StrokeWidth => "widths",
+            ParamGroup::PaintGeometry => "paint",
+            ParamGroup::StopOffset => "stops",
+        }
+    }
+}
+
+/// One scalar of the parameter vector: its group and the node that owns it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ParamSlot {
+    /// Kind of quantity.
+    pub group: ParamGroup,
+    /// Index into [`ParamLayout::owners`].
+    pub owner: usize,
+}
+
+/// A node that owns parameters.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Owner {
+    /// The SVG id (may be empty).
+    pub id: String,
+    /// `true` for a group (its only parameter is its opacity), `false` for a path.
+    pub is_group: bool,
+}
+
+/// Where one paint's parameters start; see the module docs for the order inside.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub struct PaintOffsets {
+    /// First slot of the paint.
+    pub base: usize,
+    /// First slot of the stops (`base + 4` for linear, `base + 6` for radial); unused for
+    /// solid paints.
+    pub stops: usize,
+}
+
+/// Offsets of one path's parameters.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub struct PathOffsets {
+    /// First slot of the control points (`2k` is point `k`'s x, `2k + 1` its y).
+    pub points: usize,
+    /// Fill paint.
+    pub fill: Option<PaintOffsets>,
+    /// Fill opacity.
+    pub fill_opacity: usize,
+    /// Stroke paint.
+    pub stroke: Option<PaintOffsets>,
+    /// Stroke opacity.
+    pub stroke_opacity: usize,
+    /// Stroke width.
+    pub stroke_width: usize,
+}
+
+/// The layout of a scene's parameter vector.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ParamLayout {
+    /// One entry per scalar.
+    pub slots: Vec<ParamSlot>,
+    /// Nodes owning parameters, paths and groups, in walk order.
+    pub owners: Vec<Owner>,
+    /// Offsets per path, in paint order (the order of [`Scene::for_each_path`]).
+    pub paths: Vec<PathOffsets>,
+    /// Offset of each group's opacity, in walk order.
+    pub groups: Vec<usize>,
+}
+
+/// What a slot visited by [`walk`] is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Part {
+    /// Opacity of group number `.0` (walk order).
+    GroupOpacity(usize),
+    /// First coordinate of path `.0`'s control points.
+    PathPoints(usize),
+    /// Any other coordinate of a path's control points.
+    Point,
+    /// First slot of a fill paint of path `.0`.
+    FillPaint(usize),
+    /// First slot of a stroke paint of path `.0`.
+    StrokePaint(usize),
+    /// First stop slot of the current paint.
+    Stops,
+    /// Another slot inside a paint.
+    PaintSlot,
+    /// Fill opacity of path `.0`.
+    FillOpacity(usize),
+    /// Stroke opacity of path `.0`.
+    StrokeOpacity(usize),
+    /// Stroke width of path `.0`.
+    StrokeWidth(usize),
+}
+
+/// Visits every parameter of `scene` in the canonical order. `f` receives the owner index
+/// (into [`ParamLayout::owners`]), the group, what the slot is, and the value.
+pub fn walk(scene: &mut Scene, f: &mut dyn FnMut(usize, ParamGroup, Part, &mut f64)) {
+    let mut owner = 0usize;
+    let mut path_ix = 0usize;
+    let mut group_ix = 0usize;
+    walk_nodes(&mut scene.nodes, f, &mut owner, &mut path_ix, &mut group_ix);
+}
+
+fn walk_nodes(
+    nodes: &mut [Node],
+    f: &mut dyn FnMut(usize, ParamGroup, Part, &mut f64),
+    owner: &mut usize,
+    path_ix: &mut usize,
+    group_ix: &mut usize,
+) {
+    for n in nodes {
+        match n {
+            Node::Group(g) => {
+                f(*owner, ParamGroup::Opacity, Part::GroupOpacity(*group_ix), &mut g.opacity);
+                *owner += 1;
+                *group_ix += 1;
+                walk_nodes(&mut g.children, f, owner, path_ix, group_ix);
+            }
+            Node::Path(p) => {
+                walk_path(p, *owner, *path_ix, f);
+                *owner += 1;
+                *path_ix += 1;
+            }
+        }
+    }
+}
+
+fn walk_path(
+    p: &mut Path,
+    owner: usize,
+    ix: usize,
+    f: &mut dyn FnMut(usize, ParamGroup, Part, &mut f64),
+) {
+    for (k, q) in p.points.iter_mut().enumerate() {
+        let first = if k == 0 { Part::PathPoints(ix) } else { Part::Point };
+        f(owner, ParamGroup::Points, first, &mut q[0]);
+        f(owner, ParamGroup::Points, Part::Point, &mut q[1]);
+    }
+    if let Some(fill) = &mut p.fill {
+        walk_paint(&mut fill.paint, owner, Part::FillPaint(ix), f);
+        f(owner, ParamGroup::Opacity, Part::FillOpacity(ix), &mut fill.opacity);
+    }
+    if let Some(s) = &mut p.stroke {
+        walk_paint(&mut s.paint, owner, Part::StrokePaint(ix), f);
+        f(owner, ParamGroup::Opacity, Part::StrokeOpacity(ix), &mut s.opacity);
+        f(owner, ParamGroup::StrokeWidth, Part::StrokeWidth(ix), &mut s.width);
+    }
+}
+
+fn walk_paint(
+    paint: &mut Paint,
+    owner: usize,
+    first: Part,
+    f: &mut dyn FnMut(usize, ParamGroup, Part, &mut f64),
+) {
+    let mut first = Some(first);
+    let mut next = |fp: &mut Option<Part>| fp.take().unwrap_or(Part::PaintSlot);
+    match paint {
+        Paint::Solid(c) => {
+            for v in c.iter_mut() {
+                f(owner, ParamGroup::Color, next(&mut first), v);
+            }
+        }
+        Paint::Gradient(g) => {
+            let geo: Vec<&mut f64> = match &mut g.kind {
+                GradientKind::Linear { p1, p2 } => {
+                    let [a, b] = p1;
+                    let [c, d] = p2;
+                    vec![a, b, c, d]
+                }
+                GradientKind::Radial { c, r, f: fp, fr } => {
+                    let [a, b] = c;
+                    let [x, y] = fp;
+                    vec![a, b, r, x, y, fr]
+                }
+            };
+            for v in geo {
+                f(owner, ParamGroup::PaintGeometry, next(&mut first), v);
+            }
+            for (i, s) in g.stops.iter_mut().enumerate() {
+                let part = if i == 0 { Part::Stops } else { Part::PaintSlot };
+                f(owner, ParamGroup::StopOffset, part, &mut s.offset);
+                for v in s.color.iter_mut() {
+                    f(owner, ParamGroup::Color, Part::PaintSlot, v);
+                }
+                f(owner, ParamGroup::Opacity, Part::PaintSlot, &mut s.opacity);
+            }
+        }
+    }
+}
+
+impl ParamLayout {
+    /// Computes the layout of `scene`'s parameter vector.
+    pub fn new(scene: &Scene) -> Self {
+        let mut owners = Vec::new();
+        collect_owners(&scene.nodes, &mut owners);
+        let mut layout = ParamLayout {
+            slots: Vec::new(),
+            owners,
+            paths: vec![PathOffsets::default(); scene.path_count()],
+            groups: Vec::new(),
+        };
+        // The walk needs `&mut`; a clone keeps this function's signature honest.
+        let mut s = scene.clone();
+        let mut current_paint: Option<(usize, bool)> = None;
+        walk(&mut s, &mut |owner, group, part, _| {
+            let at = layout.slots.len();
+            layout.slots.push(ParamSlot { group, owner });
+            match part {
+                Part::GroupOpacity(_) => layout.groups.push(at),
+                Part::PathPoints(i) => layout.paths[i].points = at,
+                Part::FillPaint(i) => {
+                    layout.paths[i].fill = Some(PaintOffsets { base: at, stops: at });
+                    current_paint = Some((i, false));
+                }
+                Part::StrokePaint(i) => {
+                    layout.paths[i].stroke = Some(PaintOffsets { base: at, stops: at });
+                    current_paint = Some((i, true));
+                }
+                Part::Stops => {
+                    if let Some((i, stroke)) = current_paint {
+                        let p = &mut layout.paths[i];
+                        let po = if stroke { &mut p.stroke } else { &mut p.fill };
+                        if let Some(po) = po {
+                            po.stops = at;
+                        }
+                    }
+                }
+                Part::FillOpacity(i) => layout.paths[i].fill_opacity = at,
+                Part::StrokeOpacity(i) => layout.paths[i].stroke_opacity = at,
+                Part::StrokeWidth(i) => layout.paths[i].stroke_width = at,
+                Part::Point | Part::PaintSlot => {}
+            }
+        });
+        layout
+    }
+
+    /// Number of scalars.
+    pub fn len(&self) -> usize {
+        self.slots.len()
+    }
+
+    /// Whether the scene has no parameters.
+    pub fn is_empty(&self) -> bool {
+        self.slots.is_empty()
+    }
+}
+
+fn collect_owners(nodes: &[Node], out: &mut Vec<Owner>) {
+    for n in nodes {
+        match n {
+            Node::Group(g) => {
+                out.push(Owner {
+                    id: g.id.clone(),
+                    is_group: true,
+                });
+                collect_owners(&g.children, out);
+            }
+            Node::Path(p) => out.push(Owner {
+                id: p.id.clone(),
+                is_group: false,
+            }),
+        }
+    }
+}
+
+impl Scene {
+    /// The parameter vector, in the order of [`walk`].
+    pub fn params(&self) -> Vec<f64> {
+        let mut out = Vec::new();
+        let mut s = self.clone();
+        walk(&mut s, &mut |_, _, _, v| out.push(*v));
+        out
+    }
+
+    /// Writes a parameter vector back into the scene. Panics if the length differs from
+    /// [`ParamLayout::len`]; callers build vectors from [`Scene::params`].
+    pub fn set_params(&mut self, values: &[f64]) {
+        let mut i = 0;
+        walk(self, &mut |_, _, _, v| {
+            *v = values[i];
+            i += 1;
+        });
+        assert_eq!(i, values.len(), "parameter vector length mismatch");
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::{Fill, FillRule, Gradient, Spread, Stop, IDENTITY};
+
+    fn sample() -> Scene {
+        let mut s = Scene::new(10, 10);
+        let mut p = Path::new("a");
+        p.move_to([1.0, 1.0]);
+        p.line_to([5.0, 1.0]);
+        p.cubic_to([6.0, 2.0], [6.0, 4.0], [5.0, 5.0]);
+        p.close();
+        p.fill = Some(Fill {
+            paint: Paint::Gradient(Gradient {
+                id: "g".into(),
+                kind: GradientKind::Radial {
+                    c: [5.0, 5.0],
+                    r: 3.0,
+                    f: [4.0, 4.0],
+                    fr: 0.0,
+                },
+                transform: IDENTITY,
+                spread: Spread::Pad,
+                stops: vec![
+                    Stop {
+                        offset: 0.0,
+                        color: [1.0, 0.0, 0.0],
+                        opacity: 1.0,
+                    },
+                    Stop {
+                        offset: 1.0,
+                        color: [0.0, 0.0, 1.0],
+                        opacity: 0.5,
+                    },
+                ],
+            }),
+            opacity: 0.8,
+            rule: FillRule::NonZero,
+        });
+        s.nodes.push(Node::Group(crate::scene::Group {
+            id: "grp".into(),
+            opacity: 0.5,
+            children: vec![Node::Path(p)],
+        }));
+        s
+    }
+
+    #[test]
+    fn layout_offsets_match_walk() {
+        let s = sample();
+        let l = ParamLayout::new(&s);
+        let v = s.params();
+        assert_eq!(l.len(), v.len());
+        // group opacity, 7 points, radial (6) + 2 stops (10), fill opacity
+        assert_eq!(v.len(), 1 + 14 + 6 + 10 + 1);
+        assert_eq!(l.groups, vec![0]);
+        assert_eq!(v[l.groups[0]], 0.5);
+        let po = l.paths[0];
+        assert_eq!(v[po.points], 1.0);
+        let fill = po.fill.unwrap();
+        assert_eq!(v[fill.base + 2], 3.0); // r
+        assert_eq!(fill.stops, fill.base + 6);
+        assert_eq!(v[fill.stops + 5 + 4], 0.5); // second stop opacity
+        assert_eq!(v[po.fill_opacity], 0.8);
+        assert_eq!(l.owners.len(), 2);
+        assert!(l.owners[0].is_group);
+    }
+
+    #[test]
+    fn set_params_round_trips() {
+        let mut s = sample();
+        let mut v = s.params();
+        for (i, x) in v.iter_mut().enumerate() {
+            *x += i as f64 * 0.001;
+        }
+        s.set_params(&v);
+        assert_eq!(s.params(), v);
+    }
+}

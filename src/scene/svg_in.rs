@@ -1,0 +1,438 @@
+//! SVG in: usvg parses and simplifies, this module bakes transforms into device space.
+
+use std::path::{Path as FsPath, PathBuf};
+
+use super::{
+    Affine, FRAME_IDENTITY, Fill, FillRule, Gradient, GradientKind, Group, LineCap, LineJoin,
+    Node, Paint, Path, Scene, Spread, Stop, Stroke, apply, concat,
+};
+use crate::error::{Error, Result};
+
+/// The largest canvas side accepted, in pixels.
+pub const MAX_SIDE: u32 = 16384;
+
+/// How to size the canvas when loading an SVG.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub enum Sizing {
+    /// The SVG's own size (its `width`/`height`, else its viewBox).
+    #[default]
+    Natural,
+    /// Scale uniformly so that the canvas is this many pixels wide.
+    Width(u32),
+    /// Scale uniformly by this factor.
+    Scale(f64),
+    /// Scale non-uniformly to exactly this size (used to match a target image).
+    Exact(u32, u32),
+}
+
+impl Scene {
+    /// Loads an SVG file. Errors name the file.
+    pub fn load(path: impl AsRef<FsPath>, sizing: Sizing) -> Result<Scene> {
+        let path = path.as_ref();
+        let data = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        Scene::from_svg_data(&data, path, sizing)
+    }
+
+    /// Parses SVG text; `name` is used in error messages.
+    pub fn from_svg_str(text: &str, name: impl AsRef<FsPath>, sizing: Sizing) -> Result<Scene> {
+        Scene::from_svg_data(text.as_bytes(), name.as_ref(), sizing)
+    }
+
+    /// Parses SVG bytes (plain or gzip-compressed); `name` is used in error messages.
+    pub fn from_svg_data(data: &[u8], name: &FsPath, sizing: Sizing) -> Result<Scene> {
+        let svg_err = |m: String| Error::Svg {
+            path: name.to_path_buf(),
+            message: m,
+        };
+        if let Ok(text) = std::str::from_utf8(data) {
+            reject_unsupported_xml(text, name)?;
+        }
+        let opt = usvg::Options::default();
+        let tree = usvg::Tree::from_data(data, &opt).map_err(|e| svg_err(e.to_string()))?;
+        from_tree(&tree, name, sizing)
+    }
+}
+
+/// usvg silently drops some elements (text without fonts); refuse them instead of
+/// rendering something else than the file says.
+fn reject_unsupported_xml(text: &str, name: &FsPath) -> Result<()> {
+    let Ok(doc) = usvg::roxmltree::Document::parse_with_options(
+        text,
+        usvg::roxmltree::ParsingOptions {
+            allow_dtd: true,
+            ..Default::default()
+        },
+    ) else {
+        return Ok(()); // usvg reports the parse error with more detail
+    };
+    for n in doc.descendants().filter(|n| n.is_element()) {
+        let tag = n.tag_name().name();
+        if matches!(tag, "text" | "foreignObject") {
+            return Err(Error::Unsupported {
+                path: name.to_path_buf(),
+                what: describe(tag, n.attribute("id")),
+            });
+        }
+    }
+    Ok(())
+}
+
+fn describe(tag: &str, id: Option<&str>) -> String {
+    match id {
+        Some(id) if !id.is_empty() => format!("<{tag}> element (id \"{id}\")"),
+        _ => format!("<{tag}> element"),
+    }
+}
+
+fn to_affine(t: usvg::Transform) -> Affine {
+    [
+        t.sx as f64,
+        t.ky as f64,
+        t.kx as f64,
+        t.sy as f64,
+        t.tx as f64,
+        t.ty as f64,
+    ]
+}
+
+struct Ctx<'a> {
+    name: &'a FsPath,
+    root: Affine,
+}
+
+impl Ctx<'_> {
+    fn unsupported(&self, what: String) -> Error {
+        Error::Unsupported {
+            path: self.name.to_path_buf(),
+            what,
+        }
+    }
+    fn invalid(&self, what: String) -> Error {
+        Error::InvalidValue {
+            path: self.name.to_path_buf(),
+            what,
+        }
+    }
+}
+
+fn canvas_size(tree: &usvg::Tree, sizing: Sizing, name: &FsPath) -> Result<(u32, u32, Affine)> {
+    let (w, h) = (tree.size().width() as f64, tree.size().height() as f64);
+    let bad = |what: String| Error::InvalidValue {
+        path: name.to_path_buf(),
+        what,
+    };
+    let (sx, sy) = match sizing {
+        Sizing::Natural => (1.0, 1.0),
+        Sizing::Width(px) => {
+            let s = px as f64 / w;
+            (s, s)
+        }
+        Sizing::Scale(s) => {
+            if !(s.is_finite() && s > 0.0) {
+                return Err(bad(format!("scale {s} must be a positive number")));
+            }
+            (s, s)
+        }
+        Sizing::Exact(pw, ph) => (pw as f64 / w, ph as f64 / h),
+    };
+    let (cw, ch) = match sizing {
+        Sizing::Exact(pw, ph) => (pw as f64, ph as f64),
+        Sizing::Width(pw) => (pw as f64, (h * sy).round()),
+        _ => ((w * sx).round(), (h * sy).round()),
+    };
+    if !(cw >= 1.0 && ch >= 1.0) {
+        return Err(bad(format!("output size {cw}x{ch} is empty")));
+    }
+    if cw > MAX_SIDE as f64 || ch > MAX_SIDE as f64 {
+        return Err(bad(format!(
+            "output size {cw}x{ch} exceeds the limit of {MAX_SIDE} pixels per side"
+        )));
+    }
+    Ok((cw as u32, ch as u32, [sx, 0.0, 0.0, sy, 0.0, 0.0]))
+}
+
+/// Converts a parsed usvg tree into a [`Scene`] of the requested size.
+pub fn from_tree(tree: &usvg::Tree, name: &FsPath, sizing: Sizing) -> Result<Scene> {
+    let (w, h, root) = canvas_size(tree, sizing, name)?;
+    let ctx = Ctx { name, root };
+    let mut scene = Scene::new(w, h);
+    scene.nodes = convert_group_children(tree.root(), &ctx)?;
+    Ok(scene)
+}
+
+fn convert_group_children(g: &usvg::Group, ctx: &Ctx) -> Result<Vec<Node>> {
+    let mut out = Vec::new();
+    for child in g.children() {
+        match child {
+            usvg::Node::Group(g) => {
+                let what = |f: &str| describe("g", Some(g.id())).replace("element", f);
+                if g.clip_path().is_some() {
+                    return Err(ctx.unsupported(what("element with clip-path")));
+                }
+                if g.mask().is_some() {
+                    return Err(ctx.unsupported(what("element with mask")));
+                }
+                if !g.filters().is_empty() {
+                    return Err(ctx.unsupported(what("element with filter")));
+                }
+                if g.blend_mode() != usvg::BlendMode::Normal {
+                    return Err(ctx.unsupported(what("element with mix-blend-mode")));
+                }
+                let children = convert_group_children(g, ctx)?;
+                let opacity = g.opacity().get() as f64;
+                if g.should_isolate() && opacity < 1.0 {
+                    out.push(Node::Group(Group {
+                        id: g.id().to_string(),
+                        opacity,
+                        children,
+                    }));
+                } else {
+                    out.extend(children);
+                }
+            }
+            usvg::Node::Path(p) => {
+                if let Some(path) = convert_path(p, ctx)? {
+                    out.push(Node::Path(path));
+                }
+            }
+            usvg::Node::Image(i) => {
+                return Err(ctx.unsupported(describe("image", Some(i.id()))));
+            }
+            usvg::Node::Text(t) => {
+                return Err(ctx.unsupported(describe("text", Some(t.id()))));
+            }
+        }
+    }
+    Ok(out)
+}
+
+fn convert_path(p: &usvg::Path, ctx: &Ctx) -> Result<Option<Path>> {
+    if !p.is_visible() {
+        return Ok(None);
+    }
+    let t = concat(&ctx.root, &to_affine(p.abs_transform()));
+    let mut out = Path::new(p.id());
+    let tp = |q: usvg::tiny_skia_path::Point| -> Result<[f64; 2]> {
+        let d = apply(&t, [q.x as f64, q.y as f64]);
+        if d[0].is_finite() && d[1].is_finite() {
+            Ok(d)
+        } else {
+            Err(ctx.invalid(format!(
+                "path \"{}\" has a non-finite coordinate ({}, {})",
+                p.id(),
+                q.x,
+                q.y
+            )))
+        }
+    };
+    let mut open = false;
+    for seg in p.data().segments() {
+        use usvg::tiny_skia_path::PathSegment as S;
+        match seg {
+            S::MoveTo(a) => {
+                out.move_to(tp(a)?);
+                open = true;
+            }
+            S::LineTo(a) => {
+                ensure_open(&mut out, &mut open);
+                out.line_to(tp(a)?);
+            }
+            S::QuadTo(a, b) => {
+                ensure_open(&mut out, &mut open);
+                out.quad_to(tp(a)?, tp(b)?);
+            }
+            S::CubicTo(a, b, c) => {
+                ensure_open(&mut out, &mut open);
+                out.cubic_to(tp(a)?, tp(b)?, tp(c)?);
+            }
+            S::Close => {
+                out.close();
+                open = false;
+            }
+        }
+    }
+    if out.points.is_empty() {
+        return Ok(None);
+    }
+    if let Some(f) = p.fill() {
+        out.fill = Some(Fill {
+            paint: convert_paint(f.paint(), &t, p.id(), ctx)?,
+            opacity: f.opacity().get() as f64,
+            rule: match f.rule() {
+                usvg::FillRule::NonZero => FillRule::NonZero,
+                usvg::FillRule::EvenOdd => FillRule::EvenOdd,
+            },
+        });
+    }
+    if let Some(s) = p.stroke() {
+        let mut stroke = Stroke {
+            paint: convert_paint(s.paint(), &t, p.id(), ctx)?,
+            opacity: s.opacity().get() as f64,
+            width: s.width().get() as f64,
+            join: match s.linejoin() {
+                usvg::LineJoin::Miter => LineJoin::Miter,
+                usvg::LineJoin::MiterClip => LineJoin::MiterClip,
+                usvg::LineJoin::Round => LineJoin::Round,
+                usvg::LineJoin::Bevel => LineJoin::Bevel,
+            },
+            cap: match s.linecap() {
+                usvg::LineCap::Butt => LineCap::Butt,
+                usvg::LineCap::Round => LineCap::Round,
+                usvg::LineCap::Square => LineCap::Square,
+            },
+            miter_limit: s.miterlimit().get() as f64,
+            dash: s
+                .dasharray()
+                .map(|d| d.iter().map(|&v| v as f64).collect()),
+            dash_offset: s.dashoffset() as f64,
+            frame: [t[0], t[1], t[2], t[3]],
+        };
+        stroke.normalize_frame();
+        if stroke.frame != FRAME_IDENTITY {
+            let [a, b, c, d] = stroke.frame;
+            if (a * d - b * c).abs() < 1e-12 {
+                return Ok(if out.fill.is_some() { Some(out) } else { None });
+            }
+        }
+        out.stroke = Some(stroke);
+    }
+    if out.fill.is_none() && out.stroke.is_none() {
+        return Ok(None);
+    }
+    out.stroke_first = p.paint_order() == usvg::PaintOrder::StrokeAndFill;
+    Ok(Some(out))
+}
+
+/// usvg may emit a segment right after a close without a MoveTo: SVG starts the next
+/// subpath at the previous subpath's start.
+fn ensure_open(out: &mut Path, open: &mut bool) {
+    if !*open {
+        let start = out
+            .subpaths
+            .last()
+            .map(|s| out.points[s.start])
+            .unwrap_or([0.0, 0.0]);
+        out.move_to(start);
+        *open = true;
+    }
+}
+
+fn convert_paint(paint: &usvg::Paint, t: &Affine, id: &str, ctx: &Ctx) -> Result<Paint> {
+    let color = |c: usvg::Color| {
+        [
+            c.red as f64 / 255.0,
+            c.green as f64 / 255.0,
+            c.blue as f64 / 255.0,
+        ]
+    };
+    let base = |g: &usvg::BaseGradient, kind: GradientKind| Gradient {
+        id: g.id().to_string(),
+        kind,
+        transform: concat(t, &to_affine(g.transform())),
+        spread: match g.spread_method() {
+            usvg::SpreadMethod::Pad => Spread::Pad,
+            usvg::SpreadMethod::Reflect => Spread::Reflect,
+            usvg::SpreadMethod::Repeat => Spread::Repeat,
+        },
+        stops: g
+            .stops()
+            .iter()
+            .map(|s| Stop {
+                offset: s.offset().get() as f64,
+                color: color(s.color()),
+                opacity: s.opacity().get() as f64,
+            })
+            .collect(),
+    };
+    Ok(match paint {
+        usvg::Paint::Color(c) => Paint::Solid(color(*c)),
+        usvg::Paint::LinearGradient(g) => Paint::Gradient(base(
+            g,
+            GradientKind::Linear {
+                p1: [g.x1() as f64, g.y1() as f64],
+                p2: [g.x2() as f64, g.y2() as f64],
+            },
+        )),
+        usvg::Paint::RadialGradient(g) => Paint::Gradient(base(
+            g,
+            GradientKind::Radial {
+                c: [g.cx() as f64, g.cy() as f64],
+                r: g.r().get() as f64,
+                f: [g.fx() as f64, g.fy() as f64],
+                fr: g.fr().get() as f64,
+            },
+        )),
+        usvg::Paint::Pattern(_) => {
+            return Err(ctx.unsupported(format!("pattern paint on path \"{id}\"")));
+        }
+    })
+}
+
+/// The file name used for SVG given as a string.
+pub fn string_name() -> PathBuf {
+    PathBuf::from("<string>")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn load(s: &str) -> Result<Scene> {
+        Scene::from_svg_str(s, "t.svg", Sizing::Natural)
+    }
+
+    #[test]
+    fn rect_becomes_closed_lines_in_device_space() {
+        let s = load(
+            r#"<svg xmlns="http://www.w3.org/2000/svg" width="20" height="10" viewBox="0 0 10 5">
+               <rect id="r" x="1" y="1" width="2" height="3" fill="red"/></svg>"#,
+        )
+        .unwrap();
+        assert_eq!((s.width, s.height), (20, 10));
+        let Node::Path(p) = &s.nodes[0] else { panic!() };
+        assert_eq!(p.id, "r");
+        assert_eq!(p.points[0], [2.0, 2.0]);
+        let b = p.control_bounds().unwrap();
+        assert_eq!(b, [2.0, 2.0, 6.0, 8.0]);
+        assert!(p.subpaths[0].closed);
+        assert_eq!(p.fill.as_ref().unwrap().paint, Paint::Solid([1.0, 0.0, 0.0]));
+    }
+
+    #[test]
+    fn group_opacity_becomes_layer() {
+        let s = load(
+            r#"<svg xmlns="http://www.w3.org/2000/svg" width="10" height="10">
+               <g opacity="0.5"><rect width="5" height="5"/><rect x="2" width="5" height="5"/></g></svg>"#,
+        )
+        .unwrap();
+        let Node::Group(g) = &s.nodes[0] else { panic!() };
+        assert_eq!(g.opacity, 0.5);
+        assert_eq!(g.children.len(), 2);
+    }
+
+    #[test]
+    fn malformed_and_unsupported_are_errors() {
+        let e = load("<svg").unwrap_err().to_string();
+        assert!(e.contains("t.svg") && e.contains("malformed"), "{e}");
+        let e = load(
+            r#"<svg xmlns="http://www.w3.org/2000/svg" width="10" height="10"><text id="x">hi</text></svg>"#,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("unsupported") && e.contains("text"), "{e}");
+    }
+
+    #[test]
+    fn sizing_scales_everything() {
+        let svg = r#"<svg xmlns="http://www.w3.org/2000/svg" width="10" height="20">
+               <path d="M1 1 L9 1" stroke="black" stroke-width="2"/></svg>"#;
+        let s = Scene::from_svg_str(svg, "t.svg", Sizing::Width(30)).unwrap();
+        assert_eq!((s.width, s.height), (30, 60));
+        let Node::Path(p) = &s.nodes[0] else { panic!() };
+        assert_eq!(p.points[0], [3.0, 3.0]);
+        assert!((p.stroke.as_ref().unwrap().width - 6.0).abs() < 1e-9);
+        assert!(Scene::from_svg_str(svg, "t.svg", Sizing::Scale(f64::NAN)).is_err());
+        assert!(Scene::from_svg_str(svg, "t.svg", Sizing::Width(0)).is_err());
+        assert!(Scene::from_svg_str(svg, "t.svg", Sizing::Width(100_000)).is_err());
+    }
+}

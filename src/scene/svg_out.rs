@@ -1,0 +1,358 @@
+//! SVG out: a clean, valid SVG with absolute path data in device pixels.
+//!
+//! The canvas becomes `width`, `height` and `viewBox="0 0 width height"`. Paths keep their
+//! ids; gradients are written to `<defs>` in `userSpaceOnUse` units with their transform.
+//! A stroke with a non-identity frame (drawn under a non-uniform scale) is written with a
+//! `transform` on its path so that the pen keeps its shape. Coordinates are written with
+//! four decimals, colors as `#rrggbb`.
+
+use std::collections::HashSet;
+use std::fmt::Write as _;
+use std::path::Path as FsPath;
+
+use super::{
+    Affine, FRAME_IDENTITY, FillRule, GradientKind, LineCap, LineJoin, Node, Paint, Path, Scene,
+    SegmentKind, Spread, apply, concat, invert,
+};
+use crate::error::Result;
+
+/// Formats a number with at most four decimals and no trailing zeros.
+pub fn num(v: f64) -> String {
+    let mut s = format!("{:.4}", v);
+    if s.contains('.') {
+        while s.ends_with('0') {
+            s.pop();
+        }
+        if s.ends_with('.') {
+            s.pop();
+        }
+    }
+    if s == "-0" { "0".to_string() } else { s }
+}
+
+fn hex(c: &[f64; 3]) -> String {
+    let q = |v: f64| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
+    format!("#{:02x}{:02x}{:02x}", q(c[0]), q(c[1]), q(c[2]))
+}
+
+struct Writer {
+    defs: String,
+    body: String,
+    ids: HashSet<String>,
+    next_id: usize,
+}
+
+impl Writer {
+    fn unique_id(&mut self, want: &str) -> String {
+        let base = if want.is_empty() { "grad" } else { want };
+        if !want.is_empty() && self.ids.insert(base.to_string()) {
+            return base.to_string();
+        }
+        loop {
+            self.next_id += 1;
+            let id = format!("{base}-{}", self.next_id);
+            if self.ids.insert(id.clone()) {
+                return id;
+            }
+        }
+    }
+
+    /// Writes `paint` as an attribute value; gradients go to defs. `to_local` maps device
+    /// space to the coordinate system of the element the paint is used on.
+    fn paint(&mut self, paint: &Paint, to_local: &Affine) -> String {
+        match paint {
+            Paint::Solid(c) => hex(c),
+            Paint::Gradient(g) => {
+                let id = self.unique_id(&g.id);
+                let t = concat(to_local, &g.transform);
+                let tf = format!(
+                    "matrix({} {} {} {} {} {})",
+                    num(t[0]),
+                    num(t[1]),
+                    num(t[2]),
+                    num(t[3]),
+                    num(t[4]),
+                    num(t[5])
+                );
+                let spread = match g.spread {
+                    Spread::Pad => "pad",
+                    Spread::Reflect => "reflect",
+                    Spread::Repeat => "repeat",
+                };
+                let d = &mut self.defs;
+                match &g.kind {
+                    GradientKind::Linear { p1, p2 } => {
+                        let _ = write!(
+                            d,
+                            "    <linearGradient id=\"{id}\" gradientUnits=\"userSpaceOnUse\" x1=\"{}\" y1=\"{}\" x2=\"{}\" y2=\"{}\"",
+                            num(p1[0]),
+                            num(p1[1]),
+                            num(p2[0]),
+                            num(p2[1])
+                        );
+                    }
+                    GradientKind::Radial { c, r, f, fr } => {
+                        let _ = write!(
+                            d,
+                            "    <radialGradient id=\"{id}\" gradientUnits=\"userSpaceOnUse\" cx=\"{}\" cy=\"{}\" r=\"{}\" fx=\"{}\" fy=\"{}\" fr=\"{}\"",
+                            num(c[0]),
+                            num(c[1]),
+                            num(r.max(0.0)),
+                            num(f[0]),
+                            num(f[1]),
+                            num(fr.max(0.0))
+                        );
+                    }
+                }
+                let _ = writeln!(d, " gradientTransform=\"{tf}\" spreadMethod=\"{spread}\">");
+                for s in &g.stops {
+                    let _ = write!(
+                        d,
+                        "      <stop offset=\"{}\" stop-color=\"{}\"",
+                        num(s.offset.clamp(0.0, 1.0)),
+                        hex(&s.color)
+                    );
+                    if s.opacity < 1.0 {
+                        let _ = write!(d, " stop-opacity=\"{}\"", num(s.opacity.clamp(0.0, 1.0)));
+                    }
+                    d.push_str("/>\n");
+                }
+                let tag = match g.kind {
+                    GradientKind::Linear { .. } => "linearGradient",
+                    GradientKind::Radial { .. } => "radialGradient",
+                };
+                let _ = writeln!(d, "    </{tag}>");
+                format!("url(#{id})")
+            }
+        }
+    }
+
+    fn nodes(&mut self, nodes: &[Node], indent: usize) {
+        for n in nodes {
+            match n {
+                Node::Group(g) => {
+                    let pad = "  ".repeat(indent);
+                    let _ = write!(self.body, "{pad}<g");
+                    if !g.id.is_empty() {
+                        let _ = write!(self.body, " id=\"{}\"", escape(&g.id));
+                    }
+                    let _ = writeln!(self.body, " opacity=\"{}\">", num(g.opacity.clamp(0.0, 1.0)));
+                    self.nodes(&g.children, indent + 1);
+                    let _ = writeln!(self.body, "{pad}</g>");
+                }
+                Node::Path(p) => self.path(p, indent),
+            }
+        }
+    }
+
+    fn path(&mut self, p: &Path, indent: usize) {
+        // A stroke with a non-identity frame is written in its frame.
+        let frame = p
+            .stroke
+            .as_ref()
+            .map(|s| s.frame)
+            .filter(|f| *f != FRAME_IDENTITY);
+        let (to_local, transform_attr) = match frame {
+            Some([a, b, c, d]) => {
+                let m = [a, b, c, d, 0.0, 0.0];
+                match invert(&m) {
+                    Some(inv) => (
+                        inv,
+                        format!(
+                            " transform=\"matrix({} {} {} {} 0 0)\"",
+                            num(a),
+                            num(b),
+                            num(c),
+                            num(d)
+                        ),
+                    ),
+                    None => (super::IDENTITY, String::new()),
+                }
+            }
+            None => (super::IDENTITY, String::new()),
+        };
+        let mut attrs = String::new();
+        if !p.id.is_empty() {
+            let _ = write!(attrs, " id=\"{}\"", escape(&p.id));
+        }
+        attrs.push_str(&transform_attr);
+        let _ = write!(attrs, " d=\"{}\"", path_data(p, &to_local));
+        match &p.fill {
+            Some(f) => {
+                let v = self.paint(&f.paint, &to_local);
+                let _ = write!(attrs, " fill=\"{v}\"");
+                if f.opacity < 1.0 {
+                    let _ = write!(attrs, " fill-opacity=\"{}\"", num(f.opacity.clamp(0.0, 1.0)));
+                }
+                if f.rule == FillRule::EvenOdd {
+                    attrs.push_str(" fill-rule=\"evenodd\"");
+                }
+            }
+            None => attrs.push_str(" fill=\"none\""),
+        }
+        if let Some(s) = &p.stroke {
+            let v = self.paint(&s.paint, &to_local);
+            let _ = write!(attrs, " stroke=\"{v}\" stroke-width=\"{}\"", num(s.width.max(0.0)));
+            if s.opacity < 1.0 {
+                let _ = write!(attrs, " stroke-opacity=\"{}\"", num(s.opacity.clamp(0.0, 1.0)));
+            }
+            let join = match s.join {
+                LineJoin::Miter => None,
+                LineJoin::MiterClip => Some("miter-clip"),
+                LineJoin::Round => Some("round"),
+                LineJoin::Bevel => Some("bevel"),
+            };
+            if let Some(j) = join {
+                let _ = write!(attrs, " stroke-linejoin=\"{j}\"");
+            }
+            let cap = match s.cap {
+                LineCap::Butt => None,
+                LineCap::Round => Some("round"),
+                LineCap::Square => Some("square"),
+            };
+            if let Some(c) = cap {
+                let _ = write!(attrs, " stroke-linecap=\"{c}\"");
+            }
+            if s.miter_limit != 4.0 {
+                let _ = write!(attrs, " stroke-miterlimit=\"{}\"", num(s.miter_limit));
+            }
+            if let Some(d) = &s.dash {
+                let list: Vec<String> = d.iter().map(|v| num(*v)).collect();
+                let _ = write!(attrs, " stroke-dasharray=\"{}\"", list.join(" "));
+                if s.dash_offset != 0.0 {
+                    let _ = write!(attrs, " stroke-dashoffset=\"{}\"", num(s.dash_offset));
+                }
+            }
+            if p.stroke_first {
+                attrs.push_str(" paint-order=\"stroke\"");
+            }
+        }
+        let pad = "  ".repeat(indent);
+        let _ = writeln!(self.body, "{pad}<path{attrs}/>");
+    }
+}
+
+/// Absolute path data (`M`, `L`, `Q`, `C`, `Z`) for a path, after mapping by `t`.
+/// A segment is written as `L` (or `Q`) only when its control points still sit where an
+/// elevated line (or quadratic) puts them.
+pub fn path_data(p: &Path, t: &Affine) -> String {
+    let mut d = String::new();
+    let pt = |q: [f64; 2]| {
+        let q = apply(t, q);
+        format!("{} {}", num(q[0]), num(q[1]))
+    };
+    for sp in &p.subpaths {
+        if !d.is_empty() {
+            d.push(' ');
+        }
+        let _ = write!(d, "M{}", pt(p.points[sp.start]));
+        for (k, kind) in sp.kinds.iter().enumerate() {
+            let i = sp.start + 3 * k;
+            let [a, c1, c2, b] = [p.points[i], p.points[i + 1], p.points[i + 2], p.points[i + 3]];
+            let near = |u: [f64; 2], v: [f64; 2]| (u[0] - v[0]).abs() + (u[1] - v[1]).abs() < 1e-6;
+            let lerp = |u: [f64; 2], v: [f64; 2], s: f64| [u[0] + (v[0] - u[0]) * s, u[1] + (v[1] - u[1]) * s];
+            match kind {
+                SegmentKind::Line
+                    if near(c1, lerp(a, b, 1.0 / 3.0)) && near(c2, lerp(a, b, 2.0 / 3.0)) =>
+                {
+                    let _ = write!(d, " L{}", pt(b));
+                }
+                SegmentKind::Quad | SegmentKind::Line => {
+                    // q = a + 1.5 (c1 - a) = b + 1.5 (c2 - b) for an elevated quadratic.
+                    let q1 = lerp(a, c1, 1.5);
+                    let q2 = lerp(b, c2, 1.5);
+                    if *kind == SegmentKind::Quad && near(q1, q2) {
+                        let _ = write!(d, " Q{} {}", pt(q1), pt(b));
+                    } else {
+                        let _ = write!(d, " C{} {} {}", pt(c1), pt(c2), pt(b));
+                    }
+                }
+                SegmentKind::Cubic => {
+                    let _ = write!(d, " C{} {} {}", pt(c1), pt(c2), pt(b));
+                }
+            }
+        }
+        if sp.closed {
+            d.push_str(" Z");
+        }
+    }
+    d
+}
+
+fn escape(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+}
+
+impl Scene {
+    /// The scene as SVG text.
+    pub fn to_svg_string(&self) -> String {
+        let mut w = Writer {
+            defs: String::new(),
+            body: String::new(),
+            ids: HashSet::new(),
+            next_id: 0,
+        };
+        // Reserve path and group ids so that gradient ids do not collide with them.
+        fn reserve(nodes: &[Node], ids: &mut HashSet<String>) {
+            for n in nodes {
+                match n {
+                    Node::Group(g) => {
+                        ids.insert(g.id.clone());
+                        reserve(&g.children, ids);
+                    }
+                    Node::Path(p) => {
+                        ids.insert(p.id.clone());
+                    }
+                }
+            }
+        }
+        reserve(&self.nodes, &mut w.ids);
+        w.nodes(&self.nodes, 1);
+        let mut out = String::new();
+        let _ = writeln!(
+            out,
+            "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{0}\" height=\"{1}\" viewBox=\"0 0 {0} {1}\">",
+            self.width, self.height
+        );
+        if !w.defs.is_empty() {
+            let _ = write!(out, "  <defs>\n{}  </defs>\n", w.defs);
+        }
+        out.push_str(&w.body);
+        out.push_str("</svg>\n");
+        out
+    }
+
+    /// Writes the scene as an SVG file, atomically (temporary file, then rename).
+    pub fn save_svg(&self, path: impl AsRef<FsPath>) -> Result<()> {
+        crate::image_io::write_atomic(path.as_ref(), self.to_svg_string().as_bytes())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::svg_in::Sizing;
+
+    #[test]
+    fn numbers_are_compact() {
+        assert_eq!(num(1.0), "1");
+        assert_eq!(num(-0.00001), "0");
+        assert_eq!(num(2.50004), "2.5");
+        assert_eq!(num(-3.14159), "-3.1416");
+    }
+
+    #[test]
+    fn lines_and_quads_are_written_back_as_such() {
+        let svg = r#"<svg xmlns="http://www.w3.org/2000/svg" width="10" height="10">
+            <path id="p" d="M1 1 L5 1 Q9 1 9 5 C9 7 7 9 5 9 Z" fill="#ff0000"/></svg>"#;
+        let s = Scene::from_svg_str(svg, "t.svg", Sizing::Natural).unwrap();
+        let out = s.to_svg_string();
+        assert!(out.contains(r#"d="M1 1 L5 1 Q9 1 9 5 C9 7 7 9 5 9 Z""#), "{out}");
+        assert!(out.contains(r#"id="p""#));
+        let back = Scene::from_svg_str(&out, "out.svg", Sizing::Natural).unwrap();
+        assert_eq!(back.params().len(), s.params().len());
+    }
+}
