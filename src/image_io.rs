@@ -86,12 +86,18 @@ impl Image {
                     0.0
                 }
             };
-            out.extend_from_slice(&[
-                to_u8(un(p[0])),
-                to_u8(un(p[1])),
-                to_u8(un(p[2])),
-                to_u8(a),
-            ]);
+            out.extend_from_slice(&[to_u8(un(p[0])), to_u8(un(p[1])), to_u8(un(p[2])), to_u8(a)]);
+        }
+        out
+    }
+
+    /// The image rounded to 8-bit premultiplied levels, as an 8-bit renderer stores it.
+    pub fn quantized(&self) -> Image {
+        let mut out = self.clone();
+        for p in &mut out.data {
+            for c in p.iter_mut() {
+                *c = (*c * 255.0).round().clamp(0.0, 255.0) / 255.0;
+            }
         }
         out
     }
@@ -116,7 +122,11 @@ impl Image {
             message: format!("not a readable PNG or JPEG image: {e}"),
         })?;
         let rgba = img.to_rgba8();
-        Ok(Image::from_rgba8(rgba.width(), rgba.height(), rgba.as_raw()))
+        Ok(Image::from_rgba8(
+            rgba.width(),
+            rgba.height(),
+            rgba.as_raw(),
+        ))
     }
 
     /// Writes a PNG (straight alpha) atomically: a temporary file beside the target, then
@@ -161,6 +171,22 @@ pub fn to_u8(v: f32) -> u8 {
     (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u8
 }
 
+/// Places images left to right on a transparent canvas (for before/after pictures).
+pub fn side_by_side(images: &[&Image]) -> Image {
+    let w: u32 = images.iter().map(|i| i.width).sum();
+    let h = images.iter().map(|i| i.height).max().unwrap_or(0);
+    let mut out = Image::new(w, h);
+    let mut x0 = 0usize;
+    for img in images {
+        for y in 0..img.height as usize {
+            let src = &img.data[y * img.width as usize..(y + 1) * img.width as usize];
+            out.data[y * w as usize + x0..][..src.len()].copy_from_slice(src);
+        }
+        x0 += img.width as usize;
+    }
+    out
+}
+
 /// Writes `bytes` to `path` through a temporary file in the same folder and a rename.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     let dir = match path.parent() {
@@ -202,7 +228,9 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("diffsvg-io-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let f = dir.join("a.png");
-        Image::filled(2, 2, [0.5, 0.0, 0.0, 0.5]).save_png(&f).unwrap();
+        Image::filled(2, 2, [0.5, 0.0, 0.0, 0.5])
+            .save_png(&f)
+            .unwrap();
         let back = Image::load(&f).unwrap();
         assert_eq!((back.width, back.height), (2, 2));
         assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1);

@@ -17,7 +17,11 @@ pub struct Comparison {
 
 /// Compares `a` with `b`. Panics if the sizes differ (callers check sizes first).
 pub fn compare(a: &Image, b: &Image) -> Comparison {
-    assert_eq!((a.width, a.height), (b.width, b.height), "image sizes differ");
+    assert_eq!(
+        (a.width, a.height),
+        (b.width, b.height),
+        "image sizes differ"
+    );
     let mut abs = 0.0f64;
     let mut sq = 0.0f64;
     let mut max = 0.0f64;

@@ -204,7 +204,11 @@ pub fn backward_line(g: &Cells<f32>, p0: Point, p1: Point, dp0: &mut Point, dp1:
     let step_x = if dx > 0.0 { 1.0 } else { -1.0 };
     let step_y = if dy > 0.0 { 1.0 } else { -1.0 };
     let next_cut = |v: f64, step: f64| {
-        if step > 0.0 { v.floor() + 1.0 } else { v.ceil() - 1.0 }
+        if step > 0.0 {
+            v.floor() + 1.0
+        } else {
+            v.ceil() - 1.0
+        }
     };
     let start = at(t0);
     // The next integer line strictly after the start in each direction.
@@ -260,13 +264,31 @@ pub fn backward_line(g: &Cells<f32>, p0: Point, p1: Point, dp0: &mut Point, dp1:
 pub fn coverage(w: f32, evenodd: bool) -> (f32, f32) {
     if evenodd {
         let f = w - 2.0 * (0.5 * w).round();
-        (f.abs(), if f > 0.0 { 1.0 } else if f < 0.0 { -1.0 } else { 0.0 })
+        (
+            f.abs(),
+            if f > 0.0 {
+                1.0
+            } else if f < 0.0 {
+                -1.0
+            } else {
+                0.0
+            },
+        )
     } else {
         let a = w.abs();
         if a >= 1.0 {
             (1.0, 0.0)
         } else {
-            (a, if w > 0.0 { 1.0 } else if w < 0.0 { -1.0 } else { 0.0 })
+            (
+                a,
+                if w > 0.0 {
+                    1.0
+                } else if w < 0.0 {
+                    -1.0
+                } else {
+                    0.0
+                },
+            )
         }
     }
 }
@@ -309,7 +331,10 @@ mod tests {
             for x in 0..4 {
                 let v = acc.data[y * 5 + x].abs();
                 let inside = (1..3).contains(&x) && (1..3).contains(&y);
-                assert!((v - if inside { 1.0 } else { 0.0 }).abs() < 1e-6, "{x},{y}: {v}");
+                assert!(
+                    (v - if inside { 1.0 } else { 0.0 }).abs() < 1e-6,
+                    "{x},{y}: {v}"
+                );
             }
         }
     }
@@ -347,7 +372,11 @@ mod tests {
         }
         let loss = |poly: &[Point]| -> f64 {
             let acc = raster(poly, w, h);
-            acc.data.iter().zip(&g.data).map(|(a, b)| *a as f64 * *b as f64).sum()
+            acc.data
+                .iter()
+                .zip(&g.data)
+                .map(|(a, b)| *a as f64 * *b as f64)
+                .sum()
         };
         let mut grad = [[0.0; 2]; 3];
         for i in 0..3 {
@@ -368,7 +397,11 @@ mod tests {
                 p[i][c] -= 2.0 * e;
                 let lm = loss(&p);
                 let fd = (lp - lm) / (2.0 * e);
-                assert!((fd - grad[i][c]).abs() < 2e-3, "v{i} c{c}: fd {fd} an {}", grad[i][c]);
+                assert!(
+                    (fd - grad[i][c]).abs() < 2e-3,
+                    "v{i} c{c}: fd {fd} an {}",
+                    grad[i][c]
+                );
             }
         }
     }

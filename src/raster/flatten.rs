@@ -204,7 +204,12 @@ mod tests {
         assert_eq!(f.pts.len(), 1 + counts[0] as usize + 1);
         for (q, s) in f.pts.iter().zip(&f.src) {
             let i = s.first as usize;
-            let p = [path.points[i], path.points[i + 1], path.points[i + 2], path.points[i + 3]];
+            let p = [
+                path.points[i],
+                path.points[i + 1],
+                path.points[i + 2],
+                path.points[i + 3],
+            ];
             let e = eval(&p, s.t);
             assert!((e[0] - q[0]).abs() < 1e-9 && (e[1] - q[1]).abs() < 1e-9);
         }

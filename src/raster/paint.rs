@@ -259,7 +259,12 @@ mod tests {
 
     #[test]
     fn stops_interpolate_and_clamp() {
-        let stops = [stop(0.2, 0.0), stop(0.6, 1.0), stop(0.6, 0.5), stop(1.0, 0.0)];
+        let stops = [
+            stop(0.2, 0.0),
+            stop(0.6, 1.0),
+            stop(0.6, 0.5),
+            stop(1.0, 0.0),
+        ];
         assert_eq!(stop_color(&stops, 0.0)[0], 0.0);
         assert!((stop_color(&stops, 0.4)[0] - 0.5).abs() < 1e-12);
         assert!((stop_color(&stops, 0.7)[0] - 0.375).abs() < 1e-12);

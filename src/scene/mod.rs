@@ -37,7 +37,10 @@ pub const IDENTITY: Affine = [1.0, 0.0, 0.0, 1.0, 0.0, 0.0];
 /// Applies an affine transform to a point.
 #[inline]
 pub fn apply(t: &Affine, p: Point) -> Point {
-    [t[0] * p[0] + t[2] * p[1] + t[4], t[1] * p[0] + t[3] * p[1] + t[5]]
+    [
+        t[0] * p[0] + t[2] * p[1] + t[4],
+        t[1] * p[0] + t[3] * p[1] + t[5],
+    ]
 }
 
 /// Composes two transforms: the result applies `b` first, then `a`.
@@ -328,15 +331,24 @@ impl Path {
     pub fn line_to(&mut self, p: Point) {
         let a = self.last_point();
         let c1 = [a[0] + (p[0] - a[0]) / 3.0, a[1] + (p[1] - a[1]) / 3.0];
-        let c2 = [a[0] + 2.0 * (p[0] - a[0]) / 3.0, a[1] + 2.0 * (p[1] - a[1]) / 3.0];
+        let c2 = [
+            a[0] + 2.0 * (p[0] - a[0]) / 3.0,
+            a[1] + 2.0 * (p[1] - a[1]) / 3.0,
+        ];
         self.push_segment([c1, c2, p], SegmentKind::Line);
     }
 
     /// Appends a quadratic segment, elevated exactly to a cubic.
     pub fn quad_to(&mut self, q: Point, p: Point) {
         let a = self.last_point();
-        let c1 = [a[0] + 2.0 / 3.0 * (q[0] - a[0]), a[1] + 2.0 / 3.0 * (q[1] - a[1])];
-        let c2 = [p[0] + 2.0 / 3.0 * (q[0] - p[0]), p[1] + 2.0 / 3.0 * (q[1] - p[1])];
+        let c1 = [
+            a[0] + 2.0 / 3.0 * (q[0] - a[0]),
+            a[1] + 2.0 / 3.0 * (q[1] - a[1]),
+        ];
+        let c2 = [
+            p[0] + 2.0 / 3.0 * (q[0] - p[0]),
+            p[1] + 2.0 / 3.0 * (q[1] - p[1]),
+        ];
         self.push_segment([c1, c2, p], SegmentKind::Quad);
     }
 

@@ -157,7 +157,12 @@ fn walk_nodes(
     for n in nodes {
         match n {
             Node::Group(g) => {
-                f(*owner, ParamGroup::Opacity, Part::GroupOpacity(*group_ix), &mut g.opacity);
+                f(
+                    *owner,
+                    ParamGroup::Opacity,
+                    Part::GroupOpacity(*group_ix),
+                    &mut g.opacity,
+                );
                 *owner += 1;
                 *group_ix += 1;
                 walk_nodes(&mut g.children, f, owner, path_ix, group_ix);
@@ -178,18 +183,37 @@ fn walk_path(
     f: &mut dyn FnMut(usize, ParamGroup, Part, &mut f64),
 ) {
     for (k, q) in p.points.iter_mut().enumerate() {
-        let first = if k == 0 { Part::PathPoints(ix) } else { Part::Point };
+        let first = if k == 0 {
+            Part::PathPoints(ix)
+        } else {
+            Part::Point
+        };
         f(owner, ParamGroup::Points, first, &mut q[0]);
         f(owner, ParamGroup::Points, Part::Point, &mut q[1]);
     }
     if let Some(fill) = &mut p.fill {
         walk_paint(&mut fill.paint, owner, Part::FillPaint(ix), f);
-        f(owner, ParamGroup::Opacity, Part::FillOpacity(ix), &mut fill.opacity);
+        f(
+            owner,
+            ParamGroup::Opacity,
+            Part::FillOpacity(ix),
+            &mut fill.opacity,
+        );
     }
     if let Some(s) = &mut p.stroke {
         walk_paint(&mut s.paint, owner, Part::StrokePaint(ix), f);
-        f(owner, ParamGroup::Opacity, Part::StrokeOpacity(ix), &mut s.opacity);
-        f(owner, ParamGroup::StrokeWidth, Part::StrokeWidth(ix), &mut s.width);
+        f(
+            owner,
+            ParamGroup::Opacity,
+            Part::StrokeOpacity(ix),
+            &mut s.opacity,
+        );
+        f(
+            owner,
+            ParamGroup::StrokeWidth,
+            Part::StrokeWidth(ix),
+            &mut s.width,
+        );
     }
 }
 
@@ -200,7 +224,7 @@ fn walk_paint(
     f: &mut dyn FnMut(usize, ParamGroup, Part, &mut f64),
 ) {
     let mut first = Some(first);
-    let mut next = |fp: &mut Option<Part>| fp.take().unwrap_or(Part::PaintSlot);
+    let next = |fp: &mut Option<Part>| fp.take().unwrap_or(Part::PaintSlot);
     match paint {
         Paint::Solid(c) => {
             for v in c.iter_mut() {
@@ -256,11 +280,17 @@ impl ParamLayout {
                 Part::GroupOpacity(_) => layout.groups.push(at),
                 Part::PathPoints(i) => layout.paths[i].points = at,
                 Part::FillPaint(i) => {
-                    layout.paths[i].fill = Some(PaintOffsets { base: at, stops: at });
+                    layout.paths[i].fill = Some(PaintOffsets {
+                        base: at,
+                        stops: at,
+                    });
                     current_paint = Some((i, false));
                 }
                 Part::StrokePaint(i) => {
-                    layout.paths[i].stroke = Some(PaintOffsets { base: at, stops: at });
+                    layout.paths[i].stroke = Some(PaintOffsets {
+                        base: at,
+                        stops: at,
+                    });
                     current_paint = Some((i, true));
                 }
                 Part::Stops => {
@@ -334,7 +364,7 @@ impl Scene {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scene::{Fill, FillRule, Gradient, Spread, Stop, IDENTITY};
+    use crate::scene::{Fill, FillRule, Gradient, IDENTITY, Spread, Stop};
 
     fn sample() -> Scene {
         let mut s = Scene::new(10, 10);

@@ -3,8 +3,8 @@
 use std::path::{Path as FsPath, PathBuf};
 
 use super::{
-    Affine, FRAME_IDENTITY, Fill, FillRule, Gradient, GradientKind, Group, LineCap, LineJoin,
-    Node, Paint, Path, Scene, Spread, Stop, Stroke, apply, concat,
+    Affine, FRAME_IDENTITY, Fill, FillRule, Gradient, GradientKind, Group, LineCap, LineJoin, Node,
+    Paint, Path, Scene, Spread, Stop, Stroke, apply, concat,
 };
 use crate::error::{Error, Result};
 
@@ -40,17 +40,20 @@ impl Scene {
 
     /// Parses SVG bytes (plain or gzip-compressed); `name` is used in error messages.
     pub fn from_svg_data(data: &[u8], name: &FsPath, sizing: Sizing) -> Result<Scene> {
-        let svg_err = |m: String| Error::Svg {
-            path: name.to_path_buf(),
-            message: m,
-        };
-        if let Ok(text) = std::str::from_utf8(data) {
-            reject_unsupported_xml(text, name)?;
-        }
-        let opt = usvg::Options::default();
-        let tree = usvg::Tree::from_data(data, &opt).map_err(|e| svg_err(e.to_string()))?;
-        from_tree(&tree, name, sizing)
+        from_tree(&parse_tree(data, name)?, name, sizing)
     }
+}
+
+/// Parses SVG bytes with usvg, refusing elements usvg would silently drop.
+pub fn parse_tree(data: &[u8], name: &FsPath) -> Result<usvg::Tree> {
+    if let Ok(text) = std::str::from_utf8(data) {
+        reject_unsupported_xml(text, name)?;
+    }
+    let opt = usvg::Options::default();
+    usvg::Tree::from_data(data, &opt).map_err(|e| Error::Svg {
+        path: name.to_path_buf(),
+        message: e.to_string(),
+    })
 }
 
 /// usvg silently drops some elements (text without fonts); refuse them instead of
@@ -115,7 +118,8 @@ impl Ctx<'_> {
     }
 }
 
-fn canvas_size(tree: &usvg::Tree, sizing: Sizing, name: &FsPath) -> Result<(u32, u32, Affine)> {
+/// Canvas size for `sizing` and the root transform from SVG user space to device pixels.
+pub fn canvas_size(tree: &usvg::Tree, sizing: Sizing, name: &FsPath) -> Result<(u32, u32, Affine)> {
     let (w, h) = (tree.size().width() as f64, tree.size().height() as f64);
     let bad = |what: String| Error::InvalidValue {
         path: name.to_path_buf(),
@@ -281,9 +285,7 @@ fn convert_path(p: &usvg::Path, ctx: &Ctx) -> Result<Option<Path>> {
                 usvg::LineCap::Square => LineCap::Square,
             },
             miter_limit: s.miterlimit().get() as f64,
-            dash: s
-                .dasharray()
-                .map(|d| d.iter().map(|&v| v as f64).collect()),
+            dash: s.dasharray().map(|d| d.iter().map(|&v| v as f64).collect()),
             dash_offset: s.dashoffset() as f64,
             frame: [t[0], t[1], t[2], t[3]],
         };
@@ -395,7 +397,10 @@ mod tests {
         let b = p.control_bounds().unwrap();
         assert_eq!(b, [2.0, 2.0, 6.0, 8.0]);
         assert!(p.subpaths[0].closed);
-        assert_eq!(p.fill.as_ref().unwrap().paint, Paint::Solid([1.0, 0.0, 0.0]));
+        assert_eq!(
+            p.fill.as_ref().unwrap().paint,
+            Paint::Solid([1.0, 0.0, 0.0])
+        );
     }
 
     #[test]
@@ -405,7 +410,9 @@ mod tests {
                <g opacity="0.5"><rect width="5" height="5"/><rect x="2" width="5" height="5"/></g></svg>"#,
         )
         .unwrap();
-        let Node::Group(g) = &s.nodes[0] else { panic!() };
+        let Node::Group(g) = &s.nodes[0] else {
+            panic!()
+        };
         assert_eq!(g.opacity, 0.5);
         assert_eq!(g.children.len(), 2);
     }

@@ -136,7 +136,11 @@ impl Writer {
                     if !g.id.is_empty() {
                         let _ = write!(self.body, " id=\"{}\"", escape(&g.id));
                     }
-                    let _ = writeln!(self.body, " opacity=\"{}\">", num(g.opacity.clamp(0.0, 1.0)));
+                    let _ = writeln!(
+                        self.body,
+                        " opacity=\"{}\">",
+                        num(g.opacity.clamp(0.0, 1.0))
+                    );
                     self.nodes(&g.children, indent + 1);
                     let _ = writeln!(self.body, "{pad}</g>");
                 }
@@ -182,7 +186,11 @@ impl Writer {
                 let v = self.paint(&f.paint, &to_local);
                 let _ = write!(attrs, " fill=\"{v}\"");
                 if f.opacity < 1.0 {
-                    let _ = write!(attrs, " fill-opacity=\"{}\"", num(f.opacity.clamp(0.0, 1.0)));
+                    let _ = write!(
+                        attrs,
+                        " fill-opacity=\"{}\"",
+                        num(f.opacity.clamp(0.0, 1.0))
+                    );
                 }
                 if f.rule == FillRule::EvenOdd {
                     attrs.push_str(" fill-rule=\"evenodd\"");
@@ -192,9 +200,17 @@ impl Writer {
         }
         if let Some(s) = &p.stroke {
             let v = self.paint(&s.paint, &to_local);
-            let _ = write!(attrs, " stroke=\"{v}\" stroke-width=\"{}\"", num(s.width.max(0.0)));
+            let _ = write!(
+                attrs,
+                " stroke=\"{v}\" stroke-width=\"{}\"",
+                num(s.width.max(0.0))
+            );
             if s.opacity < 1.0 {
-                let _ = write!(attrs, " stroke-opacity=\"{}\"", num(s.opacity.clamp(0.0, 1.0)));
+                let _ = write!(
+                    attrs,
+                    " stroke-opacity=\"{}\"",
+                    num(s.opacity.clamp(0.0, 1.0))
+                );
             }
             let join = match s.join {
                 LineJoin::Miter => None,
@@ -248,9 +264,16 @@ pub fn path_data(p: &Path, t: &Affine) -> String {
         let _ = write!(d, "M{}", pt(p.points[sp.start]));
         for (k, kind) in sp.kinds.iter().enumerate() {
             let i = sp.start + 3 * k;
-            let [a, c1, c2, b] = [p.points[i], p.points[i + 1], p.points[i + 2], p.points[i + 3]];
+            let [a, c1, c2, b] = [
+                p.points[i],
+                p.points[i + 1],
+                p.points[i + 2],
+                p.points[i + 3],
+            ];
             let near = |u: [f64; 2], v: [f64; 2]| (u[0] - v[0]).abs() + (u[1] - v[1]).abs() < 1e-6;
-            let lerp = |u: [f64; 2], v: [f64; 2], s: f64| [u[0] + (v[0] - u[0]) * s, u[1] + (v[1] - u[1]) * s];
+            let lerp = |u: [f64; 2], v: [f64; 2], s: f64| {
+                [u[0] + (v[0] - u[0]) * s, u[1] + (v[1] - u[1]) * s]
+            };
             match kind {
                 SegmentKind::Line
                     if near(c1, lerp(a, b, 1.0 / 3.0)) && near(c2, lerp(a, b, 2.0 / 3.0)) =>
@@ -346,11 +369,14 @@ mod tests {
 
     #[test]
     fn lines_and_quads_are_written_back_as_such() {
-        let svg = r#"<svg xmlns="http://www.w3.org/2000/svg" width="10" height="10">
-            <path id="p" d="M1 1 L5 1 Q9 1 9 5 C9 7 7 9 5 9 Z" fill="#ff0000"/></svg>"#;
+        let svg = r##"<svg xmlns="http://www.w3.org/2000/svg" width="10" height="10">
+            <path id="p" d="M1 1 L5 1 Q9 1 9 5 C9 7 7 9 5 9 Z" fill="#ff0000"/></svg>"##;
         let s = Scene::from_svg_str(svg, "t.svg", Sizing::Natural).unwrap();
         let out = s.to_svg_string();
-        assert!(out.contains(r#"d="M1 1 L5 1 Q9 1 9 5 C9 7 7 9 5 9 Z""#), "{out}");
+        assert!(
+            out.contains(r#"d="M1 1 L5 1 Q9 1 9 5 C9 7 7 9 5 9 Z""#),
+            "{out}"
+        );
         assert!(out.contains(r#"id="p""#));
         let back = Scene::from_svg_str(&out, "out.svg", Sizing::Natural).unwrap();
         assert_eq!(back.params().len(), s.params().len());

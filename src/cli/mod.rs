@@ -1,0 +1,42 @@
+//! The `diffsvg` command line. Every subcommand reports errors as one line naming the
+//! file and the problem, and exits with status 2.
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+mod parity;
+mod render;
+mod util;
+
+/// Differentiable vector rendering: render, compare and fit SVGs.
+#[derive(Parser, Debug)]
+#[command(name = "diffsvg", version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Render an SVG to PNG with the analytic-coverage rasterizer.
+    Render(render::Args),
+    /// Compare diffsvg with resvg over SVG files or folders, per folder pass rates.
+    Parity(parity::Args),
+}
+
+/// Runs the command line; returns the process exit code.
+pub fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Render(a) => render::run(a),
+        Command::Parity(a) => parity::run(a),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::from(2)
+        }
+    }
+}

@@ -1,0 +1,160 @@
+//! `diffsvg parity`: compare diffsvg with resvg over folders of SVGs.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+
+use super::util::sizing;
+use crate::raster::RenderOptions;
+use crate::reference::{PARITY_MAE, PARITY_PSNR, parity};
+
+/// Arguments of `diffsvg parity`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// SVG files or folders (searched recursively).
+    #[arg(required = true)]
+    inputs: Vec<PathBuf>,
+    /// Render width in pixels.
+    #[arg(long, conflicts_with = "scale")]
+    width: Option<u32>,
+    /// Scale factor.
+    #[arg(long)]
+    scale: Option<f64>,
+    /// Write a Markdown table of pass rates per folder here.
+    #[arg(long)]
+    report: Option<PathBuf>,
+    /// Write `ours | resvg | difference` images of failing files into this folder.
+    #[arg(long)]
+    failures: Option<PathBuf>,
+}
+
+/// What happened to one file.
+#[derive(Debug)]
+pub enum Outcome {
+    /// Rendered by both; MAE (levels) and PSNR (dB).
+    Compared {
+        mae: f64,
+        max: f64,
+        psnr: f64,
+        pass: bool,
+    },
+    /// diffsvg refused it (unsupported feature or invalid file).
+    Refused(String),
+}
+
+/// Finds SVG files under `inputs`, sorted.
+pub fn collect_svgs(inputs: &[PathBuf]) -> Result<Vec<PathBuf>> {
+    let mut out = Vec::new();
+    for p in inputs {
+        if p.is_dir() {
+            walk(p, &mut out).with_context(|| format!("{}: cannot list folder", p.display()))?;
+        } else {
+            out.push(p.clone());
+        }
+    }
+    out.sort();
+    Ok(out)
+}
+
+fn walk(dir: &Path, out: &mut Vec<PathBuf>) -> std::io::Result<()> {
+    for e in std::fs::read_dir(dir)? {
+        let p = e?.path();
+        if p.is_dir() {
+            walk(&p, out)?;
+        } else if p.extension().is_some_and(|e| e == "svg") {
+            out.push(p);
+        }
+    }
+    Ok(())
+}
+
+/// Compares one file.
+pub fn check(path: &Path, sizing: crate::Sizing) -> Outcome {
+    match parity(path, sizing, &RenderOptions::default()) {
+        Ok(p) => Outcome::Compared {
+            mae: p.comparison.mae,
+            max: p.comparison.max,
+            psnr: p.comparison.psnr,
+            pass: p.passes(),
+        },
+        Err(e) => Outcome::Refused(e.to_string()),
+    }
+}
+
+/// Runs `diffsvg parity`.
+pub fn run(a: Args) -> Result<()> {
+    use rayon::prelude::*;
+    let sizing = sizing(a.width, a.scale)?;
+    let files = collect_svgs(&a.inputs)?;
+    let outcomes: Vec<(PathBuf, Outcome)> = files
+        .par_iter()
+        .map(|f| (f.clone(), check(f, sizing)))
+        .collect();
+    // Per folder: (files, passed, refused).
+    let mut per: BTreeMap<String, [usize; 3]> = BTreeMap::new();
+    for (f, o) in &outcomes {
+        let folder = f
+            .parent()
+            .map(|p| p.display().to_string())
+            .unwrap_or_default();
+        let e = per.entry(folder).or_default();
+        e[0] += 1;
+        match o {
+            Outcome::Compared {
+                mae,
+                max,
+                psnr,
+                pass,
+            } => {
+                if *pass {
+                    e[1] += 1;
+                } else {
+                    println!(
+                        "FAIL {}: MAE {mae:.3}, max {max:.0}, PSNR {psnr:.1} dB",
+                        f.display()
+                    );
+                    if let Some(dir) = &a.failures {
+                        std::fs::create_dir_all(dir)
+                            .with_context(|| format!("{}: cannot create folder", dir.display()))?;
+                        let p = parity(f, sizing, &RenderOptions::default())?;
+                        let stem = f.file_stem().unwrap_or_default().to_string_lossy();
+                        let side = crate::image_io::side_by_side(&[
+                            &p.ours,
+                            &p.reference,
+                            &crate::metrics::difference_image(&p.ours, &p.reference),
+                        ]);
+                        side.save_png(dir.join(format!("{stem}.png")))?;
+                    }
+                }
+            }
+            Outcome::Refused(why) => {
+                e[2] += 1;
+                println!("REFUSED {why}");
+            }
+        }
+    }
+    let mut table =
+        format!("| folder | files | pass | refused | fail |\n|---|---:|---:|---:|---:|\n");
+    let mut tot = [0usize; 3];
+    for (k, v) in &per {
+        let fail = v[0] - v[1] - v[2];
+        table += &format!("| {k} | {} | {} | {} | {fail} |\n", v[0], v[1], v[2]);
+        for i in 0..3 {
+            tot[i] += v[i];
+        }
+    }
+    table += &format!(
+        "| **all** | {} | {} | {} | {} |\n",
+        tot[0],
+        tot[1],
+        tot[2],
+        tot[0] - tot[1] - tot[2]
+    );
+    println!("{table}");
+    println!("pass = MAE ≤ {PARITY_MAE}/255 and PSNR ≥ {PARITY_PSNR} dB");
+    if let Some(r) = &a.report {
+        crate::image_io::write_atomic(r, table.as_bytes())?;
+    }
+    Ok(())
+}

@@ -1,0 +1,80 @@
+//! `diffsvg render`.
+
+use std::path::PathBuf;
+
+use anyhow::Result;
+
+use super::util::{check_png, parse_color, read, sibling, sizing};
+use crate::metrics::{compare, difference_image};
+use crate::raster::{RenderOptions, render};
+use crate::reference::render_resvg;
+use crate::scene::svg_in::{from_tree, parse_tree};
+
+/// Arguments of `diffsvg render`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// SVG file to render.
+    input: PathBuf,
+    /// PNG file to write.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Output width in pixels (height follows the aspect ratio).
+    #[arg(long, conflicts_with = "scale")]
+    width: Option<u32>,
+    /// Scale factor applied to the SVG's own size.
+    #[arg(long)]
+    scale: Option<f64>,
+    /// Background color under the drawing (default: transparent).
+    #[arg(long)]
+    background: Option<String>,
+    /// Also render with resvg, print MAE, max difference and PSNR, and write
+    /// `<output>.diff.png`.
+    #[arg(long)]
+    compare: bool,
+    /// Flattening tolerance in pixels.
+    #[arg(long, default_value_t = RenderOptions::default().tolerance)]
+    tolerance: f64,
+}
+
+/// Runs `diffsvg render`.
+pub fn run(a: Args) -> Result<()> {
+    check_png(&a.output)?;
+    let bg = a.background.as_deref().map(parse_color).transpose()?;
+    let sizing = sizing(a.width, a.scale)?;
+    if !(a.tolerance.is_finite() && a.tolerance > 0.0) {
+        anyhow::bail!("--tolerance {} must be a positive number", a.tolerance);
+    }
+    let data = read(&a.input)?;
+    let tree = parse_tree(&data, &a.input)?;
+    let scene = from_tree(&tree, &a.input, sizing)?;
+    let mut img = render(
+        &scene,
+        &RenderOptions {
+            tolerance: a.tolerance,
+        },
+    );
+    if let Some(bg) = bg {
+        img.over_background(bg);
+    }
+    if a.compare {
+        let mut reference = render_resvg(&tree, &a.input, sizing)?;
+        if let Some(bg) = bg {
+            reference.over_background(bg);
+        }
+        let c = compare(&img.quantized(), &reference);
+        let diff = sibling(&a.output, "diff");
+        difference_image(&img, &reference).save_png(&diff)?;
+        println!(
+            "{}: {}x{}, vs resvg: MAE {:.3}/255, max {:.0}/255, PSNR {:.2} dB; difference image {}",
+            a.input.display(),
+            img.width,
+            img.height,
+            c.mae,
+            c.max,
+            c.psnr,
+            diff.display()
+        );
+    }
+    img.save_png(&a.output)?;
+    Ok(())
+}

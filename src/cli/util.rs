@@ -1,0 +1,58 @@
+//! Small helpers shared by subcommands.
+
+use std::path::{Path, PathBuf};
+use std::str::FromStr;
+
+use anyhow::{Context, Result, anyhow, bail};
+
+use crate::Sizing;
+
+/// Parses a CSS/SVG color (`white`, `#fa0`, `rgb(…)`, `none`) into straight RGBA in `[0, 1]`.
+pub fn parse_color(s: &str) -> Result<[f32; 4]> {
+    if s.eq_ignore_ascii_case("none") || s.eq_ignore_ascii_case("transparent") {
+        return Ok([0.0; 4]);
+    }
+    let c = svgtypes::Color::from_str(s)
+        .map_err(|e| anyhow!("--background {s:?}: not a color ({e})"))?;
+    Ok([
+        c.red as f32 / 255.0,
+        c.green as f32 / 255.0,
+        c.blue as f32 / 255.0,
+        c.alpha as f32 / 255.0,
+    ])
+}
+
+/// Sizing from `--width` / `--scale` (clap keeps them exclusive).
+pub fn sizing(width: Option<u32>, scale: Option<f64>) -> Result<Sizing> {
+    Ok(match (width, scale) {
+        (Some(0), _) => bail!("--width must be at least 1 pixel"),
+        (Some(w), _) => Sizing::Width(w),
+        (None, Some(s)) if !(s.is_finite() && s > 0.0) => {
+            bail!("--scale {s} must be a positive number")
+        }
+        (None, Some(s)) => Sizing::Scale(s),
+        (None, None) => Sizing::Natural,
+    })
+}
+
+/// `out.png` → `out.<suffix>.png`, beside it.
+pub fn sibling(path: &Path, suffix: &str) -> PathBuf {
+    let stem = path
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    path.with_file_name(format!("{stem}.{suffix}.png"))
+}
+
+/// Reads a whole file, naming it in the error.
+pub fn read(path: &Path) -> Result<Vec<u8>> {
+    std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))
+}
+
+/// Refuses output paths that are not `.png`.
+pub fn check_png(path: &Path) -> Result<()> {
+    match path.extension().and_then(|e| e.to_str()) {
+        Some(e) if e.eq_ignore_ascii_case("png") => Ok(()),
+        _ => bail!("{}: output must be a .png file", path.display()),
+    }
+}

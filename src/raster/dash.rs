@@ -1,0 +1,224 @@
+//! Dashing a flattened centerline (SVG `stroke-dasharray`).
+//!
+//! Dashes are cut from the polyline by arc length in the stroke frame; each subpath
+//! restarts the pattern at `dash_offset`. A cut point lies on a chord, so it is a fixed
+//! linear blend of the chord's two end vertices ([`DashSource`]); with the cut parameters
+//! held fixed, the backward pass maps gradients through that blend.
+
+use super::flatten::Contour;
+use crate::scene::Point;
+
+/// Where a dashed vertex comes from: `(1 − u)·pts[a] + u·pts[b]` of the undashed polyline.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DashSource {
+    /// First vertex.
+    pub a: u32,
+    /// Second vertex.
+    pub b: u32,
+    /// Blend factor in `[0, 1]`.
+    pub u: f64,
+}
+
+/// A dashed polyline: open contours, with provenance of every vertex.
+#[derive(Clone, Debug, Default)]
+pub struct Dashed {
+    /// Vertices.
+    pub pts: Vec<Point>,
+    /// Whether each vertex is a corner of the original path (joins are drawn there).
+    pub corner: Vec<bool>,
+    /// Provenance of each vertex.
+    pub src: Vec<DashSource>,
+    /// Open contours, one per dash.
+    pub contours: Vec<Contour>,
+}
+
+/// Cuts the contours of `pts` into dashes. `pattern` has an even number of non-negative
+/// lengths whose sum is positive; `offset` shifts the pattern's start along each subpath.
+pub fn dash(
+    pts: &[Point],
+    corner: &[bool],
+    contours: &[Contour],
+    pattern: &[f64],
+    offset: f64,
+) -> Dashed {
+    let mut out = Dashed::default();
+    let period: f64 = pattern.iter().sum();
+    if !(period > 0.0) || !period.is_finite() {
+        return out;
+    }
+    for c in contours {
+        if !c.drawn || c.len == 0 {
+            continue;
+        }
+        // Vertex order, with the closing chord back to the start for closed contours.
+        let mut order: Vec<u32> = (c.start..c.start + c.len).map(|i| i as u32).collect();
+        if c.closed && c.len > 1 {
+            order.push(c.start as u32);
+        }
+        // Position in the pattern at the start of the subpath.
+        let mut phase = offset.rem_euclid(period);
+        let mut k = 0usize;
+        while phase > 0.0 && phase >= pattern[k] {
+            phase -= pattern[k];
+            k = (k + 1) % pattern.len();
+        }
+        // `left`: length remaining in the current pattern entry; even `k` = dash on.
+        let mut left = pattern[k] - phase;
+        let mut on = k % 2 == 0;
+        let mut open: Option<usize> = None;
+        let push = |out: &mut Dashed, s: DashSource, is_corner: bool| {
+            let p0 = pts[s.a as usize];
+            let p1 = pts[s.b as usize];
+            out.pts
+                .push([p0[0] + s.u * (p1[0] - p0[0]), p0[1] + s.u * (p1[1] - p0[1])]);
+            out.corner.push(is_corner);
+            out.src.push(s);
+        };
+        let finish = |out: &mut Dashed, start: usize| {
+            let len = out.pts.len() - start;
+            out.contours.push(Contour {
+                start,
+                len,
+                closed: false,
+                drawn: true,
+            });
+        };
+        if on {
+            open = Some(out.pts.len());
+            let a = order[0];
+            push(&mut out, DashSource { a, b: a, u: 0.0 }, true);
+        }
+        for w in order.windows(2) {
+            let (a, b) = (w[0], w[1]);
+            let pa = pts[a as usize];
+            let pb = pts[b as usize];
+            let len = (pb[0] - pa[0]).hypot(pb[1] - pa[1]);
+            let mut pos = 0.0;
+            // Cut the chord wherever the pattern switches (zero-length entries included).
+            while left < len - pos {
+                pos += left;
+                let u = if len > 0.0 {
+                    (pos / len).clamp(0.0, 1.0)
+                } else {
+                    1.0
+                };
+                if on {
+                    push(&mut out, DashSource { a, b, u }, false);
+                    if let Some(s) = open.take() {
+                        finish(&mut out, s);
+                    }
+                } else {
+                    open = Some(out.pts.len());
+                    push(&mut out, DashSource { a, b, u }, false);
+                }
+                on = !on;
+                k = (k + 1) % pattern.len();
+                left = pattern[k];
+                if len == 0.0 && left > 0.0 {
+                    break;
+                }
+            }
+            left -= len - pos;
+            if on {
+                push(&mut out, DashSource { a: b, b, u: 0.0 }, corner[b as usize]);
+            }
+        }
+        if let Some(s) = open.take() {
+            finish(&mut out, s);
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn line(len: f64) -> (Vec<Point>, Vec<bool>, Vec<Contour>) {
+        (
+            vec![[0.0, 0.0], [len, 0.0]],
+            vec![true, true],
+            vec![Contour {
+                start: 0,
+                len: 2,
+                closed: false,
+                drawn: true,
+            }],
+        )
+    }
+
+    fn lengths(d: &Dashed) -> Vec<f64> {
+        d.contours
+            .iter()
+            .map(|c| {
+                (c.start + 1..c.start + c.len)
+                    .map(|i| {
+                        let (p, q) = (d.pts[i - 1], d.pts[i]);
+                        (q[0] - p[0]).hypot(q[1] - p[1])
+                    })
+                    .sum()
+            })
+            .collect()
+    }
+
+    #[test]
+    fn even_pattern_cuts_equal_dashes() {
+        let (p, c, k) = line(100.0);
+        let d = dash(&p, &c, &k, &[10.0, 10.0], 0.0);
+        assert_eq!(d.contours.len(), 5);
+        for l in lengths(&d) {
+            assert!((l - 10.0).abs() < 1e-9, "{l}");
+        }
+        assert!((d.pts[d.contours[1].start][0] - 20.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn offset_shifts_the_pattern() {
+        let (p, c, k) = line(30.0);
+        let d = dash(&p, &c, &k, &[10.0, 10.0], 5.0);
+        // on 5 (0–5), off 10, on 10 (15–25), off 5.
+        let l = lengths(&d);
+        assert_eq!(l.len(), 2);
+        assert!(
+            (l[0] - 5.0).abs() < 1e-9 && (l[1] - 10.0).abs() < 1e-9,
+            "{l:?}"
+        );
+        assert!((d.pts[d.contours[1].start][0] - 15.0).abs() < 1e-9);
+        // Negative offsets wrap.
+        let d = dash(&p, &c, &k, &[10.0, 10.0], -5.0);
+        assert!((d.pts[d.contours[0].start][0] - 5.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn dash_spans_corners_and_closing_chord() {
+        // A closed 10×10 square, dashes of 15 on / 5 off.
+        let p = vec![[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]];
+        let c = vec![true; 4];
+        let k = vec![Contour {
+            start: 0,
+            len: 4,
+            closed: true,
+            drawn: true,
+        }];
+        let d = dash(&p, &c, &k, &[15.0, 5.0], 0.0);
+        let l = lengths(&d);
+        assert_eq!(l.len(), 2);
+        assert!(l.iter().all(|x| (x - 15.0).abs() < 1e-9), "{l:?}");
+        // The first dash turns the corner at (10, 0), which stays a corner.
+        let first = d.contours[0];
+        assert_eq!(first.len, 3);
+        assert!(d.corner[first.start + 1]);
+    }
+
+    #[test]
+    fn zero_length_dash_makes_a_dot() {
+        let (p, c, k) = line(20.0);
+        let d = dash(&p, &c, &k, &[0.0, 10.0], 0.0);
+        assert_eq!(
+            d.contours.len(),
+            2,
+            "dots at 0 and 10; the pattern ends at 20"
+        );
+        assert!(lengths(&d).iter().all(|&l| l == 0.0));
+    }
+}
