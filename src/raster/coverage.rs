@@ -125,7 +125,13 @@ fn line_local(acc: &mut Cells<f32>, p0: Point, p1: Point) {
     while row < last {
         let r = row as f64;
         let dy = (r + 1.0).min(ybot) - r.max(ytop);
-        let xnext = if r + 1.0 >= ybot { bx } else { x + dxdy * dy };
+        let xnext = if r + 1.0 < ybot {
+            x + dxdy * dy
+        } else if ybot == by {
+            bx
+        } else {
+            ax + (ybot - ay) * dxdy
+        };
         let d = dy * dir;
         let line = &mut acc.data[row * w..(row + 1) * w];
         let (xl, xr) = if x < xnext { (x, xnext) } else { (xnext, x) };

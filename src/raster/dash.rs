@@ -55,6 +55,17 @@ pub fn dash(
         if c.closed && c.len > 1 {
             order.push(c.start as u32);
         }
+        // Zero-length subpaths draw nothing when dashed (as in Skia).
+        let length: f64 = order
+            .windows(2)
+            .map(|w| {
+                let (p, q) = (pts[w[0] as usize], pts[w[1] as usize]);
+                (q[0] - p[0]).hypot(q[1] - p[1])
+            })
+            .sum();
+        if !(length > 0.0) {
+            continue;
+        }
         // Position in the pattern at the start of the subpath.
         let mut phase = offset.rem_euclid(period);
         let mut k = 0usize;
@@ -83,6 +94,8 @@ pub fn dash(
                 drawn: true,
             });
         };
+        let first_dash = out.contours.len();
+        let started_on = on;
         if on {
             open = Some(out.pts.len());
             let a = order[0];
@@ -123,8 +136,30 @@ pub fn dash(
                 push(&mut out, DashSource { a: b, b, u: 0.0 }, corner[b as usize]);
             }
         }
+        let ended_on = open.is_some();
         if let Some(s) = open.take() {
             finish(&mut out, s);
+        }
+        // A closed contour that is dashed at both its start and its end is one dash
+        // through the start point (joined there), as in Skia.
+        let here = &out.contours[first_dash..];
+        if c.closed && started_on && ended_on && here.len() >= 2 {
+            let first = here[0];
+            let last = here[here.len() - 1];
+            let start = out.pts.len();
+            for i in (last.start..last.start + last.len).chain(first.start + 1..first.start + first.len) {
+                out.pts.push(out.pts[i]);
+                out.corner.push(out.corner[i]);
+                out.src.push(out.src[i]);
+            }
+            let n = out.contours.len();
+            out.contours[n - 1] = Contour {
+                start,
+                len: out.pts.len() - start,
+                closed: false,
+                drawn: true,
+            };
+            out.contours.remove(first_dash);
         }
     }
     out
@@ -204,6 +239,12 @@ mod tests {
         let l = lengths(&d);
         assert_eq!(l.len(), 2);
         assert!(l.iter().all(|x| (x - 15.0).abs() < 1e-9), "{l:?}");
+        // With 12 on / 2 off (dashes 0–12, 14–26, 28–40) the dash over the start point
+        // is one piece, 28–40 then 0–12.
+        let d = dash(&p, &c, &k, &[12.0, 2.0], 0.0);
+        let l = lengths(&d);
+        assert_eq!(l.len(), 2, "{l:?}");
+        assert!((l[0] - 12.0).abs() < 1e-9 && (l[1] - 24.0).abs() < 1e-9, "{l:?}");
         // The first dash turns the corner at (10, 0), which stays a corner.
         let first = d.contours[0];
         assert_eq!(first.len, 3);
