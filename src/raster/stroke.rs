@@ -88,6 +88,23 @@ pub enum Recipe {
         /// Side.
         side: f64,
     },
+    /// End of a clipped miter (`miter-clip` past the limit): where the offset line of
+    /// `a → b` (or of `b → c` when `second`) crosses the line perpendicular to the join's
+    /// bisector at distance `limit·h` from `b`.
+    Clip {
+        /// First chord start.
+        a: u32,
+        /// Shared vertex.
+        b: u32,
+        /// Second chord end.
+        c: u32,
+        /// Side.
+        side: f64,
+        /// Miter limit.
+        limit: f64,
+        /// On the second chord's offset line.
+        second: bool,
+    },
     /// The centerline vertex `b` itself (inner-join pivot).
     Center {
         /// The vertex.
@@ -143,7 +160,9 @@ impl Recipe {
     pub fn inputs(&self) -> [u32; 3] {
         match *self {
             Recipe::Offset { a, b, .. } => [a, b, NONE],
-            Recipe::Meet { a, b, c, .. } | Recipe::JoinArc { a, b, c, .. } => [a, b, c],
+            Recipe::Meet { a, b, c, .. }
+            | Recipe::JoinArc { a, b, c, .. }
+            | Recipe::Clip { a, b, c, .. } => [a, b, c],
             Recipe::CapArc { a, b, .. } | Recipe::Square { a, b, .. } => [a, b, NONE],
             Recipe::Center { b } | Recipe::Dot { b, .. } => [NONE, b, NONE],
         }
@@ -168,6 +187,28 @@ impl Recipe {
                     return add(pb, scale(n0, h));
                 }
                 add(pb, scale(add(n0, n1), h / denom))
+            }
+            Recipe::Clip {
+                side,
+                limit,
+                second,
+                ..
+            } => {
+                let (d0, n0) = frame(pa, pb);
+                let (d1, n1) = frame(pb, pc);
+                let s = S::c(side);
+                let (n0, n1) = (scale(n0, s), scale(n1, s));
+                let sum = add(n0, n1);
+                let len = dot(sum, sum).sqrt();
+                // The bisector; for a full reversal, straight ahead.
+                let m = if len.v() > 1e-9 { [sum[0] / len, sum[1] / len] } else { d0 };
+                let (n, d) = if second { (n1, d1) } else { (n0, d0) };
+                let dm = dot(d, m);
+                if dm.v().abs() <= 1e-12 {
+                    return add(pb, scale(n, h));
+                }
+                let along = h * (S::c(limit) - dot(n, m)) / dm;
+                add(pb, add(scale(n, h), scale(d, along)))
             }
             Recipe::JoinArc { side, f, .. } => {
                 let (_, n0) = frame(pa, pb);
@@ -340,6 +381,17 @@ impl Builder<'_> {
                     let limit = self.style.miter_limit.max(1.0);
                     if (1.0 + cos) * 0.5 * limit * limit >= 1.0 {
                         self.push(Recipe::Meet { a, b, c, side: 1.0 });
+                    } else if self.style.join == LineJoin::MiterClip {
+                        for second in [false, true] {
+                            self.push(Recipe::Clip {
+                                a,
+                                b,
+                                c,
+                                side: 1.0,
+                                limit,
+                                second,
+                            });
+                        }
                     }
                 }
                 LineJoin::Round => {
@@ -599,6 +651,24 @@ mod tests {
             "{}",
             ring_area(&b, 0)
         );
+    }
+
+    #[test]
+    fn miter_clip_cuts_at_the_limit() {
+        // Right angle at (10, 0), half width 1, limit 1.2 (< √2). The full miter (area 40)
+        // has its tip at (11, −1), √2 from the corner; the clip line is perpendicular to
+        // the bisector 1.2 from the corner, so it cuts off a right isosceles triangle of
+        // height h = √2 − 1.2, whose area is h².
+        let pts = [[0.0, 0.0], [10.0, 0.0], [10.0, 10.0]];
+        let mut st = style(1.0, LineJoin::MiterClip, LineCap::Butt);
+        st.miter_limit = 1.2;
+        let o = outline(&pts, &[true; 3], &[open(3)], st);
+        let want = 40.0 - (2.0f64.sqrt() - 1.2).powi(2);
+        assert!((ring_area(&o, 0).abs() - want).abs() < 1e-9, "{} vs {want}", ring_area(&o, 0));
+        // Plain miter with the same limit falls back to a bevel.
+        st.join = LineJoin::Miter;
+        let b = outline(&pts, &[true; 3], &[open(3)], st);
+        assert!((ring_area(&b, 0).abs() - 39.5).abs() < 1e-9);
     }
 
     #[test]

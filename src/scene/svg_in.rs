@@ -76,8 +76,79 @@ fn reject_unsupported_xml(text: &str, name: &FsPath) -> Result<()> {
                 what: describe(tag, n.attribute("id")),
             });
         }
+        for a in n.attributes() {
+            if GEOMETRY_ATTRIBUTES.contains(&a.name()) {
+                if let Some(bad) = bad_number(a.value()) {
+                    return Err(Error::InvalidValue {
+                        path: name.to_path_buf(),
+                        what: format!(
+                            "{} in attribute {} of {}",
+                            bad,
+                            a.name(),
+                            describe(tag, n.attribute("id"))
+                        ),
+                    });
+                }
+            }
+        }
     }
     Ok(())
+}
+
+/// Attributes holding coordinates; usvg silently drops a shape whose numbers are not
+/// finite, so they are checked here to report the file instead.
+const GEOMETRY_ATTRIBUTES: &[&str] = &[
+    "d", "points", "x", "y", "width", "height", "cx", "cy", "r", "rx", "ry", "x1", "y1", "x2",
+    "y2", "fx", "fy", "fr", "transform", "gradientTransform", "stroke-width", "viewBox",
+];
+
+/// Largest coordinate magnitude accepted (far beyond any drawing, well inside `f32`).
+const MAX_COORDINATE: f64 = 1e30;
+
+/// Describes the first NaN, infinity or out-of-range number in an attribute value.
+fn bad_number(value: &str) -> Option<String> {
+    let lower = value.to_ascii_lowercase();
+    if lower.contains("nan") {
+        return Some("NaN".into());
+    }
+    if lower.contains("inf") {
+        return Some("an infinite number".into());
+    }
+    // Scan numbers: sign, digits, fraction, exponent.
+    let b = value.as_bytes();
+    let mut i = 0;
+    while i < b.len() {
+        let start = i;
+        if b[i] == b'+' || b[i] == b'-' {
+            i += 1;
+        }
+        let digits = i;
+        while i < b.len() && (b[i].is_ascii_digit() || b[i] == b'.') {
+            i += 1;
+        }
+        if i == digits {
+            i = start + 1;
+            continue;
+        }
+        if i < b.len() && (b[i] == b'e' || b[i] == b'E') {
+            let mut j = i + 1;
+            if j < b.len() && (b[j] == b'+' || b[j] == b'-') {
+                j += 1;
+            }
+            if j < b.len() && b[j].is_ascii_digit() {
+                i = j;
+                while i < b.len() && b[i].is_ascii_digit() {
+                    i += 1;
+                }
+            }
+        }
+        if let Ok(v) = value[start..i].parse::<f64>() {
+            if !(v.abs() <= MAX_COORDINATE) {
+                return Some(format!("number {} out of range", &value[start..i]));
+            }
+        }
+    }
+    None
 }
 
 fn describe(tag: &str, id: Option<&str>) -> String {
@@ -160,11 +231,14 @@ pub fn from_tree(tree: &usvg::Tree, name: &FsPath, sizing: Sizing) -> Result<Sce
     let (w, h, root) = canvas_size(tree, sizing, name)?;
     let ctx = Ctx { name, root };
     let mut scene = Scene::new(w, h);
-    scene.nodes = convert_group_children(tree.root(), &ctx)?;
+    let t = concat(&ctx.root, &to_affine(tree.root().transform()));
+    scene.nodes = convert_group_children(tree.root(), &ctx, &t)?;
     Ok(scene)
 }
 
-fn convert_group_children(g: &usvg::Group, ctx: &Ctx) -> Result<Vec<Node>> {
+/// Converts a group's children; `t` maps the group's user space to device pixels.
+/// (resvg composes group transforms the same way while drawing.)
+fn convert_group_children(g: &usvg::Group, ctx: &Ctx, t: &Affine) -> Result<Vec<Node>> {
     let mut out = Vec::new();
     for child in g.children() {
         match child {
@@ -182,7 +256,7 @@ fn convert_group_children(g: &usvg::Group, ctx: &Ctx) -> Result<Vec<Node>> {
                 if g.blend_mode() != usvg::BlendMode::Normal {
                     return Err(ctx.unsupported(what("element with mix-blend-mode")));
                 }
-                let children = convert_group_children(g, ctx)?;
+                let children = convert_group_children(g, ctx, &concat(t, &to_affine(g.transform())))?;
                 let opacity = g.opacity().get() as f64;
                 if g.should_isolate() && opacity < 1.0 {
                     out.push(Node::Group(Group {
@@ -195,7 +269,7 @@ fn convert_group_children(g: &usvg::Group, ctx: &Ctx) -> Result<Vec<Node>> {
                 }
             }
             usvg::Node::Path(p) => {
-                if let Some(path) = convert_path(p, ctx)? {
+                if let Some(path) = convert_path(p, ctx, t)? {
                     out.push(Node::Path(path));
                 }
             }
@@ -210,11 +284,11 @@ fn convert_group_children(g: &usvg::Group, ctx: &Ctx) -> Result<Vec<Node>> {
     Ok(out)
 }
 
-fn convert_path(p: &usvg::Path, ctx: &Ctx) -> Result<Option<Path>> {
+fn convert_path(p: &usvg::Path, ctx: &Ctx, t: &Affine) -> Result<Option<Path>> {
     if !p.is_visible() {
         return Ok(None);
     }
-    let t = concat(&ctx.root, &to_affine(p.abs_transform()));
+    let t = *t;
     let mut out = Path::new(p.id());
     let tp = |q: usvg::tiny_skia_path::Point| -> Result<[f64; 2]> {
         let d = apply(&t, [q.x as f64, q.y as f64]);
@@ -378,6 +452,19 @@ pub fn string_name() -> PathBuf {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn non_finite_numbers_are_reported() {
+        assert_eq!(bad_number("M 0 0 L 10 20.5e3 Z"), None);
+        assert_eq!(bad_number("matrix(1 0 0 1 -5 .5)"), None);
+        assert!(bad_number("M NaN 0").unwrap().contains("NaN"));
+        assert!(bad_number("M 0 0 L 1e39 5").unwrap().contains("1e39"));
+        assert!(bad_number("-Infinity").is_some());
+        let svg = r#"<svg xmlns="http://www.w3.org/2000/svg" width="10" height="10">
+            <rect id="r" x="NaN" width="5" height="5"/></svg>"#;
+        let e = Scene::from_svg_str(svg, "nan.svg", Sizing::Natural).unwrap_err().to_string();
+        assert!(e.contains("nan.svg") && e.contains("NaN") && e.contains("\"r\""), "{e}");
+    }
 
     fn load(s: &str) -> Result<Scene> {
         Scene::from_svg_str(s, "t.svg", Sizing::Natural)

@@ -1,0 +1,115 @@
+//! Forward parity with resvg on the bundled samples and on resvg's own test suite.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+use diffsvg::Sizing;
+use diffsvg::raster::RenderOptions;
+use diffsvg::reference::{PARITY_MAE, PARITY_PSNR, parity};
+use rayon::prelude::*;
+
+use super::common::{root, samples, shared_data};
+
+fn check_all(files: &[(PathBuf, String, Sizing)], skip: &HashMap<String, (String, String)>) {
+    let results: Vec<(String, Result<diffsvg::metrics::Comparison, String>)> = files
+        .par_iter()
+        .map(|(f, key, sizing)| {
+            let r = parity(f, *sizing, &RenderOptions::default())
+                .map(|p| p.comparison)
+                .map_err(|e| e.to_string());
+            (key.clone(), r)
+        })
+        .collect();
+    let (mut pass, mut refused, mut differs) = (0, 0, 0);
+    let mut failures = Vec::new();
+    for (key, r) in &results {
+        match (r, skip.get(key)) {
+            (Ok(c), None) => {
+                if c.mae <= PARITY_MAE && c.psnr >= PARITY_PSNR {
+                    pass += 1;
+                } else {
+                    failures.push(format!("{key}: MAE {:.3}, PSNR {:.1} dB", c.mae, c.psnr));
+                }
+            }
+            (Err(e), None) => failures.push(format!("{key}: unexpected error: {e}")),
+            (Err(e), Some((kind, _))) if kind == "refused" => {
+                // Refused files must fail cleanly, naming the file.
+                assert!(e.contains(".svg"), "{key}: error does not name the file: {e}");
+                refused += 1;
+            }
+            (Ok(c), Some((kind, why))) if kind == "differs" => {
+                differs += 1;
+                println!("known difference {key}: MAE {:.3}, PSNR {:.1} dB ({why})", c.mae, c.psnr);
+            }
+            (r, Some((kind, _))) => {
+                failures.push(format!("{key}: skip list says {kind}, got {:?}", r.as_ref().map(|c| c.mae)))
+            }
+        }
+    }
+    println!(
+        "parity: {} files, {pass} pass, {refused} refused (unsupported or invalid), {differs} known differences",
+        results.len()
+    );
+    assert!(failures.is_empty(), "{} files fail parity:\n{}", failures.len(), failures.join("\n"));
+}
+
+fn skip_list() -> HashMap<String, (String, String)> {
+    let text = std::fs::read_to_string(root().join("tests/parity-skip.tsv")).unwrap();
+    text.lines()
+        .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
+        .map(|l| {
+            let mut f = l.splitn(3, '\t');
+            let path = f.next().unwrap().to_string();
+            let kind = f.next().expect("kind column").to_string();
+            let why = f.next().expect("reason column").to_string();
+            assert!(kind == "refused" || kind == "differs", "bad kind in skip list: {l}");
+            assert!(!why.trim().is_empty(), "skip list entry without a reason: {l}");
+            (path, (kind, why))
+        })
+        .collect()
+}
+
+#[test]
+fn samples_match_resvg() {
+    let files: Vec<_> = samples()
+        .into_iter()
+        .map(|p| {
+            let key = p.file_name().unwrap().to_string_lossy().into_owned();
+            (p, key, Sizing::Natural)
+        })
+        .collect();
+    assert!(files.len() >= 12, "expected a dozen samples");
+    check_all(&files, &HashMap::new());
+}
+
+fn svgs(dir: &Path, out: &mut Vec<PathBuf>) {
+    for e in std::fs::read_dir(dir).unwrap() {
+        let p = e.unwrap().path();
+        if p.is_dir() {
+            svgs(&p, out);
+        } else if p.extension().is_some_and(|e| e == "svg") {
+            out.push(p);
+        }
+    }
+}
+
+#[test]
+fn resvg_test_suite_matches_resvg() {
+    let Some(data) = shared_data("resvg_test_suite_matches_resvg") else {
+        return;
+    };
+    let base = data.join("resvg-tests");
+    let mut files = Vec::new();
+    // The suite's drawings are 200 units rendered 300 px wide; `extra/` at natural size.
+    for (sub, sizing) in [("tests", Sizing::Width(300)), ("extra", Sizing::Natural)] {
+        let mut v = Vec::new();
+        svgs(&base.join(sub), &mut v);
+        v.sort();
+        for p in v {
+            let key = p.strip_prefix(&base).unwrap().to_string_lossy().replace('\\', "/");
+            files.push((p, key, sizing));
+        }
+    }
+    assert!(files.len() > 500, "resvg-tests looks incomplete: {} files", files.len());
+    check_all(&files, &skip_list());
+}
