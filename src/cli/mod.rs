@@ -5,6 +5,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
+mod bench;
 mod parity;
 mod render;
 mod util;
@@ -23,6 +24,8 @@ enum Command {
     Render(render::Args),
     /// Compare diffsvg with resvg over SVG files or folders, per folder pass rates.
     Parity(parity::Args),
+    /// Time forward rendering against resvg (medians of several runs).
+    Bench(bench::Args),
 }
 
 /// Runs the command line; returns the process exit code.
@@ -31,6 +34,7 @@ pub fn main() -> ExitCode {
     let result = match cli.command {
         Command::Render(a) => render::run(a),
         Command::Parity(a) => parity::run(a),
+        Command::Bench(a) => bench::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

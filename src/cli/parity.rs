@@ -94,10 +94,20 @@ pub fn run(a: Args) -> Result<()> {
     // Per folder: (files, passed, refused).
     let mut per: BTreeMap<String, [usize; 3]> = BTreeMap::new();
     for (f, o) in &outcomes {
-        let folder = f
-            .parent()
-            .map(|p| p.display().to_string())
-            .unwrap_or_default();
+        // Folders relative to the input they were found under.
+        let base = a.inputs.iter().find(|i| f.starts_with(i));
+        let parent = f.parent().unwrap_or(f);
+        let folder = match base {
+            Some(b) if b.is_dir() => {
+                let rel = parent
+                    .strip_prefix(b)
+                    .unwrap_or(parent)
+                    .display()
+                    .to_string();
+                if rel.is_empty() { ".".to_string() } else { rel }
+            }
+            _ => parent.display().to_string(),
+        };
         let e = per.entry(folder).or_default();
         e[0] += 1;
         match o {

@@ -147,7 +147,9 @@ pub fn dash(
             let first = here[0];
             let last = here[here.len() - 1];
             let start = out.pts.len();
-            for i in (last.start..last.start + last.len).chain(first.start + 1..first.start + first.len) {
+            for i in
+                (last.start..last.start + last.len).chain(first.start + 1..first.start + first.len)
+            {
                 out.pts.push(out.pts[i]);
                 out.corner.push(out.corner[i]);
                 out.src.push(out.src[i]);
@@ -244,7 +246,10 @@ mod tests {
         let d = dash(&p, &c, &k, &[12.0, 2.0], 0.0);
         let l = lengths(&d);
         assert_eq!(l.len(), 2, "{l:?}");
-        assert!((l[0] - 12.0).abs() < 1e-9 && (l[1] - 24.0).abs() < 1e-9, "{l:?}");
+        assert!(
+            (l[0] - 12.0).abs() < 1e-9 && (l[1] - 24.0).abs() < 1e-9,
+            "{l:?}"
+        );
         // The first dash turns the corner at (10, 0), which stays a corner.
         let first = d.contours[0];
         assert_eq!(first.len, 3);

@@ -201,7 +201,11 @@ impl Recipe {
                 let sum = add(n0, n1);
                 let len = dot(sum, sum).sqrt();
                 // The bisector; for a full reversal, straight ahead.
-                let m = if len.v() > 1e-9 { [sum[0] / len, sum[1] / len] } else { d0 };
+                let m = if len.v() > 1e-9 {
+                    [sum[0] / len, sum[1] / len]
+                } else {
+                    d0
+                };
                 let (n, d) = if second { (n1, d1) } else { (n0, d0) };
                 let dm = dot(d, m);
                 if dm.v().abs() <= 1e-12 {
@@ -664,7 +668,11 @@ mod tests {
         st.miter_limit = 1.2;
         let o = outline(&pts, &[true; 3], &[open(3)], st);
         let want = 40.0 - (2.0f64.sqrt() - 1.2).powi(2);
-        assert!((ring_area(&o, 0).abs() - want).abs() < 1e-9, "{} vs {want}", ring_area(&o, 0));
+        assert!(
+            (ring_area(&o, 0).abs() - want).abs() < 1e-9,
+            "{} vs {want}",
+            ring_area(&o, 0)
+        );
         // Plain miter with the same limit falls back to a bevel.
         st.join = LineJoin::Miter;
         let b = outline(&pts, &[true; 3], &[open(3)], st);

@@ -19,6 +19,7 @@
 //! The flat parameter vector that the optimizer moves is described in [`params`].
 
 pub mod params;
+pub mod random;
 pub mod svg_in;
 pub mod svg_out;
 

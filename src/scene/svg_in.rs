@@ -77,6 +77,16 @@ fn reject_unsupported_xml(text: &str, name: &FsPath) -> Result<()> {
             });
         }
         for a in n.attributes() {
+            let is_marker = matches!(
+                a.name(),
+                "marker-start" | "marker-mid" | "marker-end" | "marker"
+            ) || (a.name() == "style" && a.value().contains("marker"));
+            if is_marker && !a.value().trim().eq_ignore_ascii_case("none") {
+                return Err(Error::Unsupported {
+                    path: name.to_path_buf(),
+                    what: format!("markers ({})", describe(tag, n.attribute("id"))),
+                });
+            }
             if GEOMETRY_ATTRIBUTES.contains(&a.name()) {
                 if let Some(bad) = bad_number(a.value()) {
                     return Err(Error::InvalidValue {
@@ -98,8 +108,28 @@ fn reject_unsupported_xml(text: &str, name: &FsPath) -> Result<()> {
 /// Attributes holding coordinates; usvg silently drops a shape whose numbers are not
 /// finite, so they are checked here to report the file instead.
 const GEOMETRY_ATTRIBUTES: &[&str] = &[
-    "d", "points", "x", "y", "width", "height", "cx", "cy", "r", "rx", "ry", "x1", "y1", "x2",
-    "y2", "fx", "fy", "fr", "transform", "gradientTransform", "stroke-width", "viewBox",
+    "d",
+    "points",
+    "x",
+    "y",
+    "width",
+    "height",
+    "cx",
+    "cy",
+    "r",
+    "rx",
+    "ry",
+    "x1",
+    "y1",
+    "x2",
+    "y2",
+    "fx",
+    "fy",
+    "fr",
+    "transform",
+    "gradientTransform",
+    "stroke-width",
+    "viewBox",
 ];
 
 /// Largest coordinate magnitude accepted (far beyond any drawing, well inside `f32`).
@@ -256,7 +286,8 @@ fn convert_group_children(g: &usvg::Group, ctx: &Ctx, t: &Affine) -> Result<Vec<
                 if g.blend_mode() != usvg::BlendMode::Normal {
                     return Err(ctx.unsupported(what("element with mix-blend-mode")));
                 }
-                let children = convert_group_children(g, ctx, &concat(t, &to_affine(g.transform())))?;
+                let children =
+                    convert_group_children(g, ctx, &concat(t, &to_affine(g.transform())))?;
                 let opacity = g.opacity().get() as f64;
                 if g.should_isolate() && opacity < 1.0 {
                     out.push(Node::Group(Group {
@@ -462,8 +493,13 @@ mod tests {
         assert!(bad_number("-Infinity").is_some());
         let svg = r#"<svg xmlns="http://www.w3.org/2000/svg" width="10" height="10">
             <rect id="r" x="NaN" width="5" height="5"/></svg>"#;
-        let e = Scene::from_svg_str(svg, "nan.svg", Sizing::Natural).unwrap_err().to_string();
-        assert!(e.contains("nan.svg") && e.contains("NaN") && e.contains("\"r\""), "{e}");
+        let e = Scene::from_svg_str(svg, "nan.svg", Sizing::Natural)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("nan.svg") && e.contains("NaN") && e.contains("\"r\""),
+            "{e}"
+        );
     }
 
     fn load(s: &str) -> Result<Scene> {

@@ -29,7 +29,10 @@ fn assert_fails(out: &Output, needle: &str, what: &str, output: &Path) {
     assert_eq!(out.status.code(), Some(2), "stderr: {err}");
     assert_eq!(err.trim().lines().count(), 1, "one line expected: {err}");
     assert!(err.contains(needle), "{err:?} should name {needle}");
-    assert!(err.to_lowercase().contains(what), "{err:?} should say {what}");
+    assert!(
+        err.to_lowercase().contains(what),
+        "{err:?} should say {what}"
+    );
     assert!(!err.contains("panicked"), "{err}");
     assert!(!output.exists(), "no output may be written on failure");
     // Nor a stray temporary file.
@@ -57,7 +60,16 @@ fn render_writes_a_png_of_the_requested_size() {
     assert_eq!(img.get(40, 20), [0.0, 0.0, 1.0, 1.0]);
     assert_eq!(img.get(2, 2)[3], 0.0, "transparent without --background");
 
-    let r = diffsvg(&["render", s(&svg), "-o", s(&out), "--scale", "0.5", "--background", "white"]);
+    let r = diffsvg(&[
+        "render",
+        s(&svg),
+        "-o",
+        s(&out),
+        "--scale",
+        "0.5",
+        "--background",
+        "white",
+    ]);
     assert!(r.status.success());
     let img = diffsvg::Image::load(&out).unwrap();
     assert_eq!((img.width, img.height), (20, 10));
@@ -74,7 +86,15 @@ fn compare_reports_metrics_and_writes_a_difference_image() {
     assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
     assert!(text.contains("MAE") && text.contains("PSNR"), "{text}");
     assert!(dir.join("curves.diff.png").exists());
-    let mae: f64 = text.split("MAE ").nth(1).unwrap().split('/').next().unwrap().parse().unwrap();
+    let mae: f64 = text
+        .split("MAE ")
+        .nth(1)
+        .unwrap()
+        .split('/')
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap();
     assert!(mae <= 0.5, "{text}");
 }
 
@@ -84,18 +104,37 @@ fn bad_inputs_fail_cleanly() {
     let out = dir.join("out.png");
     let o = s(&out).to_string();
 
-    let p = write(&dir, "malformed.svg", "<svg xmlns='http://www.w3.org/2000/svg'><rect");
-    assert_fails(&diffsvg(&["render", s(&p), "-o", &o]), "malformed.svg", "malformed", &out);
+    let p = write(
+        &dir,
+        "malformed.svg",
+        "<svg xmlns='http://www.w3.org/2000/svg'><rect",
+    );
+    assert_fails(
+        &diffsvg(&["render", s(&p), "-o", &o]),
+        "malformed.svg",
+        "malformed",
+        &out,
+    );
 
     let p = dir.join("missing.svg");
-    assert_fails(&diffsvg(&["render", s(&p), "-o", &o]), "missing.svg", "no such file", &out);
+    assert_fails(
+        &diffsvg(&["render", s(&p), "-o", &o]),
+        "missing.svg",
+        "no such file",
+        &out,
+    );
 
     let p = write(
         &dir,
         "text.svg",
         r#"<svg xmlns="http://www.w3.org/2000/svg" width="10" height="10"><text id="t">hi</text></svg>"#,
     );
-    assert_fails(&diffsvg(&["render", s(&p), "-o", &o]), "text.svg", "unsupported: <text>", &out);
+    assert_fails(
+        &diffsvg(&["render", s(&p), "-o", &o]),
+        "text.svg",
+        "unsupported: <text>",
+        &out,
+    );
 
     let p = write(
         &dir,
@@ -104,18 +143,38 @@ fn bad_inputs_fail_cleanly() {
         <clipPath id="c"><rect width="5" height="5"/></clipPath>
         <rect id="r" width="10" height="10" clip-path="url(#c)"/></svg>"#,
     );
-    assert_fails(&diffsvg(&["render", s(&p), "-o", &o]), "clip.svg", "clip-path", &out);
+    assert_fails(
+        &diffsvg(&["render", s(&p), "-o", &o]),
+        "clip.svg",
+        "clip-path",
+        &out,
+    );
 
     let p = write(&dir, "sq.svg", SQUARE);
-    assert_fails(&diffsvg(&["render", s(&p), "-o", &o, "--width", "0"]), "width", "at least 1", &out);
+    assert_fails(
+        &diffsvg(&["render", s(&p), "-o", &o, "--width", "0"]),
+        "width",
+        "at least 1",
+        &out,
+    );
     assert_fails(
         &diffsvg(&["render", s(&p), "-o", &o, "--width", "100000"]),
         "sq.svg",
         "exceeds the limit",
         &out,
     );
-    assert_fails(&diffsvg(&["render", s(&p), "-o", &o, "--scale", "NaN"]), "scale", "positive", &out);
-    assert_fails(&diffsvg(&["render", s(&p), "-o", &o, "--background", "bluish"]), "bluish", "not a color", &out);
+    assert_fails(
+        &diffsvg(&["render", s(&p), "-o", &o, "--scale", "NaN"]),
+        "scale",
+        "positive",
+        &out,
+    );
+    assert_fails(
+        &diffsvg(&["render", s(&p), "-o", &o, "--background", "bluish"]),
+        "bluish",
+        "not a color",
+        &out,
+    );
 
     let p = write(
         &dir,
@@ -123,11 +182,21 @@ fn bad_inputs_fail_cleanly() {
         r#"<svg xmlns="http://www.w3.org/2000/svg" width="10" height="10">
         <path id="p" d="M 0 0 L 1e39 5 L 0 9 Z"/></svg>"#,
     );
-    assert_fails(&diffsvg(&["render", s(&p), "-o", &o]), "huge.svg", "invalid value", &out);
+    assert_fails(
+        &diffsvg(&["render", s(&p), "-o", &o]),
+        "huge.svg",
+        "invalid value",
+        &out,
+    );
 
     let p = write(&dir, "sq.svg", SQUARE);
     let jpg = dir.join("out.jpg");
-    assert_fails(&diffsvg(&["render", s(&p), "-o", s(&jpg)]), "out.jpg", ".png", &jpg);
+    assert_fails(
+        &diffsvg(&["render", s(&p), "-o", s(&jpg)]),
+        "out.jpg",
+        ".png",
+        &jpg,
+    );
 }
 
 #[test]

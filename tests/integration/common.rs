@@ -16,7 +16,10 @@ pub fn shared_data(test: &str) -> Option<PathBuf> {
     if dir.is_dir() {
         Some(dir)
     } else {
-        println!("SKIPPED {test}: {} not found (set DIFFSVG_DATA)", dir.display());
+        println!(
+            "SKIPPED {test}: {} not found (set DIFFSVG_DATA)",
+            dir.display()
+        );
         None
     }
 }

@@ -24,7 +24,11 @@ fn polygon_scene(w: u32, h: u32, rings: &[Vec<Point>], rule: FillRule) -> Scene 
 }
 
 fn alpha_sum(s: &Scene) -> f64 {
-    render(s, &RenderOptions::default()).data.iter().map(|p| p[3] as f64).sum()
+    render(s, &RenderOptions::default())
+        .data
+        .iter()
+        .map(|p| p[3] as f64)
+        .sum()
 }
 
 #[test]
@@ -34,8 +38,12 @@ fn rotated_rectangles_have_exact_area() {
         let (c, s) = (a.cos(), a.sin());
         let (w, h) = (17.3, 6.9);
         let center = [32.2, 31.7];
-        let corners = [[-w, -h], [w, -h], [w, h], [-w, h]]
-            .map(|[x, y]| [center[0] + 0.5 * (c * x - s * y), center[1] + 0.5 * (s * x + c * y)]);
+        let corners = [[-w, -h], [w, -h], [w, h], [-w, h]].map(|[x, y]| {
+            [
+                center[0] + 0.5 * (c * x - s * y),
+                center[1] + 0.5 * (s * x + c * y),
+            ]
+        });
         let scene = polygon_scene(64, 64, &[corners.to_vec()], FillRule::NonZero);
         let got = alpha_sum(&scene);
         assert!((got - w * h).abs() < 2e-3, "angle {a}: {got} vs {}", w * h);
@@ -50,7 +58,10 @@ fn triangles_have_exact_area() {
         [[10.0, 10.0], [50.0, 10.0001], [30.0, 10.5]],
     ];
     for t in tris {
-        let area = 0.5 * ((t[1][0] - t[0][0]) * (t[2][1] - t[0][1]) - (t[2][0] - t[0][0]) * (t[1][1] - t[0][1])).abs();
+        let area = 0.5
+            * ((t[1][0] - t[0][0]) * (t[2][1] - t[0][1])
+                - (t[2][0] - t[0][0]) * (t[1][1] - t[0][1]))
+                .abs();
         let got = alpha_sum(&polygon_scene(64, 64, &[t.to_vec()], FillRule::EvenOdd));
         assert!((got - area).abs() < 2e-3, "{t:?}: {got} vs {area}");
     }
@@ -70,7 +81,10 @@ fn circles_are_within_the_flattening_tolerance() {
         // usvg's four-arc circle deviates from the true circle by 2.7e-4·r; flattening
         // adds at most the tolerance along the perimeter.
         let bound = 2.0 * std::f64::consts::PI * r * (tol + 3e-4 * r);
-        assert!((got - exact).abs() < bound, "r {r}: {got} vs {exact} (bound {bound})");
+        assert!(
+            (got - exact).abs() < bound,
+            "r {r}: {got} vs {exact} (bound {bound})"
+        );
     }
 }
 
@@ -100,7 +114,10 @@ fn supersampled(w: u32, h: u32, rings: &[Vec<Point>], rule: FillRule) -> Vec<f64
             let mut inside = 0;
             for sy in 0..N {
                 for sx in 0..N {
-                    let q = [px as f64 + (sx as f64 + 0.5) / N as f64, py as f64 + (sy as f64 + 0.5) / N as f64];
+                    let q = [
+                        px as f64 + (sx as f64 + 0.5) / N as f64,
+                        py as f64 + (sy as f64 + 0.5) / N as f64,
+                    ];
                     let wn = winding(rings, q);
                     let hit = match rule {
                         FillRule::NonZero => wn != 0,
@@ -127,9 +144,15 @@ fn star_polygon(c: Point, radii: &[f64], jitter: &[f64], spread: f64) -> Vec<Poi
         .collect()
 }
 
-fn check_against_supersampling(rings: Vec<Vec<Point>>, rule: FillRule) -> Result<(), TestCaseError> {
+fn check_against_supersampling(
+    rings: Vec<Vec<Point>>,
+    rule: FillRule,
+) -> Result<(), TestCaseError> {
     let (w, h) = (12, 12);
-    let img = render(&polygon_scene(w, h, &rings, rule), &RenderOptions::default());
+    let img = render(
+        &polygon_scene(w, h, &rings, rule),
+        &RenderOptions::default(),
+    );
     let reference = supersampled(w, h, &rings, rule);
     let mut sum = 0.0;
     for (i, (p, r)) in img.data.iter().zip(&reference).enumerate() {

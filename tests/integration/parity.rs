@@ -34,23 +34,35 @@ fn check_all(files: &[(PathBuf, String, Sizing)], skip: &HashMap<String, (String
             (Err(e), None) => failures.push(format!("{key}: unexpected error: {e}")),
             (Err(e), Some((kind, _))) if kind == "refused" => {
                 // Refused files must fail cleanly, naming the file.
-                assert!(e.contains(".svg"), "{key}: error does not name the file: {e}");
+                assert!(
+                    e.contains(".svg"),
+                    "{key}: error does not name the file: {e}"
+                );
                 refused += 1;
             }
             (Ok(c), Some((kind, why))) if kind == "differs" => {
                 differs += 1;
-                println!("known difference {key}: MAE {:.3}, PSNR {:.1} dB ({why})", c.mae, c.psnr);
+                println!(
+                    "known difference {key}: MAE {:.3}, PSNR {:.1} dB ({why})",
+                    c.mae, c.psnr
+                );
             }
-            (r, Some((kind, _))) => {
-                failures.push(format!("{key}: skip list says {kind}, got {:?}", r.as_ref().map(|c| c.mae)))
-            }
+            (r, Some((kind, _))) => failures.push(format!(
+                "{key}: skip list says {kind}, got {:?}",
+                r.as_ref().map(|c| c.mae)
+            )),
         }
     }
     println!(
         "parity: {} files, {pass} pass, {refused} refused (unsupported or invalid), {differs} known differences",
         results.len()
     );
-    assert!(failures.is_empty(), "{} files fail parity:\n{}", failures.len(), failures.join("\n"));
+    assert!(
+        failures.is_empty(),
+        "{} files fail parity:\n{}",
+        failures.len(),
+        failures.join("\n")
+    );
 }
 
 fn skip_list() -> HashMap<String, (String, String)> {
@@ -62,8 +74,14 @@ fn skip_list() -> HashMap<String, (String, String)> {
             let path = f.next().unwrap().to_string();
             let kind = f.next().expect("kind column").to_string();
             let why = f.next().expect("reason column").to_string();
-            assert!(kind == "refused" || kind == "differs", "bad kind in skip list: {l}");
-            assert!(!why.trim().is_empty(), "skip list entry without a reason: {l}");
+            assert!(
+                kind == "refused" || kind == "differs",
+                "bad kind in skip list: {l}"
+            );
+            assert!(
+                !why.trim().is_empty(),
+                "skip list entry without a reason: {l}"
+            );
             (path, (kind, why))
         })
         .collect()
@@ -106,10 +124,18 @@ fn resvg_test_suite_matches_resvg() {
         svgs(&base.join(sub), &mut v);
         v.sort();
         for p in v {
-            let key = p.strip_prefix(&base).unwrap().to_string_lossy().replace('\\', "/");
+            let key = p
+                .strip_prefix(&base)
+                .unwrap()
+                .to_string_lossy()
+                .replace('\\', "/");
             files.push((p, key, sizing));
         }
     }
-    assert!(files.len() > 500, "resvg-tests looks incomplete: {} files", files.len());
+    assert!(
+        files.len() > 500,
+        "resvg-tests looks incomplete: {} files",
+        files.len()
+    );
     check_all(&files, &skip_list());
 }

@@ -11,13 +11,19 @@ fn samples_survive_a_round_trip() {
     for path in samples() {
         let a = Scene::load(&path, Sizing::Natural).unwrap();
         let text = a.to_svg_string();
-        let b = Scene::from_svg_str(&text, "roundtrip.svg", Sizing::Natural)
-            .unwrap_or_else(|e| panic!("{}: written SVG does not load: {e}\n{text}", path.display()));
+        let b = Scene::from_svg_str(&text, "roundtrip.svg", Sizing::Natural).unwrap_or_else(|e| {
+            panic!("{}: written SVG does not load: {e}\n{text}", path.display())
+        });
         assert_eq!(a.path_count(), b.path_count(), "{}", path.display());
         let opts = RenderOptions::default();
         let c = compare(&render(&a, &opts), &render(&b, &opts));
         // Numbers are written with 4 decimals: differences stay far below one level.
-        assert!(c.max < 1.0, "{}: round trip changed pixels by {} levels", path.display(), c.max);
+        assert!(
+            c.max < 1.0,
+            "{}: round trip changed pixels by {} levels",
+            path.display(),
+            c.max
+        );
         // Ids survive.
         let ids = |s: &Scene| {
             let mut v = Vec::new();

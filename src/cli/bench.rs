@@ -1,0 +1,120 @@
+//! `diffsvg bench`: forward render time against resvg.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+
+use super::parity::collect_svgs;
+use crate::Sizing;
+use crate::raster::{RenderOptions, prepare, render_prepared};
+use crate::reference::render_resvg;
+use crate::scene::random::curved_paths;
+use crate::scene::svg_in::{from_tree, parse_tree};
+
+/// Arguments of `diffsvg bench`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// SVG files or folders to time (default: svg-samples/).
+    inputs: Vec<PathBuf>,
+    /// Timed runs per case; the median is reported.
+    #[arg(long, default_value_t = 9)]
+    runs: usize,
+    /// Thread counts for diffsvg (resvg always uses one).
+    #[arg(long, value_delimiter = ',', default_value = "1,2")]
+    threads: Vec<usize>,
+    /// Canvas sizes for the random scene of 500 curved translucent paths.
+    #[arg(long, value_delimiter = ',', default_value = "256,512,1024")]
+    sizes: Vec<u32>,
+    /// Write the Markdown table here as well.
+    #[arg(long)]
+    report: Option<PathBuf>,
+}
+
+fn median_ms(runs: usize, mut f: impl FnMut()) -> f64 {
+    f(); // warm-up
+    let mut t: Vec<f64> = (0..runs.max(1))
+        .map(|_| {
+            let s = Instant::now();
+            f();
+            s.elapsed().as_secs_f64() * 1e3
+        })
+        .collect();
+    t.sort_by(|a, b| a.total_cmp(b));
+    t[t.len() / 2]
+}
+
+/// Runs `diffsvg bench`.
+pub fn run(a: Args) -> Result<()> {
+    let inputs = if a.inputs.is_empty() {
+        vec![PathBuf::from("svg-samples")]
+    } else {
+        a.inputs.clone()
+    };
+    let mut cases: Vec<(String, usvg::Tree, Sizing)> = Vec::new();
+    for f in collect_svgs(&inputs)? {
+        let data = std::fs::read(&f).with_context(|| format!("{}: cannot read", f.display()))?;
+        let tree = parse_tree(&data, &f)?;
+        let name = f
+            .file_name()
+            .unwrap_or_default()
+            .to_string_lossy()
+            .into_owned();
+        cases.push((name, tree, Sizing::Natural));
+    }
+    for &size in &a.sizes {
+        let scene = curved_paths(500, size, 1);
+        let tree = parse_tree(scene.to_svg_string().as_bytes(), "random.svg".as_ref())?;
+        cases.push((format!("500 random paths, {size}²"), tree, Sizing::Natural));
+    }
+    let pools: Vec<(usize, rayon::ThreadPool)> = a
+        .threads
+        .iter()
+        .map(|&n| Ok((n, rayon::ThreadPoolBuilder::new().num_threads(n).build()?)))
+        .collect::<Result<_>>()?;
+    let mut table = String::from("| case | resvg (ms) |");
+    for (n, _) in &pools {
+        table += &format!(" diffsvg {n} thr (ms) | ratio |");
+    }
+    table += "\n|---|---:|";
+    for _ in &pools {
+        table += "---:|---:|";
+    }
+    table += "\n";
+    let mut ratios: Vec<Vec<f64>> = vec![Vec::new(); pools.len()];
+    for (name, tree, sizing) in &cases {
+        let path = std::path::Path::new(name);
+        let scene = from_tree(tree, path, *sizing)?;
+        let opts = RenderOptions::default();
+        let reference = median_ms(a.runs, || {
+            let _ = render_resvg(tree, path, *sizing);
+        });
+        let mut row = format!("| {name} | {reference:.2} |");
+        for (k, (_, pool)) in pools.iter().enumerate() {
+            let t = pool.install(|| {
+                median_ms(a.runs, || {
+                    let _ = render_prepared(&prepare(&scene, opts.tolerance, None));
+                })
+            });
+            let ratio = reference / t;
+            ratios[k].push(ratio);
+            row += &format!(" {t:.2} | {ratio:.2}× |");
+        }
+        println!("{row}");
+        table += &row;
+        table += "\n";
+    }
+    let mut summary = String::from("\nGeometric mean speed-up over resvg (> 1: diffsvg faster):");
+    for (k, (n, _)) in pools.iter().enumerate() {
+        let g =
+            (ratios[k].iter().map(|r| r.ln()).sum::<f64>() / ratios[k].len().max(1) as f64).exp();
+        summary += &format!(" {n} thread(s) {g:.2}×;");
+    }
+    println!("{summary}");
+    table += &summary;
+    table += "\n";
+    if let Some(r) = &a.report {
+        crate::image_io::write_atomic(r, table.as_bytes())?;
+    }
+    Ok(())
+}

@@ -1,0 +1,74 @@
+//! Seeded random scenes for benchmarks and tests.
+
+use super::{Fill, FillRule, Node, Paint, Path, Scene};
+
+/// A small deterministic generator (SplitMix64): the same seed gives the same scene on
+/// every platform.
+#[derive(Clone, Debug)]
+pub struct Rng(u64);
+
+impl Rng {
+    /// A generator from a seed.
+    pub fn new(seed: u64) -> Self {
+        Rng(seed)
+    }
+
+    /// Next 64 random bits.
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+
+    /// Uniform in `[lo, hi)`.
+    pub fn range(&mut self, lo: f64, hi: f64) -> f64 {
+        let u = (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64;
+        lo + (hi - lo) * u
+    }
+}
+
+/// `n` closed paths of three random cubics each, translucent solid fills, on a
+/// `size × size` canvas; each path spans up to a quarter of the canvas.
+pub fn curved_paths(n: usize, size: u32, seed: u64) -> Scene {
+    let mut rng = Rng::new(seed);
+    let s = size as f64;
+    let mut scene = Scene::new(size, size);
+    for i in 0..n {
+        let c = [rng.range(0.0, s), rng.range(0.0, s)];
+        let r = s * 0.125;
+        let mut pt = || [c[0] + rng.range(-r, r), c[1] + rng.range(-r, r)];
+        let mut p = Path::new(format!("p{i}"));
+        p.move_to(pt());
+        for _ in 0..3 {
+            let (a, b, e) = (pt(), pt(), pt());
+            p.cubic_to(a, b, e);
+        }
+        p.close();
+        p.fill = Some(Fill {
+            paint: Paint::Solid([
+                rng.range(0.0, 1.0),
+                rng.range(0.0, 1.0),
+                rng.range(0.0, 1.0),
+            ]),
+            opacity: rng.range(0.3, 0.8),
+            rule: FillRule::NonZero,
+        });
+        scene.nodes.push(Node::Path(p));
+    }
+    scene
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn same_seed_same_scene() {
+        assert_eq!(curved_paths(5, 64, 7), curved_paths(5, 64, 7));
+        assert_ne!(curved_paths(5, 64, 7), curved_paths(5, 64, 8));
+        let s = curved_paths(5, 64, 7);
+        assert_eq!(s.path_count(), 5);
+    }
+}
