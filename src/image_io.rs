@@ -113,6 +113,17 @@ impl Image {
         }
     }
 
+    /// Backward of [`over_background`](Self::over_background): turns `∂L/∂(composited)`
+    /// (this image) into `∂L/∂(image before compositing)`, in place.
+    pub fn over_background_backward(&mut self, bg: [f32; 4]) {
+        let b = [bg[0] * bg[3], bg[1] * bg[3], bg[2] * bg[3], bg[3]];
+        for g in &mut self.data {
+            // out_c = p_c + (1 − p_a)·b_c
+            let gb: f32 = (0..4).map(|c| g[c] * b[c]).sum();
+            g[3] -= gb;
+        }
+    }
+
     /// Reads a PNG or JPEG file (straight alpha in the file), premultiplying.
     pub fn load(path: impl AsRef<Path>) -> Result<Image> {
         let path = path.as_ref();

@@ -16,7 +16,9 @@
 
 pub mod cli;
 pub mod error;
+pub mod gradcheck;
 pub mod image_io;
+pub mod loss;
 pub mod metrics;
 pub mod raster;
 pub mod reference;

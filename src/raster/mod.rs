@@ -8,6 +8,7 @@
 //! Bands are independent and each is processed in a fixed order, so the result has the
 //! same bits for any number of threads.
 
+pub mod backward;
 pub mod coverage;
 pub mod dash;
 pub mod flatten;
@@ -17,5 +18,6 @@ pub mod prepare;
 pub mod render;
 pub mod stroke;
 
+pub use backward::{backward_prepared, render_and_backward, render_backward};
 pub use prepare::{Prepared, prepare};
 pub use render::{RenderOptions, render, render_prepared};

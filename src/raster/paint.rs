@@ -10,16 +10,27 @@
 //! `t = 0` and the end circle `(c, r)` at `t = 1` with a non-negative radius. Where no such
 //! circle exists the pixel is left unpainted.
 
-use super::jet::Scalar;
+use super::jet::{Jet, Scalar};
 use crate::scene::{Affine, Gradient, GradientKind, Paint, Point, Spread, Stop, apply, invert};
 
 /// A paint ready for per-pixel evaluation.
 #[derive(Clone, Debug)]
 pub enum PaintEval {
-    /// Premultiplied color, opacity included.
-    Solid([f32; 4]),
+    /// A solid color.
+    Solid(SolidEval),
     /// A gradient.
     Gradient(GradientEval),
+}
+
+/// A solid color ready for compositing.
+#[derive(Clone, Copy, Debug)]
+pub struct SolidEval {
+    /// Premultiplied color, opacity included.
+    pub premul: [f32; 4],
+    /// Straight color.
+    pub color: [f64; 3],
+    /// Opacity as given (clamped to `[0, 1]` when drawn).
+    pub opacity: f64,
 }
 
 /// A gradient ready for evaluation.
@@ -44,12 +55,16 @@ impl PaintEval {
         match paint {
             Paint::Solid(c) => {
                 let a = opacity.clamp(0.0, 1.0);
-                Some(PaintEval::Solid([
-                    (c[0] * a) as f32,
-                    (c[1] * a) as f32,
-                    (c[2] * a) as f32,
-                    a as f32,
-                ]))
+                Some(PaintEval::Solid(SolidEval {
+                    premul: [
+                        (c[0] * a) as f32,
+                        (c[1] * a) as f32,
+                        (c[2] * a) as f32,
+                        a as f32,
+                    ],
+                    color: *c,
+                    opacity,
+                }))
             }
             Paint::Gradient(g) => Some(PaintEval::Gradient(GradientEval::new(g, opacity)?)),
         }
@@ -59,7 +74,7 @@ impl PaintEval {
     #[inline]
     pub fn at(&self, p: Point) -> [f32; 4] {
         match self {
-            PaintEval::Solid(c) => *c,
+            PaintEval::Solid(c) => c.premul,
             PaintEval::Gradient(g) => g.at(p),
         }
     }
@@ -67,6 +82,34 @@ impl PaintEval {
     /// Whether the paint is one color everywhere.
     pub fn is_solid(&self) -> bool {
         matches!(self, PaintEval::Solid(_))
+    }
+
+    /// Length of this paint's gradient vector in [`PaintEval::backward`]: a solid paint has
+    /// `r, g, b, opacity`; a gradient its geometry (4 or 6), `offset, r, g, b, opacity`
+    /// per stop, then the item opacity.
+    pub fn grad_len(&self) -> usize {
+        match self {
+            PaintEval::Solid(_) => 4,
+            PaintEval::Gradient(g) => geometry(&g.kind).len() + 5 * g.stops.len() + 1,
+        }
+    }
+
+    /// Adds to `out` (length [`grad_len`](Self::grad_len)) the gradient of the loss with
+    /// respect to this paint's parameters, given `gs = ∂L/∂(premultiplied color)` at the
+    /// device point `p`.
+    pub fn backward(&self, p: Point, gs: [f64; 4], out: &mut [f64]) {
+        match self {
+            PaintEval::Solid(c) => {
+                let a = c.opacity.clamp(0.0, 1.0);
+                for k in 0..3 {
+                    out[k] += gs[k] * a;
+                }
+                if (0.0..=1.0).contains(&c.opacity) {
+                    out[3] += gs[0] * c.color[0] + gs[1] * c.color[1] + gs[2] * c.color[2] + gs[3];
+                }
+            }
+            PaintEval::Gradient(g) => g.backward(p, gs, out),
+        }
     }
 }
 
@@ -102,6 +145,64 @@ impl GradientEval {
     }
 }
 
+impl GradientEval {
+    /// See [`PaintEval::backward`].
+    fn backward(&self, p: Point, gs: [f64; 4], out: &mut [f64]) {
+        let q = apply(&self.inv, p);
+        let geo = geometry(&self.kind);
+        let ng = geo.len();
+        let jet = geo.to_jets();
+        let Some(t) = gradient_t(&jet, q) else {
+            return;
+        };
+        let (ts, dts) = spread(self.spread, t);
+        let (i, j, u) = bracket(&self.stops, ts);
+        let c = stop_color(&self.stops, ts);
+        let op = self.opacity;
+        // s = (C_rgb·C_a·op, C_a·op).
+        let mut gc = [0.0; 4];
+        for k in 0..3 {
+            gc[k] = gs[k] * c[3] * op;
+        }
+        gc[3] = (gs[0] * c[0] + gs[1] * c[1] + gs[2] * c[2] + gs[3]) * op;
+        let n = out.len();
+        out[n - 1] += (gs[0] * c[0] + gs[1] * c[1] + gs[2] * c[2] + gs[3]) * c[3];
+        // C = (1 − u)·stop_i + u·stop_j, per channel (stop opacity as alpha).
+        let stop_slot = |s: usize| ng + 5 * s;
+        let weights: &[(usize, f64)] = if i == j {
+            &[(i, 1.0)]
+        } else {
+            &[(i, 1.0 - u), (j, u)]
+        };
+        for &(s, w) in weights {
+            for k in 0..3 {
+                out[stop_slot(s) + 1 + k] += w * gc[k];
+            }
+            out[stop_slot(s) + 4] += w * gc[3];
+        }
+        if i == j {
+            return;
+        }
+        let (a, b) = (&self.stops[i], &self.stops[j]);
+        let span = b.offset - a.offset;
+        if !(span > 0.0) {
+            return;
+        }
+        let ca = [a.color[0], a.color[1], a.color[2], a.opacity];
+        let cb = [b.color[0], b.color[1], b.color[2], b.opacity];
+        let gu: f64 = (0..4).map(|k| gc[k] * (cb[k] - ca[k])).sum();
+        // u = (t' − o_i) / (o_j − o_i).
+        out[stop_slot(i)] += -gu * (1.0 - u) / span;
+        out[stop_slot(j)] += -gu * u / span;
+        let gt = gu / span * dts;
+        if gt != 0.0 {
+            for k in 0..ng {
+                out[k] += gt * t.d[k];
+            }
+        }
+    }
+}
+
 /// Geometry parameters as a flat array: linear `x1 y1 x2 y2`, radial `cx cy r fx fy fr`.
 pub fn geometry(kind: &GradientKind) -> Geometry<f64> {
     match *kind {
@@ -117,6 +218,29 @@ pub enum Geometry<S> {
     Linear([S; 4]),
     /// `cx cy r fx fy fr`.
     Radial([S; 6]),
+}
+
+impl Geometry<f64> {
+    /// Number of parameters.
+    pub fn len(&self) -> usize {
+        match self {
+            Geometry::Linear(_) => 4,
+            Geometry::Radial(_) => 6,
+        }
+    }
+
+    /// Whether there are no parameters (never).
+    pub fn is_empty(&self) -> bool {
+        false
+    }
+
+    /// The parameters as dual numbers, parameter `k` seeded in slot `k`.
+    pub fn to_jets(&self) -> Geometry<Jet> {
+        match self {
+            Geometry::Linear(v) => Geometry::Linear(std::array::from_fn(|k| Jet::var(v[k], k))),
+            Geometry::Radial(v) => Geometry::Radial(std::array::from_fn(|k| Jet::var(v[k], k))),
+        }
+    }
 }
 
 /// The gradient parameter `t` at gradient-space point `q`, before spreading. `None` where

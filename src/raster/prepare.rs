@@ -24,6 +24,9 @@ pub struct Item {
     pub kind: ItemKind,
     /// Polygon vertices, device pixels.
     pub pts: Vec<Point>,
+    /// For a fill, the index in [`PathGeom::flat`] of each vertex; for a stroke, the index
+    /// in [`PathGeom::outline`] (the identity).
+    pub src: Vec<u32>,
     /// Closed rings as `(start, len)` into `pts`.
     pub rings: Vec<(usize, usize)>,
     /// Even-odd fill rule (strokes are always nonzero).
@@ -41,8 +44,14 @@ pub enum Op {
     Draw(usize),
     /// Start a transparent layer.
     Push,
-    /// Composite the current layer onto the one below with this opacity.
-    Pop(f32),
+    /// Composite the current layer onto the one below with `opacity`; `group` numbers the
+    /// group in walk order (its slot in [`crate::scene::ParamLayout::groups`]).
+    Pop {
+        /// Layer opacity.
+        opacity: f32,
+        /// Group index.
+        group: usize,
+    },
 }
 
 /// The geometry of one path, kept for the backward pass.
@@ -86,6 +95,7 @@ pub fn prepare(scene: &Scene, tolerance: f64, counts: Option<&[ChordCounts]>) ->
         geoms: Vec::new(),
     };
     let mut b = Builder {
+        groups: 0,
         tolerance,
         counts,
         out: &mut p,
@@ -95,6 +105,7 @@ pub fn prepare(scene: &Scene, tolerance: f64, counts: Option<&[ChordCounts]>) ->
 }
 
 struct Builder<'a> {
+    groups: usize,
     tolerance: f64,
     counts: Option<&'a [ChordCounts]>,
     out: &'a mut Prepared,
@@ -106,9 +117,14 @@ impl Builder<'_> {
             match n {
                 Node::Path(p) => self.path(p),
                 Node::Group(g) => {
+                    let group = self.groups;
+                    self.groups += 1;
                     self.out.ops.push(Op::Push);
                     self.nodes(&g.children);
-                    self.out.ops.push(Op::Pop(g.opacity.clamp(0.0, 1.0) as f32));
+                    self.out.ops.push(Op::Pop {
+                        opacity: g.opacity.clamp(0.0, 1.0) as f32,
+                        group,
+                    });
                 }
             }
         }
@@ -134,17 +150,20 @@ impl Builder<'_> {
         let fill_item = path.fill.as_ref().and_then(|f| {
             let paint = PaintEval::new(&f.paint, f.opacity)?;
             let mut pts = Vec::with_capacity(geom.flat.pts.len());
+            let mut src = Vec::with_capacity(geom.flat.pts.len());
             let mut rings = Vec::new();
             for c in &geom.flat.contours {
                 if c.len >= 3 {
                     rings.push((pts.len(), c.len));
                     pts.extend_from_slice(&geom.flat.pts[c.start..c.start + c.len]);
+                    src.extend(c.start as u32..(c.start + c.len) as u32);
                 }
             }
             item(
                 ix,
                 ItemKind::Fill,
                 pts,
+                src,
                 rings,
                 f.rule == FillRule::EvenOdd,
                 paint,
@@ -192,9 +211,10 @@ impl Builder<'_> {
                 .map(|q| [a * q[0] + c * q[1], b * q[0] + d * q[1]])
                 .collect();
             let rings = ol.rings.clone();
+            let src = (0..pts.len() as u32).collect();
             geom.frame_inv = Some(inv);
             geom.outline = Some(ol);
-            item(ix, ItemKind::Stroke, pts, rings, false, paint)
+            item(ix, ItemKind::Stroke, pts, src, rings, false, paint)
         });
         let mut push = |it: Option<Item>| {
             if let Some(it) = it {
@@ -217,6 +237,7 @@ fn item(
     path: usize,
     kind: ItemKind,
     pts: Vec<Point>,
+    src: Vec<u32>,
     rings: Vec<(usize, usize)>,
     evenodd: bool,
     paint: PaintEval,
@@ -243,6 +264,7 @@ fn item(
         path,
         kind,
         pts,
+        src,
         rings,
         evenodd,
         paint,

@@ -79,7 +79,7 @@ impl<'a> BandRenderer<'a> {
                     self.draw(&self.p.items[i], target);
                 }
                 Op::Push => layers.push(vec![[0.0; 4]; out.len()]),
-                Op::Pop(opacity) => {
+                Op::Pop { opacity, .. } => {
                     let top = layers.pop().unwrap_or_default();
                     let below = match layers.last_mut() {
                         Some(l) => l.as_mut_slice(),
@@ -126,9 +126,13 @@ impl<'a> BandRenderer<'a> {
 
     /// Draws one item source-over onto `target` (this band's rows of a layer).
     pub fn draw(&mut self, item: &Item, target: &mut [[f32; 4]]) {
-        if !self.winding(item) {
-            return;
+        if self.winding(item) {
+            self.composite(item, target);
         }
+    }
+
+    /// Composites `item` onto `target` using the winding integrals in `self.acc`.
+    pub fn composite(&self, item: &Item, target: &mut [[f32; 4]]) {
         let width = self.p.width as usize;
         let acc = &self.acc;
         let cols = acc.w.min(width - acc.x0 as usize);

@@ -3,5 +3,6 @@
 mod cli;
 mod common;
 mod exactness;
+mod gradients;
 mod parity;
 mod roundtrip;

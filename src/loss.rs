@@ -1,0 +1,82 @@
+//! Image losses over premultiplied RGBA in `[0, 1]`: the mean over pixels and channels.
+
+use std::str::FromStr;
+
+use crate::image_io::Image;
+
+/// Which loss.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Loss {
+    /// Mean squared error.
+    #[default]
+    Mse,
+    /// Mean absolute error.
+    L1,
+}
+
+impl FromStr for Loss {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s.to_ascii_lowercase().as_str() {
+            "mse" | "l2" => Ok(Loss::Mse),
+            "l1" | "mae" => Ok(Loss::L1),
+            _ => Err(format!("unknown loss {s:?} (expected mse or l1)")),
+        }
+    }
+}
+
+impl Loss {
+    /// Loss of `img` against `target` (same size).
+    pub fn value(self, img: &Image, target: &Image) -> f64 {
+        self.value_and_grad(img, target, false).0
+    }
+
+    /// Loss and `∂L/∂img`.
+    pub fn grad(self, img: &Image, target: &Image) -> (f64, Image) {
+        let (l, g) = self.value_and_grad(img, target, true);
+        (l, g.expect("gradient requested"))
+    }
+
+    fn value_and_grad(self, img: &Image, target: &Image, want_grad: bool) -> (f64, Option<Image>) {
+        assert_eq!(
+            (img.width, img.height),
+            (target.width, target.height),
+            "image sizes differ"
+        );
+        let n = (img.data.len() * 4).max(1) as f64;
+        let mut sum = 0.0f64;
+        let mut g = want_grad.then(|| Image::new(img.width, img.height));
+        for (k, (p, t)) in img.data.iter().zip(&target.data).enumerate() {
+            for c in 0..4 {
+                let d = p[c] as f64 - t[c] as f64;
+                let (v, dv) = match self {
+                    Loss::Mse => (d * d, 2.0 * d),
+                    Loss::L1 => (d.abs(), d.signum() * (d != 0.0) as i32 as f64),
+                };
+                sum += v;
+                if let Some(g) = &mut g {
+                    g.data[k][c] = (dv / n) as f32;
+                }
+            }
+        }
+        (sum / n, g)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn values_and_gradients() {
+        let a = Image::filled(2, 1, [0.5, 0.5, 0.5, 1.0]);
+        let b = Image::filled(2, 1, [0.25, 0.5, 0.5, 1.0]);
+        assert!((Loss::Mse.value(&a, &b) - 0.0625 / 4.0).abs() < 1e-12);
+        assert!((Loss::L1.value(&a, &b) - 0.25 / 4.0).abs() < 1e-12);
+        let (_, g) = Loss::Mse.grad(&a, &b);
+        assert!((g.data[0][0] - 2.0 * 0.25 / 8.0).abs() < 1e-7);
+        assert_eq!(g.data[0][1], 0.0);
+        assert_eq!("L1".parse::<Loss>().unwrap(), Loss::L1);
+        assert!("huber".parse::<Loss>().is_err());
+    }
+}
