@@ -25,7 +25,7 @@
 
 use rayon::prelude::*;
 
-use super::coverage::{Cells, backward_line, coverage};
+use super::coverage::{Cells, backward_line, coverage, coverage_slopes};
 use super::prepare::{ItemKind, Op, Prepared, prepare};
 use super::render::{BAND_ROWS, BandRenderer, RenderOptions, composite_layer};
 use super::stroke::NONE;
@@ -316,7 +316,7 @@ fn band_backward(p: &Prepared, y0: usize, rows: usize, d_out: &[[f32; 4]]) -> Ba
     // 2. Reverse walk with ∂L/∂(current layer).
     let mut out = BandGrads::default();
     let mut g_stack: Vec<Vec<[f32; 4]>> = vec![d_out.to_vec()];
-    let mut gw = Cells::<f32>::default();
+    let mut gw = Cells::<[f32; 2]>::default();
     for rec in tape.iter().rev() {
         match rec {
             Rec::Pop {
@@ -362,8 +362,9 @@ fn band_backward(p: &Prepared, y0: usize, rows: usize, d_out: &[[f32; 4]]) -> Ba
                     let y = acc.y0 as usize + row;
                     for col in 0..*cols {
                         let wv = acc.data[row * acc.w + col];
-                        let (cov, dcov) = coverage(wv, it.evenodd);
-                        if cov == 0.0 && dcov == 0.0 {
+                        let (cov, _) = coverage(wv, it.evenodd);
+                        let (up, down) = coverage_slopes(wv, it.evenodd);
+                        if cov == 0.0 && up == 0.0 && down == 0.0 {
                             continue;
                         }
                         let x = acc.x0 as usize + col;
@@ -375,7 +376,10 @@ fn band_backward(p: &Prepared, y0: usize, rows: usize, d_out: &[[f32; 4]]) -> Ba
                         let gd: f32 = (0..4).map(|c| go[c] * d[c]).sum();
                         let gsrc: f32 = (0..4).map(|c| go[c] * s[c]).sum();
                         let g_cov = gsrc - s[3] * gd;
-                        gw.data[row * acc.w + col] = g_cov * dcov;
+                        gw.data[row * acc.w + col] = [g_cov * up, g_cov * down];
+                        if cov == 0.0 {
+                            continue;
+                        }
                         let mut gs = [0.0f64; 4];
                         for c in 0..4 {
                             gs[c] = (go[c] * cov) as f64;
@@ -406,7 +410,9 @@ fn band_backward(p: &Prepared, y0: usize, rows: usize, d_out: &[[f32; 4]]) -> Ba
                         let ia = s + k;
                         let ib = s + if k + 1 == n { 0 } else { k + 1 };
                         let (a, b) = (it.pts[ia], it.pts[ib]);
-                        if a[1].max(b[1]) <= ylo || a[1].min(b[1]) >= yhi {
+                        // Inclusive: an edge on the band's boundary line counts in
+                        // both bands, each for the cells on its side.
+                        if a[1].max(b[1]) < ylo || a[1].min(b[1]) > yhi {
                             continue;
                         }
                         let (mut da, mut db) = ([0.0; 2], [0.0; 2]);

@@ -177,59 +177,76 @@ fn line_local(acc: &mut Cells<f32>, p0: Point, p1: Point) {
     }
 }
 
-/// Backward of [`accumulate_line`]: adds `∂L/∂p0` and `∂L/∂p1` given `g`, the gradient
-/// with respect to each cell's winding integral (cells outside `g` count as zero).
-pub fn backward_line(g: &Cells<f32>, p0: Point, p1: Point, dp0: &mut Point, dp1: &mut Point) {
+/// Backward of [`accumulate_line`]: adds `∂L/∂p0` and `∂L/∂p1`.
+///
+/// `g` holds, per cell, the loss gradient with respect to the cell's winding integral as
+/// two one-sided values: `[∂L/∂w⁺, ∂L/∂w⁻]` for `w` increasing and decreasing (they differ
+/// only where the coverage rule has a kink, e.g. `w` exactly 0 or 1 under nonzero). Cells
+/// outside `g` count as zero.
+///
+/// Moving the segment along its normal `N = (−dy, dx)` raises `w` in the cells on the side
+/// `N` points to (the "low" side) and lowers it on the other. A piece inside one cell uses
+/// the mean of the two one-sided values; a piece lying exactly on a cell boundary uses the
+/// low cell's `∂L/∂w⁺` and the high cell's `∂L/∂w⁻`, averaged. So at kinks the result is the
+/// mean of the one-sided derivatives, which is what a central difference measures, and a
+/// shape whose edges sit exactly on pixel boundaries still gets a useful gradient.
+pub fn backward_line(g: &Cells<[f32; 2]>, p0: Point, p1: Point, dp0: &mut Point, dp1: &mut Point) {
     let (dx, dy) = (p1[0] - p0[0], p1[1] - p0[1]);
-    if dy == 0.0 || g.w == 0 {
-        return; // a horizontal segment contributes no area: no gradient either
+    if (dx == 0.0 && dy == 0.0) || g.w == 0 || g.h == 0 {
+        return;
     }
-    // t range inside the rows of g.
     let ylo = g.y0 as f64;
     let yhi = ylo + g.h as f64;
     let xlo = g.x0 as f64;
     let xhi = xlo + g.w as f64;
-    let ty = |y: f64| (y - p0[1]) / dy;
-    let (mut t0, mut t1) = {
-        let (a, b) = (ty(ylo), ty(yhi));
-        (a.min(b).max(0.0), a.max(b).min(1.0))
-    };
-    if dx != 0.0 {
-        let tx = |x: f64| (x - p0[0]) / dx;
-        let (a, b) = (tx(xlo), tx(xhi));
-        t0 = t0.max(a.min(b));
-        t1 = t1.min(a.max(b));
-    } else if p0[0] < xlo || p0[0] >= xhi {
-        return;
+    // Parameter range inside the closed box of g (boundary lines count: the cell inside
+    // may see a piece lying on them).
+    let (mut t0, mut t1) = (0.0f64, 1.0f64);
+    for (o, d, lo, hi) in [(p0[0], dx, xlo, xhi), (p0[1], dy, ylo, yhi)] {
+        if d == 0.0 {
+            if o < lo || o > hi {
+                return;
+            }
+        } else {
+            let (a, b) = ((lo - o) / d, (hi - o) / d);
+            t0 = t0.max(a.min(b));
+            t1 = t1.min(a.max(b));
+        }
     }
     if t1 <= t0 {
         return;
     }
-    // Walk the cells between t0 and t1, cutting at integer x and y.
     let at = |t: f64| [p0[0] + dx * t, p0[1] + dy * t];
-    let step_x = if dx > 0.0 { 1.0 } else { -1.0 };
-    let step_y = if dy > 0.0 { 1.0 } else { -1.0 };
-    let next_cut = |v: f64, step: f64| {
-        if step > 0.0 {
-            v.floor() + 1.0
+    // Next integer grid line strictly after `v` in the direction of `d`, as a parameter.
+    let next = |v: f64, o: f64, d: f64| -> f64 {
+        if d > 0.0 {
+            (v.floor() + 1.0 - o) / d
+        } else if d < 0.0 {
+            (v.ceil() - 1.0 - o) / d
         } else {
-            v.ceil() - 1.0
+            f64::INFINITY
         }
     };
     let start = at(t0);
-    // The next integer line strictly after the start in each direction.
-    let mut nx = if dx != 0.0 {
-        let c = next_cut(start[0], step_x);
-        (c - p0[0]) / dx
+    let mut nx = next(start[0], p0[0], dx);
+    let mut ny = next(start[1], p0[1], dy);
+    let step_x = if dx != 0.0 {
+        1.0 / dx.abs()
     } else {
         f64::INFINITY
     };
-    let mut ny = {
-        let c = next_cut(start[1], step_y);
-        (c - p0[1]) / dy
+    let step_y = if dy != 0.0 {
+        1.0 / dy.abs()
+    } else {
+        f64::INFINITY
     };
-    let inv_dx = if dx != 0.0 { 1.0 / dx.abs() } else { 0.0 };
-    let inv_dy = 1.0 / dy.abs();
+    let cell = |col: f64, row: f64| -> [f32; 2] {
+        if col >= 0.0 && row >= 0.0 && (col as usize) < g.w && (row as usize) < g.h {
+            g.data[row as usize * g.w + col as usize]
+        } else {
+            [0.0; 2]
+        }
+    };
     let mut ta = t0;
     let (mut s0, mut s1) = (0.0f64, 0.0f64); // Σ G ∫(1 − t), Σ G ∫ t
     let mut guard = 0usize;
@@ -238,23 +255,42 @@ pub fn backward_line(g: &Cells<f32>, p0: Point, p1: Point, dp0: &mut Point, dp1:
         let tb = nx.min(ny).min(t1);
         if tb > ta {
             let m = at(0.5 * (ta + tb));
-            let cx = (m[0] - xlo).floor();
-            let cy = (m[1] - ylo).floor();
-            if cx >= 0.0 && cy >= 0.0 && (cx as usize) < g.w && (cy as usize) < g.h {
-                let gv = g.data[cy as usize * g.w + cx as usize] as f64;
-                if gv != 0.0 {
-                    let it = 0.5 * (tb * tb - ta * ta);
-                    s1 += gv * it;
-                    s0 += gv * ((tb - ta) - it);
-                }
+            let col = (m[0] - xlo).floor();
+            let row = (m[1] - ylo).floor();
+            let gv = if dx == 0.0 && m[0] == m[0].floor() {
+                // On a vertical grid line: cells `col − 1` (left) and `col` (right).
+                let (left, right) = (cell(col - 1.0, row), cell(col, row));
+                let (low, high) = if dy > 0.0 {
+                    (left, right)
+                } else {
+                    (right, left)
+                };
+                0.5 * (low[0] + high[1]) as f64
+            } else if dy == 0.0 && m[1] == m[1].floor() {
+                // On a horizontal grid line: rows `row − 1` (above) and `row` (below).
+                let (above, below) = (cell(col, row - 1.0), cell(col, row));
+                let (low, high) = if dx > 0.0 {
+                    (below, above)
+                } else {
+                    (above, below)
+                };
+                0.5 * (low[0] + high[1]) as f64
+            } else {
+                let c = cell(col, row);
+                0.5 * (c[0] + c[1]) as f64
+            };
+            if gv != 0.0 {
+                let it = 0.5 * (tb * tb - ta * ta);
+                s1 += gv * it;
+                s0 += gv * ((tb - ta) - it);
             }
         }
         ta = tb;
         if nx <= tb {
-            nx += inv_dx;
+            nx += step_x;
         }
         if ny <= tb {
-            ny += inv_dy;
+            ny += step_y;
         }
     }
     let n = [-dy, dx];
@@ -262,6 +298,35 @@ pub fn backward_line(g: &Cells<f32>, p0: Point, p1: Point, dp0: &mut Point, dp1:
     dp0[1] += s0 * n[1];
     dp1[0] += s1 * n[0];
     dp1[1] += s1 * n[1];
+}
+
+/// One-sided slopes `(d cov/dw⁺, d cov/dw⁻)` of the coverage rule at `w` (see
+/// [`coverage`]); equal except at kinks.
+#[inline]
+pub fn coverage_slopes(w: f32, evenodd: bool) -> (f32, f32) {
+    if evenodd {
+        // Triangle wave of period 2: rising on [0, 1], falling on [1, 2].
+        let m = w.rem_euclid(2.0);
+        let plus = if m < 1.0 { 1.0 } else { -1.0 };
+        let minus = if m > 0.0 && m <= 1.0 { 1.0 } else { -1.0 };
+        (plus, minus)
+    } else {
+        let plus = if (0.0..1.0).contains(&w) {
+            1.0
+        } else if (-1.0..0.0).contains(&w) {
+            -1.0
+        } else {
+            0.0
+        };
+        let minus = if w > 0.0 && w <= 1.0 {
+            1.0
+        } else if w > -1.0 && w <= 0.0 {
+            -1.0
+        } else {
+            0.0
+        };
+        (plus, minus)
+    }
 }
 
 /// Coverage from a winding integral under a fill rule, and its derivative.
@@ -371,17 +436,18 @@ mod tests {
         // Loss = Σ G · w with fixed G: gradient of each vertex against differences.
         let tri = [[1.3, 0.7], [8.1, 2.2], [4.4, 7.9]];
         let (w, h) = (10usize, 10usize);
-        let mut g = Cells::default();
+        let mut g = Cells::<[f32; 2]>::default();
         g.reset(0, 0, w + 1, h);
         for (i, v) in g.data.iter_mut().enumerate() {
-            *v = ((i * 7919) % 13) as f32 / 13.0 - 0.4;
+            let x = ((i * 7919) % 13) as f32 / 13.0 - 0.4;
+            *v = [x, x];
         }
         let loss = |poly: &[Point]| -> f64 {
             let acc = raster(poly, w, h);
             acc.data
                 .iter()
                 .zip(&g.data)
-                .map(|(a, b)| *a as f64 * *b as f64)
+                .map(|(a, b)| *a as f64 * b[0] as f64)
                 .sum()
         };
         let mut grad = [[0.0; 2]; 3];
@@ -410,6 +476,59 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn edges_on_pixel_boundaries_get_one_sided_means() {
+        // Loss = Σ G · cov(w) with nonzero coverage; a unit-aligned square whose right edge
+        // sits on x = 3 and bottom edge on y = 3. Central differences straddle the kink.
+        let (w, h) = (6usize, 6usize);
+        let gpix: Vec<f64> = (0..(w + 1) * h)
+            .map(|i| ((i * 31) % 7) as f64 / 7.0 - 0.3)
+            .collect();
+        let loss = |poly: &[Point]| -> f64 {
+            let acc = raster(poly, w, h);
+            acc.data
+                .iter()
+                .zip(&gpix)
+                .map(|(a, b)| coverage(*a, false).0 as f64 * b)
+                .sum()
+        };
+        let sq = [[1.0, 1.0], [3.0, 1.0], [3.0, 3.0], [1.0, 3.0]];
+        let acc = raster(&sq, w, h);
+        let mut g = Cells::<[f32; 2]>::default();
+        g.reset(0, 0, w + 1, h);
+        for (k, v) in g.data.iter_mut().enumerate() {
+            let (p, m) = coverage_slopes(acc.data[k], false);
+            *v = [(gpix[k] as f32) * p, (gpix[k] as f32) * m];
+        }
+        let mut grad = [[0.0; 2]; 4];
+        for i in 0..4 {
+            let j = (i + 1) % 4;
+            let (mut a, mut b) = ([0.0; 2], [0.0; 2]);
+            backward_line(&g, sq[i], sq[j], &mut a, &mut b);
+            for c in 0..2 {
+                grad[i][c] += a[c];
+                grad[j][c] += b[c];
+            }
+        }
+        for i in 0..4 {
+            for c in 0..2 {
+                let e = 1e-3;
+                let mut p = sq;
+                p[i][c] += e;
+                let lp = loss(&p);
+                p[i][c] -= 2.0 * e;
+                let lm = loss(&p);
+                let fd = (lp - lm) / (2.0 * e);
+                assert!(
+                    (fd - grad[i][c]).abs() < 1e-3,
+                    "v{i} c{c}: fd {fd} an {}",
+                    grad[i][c]
+                );
+            }
+        }
+        assert!(grad.iter().flatten().any(|v| v.abs() > 0.05), "{grad:?}");
     }
 
     #[test]

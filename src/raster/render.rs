@@ -99,12 +99,14 @@ impl<'a> BandRenderer<'a> {
         if b[2] <= 0.0 || b[0] >= w {
             return false;
         }
-        let top = (b[1].floor().max(self.y0 as f64)) as usize;
-        let bottom = (b[3].ceil().min((self.y0 + self.rows) as f64)).max(0.0) as usize;
+        // One pixel of margin around the bounds: the backward pass needs the pixels next to
+        // an edge that lies exactly on a pixel boundary.
+        let top = ((b[1].floor() - 1.0).max(self.y0 as f64)) as usize;
+        let bottom = ((b[3].ceil() + 1.0).min((self.y0 + self.rows) as f64)).max(0.0) as usize;
         if top >= bottom {
             return false;
         }
-        let cx0 = b[0].max(0.0).floor();
+        let cx0 = (b[0].floor() - 1.0).max(0.0);
         let cx1 = b[2].ceil().min(w);
         let cols = (cx1 - cx0) as usize + 2;
         self.acc.reset(cx0 as i64, top as i64, cols, bottom - top);

@@ -80,3 +80,99 @@ fn filled_curves_solid() {
         bg,
     );
 }
+
+#[test]
+fn strokes_joins_and_caps() {
+    for (join, cap) in [
+        ("miter", "butt"),
+        ("round", "round"),
+        ("bevel", "square"),
+        ("miter-clip", "butt"),
+    ] {
+        let s = scene(&format!(
+            r#"<svg xmlns="http://www.w3.org/2000/svg" width="48" height="40">
+            <path id="z" d="M 5 30 L 15 8 L 25 30 C 30 10 40 5 44 20" fill="none"
+                  stroke="rgb(30,120,60)" stroke-width="4" stroke-opacity="0.9"
+                  stroke-linejoin="{join}" stroke-linecap="{cap}" stroke-miterlimit="3"/>
+            <path id="c" d="M 10 10 L 30 12 L 20 20 Z" fill="none" stroke="rgb(200,100,0)" stroke-width="2.5" stroke-opacity="0.85"
+                  stroke-linejoin="{join}"/>
+            </svg>"#
+        ));
+        let bg = Some([1.0, 1.0, 1.0, 1.0]);
+        assert_agrees(
+            &format!("stroke {join}/{cap}"),
+            &s,
+            &nudged_target(&s, 1.0, bg),
+            Loss::Mse,
+            bg,
+        );
+    }
+}
+
+#[test]
+fn skewed_stroke_frame() {
+    let s = scene(
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="48" height="40">
+        <g transform="matrix(1.3 0.2 0.4 0.7 2 3)">
+        <path id="s" d="M 5 5 C 20 0 30 30 10 40" fill="none" stroke="rgb(0,0,200)" stroke-width="3" stroke-opacity="0.9"/>
+        </g></svg>"#,
+    );
+    assert_agrees(
+        "skewed stroke",
+        &s,
+        &nudged_target(&s, 1.0, None),
+        Loss::Mse,
+        None,
+    );
+}
+
+#[test]
+fn linear_and_radial_gradients() {
+    let s = scene(
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="48" height="40">
+        <linearGradient id="l" x1="0.1" y1="0.2" x2="0.9" y2="0.7" spreadMethod="reflect">
+          <stop offset="0.1" stop-color="rgb(250,20,20)"/>
+          <stop offset="0.5" stop-color="rgb(20,200,20)" stop-opacity="0.7"/>
+          <stop offset="0.8" stop-color="rgb(20,20,250)"/>
+        </linearGradient>
+        <radialGradient id="r" cx="30" cy="22" r="14" fx="26" fy="18" fr="2" gradientUnits="userSpaceOnUse" spreadMethod="repeat">
+          <stop offset="0.2" stop-color="rgb(240,200,30)"/>
+          <stop offset="0.9" stop-color="rgb(40,30,160)" stop-opacity="0.5"/>
+        </radialGradient>
+        <rect id="a" x="3" y="4" width="30" height="26" fill="url(#l)" fill-opacity="0.9"/>
+        <ellipse id="b" cx="30" cy="22" rx="15" ry="13" fill="url(#r)" fill-opacity="0.8"/>
+        </svg>"#,
+    );
+    let bg = Some([1.0, 1.0, 1.0, 1.0]);
+    assert_agrees("gradients", &s, &nudged_target(&s, 1.0, bg), Loss::Mse, bg);
+}
+
+#[test]
+fn group_layers_and_l1() {
+    let s = scene(
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="40" height="40">
+        <rect id="under" x="2" y="2" width="30" height="20" fill="rgb(250,200,0)" fill-opacity="0.95"/>
+        <g id="layer" opacity="0.6">
+          <circle id="c1" cx="15" cy="18" r="10" fill="rgb(200,0,0)" fill-opacity="0.9"/>
+          <circle id="c2" cx="24" cy="22" r="10" fill="rgb(0,0,200)" fill-opacity="0.7"/>
+          <g id="inner" opacity="0.5"><rect id="r2" x="8" y="25" width="20" height="9" fill="green" fill-opacity="0.8"/></g>
+        </g></svg>"#,
+    );
+    assert_agrees(
+        "groups mse",
+        &s,
+        &nudged_target(&s, 1.0, None),
+        Loss::Mse,
+        None,
+    );
+    // L1 has a kink wherever render and target agree exactly; offset the target so that
+    // no pixel does.
+    let bg = Some([0.2, 0.3, 0.4, 1.0]);
+    let mut t = nudged_target(&s, 1.0, bg);
+    for (k, p) in t.data.iter_mut().enumerate() {
+        for c in 0..4 {
+            p[c] += 0.01 + 0.02 * ((k * 7 + c) % 5) as f32 / 5.0;
+        }
+    }
+    assert_agrees("groups l1", &s, &t, Loss::L1, bg);
+}
