@@ -6,6 +6,7 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 
 mod bench;
+mod grad;
 mod parity;
 mod render;
 mod util;
@@ -26,6 +27,10 @@ enum Command {
     Parity(parity::Args),
     /// Time forward rendering against resvg (medians of several runs).
     Bench(bench::Args),
+    /// Print the loss of an SVG's rendering against a target image.
+    Loss(grad::LossArgs),
+    /// Print the gradient of the loss with respect to every shape parameter.
+    Grad(grad::GradArgs),
 }
 
 /// Runs the command line; returns the process exit code.
@@ -35,6 +40,8 @@ pub fn main() -> ExitCode {
         Command::Render(a) => render::run(a),
         Command::Parity(a) => parity::run(a),
         Command::Bench(a) => bench::run(a),
+        Command::Loss(a) => grad::run_loss(a),
+        Command::Grad(a) => grad::run_grad(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

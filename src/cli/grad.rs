@@ -1,0 +1,305 @@
+//! `diffsvg loss` and `diffsvg grad`.
+
+use std::path::PathBuf;
+
+use anyhow::{Result, bail};
+use serde_json::{Value, json};
+
+use super::util::{parse_color, sizing};
+use crate::gradcheck::{analytic, check};
+use crate::image_io::Image;
+use crate::loss::Loss;
+use crate::raster::{RenderOptions, render};
+use crate::scene::{GradientKind, Node, ParamLayout, Path, Scene, SegmentKind};
+
+/// Arguments shared by `loss` and `grad`.
+#[derive(clap::Args, Debug)]
+pub struct Common {
+    /// SVG file.
+    input: PathBuf,
+    /// Target image (PNG or JPEG; straight alpha in the file).
+    target: PathBuf,
+    /// Loss: mse or l1 (mean over pixels and premultiplied RGBA channels).
+    #[arg(long, default_value = "mse")]
+    loss: String,
+    /// Resize the target to the render size instead of refusing a size mismatch.
+    #[arg(long)]
+    resize: bool,
+    /// Render width in pixels.
+    #[arg(long, conflicts_with = "scale")]
+    width: Option<u32>,
+    /// Scale factor applied to the SVG's own size.
+    #[arg(long)]
+    scale: Option<f64>,
+    /// Composite the render over this color before comparing (default: transparent).
+    #[arg(long)]
+    background: Option<String>,
+}
+
+/// Arguments of `diffsvg loss`.
+#[derive(clap::Args, Debug)]
+pub struct LossArgs {
+    #[command(flatten)]
+    common: Common,
+}
+
+/// Arguments of `diffsvg grad`.
+#[derive(clap::Args, Debug)]
+pub struct GradArgs {
+    #[command(flatten)]
+    common: Common,
+    /// Print the gradient as JSON (the default prints a per-shape summary).
+    #[arg(long)]
+    json: bool,
+    /// Also compare every gradient with central finite differences (chord counts held
+    /// fixed) and print the worst relative error per parameter group.
+    #[arg(long)]
+    check: bool,
+}
+
+struct Job {
+    scene: Scene,
+    target: Image,
+    loss: Loss,
+    background: Option<[f32; 4]>,
+}
+
+fn load(c: &Common) -> Result<Job> {
+    let loss: Loss = c
+        .loss
+        .parse()
+        .map_err(|e: String| anyhow::anyhow!("--loss: {e}"))?;
+    let background = c.background.as_deref().map(parse_color).transpose()?;
+    let scene = Scene::load(&c.input, sizing(c.width, c.scale)?)?;
+    let mut target = Image::load(&c.target)?;
+    if (target.width, target.height) != (scene.width, scene.height) {
+        if !c.resize {
+            bail!(
+                "{}: target is {}x{} but the render is {}x{} (pass --resize to resample it)",
+                c.target.display(),
+                target.width,
+                target.height,
+                scene.width,
+                scene.height
+            );
+        }
+        target = target.resized(scene.width, scene.height);
+    }
+    Ok(Job {
+        scene,
+        target,
+        loss,
+        background,
+    })
+}
+
+/// Runs `diffsvg loss`.
+pub fn run_loss(a: LossArgs) -> Result<()> {
+    let job = load(&a.common)?;
+    let mut img = render(&job.scene, &RenderOptions::default());
+    if let Some(bg) = job.background {
+        img.over_background(bg);
+    }
+    // `{:?}` prints the shortest representation that reads back to the same f64.
+    println!("{:?}", job.loss.value(&img, &job.target));
+    Ok(())
+}
+
+/// Runs `diffsvg grad`.
+pub fn run_grad(a: GradArgs) -> Result<()> {
+    let job = load(&a.common)?;
+    let opts = RenderOptions::default();
+    let (loss, grad) = analytic(&job.scene, &job.target, job.loss, &opts, job.background);
+    if a.json {
+        let doc = gradient_json(&job.scene, loss, &grad);
+        println!("{}", serde_json::to_string_pretty(&doc)?);
+    } else {
+        println!("loss {loss:?}");
+        let layout = ParamLayout::new(&job.scene);
+        for (k, o) in layout.owners.iter().enumerate() {
+            let norm: f64 = layout
+                .slots
+                .iter()
+                .zip(&grad)
+                .filter(|(s, _)| s.owner == k)
+                .map(|(_, g)| g * g)
+                .sum::<f64>()
+                .sqrt();
+            let kind = if o.is_group { "group" } else { "path" };
+            let id = if o.id.is_empty() { "(no id)" } else { &o.id };
+            println!("{kind} {id}: |gradient| {norm:.4e}");
+        }
+    }
+    if a.check {
+        let (_, _, groups) = check(
+            &job.scene,
+            &job.target,
+            job.loss,
+            &opts,
+            job.background,
+            None,
+        );
+        let out = if a.json {
+            &mut std::io::stderr() as &mut dyn std::io::Write
+        } else {
+            &mut std::io::stdout()
+        };
+        for g in groups {
+            writeln!(
+                out,
+                "check {:>9}: {} parameters, worst relative error {:.3e} (slot {}: analytic {:.6e}, numeric {:.6e})",
+                g.group.name(),
+                g.checked,
+                g.worst,
+                g.worst_index,
+                g.worst_pair.0,
+                g.worst_pair.1
+            )?;
+        }
+    }
+    Ok(())
+}
+
+/// The gradient as a JSON document, one entry per shape and group in paint order.
+///
+/// `points` follows the path data as written when it uses absolute `M`, `L`, `C` and `Z`:
+/// one entry per `M` point, one per `L` (its end point), three per `C`; a `Q` gives two
+/// (its control and end point). Other commands reach diffsvg as usvg normalizes them:
+/// relative commands become absolute, `H`/`V` become `L`, `S`/`T` become `C`/`Q`, and an
+/// arc `A` becomes one or more `C`. Internally a line or quadratic is a cubic; the
+/// gradients of its derived control points are chained to the points written.
+pub fn gradient_json(scene: &Scene, loss: f64, grad: &[f64]) -> Value {
+    let layout = ParamLayout::new(scene);
+    let mut shapes = Vec::new();
+    let mut groups = Vec::new();
+    let mut path_ix = 0usize;
+    let mut group_ix = 0usize;
+    fn visit(
+        nodes: &[Node],
+        layout: &ParamLayout,
+        grad: &[f64],
+        shapes: &mut Vec<Value>,
+        groups: &mut Vec<Value>,
+        path_ix: &mut usize,
+        group_ix: &mut usize,
+    ) {
+        for n in nodes {
+            match n {
+                Node::Group(g) => {
+                    groups.push(json!({"id": g.id, "opacity": grad[layout.groups[*group_ix]]}));
+                    *group_ix += 1;
+                    visit(&g.children, layout, grad, shapes, groups, path_ix, group_ix);
+                }
+                Node::Path(p) => {
+                    shapes.push(shape_json(p, &layout.paths[*path_ix], grad));
+                    *path_ix += 1;
+                }
+            }
+        }
+    }
+    visit(
+        &scene.nodes,
+        &layout,
+        grad,
+        &mut shapes,
+        &mut groups,
+        &mut path_ix,
+        &mut group_ix,
+    );
+    json!({"loss": loss, "shapes": shapes, "groups": groups})
+}
+
+fn add(a: [f64; 2], b: [f64; 2], w: f64) -> [f64; 2] {
+    [a[0] + w * b[0], a[1] + w * b[1]]
+}
+
+fn scale(a: [f64; 2], w: f64) -> [f64; 2] {
+    [a[0] * w, a[1] * w]
+}
+
+fn shape_json(p: &Path, off: &crate::scene::params::PathOffsets, grad: &[f64]) -> Value {
+    let g = |k: usize| -> [f64; 2] { [grad[off.points + 2 * k], grad[off.points + 2 * k + 1]] };
+    let mut points: Vec<[f64; 2]> = Vec::new();
+    for sp in &p.subpaths {
+        // Accumulate into the written points: start, then per segment.
+        let mut start = g(sp.start);
+        let mut seg_points: Vec<[f64; 2]> = Vec::new();
+        for (k, kind) in sp.kinds.iter().enumerate() {
+            let i = sp.start + 3 * k;
+            let (c1, c2, end) = (g(i + 1), g(i + 2), g(i + 3));
+            // The previous written point (start or last end) receives the share of derived
+            // control points that depend on it.
+            let dprev = match kind {
+                SegmentKind::Line => {
+                    // c1 = p0 + (p3 − p0)/3, c2 = p0 + 2(p3 − p0)/3.
+                    seg_points.push(add(add(end, c1, 1.0 / 3.0), c2, 2.0 / 3.0));
+                    add(scale(c1, 2.0 / 3.0), c2, 1.0 / 3.0)
+                }
+                SegmentKind::Quad => {
+                    // c1 = p0 + 2(q − p0)/3, c2 = p3 + 2(q − p3)/3.
+                    seg_points.push(add(scale(c1, 2.0 / 3.0), c2, 2.0 / 3.0));
+                    seg_points.push(add(end, c2, 1.0 / 3.0));
+                    scale(c1, 1.0 / 3.0)
+                }
+                SegmentKind::Cubic => {
+                    seg_points.extend([c1, c2, end]);
+                    [0.0; 2]
+                }
+            };
+            let n = seg_points.len();
+            let written = match kind {
+                SegmentKind::Line => 1,
+                SegmentKind::Quad => 2,
+                SegmentKind::Cubic => 3,
+            };
+            let prev = if n > written {
+                &mut seg_points[n - written - 1]
+            } else {
+                &mut start
+            };
+            *prev = add(*prev, dprev, 1.0);
+        }
+        points.push(start);
+        points.extend(seg_points);
+    }
+    let paint = |po: Option<crate::scene::params::PaintOffsets>,
+                 paint: &crate::scene::Paint,
+                 opacity: usize|
+     -> Value {
+        let Some(po) = po else { return Value::Null };
+        match paint {
+            crate::scene::Paint::Solid(_) => {
+                json!([
+                    grad[po.base],
+                    grad[po.base + 1],
+                    grad[po.base + 2],
+                    grad[opacity]
+                ])
+            }
+            crate::scene::Paint::Gradient(gr) => {
+                let n = match gr.kind {
+                    GradientKind::Linear { .. } => 4,
+                    GradientKind::Radial { .. } => 6,
+                };
+                let stops: Vec<Vec<f64>> = (0..gr.stops.len())
+                    .map(|s| grad[po.stops + 5 * s..po.stops + 5 * s + 5].to_vec())
+                    .collect();
+                json!({
+                    "kind": if n == 4 { "linear" } else { "radial" },
+                    "geometry": grad[po.base..po.base + n].to_vec(),
+                    "stops": stops,
+                    "opacity": grad[opacity],
+                })
+            }
+        }
+    };
+    let mut v = json!({"id": p.id, "points": points});
+    if let Some(f) = &p.fill {
+        v["fill"] = paint(off.fill, &f.paint, off.fill_opacity);
+    }
+    if let Some(s) = &p.stroke {
+        v["stroke"] = paint(off.stroke, &s.paint, off.stroke_opacity);
+        v["stroke_width"] = json!(grad[off.stroke_width]);
+    }
+    v
+}
