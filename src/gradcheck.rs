@@ -26,6 +26,8 @@ pub fn step(group: ParamGroup, v: f64) -> f64 {
     match group {
         ParamGroup::Points => 1e-3,
         ParamGroup::StopOffset => 1e-4,
+        // Never step through zero width, where the stroke vanishes.
+        ParamGroup::StrokeWidth => (0.1 * v.abs()).clamp(1e-9, 1e-3),
         ParamGroup::PaintGeometry => 1e-3 * v.abs().max(1.0),
         _ => 1e-3,
     }
