@@ -176,3 +176,100 @@ fn group_layers_and_l1() {
     }
     assert_agrees("groups l1", &s, &t, Loss::L1, bg);
 }
+
+/// A random scene: a filled curved path, a stroked open path with a random join and cap,
+/// and a gradient-filled path inside a translucent group.
+fn random_scene(seed: u64) -> Scene {
+    use diffsvg::scene::random::Rng;
+    let mut r = Rng::new(seed);
+    let mut pt = |r: &mut Rng| format!("{:.3} {:.3}", r.range(2.0, 38.0), r.range(2.0, 30.0));
+    let join = ["miter", "round", "bevel"][(r.next_u64() % 3) as usize];
+    let cap = ["butt", "round", "square"][(r.next_u64() % 3) as usize];
+    let c = |r: &mut Rng| (r.range(0.1, 0.9) * 255.0).round();
+    let svg = format!(
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="40" height="32">
+        <linearGradient id="g" x1="{}" y1="0.1" x2="{}" y2="0.9" spreadMethod="pad">
+          <stop offset="0.2" stop-color="rgb({},{},{})"/><stop offset="0.8" stop-color="rgb({},{},{})" stop-opacity="0.6"/>
+        </linearGradient>
+        <path id="f" d="M {} C {} {} {} C {} {} {} Z" fill="rgb({},{},{})" fill-opacity="{:.2}"/>
+        <path id="s" d="M {} L {} Q {} {}" fill="none" stroke="rgb({},{},{})" stroke-opacity="0.85"
+              stroke-width="{:.2}" stroke-linejoin="{join}" stroke-linecap="{cap}" stroke-miterlimit="3"/>
+        <g id="grp" opacity="0.7"><path id="gp" d="M {} C {} {} {} L {} Z" fill="url(#g)" fill-opacity="0.9"/></g>
+        </svg>"#,
+        r.range(0.0, 0.3),
+        r.range(0.7, 1.0),
+        c(&mut r),
+        c(&mut r),
+        c(&mut r),
+        c(&mut r),
+        c(&mut r),
+        c(&mut r),
+        pt(&mut r),
+        pt(&mut r),
+        pt(&mut r),
+        pt(&mut r),
+        pt(&mut r),
+        pt(&mut r),
+        pt(&mut r),
+        c(&mut r),
+        c(&mut r),
+        c(&mut r),
+        r.range(0.4, 0.9),
+        pt(&mut r),
+        pt(&mut r),
+        pt(&mut r),
+        pt(&mut r),
+        c(&mut r),
+        c(&mut r),
+        c(&mut r),
+        r.range(1.0, 4.0),
+        pt(&mut r),
+        pt(&mut r),
+        pt(&mut r),
+        pt(&mut r),
+        pt(&mut r),
+    );
+    scene(&svg)
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig { cases: 12, ..Default::default() })]
+
+    #[test]
+    fn random_scenes_agree_with_differences(seed in 0u64..1_000_000) {
+        let s = random_scene(seed);
+        let bg = Some([1.0, 1.0, 1.0, 1.0]);
+        assert_agrees(&format!("random scene {seed}"), &s, &nudged_target(&s, 1.0, bg), Loss::Mse, bg);
+    }
+}
+
+#[test]
+fn backward_has_the_same_bits_for_any_thread_count() {
+    let s = random_scene(42);
+    let t = nudged_target(&s, 1.0, None);
+    let run = || diffsvg::gradcheck::analytic(&s, &t, Loss::Mse, &RenderOptions::default(), None);
+    let many = run();
+    let one = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap()
+        .install(run);
+    let three = rayon::ThreadPoolBuilder::new()
+        .num_threads(3)
+        .build()
+        .unwrap()
+        .install(run);
+    assert_eq!(many.0.to_bits(), one.0.to_bits());
+    assert!(
+        many.1
+            .iter()
+            .zip(&one.1)
+            .all(|(a, b)| a.to_bits() == b.to_bits())
+    );
+    assert!(
+        many.1
+            .iter()
+            .zip(&three.1)
+            .all(|(a, b)| a.to_bits() == b.to_bits())
+    );
+}
