@@ -29,6 +29,72 @@ pub struct Args {
     /// Write the Markdown table here as well.
     #[arg(long)]
     report: Option<PathBuf>,
+    /// Time forward and forward+backward on the painterly case (N random closed cubic
+    /// paths with translucent colors at 256×256) instead, with peak memory.
+    #[arg(long)]
+    backward: bool,
+    /// Shape counts for `--backward`.
+    #[arg(long, value_delimiter = ',', default_value = "64,256,512")]
+    shapes: Vec<usize>,
+}
+
+/// Resets the peak resident set size (Linux; ignored elsewhere).
+fn reset_peak() {
+    let _ = std::fs::write("/proc/self/clear_refs", "5");
+}
+
+/// Current and peak resident set size in MiB (Linux; zeros elsewhere).
+fn rss_mib() -> (f64, f64) {
+    let text = std::fs::read_to_string("/proc/self/status").unwrap_or_default();
+    let field = |name: &str| {
+        text.lines()
+            .find(|l| l.starts_with(name))
+            .and_then(|l| l.split_whitespace().nth(1))
+            .and_then(|v| v.parse::<f64>().ok())
+            .map_or(0.0, |kb| kb / 1024.0)
+    };
+    (field("VmRSS:"), field("VmHWM:"))
+}
+
+fn run_backward(a: &Args) -> Result<()> {
+    use crate::loss::Loss;
+    use crate::raster::backward_prepared;
+    let threads = a.threads.iter().copied().max().unwrap_or(1);
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
+    let mut table = format!(
+        "Painterly case, 256×256, {threads} thread(s), medians of {} runs.\n\n| shapes | forward (ms) | forward+backward (ms) | ratio | peak extra memory (MiB) |\n|---:|---:|---:|---:|---:|\n",
+        a.runs
+    );
+    for &n in &a.shapes {
+        let scene = curved_paths(n, 256, 1);
+        let target = crate::raster::render(&curved_paths(n, 256, 2), &RenderOptions::default());
+        let opts = RenderOptions::default();
+        let (fwd, both, mem) = pool.install(|| {
+            let fwd = median_ms(a.runs, || {
+                let _ = render_prepared(&prepare(&scene, opts.tolerance, None));
+            });
+            let mut step = || {
+                let p = prepare(&scene, opts.tolerance, None);
+                let img = render_prepared(&p);
+                let (_, d) = Loss::Mse.grad(&img, &target);
+                let _ = backward_prepared(&scene, &p, &d);
+            };
+            let both = median_ms(a.runs, &mut step);
+            let (base, _) = rss_mib();
+            reset_peak();
+            step();
+            let (_, peak) = rss_mib();
+            (fwd, both, (peak - base).max(0.0))
+        });
+        let row = format!("| {n} | {fwd:.2} | {both:.2} | {:.2}× | {mem:.1} |", both / fwd);
+        println!("{row}");
+        table += &row;
+        table += "\n";
+    }
+    if let Some(r) = &a.report {
+        crate::image_io::write_atomic(r, table.as_bytes())?;
+    }
+    Ok(())
 }
 
 fn median_ms(runs: usize, mut f: impl FnMut()) -> f64 {
@@ -46,6 +112,9 @@ fn median_ms(runs: usize, mut f: impl FnMut()) -> f64 {
 
 /// Runs `diffsvg bench`.
 pub fn run(a: Args) -> Result<()> {
+    if a.backward {
+        return run_backward(&a);
+    }
     let inputs = if a.inputs.is_empty() {
         vec![PathBuf::from("svg-samples")]
     } else {

@@ -362,6 +362,10 @@ fn band_backward(p: &Prepared, y0: usize, rows: usize, d_out: &[[f32; 4]]) -> Ba
                     let y = acc.y0 as usize + row;
                     for col in 0..*cols {
                         let wv = acc.data[row * acc.w + col];
+                        if wv == 0.0 && !it.grid_aligned {
+                            // Untouched by any edge: no coverage, no boundary here.
+                            continue;
+                        }
                         let (cov, _) = coverage(wv, it.evenodd);
                         let (up, down) = coverage_slopes(wv, it.evenodd);
                         if cov == 0.0 && up == 0.0 && down == 0.0 {

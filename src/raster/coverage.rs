@@ -306,8 +306,20 @@ pub fn backward_line(g: &Cells<[f32; 2]>, p0: Point, p1: Point, dp0: &mut Point,
 pub fn coverage_slopes(w: f32, evenodd: bool) -> (f32, f32) {
     // A winding integral within rounding of an integer *is* that integer (a pixel wholly
     // inside or outside whose area was summed from fractions); its slopes are one-sided.
+    const EPS: f32 = 4e-6;
+    if !evenodd {
+        // Fast path for the common fractional case.
+        let a = w.abs();
+        if a > EPS && a < 1.0 - EPS {
+            let s = if w > 0.0 { 1.0 } else { -1.0 };
+            return (s, s);
+        }
+        if a > 1.0 + EPS {
+            return (0.0, 0.0);
+        }
+    }
     let r = w.round();
-    let w = if (w - r).abs() < 4e-6 { r } else { w };
+    let w = if (w - r).abs() < EPS { r } else { w };
     if evenodd {
         // Triangle wave of period 2: rising on [0, 1], falling on [1, 2].
         let m = w.rem_euclid(2.0);

@@ -35,6 +35,10 @@ pub struct Item {
     pub paint: PaintEval,
     /// Bounds of `pts`: `[xmin, ymin, xmax, ymax]`.
     pub bbox: [f64; 4],
+    /// Whether some edge lies exactly on a pixel boundary (vertical at integer x or
+    /// horizontal at integer y). Only then do pixels with a zero winding integral take
+    /// part in the backward pass.
+    pub grid_aligned: bool,
 }
 
 /// What the compositor does, in order.
@@ -260,7 +264,15 @@ fn item(
     if !bbox.iter().all(|v| v.is_finite()) {
         return None;
     }
+    let mut grid_aligned = false;
+    for &(s, n) in &rings {
+        for k in 0..n {
+            let (a, b) = (pts[s + k], pts[s + (k + 1) % n]);
+            grid_aligned |= (a[0] == b[0] && a[0] == a[0].floor()) || (a[1] == b[1] && a[1] == a[1].floor());
+        }
+    }
     Some(Item {
+        grid_aligned,
         path,
         kind,
         pts,
