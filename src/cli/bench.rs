@@ -60,7 +60,9 @@ fn run_backward(a: &Args) -> Result<()> {
     use crate::loss::Loss;
     use crate::raster::backward_prepared;
     let threads = a.threads.iter().copied().max().unwrap_or(1);
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()?;
     let mut table = format!(
         "Painterly case, 256×256, {threads} thread(s), medians of {} runs.\n\n| shapes | forward (ms) | forward+backward (ms) | ratio | peak extra memory (MiB) |\n|---:|---:|---:|---:|---:|\n",
         a.runs
@@ -86,7 +88,10 @@ fn run_backward(a: &Args) -> Result<()> {
             let (_, peak) = rss_mib();
             (fwd, both, (peak - base).max(0.0))
         });
-        let row = format!("| {n} | {fwd:.2} | {both:.2} | {:.2}× | {mem:.1} |", both / fwd);
+        let row = format!(
+            "| {n} | {fwd:.2} | {both:.2} | {:.2}× | {mem:.1} |",
+            both / fwd
+        );
         println!("{row}");
         table += &row;
         table += "\n";

@@ -268,7 +268,8 @@ fn item(
     for &(s, n) in &rings {
         for k in 0..n {
             let (a, b) = (pts[s + k], pts[s + (k + 1) % n]);
-            grid_aligned |= (a[0] == b[0] && a[0] == a[0].floor()) || (a[1] == b[1] && a[1] == a[1].floor());
+            grid_aligned |=
+                (a[0] == b[0] && a[0] == a[0].floor()) || (a[1] == b[1] && a[1] == a[1].floor());
         }
     }
     Some(Item {

@@ -17,12 +17,13 @@ fn samples_survive_a_round_trip() {
         assert_eq!(a.path_count(), b.path_count(), "{}", path.display());
         let opts = RenderOptions::default();
         let c = compare(&render(&a, &opts), &render(&b, &opts));
-        // Numbers are written with 4 decimals: differences stay far below one level.
+        // Numbers are written with 4 decimals (and stroke frames as transforms, whose
+        // coordinates are rescaled): differences stay within a couple of levels at an edge.
         assert!(
-            c.max < 1.0,
-            "{}: round trip changed pixels by {} levels",
+            c.max < 2.0 && c.mae < 0.01,
+            "{}: round trip changed pixels by {:?}",
             path.display(),
-            c.max
+            c
         );
         // Ids survive.
         let ids = |s: &Scene| {
