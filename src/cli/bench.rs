@@ -38,33 +38,15 @@ pub struct Args {
     shapes: Vec<usize>,
 }
 
-/// Resets the peak resident set size (Linux; ignored elsewhere).
-fn reset_peak() {
-    let _ = std::fs::write("/proc/self/clear_refs", "5");
-}
-
-/// Current and peak resident set size in MiB (Linux; zeros elsewhere).
-fn rss_mib() -> (f64, f64) {
-    let text = std::fs::read_to_string("/proc/self/status").unwrap_or_default();
-    let field = |name: &str| {
-        text.lines()
-            .find(|l| l.starts_with(name))
-            .and_then(|l| l.split_whitespace().nth(1))
-            .and_then(|v| v.parse::<f64>().ok())
-            .map_or(0.0, |kb| kb / 1024.0)
-    };
-    (field("VmRSS:"), field("VmHWM:"))
-}
-
 fn run_backward(a: &Args) -> Result<()> {
     use crate::loss::Loss;
-    use crate::raster::backward_prepared;
+    use crate::raster::backward_with_stats;
     let threads = a.threads.iter().copied().max().unwrap_or(1);
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()?;
     let mut table = format!(
-        "Painterly case, 256×256, {threads} thread(s), medians of {} runs.\n\n| shapes | forward (ms) | forward+backward (ms) | ratio | peak extra memory (MiB) |\n|---:|---:|---:|---:|---:|\n",
+        "Painterly case, 256×256, {threads} thread(s), medians of {} runs.\n\n| shapes | forward (ms) | forward+backward (ms) | ratio | backward replay memory (MiB) | ×(canvas RGBA f32) |\n|---:|---:|---:|---:|---:|---:|\n",
         a.runs
     );
     for &n in &a.shapes {
@@ -75,22 +57,22 @@ fn run_backward(a: &Args) -> Result<()> {
             let fwd = median_ms(a.runs, || {
                 let _ = render_prepared(&prepare(&scene, opts.tolerance, None));
             });
+            let mut peak = 0usize;
             let mut step = || {
                 let p = prepare(&scene, opts.tolerance, None);
                 let img = render_prepared(&p);
                 let (_, d) = Loss::Mse.grad(&img, &target);
-                let _ = backward_prepared(&scene, &p, &d);
+                let (_, stats) = backward_with_stats(&scene, &p, &d);
+                peak = stats.peak_bytes();
             };
             let both = median_ms(a.runs, &mut step);
-            let (base, _) = rss_mib();
-            reset_peak();
-            step();
-            let (_, peak) = rss_mib();
-            (fwd, both, (peak - base).max(0.0))
+            (fwd, both, peak as f64 / (1024.0 * 1024.0))
         });
+        let canvas = (256 * 256 * 16) as f64 / (1024.0 * 1024.0);
         let row = format!(
-            "| {n} | {fwd:.2} | {both:.2} | {:.2}× | {mem:.1} |",
-            both / fwd
+            "| {n} | {fwd:.2} | {both:.2} | {:.2}× | {mem:.2} | {:.2} |",
+            both / fwd,
+            mem / canvas
         );
         println!("{row}");
         table += &row;

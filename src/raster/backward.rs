@@ -62,6 +62,24 @@ struct BandGrads {
     paints: Vec<(u32, Vec<f64>)>,
     /// Per group: ∂L/∂opacity.
     groups: Vec<(u32, f64)>,
+    /// Bytes the replay kept for this band.
+    tape_bytes: usize,
+}
+
+/// Memory use of a backward pass.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct BackwardStats {
+    /// Largest replay record of one band, in bytes.
+    pub band_bytes_max: usize,
+    /// Bands held at once (a chunk processed in parallel).
+    pub bands_in_flight: usize,
+}
+
+impl BackwardStats {
+    /// Upper bound of the extra memory the replay needs at once, in bytes.
+    pub fn peak_bytes(&self) -> usize {
+        self.band_bytes_max * self.bands_in_flight
+    }
 }
 
 /// What the replay kept for the reverse walk.
@@ -85,6 +103,15 @@ enum Rec {
 
 /// Like [`render_backward`], reusing a prepared scene (which must come from `scene`).
 pub fn backward_prepared(scene: &Scene, p: &Prepared, d_image: &Image) -> Vec<f64> {
+    backward_with_stats(scene, p, d_image).0
+}
+
+/// [`backward_prepared`], also reporting memory use.
+pub fn backward_with_stats(
+    scene: &Scene,
+    p: &Prepared,
+    d_image: &Image,
+) -> (Vec<f64>, BackwardStats) {
     assert_eq!(
         (d_image.width, d_image.height),
         (p.width, p.height),
@@ -93,8 +120,9 @@ pub fn backward_prepared(scene: &Scene, p: &Prepared, d_image: &Image) -> Vec<f6
     let (w, h) = (p.width as usize, p.height as usize);
     let layout = ParamLayout::new(scene);
     let mut grad = vec![0.0; layout.len()];
+    let mut stats = BackwardStats::default();
     if w == 0 || h == 0 {
-        return grad;
+        return (grad, stats);
     }
     let mut vert_g: Vec<Vec<Point>> = p
         .items
@@ -110,6 +138,7 @@ pub fn backward_prepared(scene: &Scene, p: &Prepared, d_image: &Image) -> Vec<f6
     let bands = h.div_ceil(BAND_ROWS);
     // Bands are computed in parallel a chunk at a time and summed strictly in band order.
     let chunk = 4 * rayon::current_num_threads().max(1);
+    stats.bands_in_flight = chunk.min(bands);
     for first in (0..bands).step_by(chunk) {
         let results: Vec<BandGrads> = (first..(first + chunk).min(bands))
             .into_par_iter()
@@ -120,6 +149,7 @@ pub fn backward_prepared(scene: &Scene, p: &Prepared, d_image: &Image) -> Vec<f6
             })
             .collect();
         for r in results {
+            stats.band_bytes_max = stats.band_bytes_max.max(r.tape_bytes);
             for (item, list) in r.verts {
                 let g = &mut vert_g[item as usize];
                 for (k, d) in list {
@@ -241,7 +271,7 @@ pub fn backward_prepared(scene: &Scene, p: &Prepared, d_image: &Image) -> Vec<f6
     for (g, v) in group_g.iter().enumerate() {
         grad[layout.groups[g]] += v;
     }
-    grad
+    (grad, stats)
 }
 
 /// Adds an item's paint gradient into the parameter gradient.
@@ -315,6 +345,15 @@ fn band_backward(p: &Prepared, y0: usize, rows: usize, d_out: &[[f32; 4]]) -> Ba
     }
     // 2. Reverse walk with ∂L/∂(current layer).
     let mut out = BandGrads::default();
+    out.tape_bytes = tape
+        .iter()
+        .map(|r| match r {
+            Rec::Draw { acc, below, .. } => acc.data.len() * 4 + below.len() * 16,
+            Rec::Push => 0,
+            Rec::Pop { top, below, .. } => (top.len() + below.len()) * 16,
+        })
+        .sum::<usize>()
+        + 2 * d_out.len() * 16;
     let mut g_stack: Vec<Vec<[f32; 4]>> = vec![d_out.to_vec()];
     let mut gw = Cells::<[f32; 2]>::default();
     for rec in tape.iter().rev() {

@@ -18,6 +18,8 @@ pub mod prepare;
 pub mod render;
 pub mod stroke;
 
-pub use backward::{backward_prepared, render_and_backward, render_backward};
+pub use backward::{
+    BackwardStats, backward_prepared, backward_with_stats, render_and_backward, render_backward,
+};
 pub use prepare::{Prepared, prepare};
 pub use render::{RenderOptions, render, render_prepared};
