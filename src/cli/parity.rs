@@ -144,22 +144,38 @@ pub fn run(a: Args) -> Result<()> {
             }
         }
     }
-    let mut table =
-        format!("| folder | files | pass | refused | fail |\n|---|---:|---:|---:|---:|\n");
+    let rate = |pass: usize, files: usize, refused: usize| {
+        let supported = files - refused;
+        if supported == 0 {
+            "–".to_string()
+        } else {
+            format!("{:.0}%", 100.0 * pass as f64 / supported as f64)
+        }
+    };
+    let mut table = String::from(
+        "| folder | files | pass | refused | fail | pass rate (supported files) |\n|---|---:|---:|---:|---:|---:|\n",
+    );
     let mut tot = [0usize; 3];
     for (k, v) in &per {
         let fail = v[0] - v[1] - v[2];
-        table += &format!("| {k} | {} | {} | {} | {fail} |\n", v[0], v[1], v[2]);
+        table += &format!(
+            "| {k} | {} | {} | {} | {fail} | {} |\n",
+            v[0],
+            v[1],
+            v[2],
+            rate(v[1], v[0], v[2])
+        );
         for i in 0..3 {
             tot[i] += v[i];
         }
     }
     table += &format!(
-        "| **all** | {} | {} | {} | {} |\n",
+        "| **all** | {} | {} | {} | {} | {} |\n",
         tot[0],
         tot[1],
         tot[2],
-        tot[0] - tot[1] - tot[2]
+        tot[0] - tot[1] - tot[2],
+        rate(tot[1], tot[0], tot[2])
     );
     println!("{table}");
     println!("pass = MAE ≤ {PARITY_MAE}/255 and PSNR ≥ {PARITY_PSNR} dB");
