@@ -209,3 +209,95 @@ fn a_failed_render_keeps_the_previous_output() {
     assert_eq!(r.status.code(), Some(2));
     assert_eq!(std::fs::read(&out).unwrap(), b"previous");
 }
+
+#[test]
+fn loss_and_grad_commands() {
+    let dir = scratch("cli_grad");
+    let a = write(
+        &dir,
+        "a.svg",
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="24" height="20">
+        <path id="tri" d="M 3 3 L 20 5 C 20 12 14 17 5 17 Z" fill="rgb(200,50,30)" fill-opacity="0.8"/></svg>"#,
+    );
+    let b = write(
+        &dir,
+        "b.svg",
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="24" height="20">
+        <path id="tri" d="M 4 3 L 21 6 C 20 13 14 17 5 16 Z" fill="rgb(180,70,30)" fill-opacity="0.8"/></svg>"#,
+    );
+    let target = dir.join("target.png");
+    assert!(
+        diffsvg(&["render", s(&b), "-o", s(&target), "--background", "white"])
+            .status
+            .success()
+    );
+
+    let r = diffsvg(&["loss", s(&a), s(&target), "--background", "white"]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let loss: f64 = String::from_utf8_lossy(&r.stdout).trim().parse().unwrap();
+    assert!(loss > 0.0 && loss < 1.0);
+
+    let r = diffsvg(&[
+        "grad",
+        s(&a),
+        s(&target),
+        "--background",
+        "white",
+        "--json",
+        "--check",
+    ]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&r.stdout).unwrap();
+    assert_eq!(
+        v["loss"].as_f64().unwrap(),
+        loss,
+        "grad and loss agree to the bit"
+    );
+    let shape = &v["shapes"][0];
+    assert_eq!(shape["id"], "tri");
+    // M, L, C (3 points): five points as written in the file.
+    assert_eq!(shape["points"].as_array().unwrap().len(), 5);
+    assert_eq!(shape["fill"].as_array().unwrap().len(), 4);
+    let checks = String::from_utf8_lossy(&r.stderr);
+    for line in checks.lines().filter(|l| l.starts_with("check")) {
+        let worst: f64 = line
+            .split("worst relative error ")
+            .nth(1)
+            .unwrap()
+            .split(' ')
+            .next()
+            .unwrap()
+            .parse()
+            .unwrap();
+        assert!(worst <= 1e-2, "{line}");
+    }
+    assert!(checks.contains("check    points"), "{checks}");
+
+    // A target of another size is refused unless --resize is given.
+    let small = dir.join("small.png");
+    assert!(
+        diffsvg(&["render", s(&b), "-o", s(&small), "--width", "12"])
+            .status
+            .success()
+    );
+    let r = diffsvg(&["loss", s(&a), s(&small)]);
+    assert_eq!(r.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert!(
+        err.contains("small.png") && err.contains("--resize"),
+        "{err}"
+    );
+    assert!(
+        diffsvg(&["loss", s(&a), s(&small), "--resize"])
+            .status
+            .success()
+    );
+
+    // Unreadable target, bad loss name.
+    let bogus = write(&dir, "bogus.png", "not an image");
+    let r = diffsvg(&["loss", s(&a), s(&bogus)]);
+    assert_eq!(r.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&r.stderr).contains("bogus.png"));
+    let r = diffsvg(&["loss", s(&a), s(&target), "--loss", "huber"]);
+    assert_eq!(r.status.code(), Some(2));
+}
