@@ -21,6 +21,23 @@ pub struct GroupCheck {
     pub worst_pair: (f64, f64),
 }
 
+impl std::fmt::Display for GroupCheck {
+    /// One line: `points: 14 parameters, worst relative error 1.3e-3 (slot 1: analytic …,
+    /// numeric …)`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{:>9}: {} parameters, worst relative error {:.3e} (slot {}: analytic {:.6e}, numeric {:.6e})",
+            self.group.name(),
+            self.checked,
+            self.worst,
+            self.worst_index,
+            self.worst_pair.0,
+            self.worst_pair.1
+        )
+    }
+}
+
 /// Step used for a central difference on a parameter of `group` with value `v`.
 pub fn step(group: ParamGroup, v: f64) -> f64 {
     match group {

@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 
-use super::util::sizing;
+use super::util::SizeArgs;
 use crate::raster::RenderOptions;
 use crate::reference::{PARITY_MAE, PARITY_PSNR, parity};
 
@@ -15,12 +15,8 @@ pub struct Args {
     /// SVG files or folders (searched recursively).
     #[arg(required = true)]
     inputs: Vec<PathBuf>,
-    /// Render width in pixels.
-    #[arg(long, conflicts_with = "scale")]
-    width: Option<u32>,
-    /// Scale factor.
-    #[arg(long)]
-    scale: Option<f64>,
+    #[command(flatten)]
+    size: SizeArgs,
     /// Write a Markdown table of pass rates per folder here.
     #[arg(long)]
     report: Option<PathBuf>,
@@ -85,7 +81,7 @@ pub fn check(path: &Path, sizing: crate::Sizing) -> Outcome {
 /// Runs `diffsvg parity`.
 pub fn run(a: Args) -> Result<()> {
     use rayon::prelude::*;
-    let sizing = sizing(a.width, a.scale)?;
+    let sizing = a.size.sizing()?;
     let files = collect_svgs(&a.inputs)?;
     let outcomes: Vec<(PathBuf, Outcome)> = files
         .par_iter()

@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 
-use super::util::{check_png, parse_color, read, sibling, sizing};
+use super::util::{SizeArgs, check_png, parse_color, read, sibling};
 use crate::metrics::{compare, difference_image};
 use crate::raster::{RenderOptions, render};
 use crate::reference::render_resvg;
@@ -18,12 +18,8 @@ pub struct Args {
     /// PNG file to write.
     #[arg(short, long)]
     output: PathBuf,
-    /// Output width in pixels (height follows the aspect ratio).
-    #[arg(long, conflicts_with = "scale")]
-    width: Option<u32>,
-    /// Scale factor applied to the SVG's own size.
-    #[arg(long)]
-    scale: Option<f64>,
+    #[command(flatten)]
+    size: SizeArgs,
     /// Background color under the drawing (default: transparent).
     #[arg(long)]
     background: Option<String>,
@@ -40,7 +36,7 @@ pub struct Args {
 pub fn run(a: Args) -> Result<()> {
     check_png(&a.output)?;
     let bg = a.background.as_deref().map(parse_color).transpose()?;
-    let sizing = sizing(a.width, a.scale)?;
+    let sizing = a.size.sizing()?;
     if !(a.tolerance.is_finite() && a.tolerance > 0.0) {
         anyhow::bail!("--tolerance {} must be a positive number", a.tolerance);
     }

@@ -22,8 +22,26 @@ pub fn parse_color(s: &str) -> Result<[f32; 4]> {
     ])
 }
 
+/// `--width` / `--scale`, shared by every command that renders an SVG.
+#[derive(clap::Args, Debug, Clone, Copy)]
+pub struct SizeArgs {
+    /// Output width in pixels (height follows the aspect ratio).
+    #[arg(long, conflicts_with = "scale")]
+    pub width: Option<u32>,
+    /// Scale factor applied to the SVG's own size.
+    #[arg(long)]
+    pub scale: Option<f64>,
+}
+
+impl SizeArgs {
+    /// The sizing these flags ask for.
+    pub fn sizing(&self) -> Result<Sizing> {
+        sizing(self.width, self.scale)
+    }
+}
+
 /// Sizing from `--width` / `--scale` (clap keeps them exclusive).
-pub fn sizing(width: Option<u32>, scale: Option<f64>) -> Result<Sizing> {
+fn sizing(width: Option<u32>, scale: Option<f64>) -> Result<Sizing> {
     Ok(match (width, scale) {
         (Some(0), _) => bail!("--width must be at least 1 pixel"),
         (Some(w), _) => Sizing::Width(w),

@@ -410,6 +410,47 @@ mod tests {
         acc
     }
 
+    /// Vertex gradients of a closed polygon from one-sided cell gradients `g`.
+    fn polygon_grad(g: &Cells<[f32; 2]>, poly: &[Point]) -> Vec<Point> {
+        let n = poly.len();
+        let mut grad = vec![[0.0; 2]; n];
+        for i in 0..n {
+            let j = (i + 1) % n;
+            let (mut a, mut b) = ([0.0; 2], [0.0; 2]);
+            backward_line(g, poly[i], poly[j], &mut a, &mut b);
+            for c in 0..2 {
+                grad[i][c] += a[c];
+                grad[j][c] += b[c];
+            }
+        }
+        grad
+    }
+
+    /// Asserts `grad` matches central differences of `loss` at `poly` within `tol`.
+    fn assert_matches_differences(
+        poly: &[Point],
+        grad: &[Point],
+        loss: impl Fn(&[Point]) -> f64,
+        tol: f64,
+    ) {
+        let e = 1e-3;
+        for i in 0..poly.len() {
+            for c in 0..2 {
+                let mut p = poly.to_vec();
+                p[i][c] += e;
+                let lp = loss(&p);
+                p[i][c] -= 2.0 * e;
+                let lm = loss(&p);
+                let fd = (lp - lm) / (2.0 * e);
+                assert!(
+                    (fd - grad[i][c]).abs() < tol,
+                    "v{i} c{c}: fd {fd} an {}",
+                    grad[i][c]
+                );
+            }
+        }
+    }
+
     #[test]
     fn unit_square_on_pixel_grid() {
         let sq = [[1.0, 1.0], [3.0, 1.0], [3.0, 3.0], [1.0, 3.0]];
@@ -466,32 +507,8 @@ mod tests {
                 .map(|(a, b)| *a as f64 * b[0] as f64)
                 .sum()
         };
-        let mut grad = [[0.0; 2]; 3];
-        for i in 0..3 {
-            let j = (i + 1) % 3;
-            let (mut a, mut b) = ([0.0; 2], [0.0; 2]);
-            backward_line(&g, tri[i], tri[j], &mut a, &mut b);
-            for c in 0..2 {
-                grad[i][c] += a[c];
-                grad[j][c] += b[c];
-            }
-        }
-        for i in 0..3 {
-            for c in 0..2 {
-                let e = 1e-3;
-                let mut p = tri;
-                p[i][c] += e;
-                let lp = loss(&p);
-                p[i][c] -= 2.0 * e;
-                let lm = loss(&p);
-                let fd = (lp - lm) / (2.0 * e);
-                assert!(
-                    (fd - grad[i][c]).abs() < 2e-3,
-                    "v{i} c{c}: fd {fd} an {}",
-                    grad[i][c]
-                );
-            }
-        }
+        let grad = polygon_grad(&g, &tri);
+        assert_matches_differences(&tri, &grad, loss, 2e-3);
     }
 
     #[test]
@@ -518,32 +535,8 @@ mod tests {
             let (p, m) = coverage_slopes(acc.data[k], false);
             *v = [(gpix[k] as f32) * p, (gpix[k] as f32) * m];
         }
-        let mut grad = [[0.0; 2]; 4];
-        for i in 0..4 {
-            let j = (i + 1) % 4;
-            let (mut a, mut b) = ([0.0; 2], [0.0; 2]);
-            backward_line(&g, sq[i], sq[j], &mut a, &mut b);
-            for c in 0..2 {
-                grad[i][c] += a[c];
-                grad[j][c] += b[c];
-            }
-        }
-        for i in 0..4 {
-            for c in 0..2 {
-                let e = 1e-3;
-                let mut p = sq;
-                p[i][c] += e;
-                let lp = loss(&p);
-                p[i][c] -= 2.0 * e;
-                let lm = loss(&p);
-                let fd = (lp - lm) / (2.0 * e);
-                assert!(
-                    (fd - grad[i][c]).abs() < 1e-3,
-                    "v{i} c{c}: fd {fd} an {}",
-                    grad[i][c]
-                );
-            }
-        }
+        let grad = polygon_grad(&g, &sq);
+        assert_matches_differences(&sq, &grad, loss, 1e-3);
         assert!(grad.iter().flatten().any(|v| v.abs() > 0.05), "{grad:?}");
     }
 

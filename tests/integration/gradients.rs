@@ -8,34 +8,15 @@ use diffsvg::{Image, Scene, Sizing};
 
 /// Asserts every group agrees to 1e-2 (relative, absolute below 1e-3 of the group's scale).
 pub fn assert_agrees(name: &str, scene: &Scene, target: &Image, loss: Loss, bg: Option<[f32; 4]>) {
-    let (grad, numeric, groups) = check(scene, target, loss, &RenderOptions::default(), bg, None);
+    let (grad, _, groups) = check(scene, target, loss, &RenderOptions::default(), bg, None);
     assert!(
         grad.iter().all(|g| g.is_finite()),
         "{name}: non-finite gradient"
     );
     for g in &groups {
-        println!(
-            "{name}: {:>9} n={:3} worst {:.2e} (analytic {:.4e}, numeric {:.4e}, slot {})",
-            g.group.name(),
-            g.checked,
-            g.worst,
-            g.worst_pair.0,
-            g.worst_pair.1,
-            g.worst_index
-        );
+        println!("{name}: {g}");
+        assert!(g.worst <= 1e-2, "{name}: {g}");
     }
-    for g in &groups {
-        assert!(
-            g.worst <= 1e-2,
-            "{name}: {} gradient off by {:.3e} at slot {}: analytic {} vs numeric {}",
-            g.group.name(),
-            g.worst,
-            g.worst_index,
-            g.worst_pair.0,
-            g.worst_pair.1
-        );
-    }
-    let _ = numeric;
 }
 
 /// A target: the scene rendered with all parameters nudged, over the same background.
@@ -177,12 +158,33 @@ fn group_layers_and_l1() {
     assert_agrees("groups l1", &s, &t, Loss::L1, bg);
 }
 
+/// A closed path of four cubics whose control points go around `c` in angular order at
+/// radii in `[0.5, 1]·r`: simple in practice, so the rendering is differentiable (a pixel
+/// holding a self-crossing has a kink where its clamped winding integral crosses 1).
+fn star_path(r: &mut diffsvg::scene::random::Rng, c: [f64; 2], radius: f64) -> String {
+    let p = |k: usize, r: &mut diffsvg::scene::random::Rng| {
+        let a = (k as f64 + r.range(-0.25, 0.25)) / 12.0 * std::f64::consts::TAU;
+        let d = radius * r.range(0.5, 1.0);
+        format!("{:.3} {:.3}", c[0] + d * a.cos(), c[1] + d * a.sin())
+    };
+    let mut d = format!("M {}", p(0, r));
+    for s in 0..4 {
+        d += &format!(
+            " C {} {} {}",
+            p(3 * s + 1, r),
+            p(3 * s + 2, r),
+            if s == 3 { p(0, r) } else { p(3 * s + 3, r) }
+        );
+    }
+    d + " Z"
+}
+
 /// A random scene: a filled curved path, a stroked open path with a random join and cap,
 /// and a gradient-filled path inside a translucent group.
 fn random_scene(seed: u64) -> Scene {
     use diffsvg::scene::random::Rng;
     let mut r = Rng::new(seed);
-    let mut pt = |r: &mut Rng| format!("{:.3} {:.3}", r.range(2.0, 38.0), r.range(2.0, 30.0));
+    let pt = |r: &mut Rng| format!("{:.3} {:.3}", r.range(2.0, 38.0), r.range(2.0, 30.0));
     let join = ["miter", "round", "bevel"][(r.next_u64() % 3) as usize];
     let cap = ["butt", "round", "square"][(r.next_u64() % 3) as usize];
     let c = |r: &mut Rng| (r.range(0.1, 0.9) * 255.0).round();
@@ -191,10 +193,10 @@ fn random_scene(seed: u64) -> Scene {
         <linearGradient id="g" x1="{}" y1="0.1" x2="{}" y2="0.9" spreadMethod="pad">
           <stop offset="0.2" stop-color="rgb({},{},{})"/><stop offset="0.8" stop-color="rgb({},{},{})" stop-opacity="0.6"/>
         </linearGradient>
-        <path id="f" d="M {} C {} {} {} C {} {} {} Z" fill="rgb({},{},{})" fill-opacity="{:.2}"/>
+        <path id="f" d="{}" fill="rgb({},{},{})" fill-opacity="{:.2}"/>
         <path id="s" d="M {} L {} Q {} {}" fill="none" stroke="rgb({},{},{})" stroke-opacity="0.85"
               stroke-width="{:.2}" stroke-linejoin="{join}" stroke-linecap="{cap}" stroke-miterlimit="3"/>
-        <g id="grp" opacity="0.7"><path id="gp" d="M {} C {} {} {} L {} Z" fill="url(#g)" fill-opacity="0.9"/></g>
+        <g id="grp" opacity="0.7"><path id="gp" d="{}" fill="url(#g)" fill-opacity="0.9"/></g>
         </svg>"#,
         r.range(0.0, 0.3),
         r.range(0.7, 1.0),
@@ -204,13 +206,7 @@ fn random_scene(seed: u64) -> Scene {
         c(&mut r),
         c(&mut r),
         c(&mut r),
-        pt(&mut r),
-        pt(&mut r),
-        pt(&mut r),
-        pt(&mut r),
-        pt(&mut r),
-        pt(&mut r),
-        pt(&mut r),
+        star_path(&mut r, [20.0, 16.0], 12.0),
         c(&mut r),
         c(&mut r),
         c(&mut r),
@@ -223,23 +219,25 @@ fn random_scene(seed: u64) -> Scene {
         c(&mut r),
         c(&mut r),
         r.range(1.0, 4.0),
-        pt(&mut r),
-        pt(&mut r),
-        pt(&mut r),
-        pt(&mut r),
-        pt(&mut r),
+        star_path(&mut r, [22.0, 14.0], 9.0),
     );
     scene(&svg)
 }
 
-proptest::proptest! {
-    #![proptest_config(proptest::prelude::ProptestConfig { cases: 12, ..Default::default() })]
-
-    #[test]
-    fn random_scenes_agree_with_differences(seed in 0u64..1_000_000) {
+#[test]
+fn random_scenes_agree_with_differences() {
+    // Fixed seeds: the same scenes on every run, so a failure reproduces.
+    for seed in 0..16u64 {
+        let seed = seed * 7_919 + 11;
         let s = random_scene(seed);
         let bg = Some([1.0, 1.0, 1.0, 1.0]);
-        assert_agrees(&format!("random scene {seed}"), &s, &nudged_target(&s, 1.0, bg), Loss::Mse, bg);
+        assert_agrees(
+            &format!("random scene {seed}"),
+            &s,
+            &nudged_target(&s, 1.0, bg),
+            Loss::Mse,
+            bg,
+        );
     }
 }
 
