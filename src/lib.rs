@@ -16,10 +16,12 @@
 
 pub mod cli;
 pub mod error;
+pub mod fit;
 pub mod gradcheck;
 pub mod image_io;
 pub mod loss;
 pub mod metrics;
+pub mod optim;
 pub mod raster;
 pub mod reference;
 pub mod scene;

@@ -1,0 +1,5 @@
+//! Fitting scenes to images: refinement of an existing SVG, vectorization from nothing,
+//! classical tracing as a starting point, and speed-vs-error reports.
+
+pub mod plot;
+pub mod trace;

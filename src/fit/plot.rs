@@ -1,0 +1,1 @@
+//! Line plots (speed against error) drawn with diffsvg's own rasterizer.

@@ -1,0 +1,1 @@
+//! Classical tracing (vtracer) as a starting point for refinement.

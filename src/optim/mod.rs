@@ -1,0 +1,1 @@
+//! Optimization: Adam with per-group learning rates, schedules and projection.
