@@ -26,28 +26,38 @@ impl FromStr for Loss {
 }
 
 impl Loss {
-    /// Loss of `img` against `target` (same size).
+    /// Loss of `img` against `target` (same size), over all four channels.
     pub fn value(self, img: &Image, target: &Image) -> f64 {
-        self.value_and_grad(img, target, false).0
+        self.eval(img, target, 4, false).0
     }
 
-    /// Loss and `∂L/∂img`.
+    /// Loss and `∂L/∂img`, over all four channels.
     pub fn grad(self, img: &Image, target: &Image) -> (f64, Image) {
-        let (l, g) = self.value_and_grad(img, target, true);
+        let (l, g) = self.eval(img, target, 4, true);
         (l, g.expect("gradient requested"))
     }
 
-    fn value_and_grad(self, img: &Image, target: &Image, want_grad: bool) -> (f64, Option<Image>) {
+    /// Loss over the first `channels` channels (3: RGB only, for images composited over an
+    /// opaque background; 4: premultiplied RGBA), the mean over pixels and those channels,
+    /// and `∂L/∂img` when `want_grad` (zero in the other channels).
+    pub fn eval(
+        self,
+        img: &Image,
+        target: &Image,
+        channels: usize,
+        want_grad: bool,
+    ) -> (f64, Option<Image>) {
         assert_eq!(
             (img.width, img.height),
             (target.width, target.height),
             "image sizes differ"
         );
-        let n = (img.data.len() * 4).max(1) as f64;
+        let channels = channels.clamp(1, 4);
+        let n = (img.data.len() * channels).max(1) as f64;
         let mut sum = 0.0f64;
         let mut g = want_grad.then(|| Image::new(img.width, img.height));
         for (k, (p, t)) in img.data.iter().zip(&target.data).enumerate() {
-            for c in 0..4 {
+            for c in 0..channels {
                 let d = p[c] as f64 - t[c] as f64;
                 let (v, dv) = match self {
                     Loss::Mse => (d * d, 2.0 * d),

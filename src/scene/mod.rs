@@ -457,6 +457,22 @@ impl Scene {
 }
 
 impl Stroke {
+    /// An SVG-default stroke (opacity 1, miter join with limit 4, butt cap, no dashes, no
+    /// frame) with the given paint and width in device pixels.
+    pub fn new(paint: Paint, width: f64) -> Self {
+        Stroke {
+            paint,
+            opacity: 1.0,
+            width,
+            join: LineJoin::Miter,
+            cap: LineCap::Butt,
+            miter_limit: 4.0,
+            dash: None,
+            dash_offset: 0.0,
+            frame: FRAME_IDENTITY,
+        }
+    }
+
     /// If the frame is a similarity (uniform scale times a rotation or reflection), folds
     /// its scale into the width and resets it to the identity, so that the stroke is
     /// described in device pixels. Rotations do not change a round pen.

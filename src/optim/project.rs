@@ -1,0 +1,127 @@
+//! Projection onto valid scenes, applied after every optimizer step.
+
+use crate::scene::{GradientKind, Node, Paint, Scene};
+
+/// Clamps every parameter back into its valid range: colors and opacities to `[0, 1]`,
+/// stroke widths and gradient radii to ≥ 0, gradient stop offsets to `[0, 1]` and
+/// non-decreasing (each offset at least the one before it). Control points and gradient
+/// end points are free. NaN values become the nearest bound's lower end (0).
+pub fn project(scene: &mut Scene) {
+    project_nodes(&mut scene.nodes);
+}
+
+fn unit(v: &mut f64) {
+    *v = if v.is_nan() { 0.0 } else { v.clamp(0.0, 1.0) };
+}
+
+fn non_negative(v: &mut f64) {
+    *v = if v.is_nan() { 0.0 } else { v.max(0.0) };
+}
+
+fn project_nodes(nodes: &mut [Node]) {
+    for n in nodes {
+        match n {
+            Node::Group(g) => {
+                unit(&mut g.opacity);
+                project_nodes(&mut g.children);
+            }
+            Node::Path(p) => {
+                if let Some(f) = &mut p.fill {
+                    unit(&mut f.opacity);
+                    project_paint(&mut f.paint);
+                }
+                if let Some(s) = &mut p.stroke {
+                    unit(&mut s.opacity);
+                    non_negative(&mut s.width);
+                    project_paint(&mut s.paint);
+                }
+            }
+        }
+    }
+}
+
+fn project_paint(paint: &mut Paint) {
+    match paint {
+        Paint::Solid(c) => c.iter_mut().for_each(unit),
+        Paint::Gradient(g) => {
+            if let GradientKind::Radial { r, fr, .. } = &mut g.kind {
+                non_negative(r);
+                non_negative(fr);
+            }
+            let mut floor = 0.0;
+            for s in &mut g.stops {
+                unit(&mut s.offset);
+                s.offset = s.offset.max(floor);
+                floor = s.offset;
+                s.color.iter_mut().for_each(unit);
+                unit(&mut s.opacity);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::{Fill, FillRule, Gradient, IDENTITY, Path, Spread, Stop, Stroke};
+
+    #[test]
+    fn clamps_and_orders() {
+        let stop = |offset, c| Stop {
+            offset,
+            color: [c, -0.5, 0.5],
+            opacity: 1.5,
+        };
+        let mut p = Path::new("p");
+        p.move_to([0.0, 0.0]);
+        p.line_to([3.0, 0.0]);
+        p.line_to([0.0, 3.0]);
+        p.close();
+        p.fill = Some(Fill {
+            paint: Paint::Gradient(Gradient {
+                id: String::new(),
+                kind: GradientKind::Radial {
+                    c: [1.0, 1.0],
+                    r: -2.0,
+                    f: [1.0, 1.0],
+                    fr: f64::NAN,
+                },
+                transform: IDENTITY,
+                spread: Spread::Pad,
+                stops: vec![stop(0.4, 2.0), stop(0.1, 0.5), stop(1.3, f64::NAN)],
+            }),
+            opacity: -0.1,
+            rule: FillRule::NonZero,
+        });
+        let mut s = Stroke::new(Paint::Solid([1.2, 0.5, -3.0]), -1.0);
+        s.opacity = 2.0;
+        p.stroke = Some(s);
+        let mut scene = Scene::new(4, 4);
+        scene.nodes.push(Node::Path(p));
+        project(&mut scene);
+        let Node::Path(p) = &scene.nodes[0] else {
+            unreachable!()
+        };
+        let f = p.fill.as_ref().unwrap();
+        assert_eq!(f.opacity, 0.0);
+        let Paint::Gradient(g) = &f.paint else {
+            unreachable!()
+        };
+        assert!(matches!(
+            g.kind,
+            GradientKind::Radial {
+                r: 0.0,
+                fr: 0.0,
+                ..
+            }
+        ));
+        let offsets: Vec<f64> = g.stops.iter().map(|s| s.offset).collect();
+        assert_eq!(offsets, [0.4, 0.4, 1.0]);
+        assert_eq!(g.stops[0].color, [1.0, 0.0, 0.5]);
+        assert_eq!(g.stops[2].color[0], 0.0);
+        assert!(g.stops.iter().all(|s| s.opacity == 1.0));
+        let s = p.stroke.as_ref().unwrap();
+        assert_eq!((s.opacity, s.width), (1.0, 0.0));
+        assert_eq!(s.paint, Paint::Solid([1.0, 0.5, 0.0]));
+    }
+}
