@@ -6,8 +6,11 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 
 mod bench;
+mod fit;
 mod grad;
 mod parity;
+mod perturb;
+mod progress;
 mod render;
 mod util;
 
@@ -31,6 +34,10 @@ enum Command {
     Loss(grad::LossArgs),
     /// Print the gradient of the loss with respect to every shape parameter.
     Grad(grad::GradArgs),
+    /// Refine an SVG's shapes and paints until its rendering matches a target image.
+    Fit(fit::Args),
+    /// Write a copy of an SVG with control points and colors moved at random.
+    Perturb(perturb::Args),
 }
 
 /// Runs the command line; returns the process exit code.
@@ -42,6 +49,8 @@ pub fn main() -> ExitCode {
         Command::Bench(a) => bench::run(a),
         Command::Loss(a) => grad::run_loss(a),
         Command::Grad(a) => grad::run_grad(a),
+        Command::Fit(a) => fit::run(a),
+        Command::Perturb(a) => perturb::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -74,3 +74,26 @@ pub fn check_png(path: &Path) -> Result<()> {
         _ => bail!("{}: output must be a .png file", path.display()),
     }
 }
+
+/// Checks before a long run that `path` has the extension `ext` and that its folder can
+/// be created and written, so that a run does not fail only at the end.
+pub fn check_output(path: &Path, ext: &str) -> Result<()> {
+    match path.extension().and_then(|e| e.to_str()) {
+        Some(e) if e.eq_ignore_ascii_case(ext) => {}
+        _ => bail!("{}: output must be a .{ext} file", path.display()),
+    }
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    std::fs::create_dir_all(&dir)
+        .with_context(|| format!("{}: cannot create the output folder", path.display()))?;
+    let probe = dir.join(format!(".diffsvg-probe-{}", std::process::id()));
+    std::fs::write(&probe, b"")
+        .with_context(|| format!("{}: output folder is not writable", path.display()))?;
+    let _ = std::fs::remove_file(&probe);
+    if path.is_dir() {
+        bail!("{}: output is a folder", path.display());
+    }
+    Ok(())
+}

@@ -2,4 +2,7 @@
 //! classical tracing as a starting point, and speed-vs-error reports.
 
 pub mod plot;
+pub mod refine;
 pub mod trace;
+
+pub use refine::{Control, FitOptions, FitOutcome, Step, StopReason, refine};

@@ -1,6 +1,6 @@
 //! Adam with bias correction, one learning rate per parameter slot.
 
-use crate::scene::{ParamGroup, ParamLayout};
+use crate::scene::{Paint, ParamGroup, ParamLayout, Scene};
 
 /// Adam's constants.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -37,18 +37,22 @@ pub struct LearningRates {
     pub opacity: f64,
     /// Stroke widths.
     pub width: f64,
-    /// Gradient geometry (end points, centers, radii), gradient-space units.
+    /// Gradient geometry (end points, centers, radii), device pixels: per slot the rate is
+    /// divided by the gradient transform's scale, so that a gradient given in
+    /// `objectBoundingBox` units (where 1 is the whole shape) moves as fast as one in
+    /// user space.
     pub paint: f64,
     /// Gradient stop offsets.
     pub stops: f64,
 }
 
 impl Default for LearningRates {
-    /// Rates that work for drawings of a few hundred pixels: 0.5 px for points, 0.01 for
-    /// colors and opacities, 0.1 for widths, 0.5 for gradient geometry, 0.005 for stops.
+    /// Rates that work for drawings of a few hundred pixels: 1 px for points (as DiffVG),
+    /// 0.01 for colors and opacities, 0.1 for widths, 0.5 px for gradient geometry, 0.005
+    /// for stops.
     fn default() -> Self {
         LearningRates {
-            points: 0.5,
+            points: 1.0,
             color: 0.01,
             opacity: 0.01,
             width: 0.1,
@@ -90,9 +94,32 @@ impl LearningRates {
         }
     }
 
-    /// One rate per slot of `layout`.
-    pub fn per_slot(&self, layout: &ParamLayout) -> Vec<f64> {
-        layout.slots.iter().map(|s| self.get(s.group)).collect()
+    /// One rate per slot of `scene`'s parameter vector (see [`ParamLayout`]).
+    pub fn per_slot(&self, scene: &Scene) -> Vec<f64> {
+        let layout = ParamLayout::new(scene);
+        let mut rates: Vec<f64> = layout.slots.iter().map(|s| self.get(s.group)).collect();
+        let mut i = 0;
+        scene.for_each_path(|p| {
+            let offsets = &layout.paths[i];
+            i += 1;
+            let paints = [
+                (p.fill.as_ref().map(|f| &f.paint), offsets.fill),
+                (p.stroke.as_ref().map(|s| &s.paint), offsets.stroke),
+            ];
+            for (paint, at) in paints {
+                let (Some(Paint::Gradient(g)), Some(at)) = (paint, at) else {
+                    continue;
+                };
+                let t = &g.transform;
+                let scale = (t[0] * t[3] - t[1] * t[2]).abs().sqrt();
+                if scale.is_finite() && scale > 0.0 {
+                    for r in &mut rates[at.base..at.stops] {
+                        *r /= scale;
+                    }
+                }
+            }
+        });
+        rates
     }
 }
 

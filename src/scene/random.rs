@@ -1,6 +1,6 @@
 //! Seeded random scenes for benchmarks and tests.
 
-use super::{Fill, FillRule, Node, Paint, Path, Scene};
+use super::{Fill, FillRule, Node, Paint, ParamGroup, ParamLayout, Path, Scene};
 
 /// A small deterministic generator (SplitMix64): the same seed gives the same scene on
 /// every platform.
@@ -60,6 +60,25 @@ pub fn curved_paths(n: usize, size: u32, seed: u64) -> Scene {
     scene
 }
 
+/// A perturbed copy of `scene`: every control point moved by up to `max_px` pixels in x
+/// and y, and every color channel (solid and stop colors) shifted by up to `max_color`
+/// (then clamped to `[0, 1]`), uniformly at random. Used to test that refinement recovers.
+pub fn perturb(scene: &Scene, max_px: f64, max_color: f64, seed: u64) -> Scene {
+    let mut rng = Rng::new(seed);
+    let layout = ParamLayout::new(scene);
+    let mut p = scene.params();
+    for (v, slot) in p.iter_mut().zip(&layout.slots) {
+        match slot.group {
+            ParamGroup::Points => *v += rng.range(-max_px, max_px),
+            ParamGroup::Color => *v = (*v + rng.range(-max_color, max_color)).clamp(0.0, 1.0),
+            _ => {}
+        }
+    }
+    let mut out = scene.clone();
+    out.set_params(&p);
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -70,5 +89,24 @@ mod tests {
         assert_ne!(curved_paths(5, 64, 7), curved_paths(5, 64, 8));
         let s = curved_paths(5, 64, 7);
         assert_eq!(s.path_count(), 5);
+    }
+
+    #[test]
+    fn perturb_moves_within_bounds() {
+        let s = curved_paths(3, 64, 1);
+        let t = perturb(&s, 8.0, 0.2, 2);
+        let layout = ParamLayout::new(&s);
+        let (a, b) = (s.params(), t.params());
+        let mut moved = 0;
+        for ((x, y), slot) in a.iter().zip(&b).zip(&layout.slots) {
+            let bound = match slot.group {
+                ParamGroup::Points => 8.0,
+                ParamGroup::Color => 0.2,
+                _ => 0.0,
+            };
+            assert!((x - y).abs() <= bound, "{slot:?}: {x} → {y}");
+            moved += (x != y) as usize;
+        }
+        assert!(moved > a.len() / 2);
     }
 }

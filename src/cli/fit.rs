@@ -1,0 +1,260 @@
+//! `diffsvg fit`: refine an SVG toward a target image.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{Result, bail};
+use serde_json::json;
+
+use super::progress::{ReportArgs, Reporter};
+use super::util::{check_output, parse_color, sibling};
+use crate::Sizing;
+use crate::fit::{FitOptions, StopReason, refine};
+use crate::image_io::{Image, side_by_side};
+use crate::loss::Loss;
+use crate::optim::{LearningRates, Objective, Schedule};
+use crate::raster::{RenderOptions, render};
+use crate::scene::{ParamGroup, ParamLayout, Scene};
+
+/// Optimizer flags shared by `fit` and `vectorize`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct OptimArgs {
+    /// Learning rate of control points, pixels per step.
+    #[arg(long, default_value_t = LearningRates::default().points)]
+    pub lr_points: f64,
+    /// Learning rate of colors (solid and stop colors).
+    #[arg(long, default_value_t = LearningRates::default().color)]
+    pub lr_color: f64,
+    /// Learning rate of opacities.
+    #[arg(long, default_value_t = LearningRates::default().opacity)]
+    pub lr_opacity: f64,
+    /// Learning rate of stroke widths, pixels per step.
+    #[arg(long, default_value_t = LearningRates::default().width)]
+    pub lr_width: f64,
+    /// Learning rate of gradient geometry (end points, centers, radii).
+    #[arg(long, default_value_t = LearningRates::default().paint)]
+    pub lr_paint: f64,
+    /// Learning rate of gradient stop offsets.
+    #[arg(long, default_value_t = LearningRates::default().stops)]
+    pub lr_stops: f64,
+    /// Learning-rate schedule: constant, cosine or linear (decay to 5%).
+    #[arg(long, default_value = "constant")]
+    pub schedule: String,
+    /// Loss: mse or l1.
+    #[arg(long, default_value = "mse")]
+    pub loss: String,
+    /// Image pyramid levels in the loss (1 = full resolution only).
+    #[arg(long, default_value_t = 1)]
+    pub pyramid: usize,
+    /// Parameter groups to hold fixed: points, colors, opacities, widths, paint, stops.
+    #[arg(long, value_delimiter = ',')]
+    pub freeze: Vec<String>,
+    /// Stop as soon as the PSNR reaches this many dB.
+    #[arg(long, value_name = "DB")]
+    pub until_psnr: Option<f64>,
+    /// Color under the drawing when comparing with the target (`auto`: white for an
+    /// opaque target, transparent otherwise; `none`: transparent).
+    #[arg(long, default_value = "auto")]
+    pub background: String,
+    /// Random seed (initial shapes of `vectorize`; `fit` itself is deterministic).
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+}
+
+impl OptimArgs {
+    /// Learning rates with frozen groups set to 0; refuses NaN, infinite or negative rates.
+    pub fn rates(&self) -> Result<LearningRates> {
+        let r = LearningRates {
+            points: self.lr_points,
+            color: self.lr_color,
+            opacity: self.lr_opacity,
+            width: self.lr_width,
+            paint: self.lr_paint,
+            stops: self.lr_stops,
+        };
+        for g in ParamGroup::ALL {
+            let v = r.get(g);
+            if !(v.is_finite() && v >= 0.0) {
+                bail!(
+                    "learning rate of {} is {v}: must be a finite number ≥ 0",
+                    g.name()
+                );
+            }
+        }
+        let mut r = r;
+        r.freeze(&self.frozen()?);
+        Ok(r)
+    }
+
+    /// The groups named by `--freeze`.
+    pub fn frozen(&self) -> Result<Vec<ParamGroup>> {
+        self.freeze
+            .iter()
+            .map(|name| {
+                let n = name.trim().to_ascii_lowercase();
+                ParamGroup::ALL
+                    .into_iter()
+                    .find(|g| g.name() == n || g.name().trim_end_matches('s') == n)
+                    .ok_or_else(|| {
+                        anyhow::anyhow!(
+                            "--freeze {name:?}: unknown group (expected points, colors, opacities, widths, paint or stops)"
+                        )
+                    })
+            })
+            .collect()
+    }
+
+    /// The background for `target`.
+    pub fn background(&self, target: &Image) -> Result<Option<[f32; 4]>> {
+        Ok(match self.background.to_ascii_lowercase().as_str() {
+            "auto" => target.data.iter().all(|p| p[3] >= 1.0).then_some([1.0; 4]),
+            _ => {
+                let c = parse_color(&self.background)?;
+                (c[3] > 0.0).then_some(c)
+            }
+        })
+    }
+
+    /// The objective against `target`.
+    pub fn objective(&self, target: &Image) -> Result<Objective> {
+        let loss: Loss = self
+            .loss
+            .parse()
+            .map_err(|e: String| anyhow::anyhow!("--loss: {e}"))?;
+        if self.pyramid == 0 {
+            bail!("--pyramid must be at least 1");
+        }
+        Ok(Objective::new(
+            target,
+            loss,
+            self.background(target)?,
+            self.pyramid,
+        ))
+    }
+
+    /// Fit options for `iters` steps.
+    pub fn fit_options(&self, iters: usize) -> Result<FitOptions> {
+        let schedule: Schedule = self
+            .schedule
+            .parse()
+            .map_err(|e: String| anyhow::anyhow!("--schedule: {e}"))?;
+        if let Some(p) = self.until_psnr {
+            if p.is_nan() {
+                bail!("--until-psnr must be a number");
+            }
+        }
+        Ok(FitOptions {
+            iters,
+            rates: self.rates()?,
+            schedule,
+            until_psnr: self.until_psnr,
+            ..FitOptions::default()
+        })
+    }
+}
+
+/// Arguments of `diffsvg fit`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// Initial SVG; it is scaled to the target's size.
+    init: PathBuf,
+    /// Target image (PNG or JPEG).
+    target: PathBuf,
+    /// Output SVG (written atomically).
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Optimizer steps.
+    #[arg(long, default_value_t = 500)]
+    iters: usize,
+    /// Also write `<output>.compare.png`: target, initial and fitted renderings side by side.
+    #[arg(long)]
+    compare: bool,
+    #[command(flatten)]
+    optim: OptimArgs,
+    #[command(flatten)]
+    report: ReportArgs,
+}
+
+/// Loads a target image, refusing empty ones.
+pub fn load_target(path: &std::path::Path) -> Result<Image> {
+    let t = Image::load(path)?;
+    if t.width == 0 || t.height == 0 {
+        bail!("{}: image is empty", path.display());
+    }
+    Ok(t)
+}
+
+/// Runs `diffsvg fit`.
+pub fn run(a: Args) -> Result<()> {
+    check_output(&a.output, "svg")?;
+    let opts = a.optim.fit_options(a.iters)?;
+    let target = load_target(&a.target)?;
+    let objective = a.optim.objective(&target)?;
+    let scene = Scene::load(&a.init, Sizing::Exact(target.width, target.height))?;
+    let layout = ParamLayout::new(&scene);
+    if scene.path_count() == 0 || layout.is_empty() {
+        bail!(
+            "{}: nothing to optimize (no filled or stroked paths)",
+            a.init.display()
+        );
+    }
+    let movable = layout
+        .slots
+        .iter()
+        .filter(|s| opts.rates.get(s.group) > 0.0)
+        .count();
+    if movable == 0 {
+        bail!(
+            "{}: nothing to optimize: every parameter group present is frozen",
+            a.init.display()
+        );
+    }
+    let start = Instant::now();
+    let mut reporter = Reporter::new(&a.report, a.iters + 1, objective.background());
+    let initial = scene.clone();
+    let out = refine(scene, &objective, &opts, &mut |s, sc| reporter.step(s, sc));
+    let snapshot_error = reporter.error.take();
+    reporter.finish()?;
+    out.best.save_svg(&a.output)?;
+    if a.compare {
+        let opts = RenderOptions::default();
+        let before = objective.composite(&render(&initial, &opts));
+        let after = objective.composite(&render(&out.best, &opts));
+        side_by_side(&[objective.target(), &before, &after])
+            .save_png(sibling(&a.output, "compare"))?;
+    }
+    let first = out.history.first().map_or(f64::NAN, |s| s.psnr);
+    let secs = start.elapsed().as_secs_f64();
+    let reason = match out.reason {
+        StopReason::Finished => "finished",
+        StopReason::ReachedPsnr => "reached the PSNR goal",
+        StopReason::Interrupted => "interrupted",
+    };
+    if a.report.json {
+        println!(
+            "{}",
+            json!({"done": true, "output": a.output, "steps": out.steps, "stop": reason,
+                "initial_psnr": first, "psnr": out.best_psnr, "loss": out.best_loss,
+                "seconds": secs, "forward_ms": out.median_ms.0, "backward_ms": out.median_ms.1})
+        );
+    } else {
+        println!(
+            "fit: {} steps ({reason}), PSNR {first:.2} → {:.2} dB, loss {:.4e}, {secs:.2} s \
+             (median forward {:.2} ms, backward {:.2} ms); wrote {}",
+            out.steps,
+            out.best_psnr,
+            out.best_loss,
+            out.median_ms.0,
+            out.median_ms.1,
+            a.output.display()
+        );
+    }
+    if let Some(e) = snapshot_error {
+        return Err(e);
+    }
+    if out.reason == StopReason::Interrupted && super::progress::interrupted() {
+        eprintln!("interrupted: the best result so far was written");
+        std::process::exit(130);
+    }
+    Ok(())
+}

@@ -1,0 +1,41 @@
+//! `diffsvg perturb`: a randomly disturbed copy of an SVG, to try refinement on.
+
+use std::path::PathBuf;
+
+use anyhow::{Result, bail};
+
+use super::util::{SizeArgs, check_output};
+use crate::scene::Scene;
+use crate::scene::random::perturb;
+
+/// Arguments of `diffsvg perturb`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// SVG file.
+    input: PathBuf,
+    /// Output SVG.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Largest control-point move in pixels (x and y each).
+    #[arg(long, default_value_t = 8.0)]
+    points: f64,
+    /// Largest color channel shift.
+    #[arg(long, default_value_t = 0.2)]
+    colors: f64,
+    /// Random seed.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    #[command(flatten)]
+    size: SizeArgs,
+}
+
+/// Runs `diffsvg perturb`.
+pub fn run(a: Args) -> Result<()> {
+    check_output(&a.output, "svg")?;
+    if !(a.points.is_finite() && a.points >= 0.0 && a.colors.is_finite() && a.colors >= 0.0) {
+        bail!("--points and --colors must be finite numbers ≥ 0");
+    }
+    let scene = Scene::load(&a.input, a.size.sizing()?)?;
+    perturb(&scene, a.points, a.colors, a.seed).save_svg(&a.output)?;
+    Ok(())
+}

@@ -1,0 +1,223 @@
+//! Progress for long runs: a bar on a terminal, JSON lines with `--json`, nothing else when
+//! piped; the iteration log, snapshots and Ctrl-C.
+
+use std::io::IsTerminal;
+use std::path::PathBuf;
+use std::sync::OnceLock;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use anyhow::{Context, Result};
+use indicatif::{ProgressBar, ProgressStyle};
+use serde_json::json;
+
+use crate::fit::{Control, Step};
+use crate::image_io::write_atomic;
+use crate::raster::{RenderOptions, render};
+use crate::scene::Scene;
+
+/// Output flags shared by `fit` and `vectorize`.
+#[derive(clap::Args, Debug, Clone, Default)]
+pub struct ReportArgs {
+    /// Write a PNG and an SVG of the current scene into this folder every `--every`
+    /// iterations.
+    #[arg(long, value_name = "DIR")]
+    pub snapshots: Option<PathBuf>,
+    /// Snapshot interval in iterations.
+    #[arg(long, default_value_t = 50, value_name = "K")]
+    pub every: usize,
+    /// Write one row per iteration (iteration, loss, PSNR, elapsed ms): JSON lines when
+    /// the name ends in .json or .jsonl, CSV otherwise.
+    #[arg(long, value_name = "FILE")]
+    pub log: Option<PathBuf>,
+    /// Print one JSON object per iteration and a summary object on stdout instead of a
+    /// progress bar.
+    #[arg(long)]
+    pub json: bool,
+    /// No progress output (the summary line is still printed).
+    #[arg(long, short)]
+    pub quiet: bool,
+}
+
+static INTERRUPTED: AtomicBool = AtomicBool::new(false);
+static HANDLER: OnceLock<()> = OnceLock::new();
+
+/// Whether Ctrl-C was pressed since the handler was installed.
+pub fn interrupted() -> bool {
+    INTERRUPTED.load(Ordering::SeqCst)
+}
+
+/// Follows a run: progress, log rows, snapshots, Ctrl-C.
+pub struct Reporter {
+    args: ReportArgs,
+    bar: Option<ProgressBar>,
+    log: String,
+    iter: usize,
+    phase: String,
+    background: Option<[f32; 4]>,
+    /// The first error met while writing a snapshot; it stops the run.
+    pub error: Option<anyhow::Error>,
+}
+
+impl Reporter {
+    /// A reporter for about `total` iterations. Installs the Ctrl-C handler (once per
+    /// process): the first Ctrl-C asks the run to stop and write its best result.
+    pub fn new(args: &ReportArgs, total: usize, background: Option<[f32; 4]>) -> Self {
+        HANDLER.get_or_init(|| {
+            // If a handler cannot be installed (another one exists), Ctrl-C just kills the
+            // process as usual; outputs are still never half-written.
+            let _ = ctrlc::set_handler(|| INTERRUPTED.store(true, Ordering::SeqCst));
+        });
+        let show_bar = !args.json && !args.quiet && std::io::stdout().is_terminal();
+        let bar = show_bar.then(|| {
+            let b = ProgressBar::new(total as u64);
+            b.set_style(
+                ProgressStyle::with_template(
+                    "{bar:30.cyan/blue} {pos}/{len} {msg} {per_sec} ETA {eta}",
+                )
+                .expect("valid template"),
+            );
+            b
+        });
+        let log = match &args.log {
+            Some(p) if !is_jsonl(p) => "iteration,phase,loss,psnr,elapsed_ms\n".to_string(),
+            _ => String::new(),
+        };
+        Reporter {
+            args: args.clone(),
+            bar,
+            log,
+            iter: 0,
+            phase: String::new(),
+            background,
+            error: None,
+        }
+    }
+
+    /// Names the current phase (e.g. `round 3, 24 paths`), shown and logged.
+    pub fn set_phase(&mut self, phase: impl Into<String>) {
+        self.phase = phase.into();
+    }
+
+    /// Changes the expected total.
+    pub fn set_total(&mut self, total: usize) {
+        if let Some(b) = &self.bar {
+            b.set_length(total as u64);
+        }
+    }
+
+    /// Records one evaluation; returns whether the run should go on.
+    pub fn step(&mut self, s: &Step, scene: &Scene) -> Control {
+        let ms = s.elapsed.as_secs_f64() * 1e3;
+        if let Some(p) = &self.args.log {
+            if is_jsonl(p) {
+                self.log += &json!({"iteration": self.iter, "phase": self.phase, "loss": s.loss,
+                    "psnr": finite(s.psnr), "elapsed_ms": ms})
+                .to_string();
+                self.log.push('\n');
+            } else {
+                self.log += &format!(
+                    "{},{},{},{},{:.3}\n",
+                    self.iter,
+                    csv_field(&self.phase),
+                    s.loss,
+                    s.psnr,
+                    ms
+                );
+            }
+        }
+        if self.args.json {
+            println!(
+                "{}",
+                json!({"iteration": self.iter, "phase": self.phase, "loss": s.loss,
+                    "psnr": finite(s.psnr), "elapsed_ms": ms})
+            );
+        }
+        if let Some(b) = &self.bar {
+            b.set_position(self.iter as u64);
+            let phase = if self.phase.is_empty() {
+                String::new()
+            } else {
+                format!("{}  ", self.phase)
+            };
+            b.set_message(format!("{phase}loss {:.3e}  PSNR {:.2} dB", s.loss, s.psnr));
+        }
+        if let Some(dir) = &self.args.snapshots {
+            if self.args.every > 0 && self.iter % self.args.every == 0 {
+                if let Err(e) = snapshot(dir, self.iter, scene, self.background) {
+                    self.error = Some(e);
+                    return Control::Stop;
+                }
+            }
+        }
+        self.iter += 1;
+        if interrupted() {
+            Control::Stop
+        } else {
+            Control::Continue
+        }
+    }
+
+    /// Iterations recorded so far.
+    pub fn iterations(&self) -> usize {
+        self.iter
+    }
+
+    /// Clears the bar and writes the log; returns the first snapshot error, if any.
+    pub fn finish(mut self) -> Result<()> {
+        if let Some(b) = self.bar.take() {
+            b.finish_and_clear();
+        }
+        if let Some(p) = &self.args.log {
+            write_atomic(p, self.log.as_bytes())?;
+        }
+        match self.error.take() {
+            Some(e) => Err(e),
+            None => Ok(()),
+        }
+    }
+
+    /// Prints a line above the bar (or plainly), unless quiet or in JSON mode.
+    pub fn println(&self, line: &str) {
+        if self.args.json || self.args.quiet {
+            return;
+        }
+        match &self.bar {
+            Some(b) => b.println(line),
+            None => {}
+        }
+    }
+}
+
+fn is_jsonl(p: &std::path::Path) -> bool {
+    matches!(
+        p.extension()
+            .and_then(|e| e.to_str())
+            .map(|e| e.to_ascii_lowercase())
+            .as_deref(),
+        Some("json" | "jsonl")
+    )
+}
+
+fn csv_field(s: &str) -> String {
+    if s.contains([',', '"']) {
+        format!("\"{}\"", s.replace('"', "\"\""))
+    } else {
+        s.to_string()
+    }
+}
+
+/// JSON has no infinity: an exact match reports `null` PSNR.
+fn finite(v: f64) -> Option<f64> {
+    v.is_finite().then_some(v)
+}
+
+fn snapshot(dir: &std::path::Path, iter: usize, scene: &Scene, bg: Option<[f32; 4]>) -> Result<()> {
+    let mut img = render(scene, &RenderOptions::default());
+    if let Some(bg) = bg {
+        img.over_background(bg);
+    }
+    img.save_png(dir.join(format!("{iter:06}.png")))
+        .with_context(|| format!("{}: cannot write snapshot", dir.display()))?;
+    scene.save_svg(dir.join(format!("{iter:06}.svg")))?;
+    Ok(())
+}
