@@ -1,49 +1,6 @@
 //! The command line: outputs, and clean failures on bad input.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-use super::common::{root, scratch};
-
-fn diffsvg(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_diffsvg"))
-        .args(args)
-        .output()
-        .expect("runs diffsvg")
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
-
-fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
-    let p = dir.join(name);
-    std::fs::write(&p, text).unwrap();
-    p
-}
-
-/// Asserts a clean failure: exit code 2, one line on stderr naming `needle` and `what`,
-/// and no output file.
-fn assert_fails(out: &Output, needle: &str, what: &str, output: &Path) {
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(2), "stderr: {err}");
-    assert_eq!(err.trim().lines().count(), 1, "one line expected: {err}");
-    assert!(err.contains(needle), "{err:?} should name {needle}");
-    assert!(
-        err.to_lowercase().contains(what),
-        "{err:?} should say {what}"
-    );
-    assert!(!err.contains("panicked"), "{err}");
-    assert!(!output.exists(), "no output may be written on failure");
-    // Nor a stray temporary file.
-    let dir = output.parent().unwrap();
-    let stray: Vec<_> = std::fs::read_dir(dir)
-        .unwrap()
-        .filter_map(|e| e.ok())
-        .filter(|e| e.file_name().to_string_lossy().ends_with(".tmp"))
-        .collect();
-    assert!(stray.is_empty(), "temporary files left behind: {stray:?}");
-}
+use super::common::{assert_fails, diffsvg, root, s, scratch, write};
 
 const SQUARE: &str = r#"<svg xmlns="http://www.w3.org/2000/svg" width="40" height="20">
   <rect id="r" x="10" y="5" width="20" height="10" fill="blue"/></svg>"#;

@@ -3,6 +3,7 @@
 mod cli;
 mod common;
 mod exactness;
+mod fit;
 mod gradients;
 mod parity;
 mod roundtrip;
