@@ -3,6 +3,7 @@
 
 pub mod plot;
 pub mod refine;
+pub mod shapes;
 pub mod trace;
 
 pub use refine::{Control, FitOptions, FitOutcome, Step, StopReason, refine};

@@ -35,7 +35,8 @@ const TRACE: &str = "<trace>";
 /// Traces `target` (premultiplied, as every [`Image`]) with vtracer's `photo` preset and
 /// returns a scene of the target's size: opaque solid-filled paths in device pixels, in
 /// vtracer's stacked order (large background shapes first, details on top). The image is
-/// handed to vtracer as straight 8-bit RGBA. Errors when the image is empty or vtracer
+/// handed to vtracer as straight 8-bit RGBA; vtracer leaves fully transparent pixels
+/// unpainted and ignores partial transparency. Errors when the image is empty or vtracer
 /// fails.
 pub fn trace(target: &Image) -> Result<Scene> {
     trace_with(target, vtracer::Config::from_preset(vtracer::Preset::Photo))
@@ -139,6 +140,7 @@ struct Stacks {
 }
 
 impl Stacks {
+    /// Rasterizes every item of `p`, band by band in parallel.
     fn new(p: &Prepared) -> Stacks {
         let (w, h) = (p.width as usize, p.height as usize);
         let bands: Vec<(Vec<usize>, Vec<Layer>)> = (0..h.div_ceil(BAND_ROWS))
@@ -198,6 +200,7 @@ impl Stacks {
         out
     }
 
+    /// The layers of pixel `px` (row-major index).
     fn at(&self, px: usize) -> &[Layer] {
         &self.layers[self.start[px]..self.start[px + 1]]
     }
