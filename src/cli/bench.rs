@@ -14,7 +14,10 @@ use crate::scene::svg_in::{from_tree, parse_tree};
 
 /// Arguments of `diffsvg bench`.
 #[derive(clap::Args, Debug)]
+#[command(args_conflicts_with_subcommands = true)]
 pub struct Args {
+    #[command(subcommand)]
+    what: Option<super::bench_fit::Which>,
     /// SVG files or folders to time (default: svg-samples/).
     inputs: Vec<PathBuf>,
     /// Timed runs per case; the median is reported.
@@ -99,6 +102,9 @@ fn median_ms(runs: usize, mut f: impl FnMut()) -> f64 {
 
 /// Runs `diffsvg bench`.
 pub fn run(a: Args) -> Result<()> {
+    if let Some(w) = a.what {
+        return super::bench_fit::run(w);
+    }
     if a.backward {
         return run_backward(&a);
     }

@@ -6,6 +6,8 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 
 mod bench;
+mod bench_fit;
+mod bench_suite;
 mod fit;
 mod grad;
 mod parity;
@@ -13,6 +15,7 @@ mod perturb;
 mod progress;
 mod render;
 mod util;
+mod vectorize;
 
 /// Differentiable vector rendering: render, compare and fit SVGs.
 #[derive(Parser, Debug)]
@@ -38,6 +41,8 @@ enum Command {
     Fit(fit::Args),
     /// Write a copy of an SVG with control points and colors moved at random.
     Perturb(perturb::Args),
+    /// Build an SVG from a picture with as few paths as it needs.
+    Vectorize(vectorize::Args),
 }
 
 /// Runs the command line; returns the process exit code.
@@ -51,6 +56,7 @@ pub fn main() -> ExitCode {
         Command::Grad(a) => grad::run_grad(a),
         Command::Fit(a) => fit::run(a),
         Command::Perturb(a) => perturb::run(a),
+        Command::Vectorize(a) => vectorize::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

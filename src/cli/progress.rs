@@ -98,13 +98,6 @@ impl Reporter {
         self.phase = phase.into();
     }
 
-    /// Changes the expected total.
-    pub fn set_total(&mut self, total: usize) {
-        if let Some(b) = &self.bar {
-            b.set_length(total as u64);
-        }
-    }
-
     /// Records one evaluation; returns whether the run should go on.
     pub fn step(&mut self, s: &Step, scene: &Scene) -> Control {
         let ms = s.elapsed.as_secs_f64() * 1e3;
@@ -157,11 +150,6 @@ impl Reporter {
         }
     }
 
-    /// Iterations recorded so far.
-    pub fn iterations(&self) -> usize {
-        self.iter
-    }
-
     /// Clears the bar and writes the log; returns the first snapshot error, if any.
     pub fn finish(mut self) -> Result<()> {
         if let Some(b) = self.bar.take() {
@@ -173,17 +161,6 @@ impl Reporter {
         match self.error.take() {
             Some(e) => Err(e),
             None => Ok(()),
-        }
-    }
-
-    /// Prints a line above the bar (or plainly), unless quiet or in JSON mode.
-    pub fn println(&self, line: &str) {
-        if self.args.json || self.args.quiet {
-            return;
-        }
-        match &self.bar {
-            Some(b) => b.println(line),
-            None => {}
         }
     }
 }

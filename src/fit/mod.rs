@@ -5,5 +5,6 @@ pub mod plot;
 pub mod refine;
 pub mod shapes;
 pub mod trace;
+pub mod vectorize;
 
 pub use refine::{Control, FitOptions, FitOutcome, Step, StopReason, refine};

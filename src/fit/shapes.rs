@@ -16,7 +16,7 @@ fn walk(rng: &mut Rng, segments: usize, w: f64, h: f64, closed: bool) -> Path {
     let to_px = |q: [f64; 2]| [q[0] * w, q[1] * h];
     let start = cur;
     p.move_to(to_px(cur));
-    let mut step = |from: [f64; 2], rng: &mut Rng| {
+    let step = |from: [f64; 2], rng: &mut Rng| {
         [
             from[0] + WALK * (rng.range(0.0, 1.0) - 0.5),
             from[1] + WALK * (rng.range(0.0, 1.0) - 0.5),

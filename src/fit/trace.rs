@@ -2,24 +2,31 @@
 //!
 //! [`trace`] runs vtracer's `photo` preset in-process and reads its SVG back as a
 //! [`Scene`]; [`prune_to_budget`] then cuts the scene down to a path budget, keeping the
-//! paths that matter most for the target.
+//! paths that matter most for the target, and [`prune_unneeded`] drops the paths that
+//! barely change (or worsen) the match.
 //!
 //! # How pruning works
 //!
 //! For one pixel, let the layers painted there be `L_0 … L_m` (in paint order, over the
-//! background `B`). Removing layer `k` changes the composited pixel by exactly
-//! `δ_k = T_k · cov_k · (s_k − s_k.a · B_k)`, where `B_k` is the composite of everything
-//! below `k`, `s_k` its premultiplied paint, `cov_k` its coverage and `T_k` the product of
-//! `1 − a_j·cov_j` over the layers above it. With `e = rendered − target`, the change of the
-//! summed squared error is `Σ (e − δ_k)² − e²`. One forward and one backward sweep over a
-//! pixel's layers give its share of this cost for every path painted there.
+//! background `B`), `s_k` being layer `k`'s premultiplied paint times its coverage.
+//! Removing layer `k` changes the composited pixel by exactly
+//! `δ_k = T_k · (s_k − s_k.a · B_k)`, where `B_k` is the composite of everything below `k`
+//! and `T_k` the product of `1 − s_j.a` over the layers above it. With
+//! `e = rendered − target`, the change of the summed squared error is `Σ (e − δ_k)² − e²`.
+//! One forward and one backward sweep over a pixel's layers give its share of this cost
+//! for every path painted there.
 //!
 //! The layers of every pixel are rasterized once and kept; the costs are summed over all
 //! pixels. Then, greedily, the cheapest path is removed and only the pixels within its
 //! bounds are swept again (their old shares subtracted, the new ones added), so each step
 //! is exact and costs about the area of the removed path. Hidden and redundant paths go
 //! first; a large lower shape goes only when what it would expose matches the target as
-//! well. Group opacity is ignored while scoring.
+//! well.
+//!
+//! A path's fill and stroke are adjacent in paint order, so on each pixel they are merged
+//! into one layer and removed together, exactly. Group opacity is folded into the paint of
+//! each path in the group: exact when at most one path of a translucent group paints a
+//! pixel (and always for opacity 0 or 1), an approximation otherwise.
 
 use rayon::prelude::*;
 
@@ -72,53 +79,169 @@ fn trace_with(target: &Image, config: vtracer::Config) -> Result<Scene> {
 ///
 /// Panics if `target`'s size differs from the scene's.
 pub fn prune_to_budget(scene: &mut Scene, target: &Image, budget: usize, background: [f32; 4]) {
+    check_size(scene, target);
+    let n = scene.path_count();
+    if n <= budget {
+        return;
+    }
+    let mut pruner = Pruner::new(scene, target, background);
+    let first = usize::from(budget > 0);
+    for _ in budget..n {
+        let Some(k) = pruner.cheapest(first) else {
+            break;
+        };
+        pruner.remove(k);
+    }
+    pruner.apply(scene);
+}
+
+/// Removes, greedily and exactly, every path whose removal raises the mean squared error
+/// (same measure as [`prune_to_budget`]) by at most `tolerance` (absolute, MSE units,
+/// ≥ 0); the cheapest first, re-scoring after each removal. Returns how many were removed.
+///
+/// The MSE is the mean, over all `4 × width × height` premultiplied channel values
+/// (red, green, blue *and* alpha), of the squared difference between the scene's rendering
+/// and `target` (premultiplied, the scene's size), both composited over `background`
+/// (straight RGBA in `[0, 1]`), values in `[0, 1]`. With an opaque background the alpha
+/// channel is 1 in both, so this MSE is `3/4` of the RGB-only MSE: to allow a PSNR drop of
+/// `Δ` dB from an RGB-only MSE `m`, pass `0.75 · m · (10^(Δ/10) − 1)`.
+///
+/// Removals that lower the error (negative cost) go first, so paths that are hidden under
+/// others, painted nowhere (shrunk to nothing, off the canvas, fully transparent) or wrong
+/// are all removed, and with `tolerance = 0` the error never rises. The
+/// first path (a background shape) gets no special treatment: it stays only if it matters.
+/// Each step removes the cheapest remaining path (among equal costs, the upper one) and
+/// stops when even that one would cost more than `tolerance`; the removals' costs add up,
+/// so the total rise can exceed `tolerance`. A NaN tolerance counts as 0; a negative one
+/// removes only paths whose removal lowers the MSE by at least its magnitude. Groups left
+/// empty are removed. See the [module documentation](self) for the method and how group
+/// opacity is handled.
+///
+/// Panics if `target`'s size differs from the scene's.
+pub fn prune_unneeded(
+    scene: &mut Scene,
+    target: &Image,
+    background: [f32; 4],
+    tolerance: f64,
+) -> usize {
+    check_size(scene, target);
+    if scene.path_count() == 0 {
+        return 0;
+    }
+    let tolerance = if tolerance.is_nan() { 0.0 } else { tolerance };
+    let values = (4 * target.data.len()).max(1) as f64;
+    let mut pruner = Pruner::new(scene, target, background);
+    while let Some(k) = pruner.cheapest(0) {
+        let rise = pruner.cost[k] / values;
+        if rise.is_nan() || rise > tolerance {
+            break;
+        }
+        pruner.remove(k);
+    }
+    pruner.apply(scene)
+}
+
+/// Panics unless `target` has the scene's size.
+fn check_size(scene: &Scene, target: &Image) {
     assert_eq!(
         (scene.width, scene.height),
         (target.width, target.height),
         "target size differs from the scene's"
     );
-    let n = scene.path_count();
-    if n <= budget {
-        return;
+}
+
+/// The greedy's state: every pixel's layers and the current cost of removing each path
+/// that is still there.
+struct Pruner {
+    stacks: Stacks,
+    /// The target composited over the background.
+    goal: Image,
+    /// The premultiplied background.
+    bg: [f32; 4],
+    width: usize,
+    /// Pixels `[x0, y0, x1, y1)` each path paints.
+    bounds: Vec<[u32; 4]>,
+    /// Whether each path (paint order) is still there.
+    alive: Vec<bool>,
+    /// Change of the summed squared error (all pixels, four channels) if each path alone
+    /// were removed now (stale for removed paths).
+    cost: Vec<f64>,
+    /// Scratch space for [`pixel_cost`].
+    below: Vec<[f32; 4]>,
+}
+
+impl Pruner {
+    /// Rasterizes `scene` and scores every path against `target` (the scene's size).
+    fn new(scene: &Scene, target: &Image, background: [f32; 4]) -> Pruner {
+        let n = scene.path_count();
+        let mut goal = target.clone();
+        goal.over_background(background);
+        let a = background[3];
+        let p = prepare(scene, RenderOptions::default().tolerance, None);
+        debug_assert_eq!(p.geoms.len(), n);
+        let stacks = Stacks::new(&p);
+        let width = p.width as usize;
+        let bounds = stacks.bounds(width, n);
+        let mut pruner = Pruner {
+            stacks,
+            goal,
+            bg: [background[0] * a, background[1] * a, background[2] * a, a],
+            width,
+            bounds,
+            alive: vec![true; n],
+            cost: vec![0.0; n],
+            below: Vec::new(),
+        };
+        pruner.sweep([0, 0, p.width, p.height], 1.0);
+        pruner
     }
-    let mut goal = target.clone();
-    goal.over_background(background);
-    let a = background[3];
-    let bg = [background[0] * a, background[1] * a, background[2] * a, a];
-    let p = prepare(scene, RenderOptions::default().tolerance, None);
-    let stacks = Stacks::new(&p);
-    let w = p.width as usize;
-    let bounds = stacks.bounds(w, n);
-    let mut alive = vec![true; n];
-    let mut cost = vec![0.0f64; n];
-    let mut below = Vec::new();
-    let mut pixels =
-        |x0: usize, y0: usize, x1: usize, y1: usize, sign, alive: &[bool], cost: &mut [f64]| {
-            for y in y0..y1 {
-                for px in y * w + x0..y * w + x1 {
-                    let stack = stacks.at(px);
-                    pixel_cost(stack, alive, goal.data[px], bg, sign, cost, &mut below);
-                }
+
+    /// Adds `sign ×` the cost shares of the pixels in `[x0, y0, x1, y1)`.
+    fn sweep(&mut self, [x0, y0, x1, y1]: [u32; 4], sign: f64) {
+        let Pruner {
+            stacks,
+            goal,
+            bg,
+            width,
+            alive,
+            cost,
+            below,
+            ..
+        } = self;
+        let w = *width;
+        for y in y0 as usize..y1 as usize {
+            for px in y * w + x0 as usize..y * w + x1 as usize {
+                pixel_cost(stacks.at(px), alive, goal.data[px], *bg, sign, cost, below);
             }
-        };
-    pixels(0, 0, w, p.height as usize, 1.0, &alive, &mut cost);
-    let first = usize::from(budget > 0);
-    for _ in budget..n {
-        // The cheapest path; among equals, the later (upper) one.
-        let Some(k) = (first..n)
-            .filter(|&i| alive[i])
-            .min_by(|&i, &j| cost[i].total_cmp(&cost[j]).then(j.cmp(&i)))
-        else {
-            break;
-        };
-        // Only the pixels under path `k` change: swap their old contributions for new ones.
-        let [x0, y0, x1, y1] = bounds[k].map(|v| v as usize);
-        pixels(x0, y0, x1, y1, -1.0, &alive, &mut cost);
-        alive[k] = false;
-        pixels(x0, y0, x1, y1, 1.0, &alive, &mut cost);
+        }
     }
-    let remove: Vec<bool> = alive.iter().map(|a| !a).collect();
-    remove_paths(scene, &remove);
+
+    /// The cheapest path still there from index `first` on; among equals, the later (upper)
+    /// one.
+    fn cheapest(&self, first: usize) -> Option<usize> {
+        (first..self.alive.len())
+            .filter(|&i| self.alive[i])
+            .min_by(|&i, &j| self.cost[i].total_cmp(&self.cost[j]).then(j.cmp(&i)))
+    }
+
+    /// Removes path `k`, re-scoring the paths it overlaps. Only the pixels under it change:
+    /// their old shares are swapped for new ones.
+    fn remove(&mut self, k: usize) {
+        let b = self.bounds[k];
+        self.sweep(b, -1.0);
+        self.alive[k] = false;
+        self.sweep(b, 1.0);
+    }
+
+    /// Removes the removed paths (and groups left empty) from `scene`; returns how many.
+    fn apply(&self, scene: &mut Scene) -> usize {
+        let remove: Vec<bool> = self.alive.iter().map(|a| !a).collect();
+        let count = remove.iter().filter(|&&r| r).count();
+        if count > 0 {
+            remove_paths(scene, &remove);
+        }
+        count
+    }
 }
 
 /// One path painted on one pixel.
@@ -126,13 +249,12 @@ pub fn prune_to_budget(scene: &mut Scene, target: &Image, budget: usize, backgro
 struct Layer {
     /// Path index in paint order.
     path: u32,
-    /// Coverage in `(0, 1]`.
-    cov: f32,
-    /// Premultiplied paint at the pixel center.
+    /// Premultiplied paint at the pixel center times coverage (and group opacity): the
+    /// layer composites as `s + below · (1 − s.a)`.
     color: [f32; 4],
 }
 
-/// The layers painted on each pixel, in paint order (group opacity ignored).
+/// The layers painted on each pixel, in paint order, one per path.
 struct Stacks {
     /// Pixel `i`'s layers are `layers[start[i]..start[i + 1]]`.
     start: Vec<usize>,
@@ -143,6 +265,7 @@ impl Stacks {
     /// Rasterizes every item of `p`, band by band in parallel.
     fn new(p: &Prepared) -> Stacks {
         let (w, h) = (p.width as usize, p.height as usize);
+        let scale = group_opacity(p);
         let bands: Vec<(Vec<usize>, Vec<Layer>)> = (0..h.div_ceil(BAND_ROWS))
             .into_par_iter()
             .map(|band| {
@@ -153,7 +276,8 @@ impl Stacks {
                 for op in &p.ops {
                     let &Op::Draw(i) = op else { continue };
                     let item = &p.items[i];
-                    if !r.winding(item) {
+                    let scale = scale[i];
+                    if scale <= 0.0 || !r.winding(item) {
                         continue;
                     }
                     let acc = &r.acc;
@@ -164,9 +288,12 @@ impl Stacks {
                             let (cov, _) = coverage(wv, item.evenodd);
                             if cov > 0.0 {
                                 let x = acc.x0 as usize + c;
-                                let color = item.paint.at([x as f64 + 0.5, y as f64 + 0.5]);
-                                let path = item.path as u32;
-                                found.push((((y - y0) * w + x) as u32, Layer { path, cov, color }));
+                                let paint = item.paint.at([x as f64 + 0.5, y as f64 + 0.5]);
+                                let color = paint.map(|v| v * cov * scale);
+                                if color != [0.0; 4] {
+                                    let path = item.path as u32;
+                                    found.push((((y - y0) * w + x) as u32, Layer { path, color }));
+                                }
                             }
                         }
                     }
@@ -180,12 +307,30 @@ impl Stacks {
                     start[i + 1] += start[i];
                 }
                 let mut next = start.clone();
-                let mut layers = vec![Layer::default(); found.len()];
+                let mut sorted = vec![Layer::default(); found.len()];
                 for (px, l) in found {
-                    layers[next[px as usize]] = l;
+                    sorted[next[px as usize]] = l;
                     next[px as usize] += 1;
                 }
-                (start, layers)
+                // A path's fill and stroke are adjacent in paint order: merge them.
+                let mut layers: Vec<Layer> = Vec::with_capacity(sorted.len());
+                let mut merged = Vec::with_capacity(rows * w + 1);
+                merged.push(0);
+                for px in 0..rows * w {
+                    let base = layers.len();
+                    for l in &sorted[start[px]..start[px + 1]] {
+                        let m = layers.len();
+                        if m > base && layers[m - 1].path == l.path {
+                            let under = &mut layers[m - 1];
+                            let k = 1.0 - l.color[3];
+                            under.color = std::array::from_fn(|c| l.color[c] + under.color[c] * k);
+                        } else {
+                            layers.push(*l);
+                        }
+                    }
+                    merged.push(layers.len());
+                }
+                (merged, layers)
             })
             .collect();
         let mut out = Stacks {
@@ -225,6 +370,29 @@ impl Stacks {
     }
 }
 
+/// Each item's factor from group opacity: the product of its groups' opacities.
+fn group_opacity(p: &Prepared) -> Vec<f32> {
+    let mut scale = vec![1.0f32; p.items.len()];
+    // The items drawn so far in each open group, outermost (the canvas) first.
+    let mut open: Vec<Vec<usize>> = vec![Vec::new()];
+    for op in &p.ops {
+        match *op {
+            Op::Draw(i) => open.last_mut().unwrap().push(i),
+            Op::Push => open.push(Vec::new()),
+            Op::Pop { opacity, .. } => {
+                if open.len() > 1 {
+                    let inner = open.pop().unwrap();
+                    for &i in &inner {
+                        scale[i] *= opacity.clamp(0.0, 1.0);
+                    }
+                    open.last_mut().unwrap().extend(inner);
+                }
+            }
+        }
+    }
+    scale
+}
+
 /// Adds `sign ×` this pixel's share of each alive path's removal cost to `cost`: the change
 /// of the pixel's squared error against `goal` if that path alone were removed. `bg` is
 /// the premultiplied background; `below` is scratch space.
@@ -242,8 +410,8 @@ fn pixel_cost(
     let mut acc = bg;
     for l in stack.iter().filter(|l| alive[l.path as usize]) {
         below.push(acc);
-        let k = 1.0 - l.color[3] * l.cov;
-        acc = std::array::from_fn(|c| l.color[c] * l.cov + acc[c] * k);
+        let k = 1.0 - l.color[3];
+        acc = std::array::from_fn(|c| l.color[c] + acc[c] * k);
     }
     let e: [f64; 4] = std::array::from_fn(|c| acc[c] as f64 - goal[c] as f64);
     // Backward: `t` is the transmittance of the layers above.
@@ -252,15 +420,14 @@ fn pixel_cost(
     for l in stack.iter().rev().filter(|l| alive[l.path as usize]) {
         j -= 1;
         let b = below[j];
-        let cov = l.cov as f64;
         let a = l.color[3] as f64;
         let mut d_sse = 0.0;
         for c in 0..4 {
-            let d = t * cov * (l.color[c] as f64 - a * b[c] as f64);
+            let d = t * (l.color[c] as f64 - a * b[c] as f64);
             d_sse += d * d - 2.0 * e[c] * d;
         }
         cost[l.path as usize] += sign * d_sse;
-        t *= 1.0 - a * cov;
+        t *= 1.0 - a;
     }
 }
 
@@ -502,6 +669,207 @@ mod tests {
         assert_eq!(s.nodes, [scene.nodes[0].clone()]);
     }
 
+    /// The pruning measure: mean squared error over all four premultiplied channels, both
+    /// images composited over `bg`.
+    fn mse4(scene: &Scene, target: &Image, bg: [f32; 4]) -> f64 {
+        let mut a = render(scene, &RenderOptions::default());
+        let mut b = target.clone();
+        a.over_background(bg);
+        b.over_background(bg);
+        crate::metrics::compare(&a, &b).mse
+    }
+
+    fn without(scene: &Scene, i: usize) -> Scene {
+        let mut s = scene.clone();
+        let mut remove = vec![false; scene.path_count()];
+        remove[i] = true;
+        remove_paths(&mut s, &remove);
+        s
+    }
+
+    fn ids(scene: &Scene) -> Vec<String> {
+        let mut out = Vec::new();
+        scene.for_each_path(|p| out.push(p.id.clone()));
+        out
+    }
+
+    fn named(mut p: Path, id: &str) -> Path {
+        p.id = id.into();
+        p
+    }
+
+    #[test]
+    fn prune_unneeded_drops_what_changes_nothing() {
+        let gray = [0.5; 3];
+        let bg = named(square(0.0, 0.0, 32.0, gray), "bg");
+        let red = named(square(4.0, 4.0, 12.0, [1.0, 0.0, 0.0]), "red");
+        let blue = named(square(20.0, 20.0, 6.0, [0.0, 0.0, 1.0]), "blue");
+        let mut target = Scene::new(32, 32);
+        for p in [&bg, &red, &blue] {
+            target.nodes.push(Node::Path(p.clone()));
+        }
+        let target = render(&target, &RenderOptions::default());
+
+        let mut clear = named(square(18.0, 4.0, 8.0, [0.0, 1.0, 0.0]), "clear");
+        clear.fill.as_mut().unwrap().opacity = 0.0;
+        let mut scene = Scene::new(32, 32);
+        scene.nodes = vec![
+            Node::Path(bg.clone()),
+            // Under the opaque red square.
+            Node::Path(named(square(6.0, 6.0, 4.0, [0.0, 1.0, 0.0]), "hidden")),
+            Node::Path(red.clone()),
+            Node::Path(clear),
+            Node::Path(named(square(40.0, -20.0, 8.0, [0.0, 1.0, 0.0]), "outside")),
+            Node::Group(Group {
+                id: String::new(),
+                opacity: 0.0,
+                children: vec![Node::Path(named(
+                    square(2.0, 20.0, 8.0, [1.0, 0.0, 1.0]),
+                    "in clear group",
+                ))],
+            }),
+            Node::Path(named(square(20.0, 20.0, 6.0, [0.0, 0.0, 1.0]), "blue")),
+            Node::Path(named(square(2.0, 24.0, 5.0, [1.0, 1.0, 0.0]), "wrong")),
+        ];
+        let white = WHITE;
+        let mut s = scene.clone();
+        assert_eq!(prune_unneeded(&mut s, &target, white, 0.0), 5);
+        assert_eq!(ids(&s), ["bg", "red", "blue"]);
+        assert_eq!(s.nodes.len(), 3, "the emptied group is gone");
+        assert_eq!(render(&s, &RenderOptions::default()), target);
+        // Nothing more to remove; NaN counts as 0.
+        assert_eq!(prune_unneeded(&mut s, &target, white, f64::NAN), 0);
+
+        // A path stays while its removal costs more than the tolerance.
+        let cost = mse4(&without(&s, 2), &target, white) - mse4(&s, &target, white);
+        assert!(cost > 0.0);
+        let mut t = s.clone();
+        assert_eq!(prune_unneeded(&mut t, &target, white, 0.9 * cost), 0);
+        assert_eq!(prune_unneeded(&mut t, &target, white, 1.1 * cost), 1);
+        assert_eq!(ids(&t), ["bg", "red"]);
+        // A negative tolerance keeps paths whose removal costs nothing.
+        let mut t = scene.clone();
+        assert_eq!(prune_unneeded(&mut t, &target, white, -1e-9), 1);
+        assert_eq!(ids(&t).last().unwrap(), "blue");
+
+        // The first path goes when the background shows the same.
+        let mut t = s.clone();
+        assert_eq!(
+            prune_unneeded(&mut t, &target, [0.5, 0.5, 0.5, 1.0], 0.0),
+            1
+        );
+        assert_eq!(ids(&t), ["red", "blue"]);
+
+        // Degenerate scenes.
+        let mut empty = Scene::new(32, 32);
+        assert_eq!(prune_unneeded(&mut empty, &target, white, 0.0), 0);
+        let mut one = Scene::new(32, 32);
+        one.nodes.push(Node::Path(bg.clone()));
+        assert_eq!(
+            prune_unneeded(&mut one.clone(), &target, white, f64::NAN),
+            0
+        );
+        assert_eq!(prune_unneeded(&mut one, &target, white, f64::INFINITY), 1);
+        assert_eq!(one.path_count(), 0);
+        let mut far = Scene::new(32, 32);
+        far.nodes.push(Node::Path(square(-50.0, 5.0, 10.0, gray)));
+        assert_eq!(prune_unneeded(&mut far, &target, white, 0.0), 1);
+        let mut nothing = Scene::new(0, 0);
+        nothing.nodes.push(Node::Path(bg.clone()));
+        assert_eq!(
+            prune_unneeded(&mut nothing, &Image::new(0, 0), white, 0.0),
+            1
+        );
+    }
+
+    /// Greedy by re-rendering: the reference for [`prune_unneeded`].
+    fn prune_unneeded_by_rendering(
+        scene: &mut Scene,
+        target: &Image,
+        bg: [f32; 4],
+        tolerance: f64,
+    ) -> usize {
+        let mut removed = 0;
+        while scene.path_count() > 0 {
+            let now = mse4(scene, target, bg);
+            let (rise, i) = (0..scene.path_count())
+                .map(|i| (mse4(&without(scene, i), target, bg) - now, i))
+                .min_by(|a, b| a.0.total_cmp(&b.0).then(b.1.cmp(&a.1)))
+                .unwrap();
+            if rise > tolerance {
+                break;
+            }
+            *scene = without(scene, i);
+            removed += 1;
+        }
+        removed
+    }
+
+    #[test]
+    fn prune_unneeded_matches_re_rendering() {
+        let curved = crate::scene::random::curved_paths(14, 40, 5);
+        let mut stroked = curved.clone();
+        // A filled and stroked path, and a translucent group of one path.
+        if let Node::Path(p) = &mut stroked.nodes[3] {
+            let mut st = crate::scene::Stroke::new(Paint::Solid([0.1, 0.6, 0.2]), 2.5);
+            st.opacity = 0.7;
+            p.stroke = Some(st);
+        }
+        let lone = stroked.nodes.remove(6);
+        stroked.nodes.insert(
+            6,
+            Node::Group(Group {
+                id: String::new(),
+                opacity: 0.6,
+                children: vec![lone],
+            }),
+        );
+        let blobs = crate::fit::shapes::random_blobs(14, 40, 40, 9);
+        let mut total = 0;
+        for (name, scene) in [("curved", curved), ("stroked", stroked), ("blobs", blobs)] {
+            // The target: a perturbed copy missing a few paths.
+            let mut t = crate::scene::random::perturb(&scene, 3.0, 0.2, 1);
+            let n = scene.path_count();
+            remove_paths(&mut t, &(0..n).map(|i| i % 4 == 1).collect::<Vec<_>>());
+            let target = render(&t, &RenderOptions::default());
+            for tolerance in [0.0, 2e-5, 2e-4] {
+                let (mut ours, mut reference) = (scene.clone(), scene.clone());
+                let k = prune_unneeded(&mut ours, &target, WHITE, tolerance);
+                let r = prune_unneeded_by_rendering(&mut reference, &target, WHITE, tolerance);
+                eprintln!("{name}, tolerance {tolerance}: {k} of {n} removed");
+                assert_eq!(ids(&ours), ids(&reference), "{name}, tolerance {tolerance}");
+                assert_eq!((k, ours.path_count()), (r, n - k));
+                total += k;
+            }
+        }
+        assert!(total >= 10, "{total} removed in all");
+    }
+
+    #[test]
+    fn prunes_unneeded_paths_quickly() {
+        let scene = crate::scene::random::curved_paths(150, 256, 11);
+        let n = scene.path_count();
+        let mut t = crate::scene::random::perturb(&scene, 4.0, 0.15, 2);
+        remove_paths(&mut t, &(0..n).map(|i| i % 5 == 2).collect::<Vec<_>>());
+        let target = render(&t, &RenderOptions::default());
+        let before = mse4(&scene, &target, WHITE);
+        for tolerance in [0.0, 1e-6, 1e-5] {
+            let mut s = scene.clone();
+            let t0 = Instant::now();
+            let k = prune_unneeded(&mut s, &target, WHITE, tolerance);
+            let secs = t0.elapsed().as_secs_f64();
+            let after = mse4(&s, &target, WHITE);
+            eprintln!(
+                "{n} paths 256²: tolerance {tolerance}: {k} removed in {secs:.3} s, MSE {before:.3e} → {after:.3e}"
+            );
+            assert!(secs < 2.0, "{secs:.3} s");
+            assert!(k > 0);
+            if tolerance == 0.0 {
+                assert!(after <= before);
+            }
+        }
+    }
+
     /// Loads a sample picture from `../shared/data/images`, or `None` (with a reason).
     fn sample(name: &str) -> Option<Image> {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -556,6 +924,15 @@ mod tests {
             );
             assert_eq!(pruned.path_count(), budget);
             assert!(after > psnr - 4.0 && after > top, "{after:.2} dB");
+
+            // Dropping what does not help never lowers the PSNR.
+            let mut lean = scene.clone();
+            let t = Instant::now();
+            let k = prune_unneeded(&mut lean, &img, WHITE, 0.0);
+            let secs = t.elapsed().as_secs_f64();
+            let after = psnr_of(&lean, &img);
+            eprintln!("  {k} unneeded paths removed: {after:.2} dB in {secs:.3} s");
+            assert!(after >= psnr - 1e-4, "{after:.2} dB");
         }
     }
 

@@ -1,0 +1,209 @@
+//! `diffsvg bench painterly` (DiffVG's painterly workload, timed) and `diffsvg bench fit`
+//! (the speed-vs-error suite written to docs/).
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Result, bail};
+
+use super::fit::load_target;
+use crate::fit::shapes::random_blobs;
+use crate::fit::{Control, FitOptions, refine};
+use crate::loss::Loss;
+use crate::optim::{LearningRates, Objective};
+
+/// Benchmarks of optimization.
+#[derive(clap::Subcommand, Debug)]
+pub enum Which {
+    /// DiffVG's painterly blob workload: N random closed blobs (3–5 cubics, random-walk
+    /// step 0.05 × canvas, random RGBA, even-odd) over white, MSE over RGB, Adam with lr 1
+    /// on points and 0.01 on colors and opacities; prints median forward and backward ms,
+    /// total seconds and the final MSE.
+    Painterly(PainterlyArgs),
+    /// The speed-vs-error suite: refinement of every sample, vectorization of photos at
+    /// several path counts against the painterly baseline and vtracer; writes a Markdown
+    /// report and plots.
+    Fit(SuiteArgs),
+}
+
+/// Arguments of `diffsvg bench painterly`.
+#[derive(clap::Args, Debug)]
+pub struct PainterlyArgs {
+    /// Path counts.
+    #[arg(long, value_delimiter = ',', default_value = "64,256,512")]
+    paths: Vec<usize>,
+    /// Canvas side in pixels (the target is resized to it).
+    #[arg(long, default_value_t = 256)]
+    size: u32,
+    /// Optimizer steps.
+    #[arg(long, default_value_t = 50)]
+    iters: usize,
+    /// Target image (default: ../shared/data/images/astronaut.png).
+    #[arg(long)]
+    target: Option<PathBuf>,
+    /// Seed of the random blobs.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Append the Markdown table to this file as well.
+    #[arg(long)]
+    report: Option<PathBuf>,
+}
+
+/// DiffVG's CPU figures on this machine class for astronaut.png at 256², 50 iterations
+/// (from the issue): paths, forward ms, backward ms, final MSE.
+const DIFFVG: [(usize, f64, f64, f64); 3] = [
+    (64, 93.0, 380.0, 0.0296),
+    (256, 198.0, 777.0, 0.0153),
+    (512, 314.0, 1226.0, 0.0096),
+];
+
+fn default_photo(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/data/images")
+        .join(name)
+}
+
+fn pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
+    let mut b = rayon::ThreadPoolBuilder::new();
+    if let Some(n) = threads {
+        if n == 0 {
+            bail!("--threads must be at least 1");
+        }
+        b = b.num_threads(n);
+    }
+    Ok(b.build()?)
+}
+
+/// Loads an image and resizes it to `w × h` (or `w` wide when `h` is 0).
+fn photo(path: &Path, w: u32, h: u32) -> Result<crate::Image> {
+    let t = load_target(path)?;
+    let h = if h == 0 {
+        ((t.height as f64 * w as f64 / t.width as f64).round() as u32).max(1)
+    } else {
+        h
+    };
+    Ok(t.resized(w, h))
+}
+
+/// One painterly run: (median forward ms, median backward ms, seconds, final MSE).
+pub fn painterly_run(
+    target: &crate::Image,
+    paths: usize,
+    iters: usize,
+    seed: u64,
+) -> (f64, f64, f64, f64) {
+    let scene = random_blobs(paths, target.width, target.height, seed);
+    let objective = Objective::new(target, Loss::Mse, Some([1.0; 4]), 1);
+    let opts = FitOptions {
+        iters,
+        rates: LearningRates {
+            points: 1.0,
+            color: 0.01,
+            opacity: 0.01,
+            ..LearningRates::default()
+        },
+        ..FitOptions::default()
+    };
+    let out = refine(scene, &objective, &opts, &mut |_, _| Control::Continue);
+    let last = out.history.last().expect("at least one evaluation");
+    (
+        out.median_ms.0,
+        out.median_ms.1,
+        last.elapsed.as_secs_f64(),
+        last.loss,
+    )
+}
+
+fn run_painterly(a: PainterlyArgs) -> Result<()> {
+    let path = a
+        .target
+        .clone()
+        .unwrap_or_else(|| default_photo("astronaut.png"));
+    let target = photo(&path, a.size, a.size)?;
+    let pool = pool(a.threads)?;
+    let threads = pool.current_num_threads();
+    let mut table = format!(
+        "Painterly blobs on {} at {}², {} steps, {threads} thread(s), seed {}.\n\n\
+         | paths | forward (ms) | backward (ms) | total (s) | final MSE | DiffVG fwd+bwd (ms) | speed-up | DiffVG final MSE |\n\
+         |---:|---:|---:|---:|---:|---:|---:|---:|\n",
+        path.file_name().unwrap_or_default().to_string_lossy(),
+        a.size,
+        a.iters,
+        a.seed
+    );
+    println!("{}", table.trim_end());
+    for &n in &a.paths {
+        let (f, b, secs, mse) = pool.install(|| painterly_run(&target, n, a.iters, a.seed));
+        let reference = DIFFVG.iter().find(|r| r.0 == n && a.size == 256);
+        let row = match reference {
+            Some(&(_, rf, rb, rm)) => format!(
+                "| {n} | {f:.2} | {b:.2} | {secs:.2} | {mse:.4} | {:.0} | {:.0}× | {rm:.4} |",
+                rf + rb,
+                (rf + rb) / (f + b)
+            ),
+            None => format!("| {n} | {f:.2} | {b:.2} | {secs:.2} | {mse:.4} | – | – | – |"),
+        };
+        println!("{row}");
+        table += &row;
+        table.push('\n');
+    }
+    if let Some(r) = &a.report {
+        let mut text = std::fs::read_to_string(r).unwrap_or_default();
+        text += &table;
+        crate::image_io::write_atomic(r, text.as_bytes())?;
+    }
+    Ok(())
+}
+
+/// Arguments of `diffsvg bench fit`.
+#[derive(clap::Args, Debug)]
+pub struct SuiteArgs {
+    /// Where the report and plots go.
+    #[arg(long, default_value = "docs")]
+    out: PathBuf,
+    /// Folder of photos (astronaut.png and chelsea.png are used).
+    #[arg(long)]
+    images: Option<PathBuf>,
+    /// Optimizer steps per vectorization.
+    #[arg(long, default_value_t = 1000)]
+    iters: usize,
+    /// Path counts for the photos.
+    #[arg(long, value_delimiter = ',', default_value = "64,256,512")]
+    paths: Vec<usize>,
+}
+
+/// Runs a benchmark.
+pub fn run(w: Which) -> Result<()> {
+    match w {
+        Which::Painterly(a) => run_painterly(a),
+        Which::Fit(a) => super::bench_suite::run(a),
+    }
+}
+
+impl SuiteArgs {
+    /// The photo folder.
+    pub fn images(&self) -> PathBuf {
+        self.images
+            .clone()
+            .unwrap_or_else(|| default_photo("").to_path_buf())
+    }
+    /// Output folder.
+    pub fn out(&self) -> &Path {
+        &self.out
+    }
+    /// Steps per vectorization.
+    pub fn iters(&self) -> usize {
+        self.iters
+    }
+    /// Path counts.
+    pub fn paths(&self) -> &[usize] {
+        &self.paths
+    }
+}
+
+/// Loads a photo for the suite.
+pub fn suite_photo(path: &Path, w: u32, h: u32) -> Result<crate::Image> {
+    photo(path, w, h)
+}
