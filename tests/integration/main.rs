@@ -7,3 +7,4 @@ mod fit;
 mod gradients;
 mod parity;
 mod roundtrip;
+mod vectorize;

@@ -1,0 +1,182 @@
+//! `diffsvg vectorize`: builds SVGs that match pictures, in every mode; bad input fails
+//! cleanly.
+
+use diffsvg::raster::{RenderOptions, render};
+use diffsvg::{Image, Scene, Sizing};
+
+use super::common::{assert_fails, diffsvg, root, s, scratch, shared_data};
+
+fn summary(out: &std::process::Output) -> serde_json::Value {
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    serde_json::from_str(text.lines().last().unwrap_or_default())
+        .unwrap_or_else(|e| panic!("{e}: {text}"))
+}
+
+/// PSNR over RGB of an SVG rendered over white against a picture.
+fn psnr_of(svg: &std::path::Path, target: &Image) -> f64 {
+    let scene = Scene::load(svg, Sizing::Natural).unwrap();
+    assert_eq!((scene.width, scene.height), (target.width, target.height));
+    let mut img = render(&scene, &RenderOptions::default()).quantized();
+    img.over_background([1.0; 4]);
+    let mut t = target.clone();
+    t.over_background([1.0; 4]);
+    let mse: f64 = img
+        .data
+        .iter()
+        .zip(&t.data)
+        .map(|(a, b)| (0..3).map(|c| ((a[c] - b[c]) as f64).powi(2)).sum::<f64>())
+        .sum::<f64>()
+        / (3 * img.data.len()) as f64;
+    -10.0 * mse.log10()
+}
+
+#[test]
+fn vectorizes_a_drawing_in_every_mode() {
+    let dir = scratch("vectorize-modes");
+    let scene = Scene::load(
+        root().join("svg-samples/06-evenodd-star.svg"),
+        Sizing::Width(64),
+    )
+    .unwrap();
+    let mut target = render(&scene, &RenderOptions::default());
+    target.over_background([1.0; 4]);
+    let png = dir.join("star.png");
+    target.save_png(&png).unwrap();
+    let target = Image::load(&png).unwrap();
+    let mut results = Vec::new();
+    for mode in ["adaptive", "fixed", "painterly", "trace"] {
+        let out = dir.join(format!("{mode}.svg"));
+        let mut args = vec![
+            "vectorize",
+            s(&png),
+            "-o",
+            s(&out),
+            "--paths",
+            "12",
+            "--iters",
+            "300",
+            "--json",
+        ];
+        if mode == "trace" {
+            args.extend(["--init", "trace"]);
+        } else {
+            args.extend(["--mode", mode]);
+        }
+        let sum = summary(&diffsvg(&args));
+        let paths = sum["paths"].as_u64().unwrap();
+        assert!(paths <= 12, "{mode}: {paths} paths");
+        let psnr = sum["psnr"].as_f64().unwrap();
+        // The written file says the same as the summary (up to 8-bit quantization).
+        let measured = psnr_of(&out, &target);
+        assert!(
+            (measured - psnr).abs() < 1.0,
+            "{mode}: summary {psnr:.2}, file {measured:.2}"
+        );
+        results.push((mode, psnr));
+    }
+    let get = |m: &str| results.iter().find(|r| r.0 == m).unwrap().1;
+    assert!(get("adaptive") > 25.0, "{results:?}");
+    assert!(get("adaptive") > get("fixed"), "{results:?}");
+    assert!(get("adaptive") > get("painterly"), "{results:?}");
+    assert!(get("trace") > 20.0, "{results:?}");
+}
+
+/// The adaptive mode stops adding paths once the PSNR goal is met.
+#[test]
+fn target_psnr_uses_only_the_paths_it_needs() {
+    let dir = scratch("vectorize-goal");
+    let mut s1 = Scene::new(48, 48);
+    let mut p = diffsvg::Path::new("sq");
+    p.move_to([8.0, 8.0]);
+    p.line_to([30.0, 10.0]);
+    p.line_to([28.0, 36.0]);
+    p.close();
+    p.fill = Some(diffsvg::scene::Fill {
+        paint: diffsvg::scene::Paint::Solid([0.8, 0.2, 0.1]),
+        opacity: 1.0,
+        rule: diffsvg::scene::FillRule::NonZero,
+    });
+    s1.nodes.push(diffsvg::Node::Path(p));
+    let mut t = render(&s1, &RenderOptions::default());
+    t.over_background([1.0; 4]);
+    let png = dir.join("tri.png");
+    t.save_png(&png).unwrap();
+    let out = dir.join("tri.svg");
+    let sum = summary(&diffsvg(&[
+        "vectorize",
+        s(&png),
+        "-o",
+        s(&out),
+        "--target-psnr",
+        "30",
+        "--max-paths",
+        "64",
+        "--iters",
+        "400",
+        "--json",
+    ]));
+    assert!(sum["psnr"].as_f64().unwrap() >= 30.0, "{sum}");
+    assert!(
+        sum["paths"].as_u64().unwrap() <= 8,
+        "one triangle needs few paths: {sum}"
+    );
+}
+
+/// On a real photo, adaptive vectorization beats the painterly baseline at the same path
+/// count and step count (small size to stay fast).
+#[test]
+fn adaptive_beats_painterly_on_a_photo() {
+    let Some(data) = shared_data("adaptive_beats_painterly_on_a_photo") else {
+        return;
+    };
+    let dir = scratch("vectorize-photo");
+    let photo = data.join("images/astronaut.png");
+    let mut mse = Vec::new();
+    for mode in ["adaptive", "painterly"] {
+        let out = dir.join(format!("{mode}.svg"));
+        let sum = summary(&diffsvg(&[
+            "vectorize",
+            s(&photo),
+            "--width",
+            "64",
+            "-o",
+            s(&out),
+            "--mode",
+            mode,
+            "--paths",
+            "32",
+            "--iters",
+            "300",
+            "--json",
+        ]));
+        mse.push(sum["mse"].as_f64().unwrap());
+    }
+    assert!(mse[0] < mse[1], "adaptive {} painterly {}", mse[0], mse[1]);
+}
+
+#[test]
+fn vectorize_bad_inputs_fail_cleanly() {
+    let dir = scratch("vectorize-bad");
+    let out = dir.join("out.svg");
+    let o = diffsvg(&["vectorize", s(&dir.join("nope.png")), "-o", s(&out)]);
+    assert_fails(&o, "nope.png", "no such file", &out);
+    let png = dir.join("t.png");
+    Image::filled(8, 8, [1.0, 0.0, 0.0, 1.0])
+        .save_png(&png)
+        .unwrap();
+    let o = diffsvg(&["vectorize", s(&png), "-o", s(&out), "--mode", "cubist"]);
+    assert_fails(&o, "cubist", "unknown mode", &out);
+    let o = diffsvg(&["vectorize", s(&png), "-o", s(&out), "--segments", "1"]);
+    assert_fails(&o, "--segments", "between", &out);
+    let o = diffsvg(&["vectorize", s(&png), "-o", s(&out), "--paths", "0"]);
+    assert_fails(&o, "budget", "at least 1", &out);
+    let o = diffsvg(&["vectorize", s(&png), "-o", s(&out), "--lr-color", "inf"]);
+    assert_fails(&o, "colors", "learning rate", &out);
+    let o = diffsvg(&["vectorize", s(&png), "-o", s(&out), "--init", "magic"]);
+    assert_fails(&o, "magic", "unknown", &out);
+}
