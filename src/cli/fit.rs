@@ -158,7 +158,7 @@ impl OptimArgs {
 pub struct Args {
     /// Initial SVG; it is scaled to the target's size.
     init: PathBuf,
-    /// Target image (PNG or JPEG).
+    /// Target picture: PNG or JPEG, or an SVG rendered at its own size.
     target: PathBuf,
     /// Output SVG (written atomically).
     #[arg(short, long)]
@@ -175,9 +175,21 @@ pub struct Args {
     report: ReportArgs,
 }
 
-/// Loads a target image, refusing empty ones.
+/// Loads a target picture, refusing empty ones. An `.svg` target is rendered by diffsvg at
+/// its own size (handy to rebuild a drawing from its rendering).
 pub fn load_target(path: &std::path::Path) -> Result<Image> {
-    let t = Image::load(path)?;
+    let is_svg = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("svg"));
+    let t = if is_svg {
+        render(
+            &Scene::load(path, Sizing::Natural)?,
+            &RenderOptions::default(),
+        )
+    } else {
+        Image::load(path)?
+    };
     if t.width == 0 || t.height == 0 {
         bail!("{}: image is empty", path.display());
     }

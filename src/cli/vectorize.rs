@@ -15,7 +15,7 @@ use crate::raster::{RenderOptions, render};
 /// Arguments of `diffsvg vectorize`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// Target image (PNG or JPEG).
+    /// Target picture: PNG or JPEG, or an SVG rendered at its own size.
     target: PathBuf,
     /// Output SVG (written atomically).
     #[arg(short, long)]
