@@ -79,6 +79,15 @@ fn vectorizes_a_drawing_in_every_mode() {
         );
         results.push((mode, psnr));
     }
+    // Same inputs and seed, same bits.
+    let again = dir.join("again.svg");
+    summary(&diffsvg(&[
+        "vectorize", s(&png), "-o", s(&again), "--paths", "12", "--iters", "300", "--json",
+    ]));
+    assert_eq!(
+        std::fs::read(&again).unwrap(),
+        std::fs::read(dir.join("adaptive.svg")).unwrap()
+    );
     let get = |m: &str| results.iter().find(|r| r.0 == m).unwrap().1;
     assert!(get("adaptive") > 25.0, "{results:?}");
     assert!(get("adaptive") > get("fixed"), "{results:?}");
