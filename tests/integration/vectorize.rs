@@ -82,7 +82,15 @@ fn vectorizes_a_drawing_in_every_mode() {
     // Same inputs and seed, same bits.
     let again = dir.join("again.svg");
     summary(&diffsvg(&[
-        "vectorize", s(&png), "-o", s(&again), "--paths", "12", "--iters", "300", "--json",
+        "vectorize",
+        s(&png),
+        "-o",
+        s(&again),
+        "--paths",
+        "12",
+        "--iters",
+        "300",
+        "--json",
     ]));
     assert_eq!(
         std::fs::read(&again).unwrap(),
