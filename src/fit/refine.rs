@@ -2,6 +2,7 @@
 
 use std::time::{Duration, Instant};
 
+use crate::metrics::psnr_from_mse;
 use crate::optim::{Adam, AdamConfig, LearningRates, Objective, Schedule, project};
 use crate::raster::{RenderOptions, backward_prepared, prepare, render_prepared};
 use crate::scene::Scene;
@@ -115,8 +116,8 @@ pub fn refine(
         let img = render_prepared(&prepared);
         let forward_ms = t0.elapsed().as_secs_f64() * 1e3;
         fwd_ms.push(forward_ms);
-        let (loss, d_img) = objective.eval(&img);
-        let psnr = objective.psnr(&img);
+        let (loss, mse, d_img) = objective.eval_with_mse(&img);
+        let psnr = psnr_from_mse(mse);
         if loss < best_loss {
             best_loss = loss;
             best_psnr = psnr;
@@ -166,7 +167,8 @@ pub fn refine(
     }
 }
 
-fn median(v: &mut [f64]) -> f64 {
+/// Median of `v` (sorted in place); 0 when empty.
+pub(crate) fn median(v: &mut [f64]) -> f64 {
     if v.is_empty() {
         return 0.0;
     }

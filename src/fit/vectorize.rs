@@ -12,7 +12,7 @@
 
 use std::time::{Duration, Instant};
 
-use super::refine::{Control, FitOptions, Step, refine};
+use super::refine::{Control, FitOptions, Step, median, refine};
 use super::shapes::{circle, random_blobs, random_strokes};
 use super::trace::{prune_to_budget, prune_unneeded, trace};
 use crate::Result;
@@ -357,14 +357,6 @@ fn components(hot: &[bool], w: usize, h: usize, err: &[f32]) -> Vec<Region> {
         out.push(r);
     }
     out
-}
-
-fn median(v: &mut [f64]) -> f64 {
-    if v.is_empty() {
-        return 0.0;
-    }
-    v.sort_by(|a, b| a.total_cmp(b));
-    v[v.len() / 2]
 }
 
 #[cfg(test)]

@@ -80,8 +80,22 @@ impl Objective {
 
     /// The loss of a rendering (premultiplied, not yet composited) and `∂L/∂render`.
     pub fn eval(&self, render: &Image) -> (f64, Image) {
+        let (l, _, g) = self.eval_with_mse(render);
+        (l, g)
+    }
+
+    /// [`eval`](Self::eval) plus the full-resolution MSE of [`mse`](Self::mse), from the
+    /// same compositing (no second pass when the loss is a one-level MSE).
+    pub fn eval_with_mse(&self, render: &Image) -> (f64, f64, Image) {
         let img = self.composite(render);
         let (mut total, g) = self.loss.eval(&img, &self.targets[0], self.channels, true);
+        let mse = if self.loss == Loss::Mse {
+            total
+        } else {
+            Loss::Mse
+                .eval(&img, &self.targets[0], self.channels, false)
+                .0
+        };
         let mut grad = g.expect("gradient requested");
         if self.targets.len() > 1 {
             // Down the pyramid keeping each level's gradient, then back up.
@@ -111,7 +125,7 @@ impl Objective {
         if let Some(bg) = self.background {
             grad.over_background_backward(bg);
         }
-        (total, grad)
+        (total, mse, grad)
     }
 
     /// Mean squared error of a rendering against the target at full resolution, over the
