@@ -198,6 +198,51 @@ pub fn side_by_side(images: &[&Image]) -> Image {
     out
 }
 
+/// A contact sheet: one column per pair, the first image of each pair above the second,
+/// `columns` pairs to a row, `gap` pixels of `background` (straight RGBA) between cells.
+/// Each cell is the size of the largest image; smaller ones sit at the cell's top left.
+pub fn contact_sheet(
+    pairs: &[(&Image, &Image)],
+    columns: usize,
+    gap: u32,
+    background: [f32; 4],
+) -> Image {
+    let columns = columns.max(1);
+    let cw = pairs
+        .iter()
+        .map(|(a, b)| a.width.max(b.width))
+        .max()
+        .unwrap_or(0);
+    let ch = pairs
+        .iter()
+        .map(|(a, b)| a.height.max(b.height))
+        .max()
+        .unwrap_or(0);
+    let rows = pairs.len().div_ceil(columns) as u32;
+    let cols = columns.min(pairs.len()) as u32;
+    let w = cols * (cw + gap) + gap;
+    let h = rows * (2 * ch + 2 * gap) + gap;
+    let a = background[3];
+    let bg = [background[0] * a, background[1] * a, background[2] * a, a];
+    let mut out = Image::new(w, h);
+    out.data.iter_mut().for_each(|p| *p = bg);
+    let mut blit = |img: &Image, x0: u32, y0: u32| {
+        for y in 0..img.height {
+            let src = &img.data[(y * img.width) as usize..((y + 1) * img.width) as usize];
+            let start = ((y0 + y) * w + x0) as usize;
+            out.data[start..start + src.len()].copy_from_slice(src);
+        }
+    };
+    for (i, (top, bottom)) in pairs.iter().enumerate() {
+        let (c, r) = ((i % columns) as u32, (i / columns) as u32);
+        let x0 = gap + c * (cw + gap);
+        let y0 = gap + r * (2 * ch + 2 * gap);
+        blit(top, x0, y0);
+        blit(bottom, x0, y0 + ch + gap);
+    }
+    out
+}
+
 /// Writes `bytes` to `path` through a temporary file in the same folder and a rename.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
@@ -228,6 +273,20 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn contact_sheet_places_pairs_in_a_grid() {
+        let white = Image::from_rgba8(1, 1, &[255, 255, 255, 255]);
+        let red = Image::from_rgba8(1, 1, &[255, 0, 0, 255]);
+        let pairs = [(&white, &red), (&white, &red), (&white, &red)];
+        let sheet = contact_sheet(&pairs, 2, 1, [0.0, 0.0, 0.0, 1.0]);
+        // 2 columns × 2 rows of 1×2 cells with 1 px gaps.
+        assert_eq!((sheet.width, sheet.height), (5, 9));
+        assert_eq!(sheet.data[(1 * 5 + 1) as usize], [1.0; 4]);
+        assert_eq!(sheet.data[(3 * 5 + 3) as usize], [1.0, 0.0, 0.0, 1.0]);
+        assert_eq!(sheet.data[(5 * 5 + 1) as usize], [1.0; 4]);
+        assert_eq!(sheet.data[(5 * 5 + 3) as usize], [0.0, 0.0, 0.0, 1.0]);
+    }
 
     #[test]
     fn rgba8_round_trip_premultiplies() {
