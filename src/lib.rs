@@ -21,6 +21,7 @@ pub mod gradcheck;
 pub mod image_io;
 pub mod loss;
 pub mod metrics;
+pub mod mnist;
 pub mod optim;
 pub mod raster;
 pub mod reference;

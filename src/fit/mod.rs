@@ -1,6 +1,7 @@
 //! Fitting scenes to images: refinement of an existing SVG, vectorization from nothing,
 //! classical tracing as a starting point, and speed-vs-error reports.
 
+pub mod digit;
 pub mod plot;
 pub mod refine;
 pub mod shapes;
