@@ -8,6 +8,7 @@ use clap::{Parser, Subcommand};
 mod bench;
 mod bench_fit;
 mod bench_suite;
+mod digits;
 mod fit;
 mod grad;
 mod parity;
@@ -43,6 +44,8 @@ enum Command {
     Perturb(perturb::Args),
     /// Build an SVG from a picture with as few paths as it needs.
     Vectorize(vectorize::Args),
+    /// Fit strokes to handwritten digits (MNIST IDX files): SVGs, summary.csv, contact.png.
+    Digits(digits::Args),
 }
 
 /// Runs the command line; returns the process exit code.
@@ -57,6 +60,7 @@ pub fn main() -> ExitCode {
         Command::Fit(a) => fit::run(a),
         Command::Perturb(a) => perturb::run(a),
         Command::Vectorize(a) => vectorize::run(a),
+        Command::Digits(a) => digits::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

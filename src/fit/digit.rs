@@ -46,8 +46,8 @@ impl Default for DigitOptions {
             target_iou: 0.85,
             max_strokes: 2,
             max_segments: 3,
-            steps: 100,
-            stage_steps: 60,
+            steps: 60,
+            stage_steps: 40,
             threshold: 0.5,
         }
     }

@@ -2,6 +2,7 @@
 
 mod cli;
 mod common;
+mod digits;
 mod exactness;
 mod fit;
 mod gradients;
