@@ -5,6 +5,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
+mod batch;
 mod bench;
 mod bench_fit;
 mod bench_suite;
@@ -46,6 +47,8 @@ enum Command {
     Vectorize(vectorize::Args),
     /// Fit strokes to handwritten digits (MNIST IDX files): SVGs, summary.csv, contact.png.
     Digits(digits::Args),
+    /// Run a job file of fit, vectorize, digits and render jobs: parallel, resumable, sharded.
+    Batch(batch::Args),
 }
 
 /// Runs the command line; returns the process exit code.
@@ -61,6 +64,7 @@ pub fn main() -> ExitCode {
         Command::Perturb(a) => perturb::run(a),
         Command::Vectorize(a) => vectorize::run(a),
         Command::Digits(a) => digits::run(a),
+        Command::Batch(a) => return batch::main(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,5 +1,6 @@
 //! Cross-cutting and command-line tests.
 
+mod batch;
 mod cli;
 mod common;
 mod digits;
