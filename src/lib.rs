@@ -26,6 +26,7 @@ pub mod optim;
 pub mod raster;
 pub mod reference;
 pub mod scene;
+pub mod volume;
 
 pub use error::{Error, Result};
 pub use image_io::Image;
