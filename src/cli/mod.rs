@@ -11,6 +11,7 @@ mod bench_fit;
 mod bench_suite;
 mod digits;
 mod fit;
+mod glyphs;
 mod grad;
 mod parity;
 mod perturb;
@@ -45,10 +46,13 @@ enum Command {
     Perturb(perturb::Args),
     /// Build an SVG from a picture with as few paths as it needs.
     Vectorize(vectorize::Args),
-    /// Fit strokes to handwritten digits (MNIST IDX files): SVGs, summary.csv, contact.png.
-    Digits(digits::Args),
+    /// Fit closed cubic outlines to rendered glyphs with the fewest segments that reach an
+    /// IoU goal, beside the glyphs' own segment counts.
+    Glyphs(glyphs::Args),
     /// Run a job file of fit, vectorize, digits and render jobs: parallel, resumable, sharded.
     Batch(batch::Args),
+    /// Fit strokes to handwritten digits (MNIST IDX files): SVGs, summary.csv, contact.png.
+    Digits(digits::Args),
 }
 
 /// Runs the command line; returns the process exit code.
@@ -63,8 +67,9 @@ pub fn main() -> ExitCode {
         Command::Fit(a) => fit::run(a),
         Command::Perturb(a) => perturb::run(a),
         Command::Vectorize(a) => vectorize::run(a),
-        Command::Digits(a) => digits::run(a),
+        Command::Glyphs(a) => glyphs::run(a),
         Command::Batch(a) => return batch::main(a),
+        Command::Digits(a) => digits::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -2,6 +2,7 @@
 //! classical tracing as a starting point, and speed-vs-error reports.
 
 pub mod digit;
+pub mod glyph;
 pub mod plot;
 pub mod refine;
 pub mod shapes;
