@@ -7,6 +7,10 @@
 //! y down and pixel `(x, y)` centered at `(x + 0.5, y + 0.5)`; colors are linear-in-file
 //! RGB in `[0, 1]` (no gamma handling), already composited over the background.
 
+pub mod camera;
+pub mod dataset;
+pub mod metrics;
+
 pub use glam::Vec3;
 
 /// A ray `origin + t · dir`, `t ≥ 0`, with `dir` of unit length.

@@ -1,0 +1,939 @@
+//! Posed-photo datasets: NeRF-synthetic (`transforms_{train,test}.json`) and instant-ngp
+//! (`transforms.json`) folders, loaded into cameras and RGB images.
+//!
+//! * **NeRF-synthetic** (detected by `transforms_train.json`): train views from
+//!   `transforms_train.json`, test views from `transforms_test.json` when it exists (none
+//!   otherwise). `file_path` usually has no extension (`"./train/r_0"`); `.png` is then
+//!   appended. Every listed image must exist.
+//! * **instant-ngp** (`transforms.json`): frames whose image is missing are skipped with one
+//!   warning on stderr naming them all; of the frames present, in file order, those at
+//!   positions 0, 8, 16, … are the test views and the rest are train views.
+//!
+//! Both formats share one reader. Intrinsics come from the top level and may be
+//! overridden per frame: `fl_x`, `fl_y` (pixels) or `camera_angle_x`, `camera_angle_y`
+//! (radians, full field of view across the image width/height); a missing vertical focal
+//! length equals the horizontal one; `cx`, `cy` default to the image center; `w`, `h`, when
+//! given, must match the image; `k1 k2 p1 p2` are OpenCV distortion (default 0).
+//! `transform_matrix` is a 4×4 (or 3×4) row-major camera-to-world matrix in the
+//! OpenGL/Blender convention. Paths are relative to the JSON file's folder.
+//!
+//! Images (PNG or JPEG, 8 or 16 bit) become RGB in `[0, 1]`; an alpha channel is
+//! composited over white (straight alpha, no gamma handling). All images must have the
+//! same size. With `downscale` K > 1 each output pixel is the mean of a K×K block
+//! (sizes rounded down, the right/bottom remainder dropped) and the cameras are
+//! [`Camera::downscaled`], so pixel geometry stays exact.
+//!
+//! Loading only reads files; on any error nothing is returned (and nothing written).
+
+use std::path::{Path, PathBuf};
+
+use glam::Affine3A;
+use rayon::prelude::*;
+use serde_json::{Map, Value};
+
+use super::camera::{Camera, focal_from_fov, pose_from_rows};
+use crate::error::{Error, Result};
+
+/// One posed photo.
+#[derive(Clone, Debug, PartialEq)]
+pub struct View {
+    /// The frame's `file_path` as written in the JSON, without a leading `./`.
+    pub name: String,
+    /// The camera, for the (possibly downscaled) image.
+    pub camera: Camera,
+    /// Image width in pixels (equals `camera.width`).
+    pub width: u32,
+    /// Image height in pixels (equals `camera.height`).
+    pub height: u32,
+    /// `width × height` RGB pixels in `[0, 1]`, row-major, y down, alpha composited over
+    /// white.
+    pub rgb: Vec<[f32; 3]>,
+}
+
+/// A dataset split into training and held-out test views.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Dataset {
+    /// Views to fit.
+    pub train: Vec<View>,
+    /// Views to evaluate on (may be empty for a NeRF-synthetic folder without
+    /// `transforms_test.json`).
+    pub test: Vec<View>,
+    /// The dataset folder's name.
+    pub name: String,
+}
+
+impl Dataset {
+    /// Loads a dataset folder; see [`load`].
+    pub fn load(dir: &Path, downscale: u32) -> Result<Dataset> {
+        load(dir, downscale)
+    }
+}
+
+/// Every `HOLDOUT`-th present frame of an instant-ngp dataset is a test view.
+pub const HOLDOUT: usize = 8;
+
+/// Loads a NeRF-synthetic or instant-ngp folder (see the module documentation), with
+/// images and cameras downscaled by the integer `downscale ≥ 1`.
+///
+/// Errors name the file and the problem: a missing folder or transforms file, malformed
+/// JSON or fields (`"frame 3 (./train/r_3): transform_matrix must be 4×4 (or 3×4)
+/// numbers"`, frames counted from 0), degenerate poses, missing or unreadable images, an
+/// image whose size differs from the first one, no frames with images.
+pub fn load(dir: &Path, downscale: u32) -> Result<Dataset> {
+    if downscale == 0 {
+        return Err(Error::InvalidValue {
+            path: dir.to_path_buf(),
+            what: "downscale must be at least 1".into(),
+        });
+    }
+    match std::fs::metadata(dir) {
+        Ok(m) if m.is_dir() => {}
+        Ok(_) => return Err(not_found(dir, "not a folder")),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            return Err(not_found(dir, "dataset folder does not exist"));
+        }
+        Err(e) => return Err(Error::io(dir, e)),
+    }
+    let name = dir
+        .canonicalize()
+        .ok()
+        .as_deref()
+        .and_then(Path::file_name)
+        .or_else(|| dir.file_name())
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+
+    let synthetic = dir.join("transforms_train.json");
+    let ngp = dir.join("transforms.json");
+    // Frames to load, each with its split (true = test).
+    let mut frames: Vec<(Frame, bool)> = Vec::new();
+    if synthetic.is_file() {
+        let train = parse_transforms(&synthetic)?;
+        require_images(&synthetic, &train)?;
+        frames.extend(train.into_iter().map(|f| (f, false)));
+        let test_json = dir.join("transforms_test.json");
+        if test_json.is_file() {
+            let test = parse_transforms(&test_json)?;
+            require_images(&test_json, &test)?;
+            frames.extend(test.into_iter().map(|f| (f, true)));
+        }
+    } else if ngp.is_file() {
+        let all = parse_transforms(&ngp)?;
+        let total = all.len();
+        let (present, missing): (Vec<Frame>, Vec<Frame>) =
+            all.into_iter().partition(|f| f.image.is_some());
+        if present.is_empty() {
+            return Err(Error::io(
+                &ngp,
+                std::io::Error::new(
+                    std::io::ErrorKind::NotFound,
+                    format!(
+                        "none of the {total} frames has its image (first looked for: {})",
+                        missing
+                            .first()
+                            .map(|f| f.tried.display().to_string())
+                            .unwrap_or_default()
+                    ),
+                ),
+            ));
+        }
+        if !missing.is_empty() {
+            let names: Vec<&str> = missing.iter().map(|f| f.file_path.as_str()).collect();
+            eprintln!(
+                "warning: {}: skipping {} of {total} frames whose image is missing: {}",
+                ngp.display(),
+                missing.len(),
+                names.join(", ")
+            );
+        }
+        frames.extend(
+            present
+                .into_iter()
+                .enumerate()
+                .map(|(i, f)| (f, i % HOLDOUT == 0)),
+        );
+    } else {
+        return Err(not_found(
+            dir,
+            "no transforms_train.json (NeRF-synthetic) or transforms.json (instant-ngp) here",
+        ));
+    }
+    if frames.is_empty() {
+        return Err(not_found(dir, "no frames"));
+    }
+
+    // Decode in parallel; report the first failure in file order.
+    let images: Vec<Result<Decoded>> = frames
+        .par_iter()
+        .map(|(f, _)| decode(f.image.as_deref().expect("present"), downscale))
+        .collect();
+    let images: Vec<Decoded> = images.into_iter().collect::<Result<_>>()?;
+
+    let (rw, rh) = (images[0].width, images[0].height);
+    let first = frames[0].0.image.clone().expect("present");
+    if rw < downscale || rh < downscale {
+        return Err(Error::InvalidValue {
+            path: first,
+            what: format!("downscale {downscale} leaves no pixels of a {rw}×{rh} image"),
+        });
+    }
+    let mut train = Vec::new();
+    let mut test = Vec::new();
+    for ((frame, is_test), img) in frames.into_iter().zip(images) {
+        let path = frame.image.as_deref().expect("present");
+        if (img.width, img.height) != (rw, rh) {
+            return Err(Error::Image {
+                path: path.to_path_buf(),
+                message: format!(
+                    "image is {}×{} but {} is {rw}×{rh}: all images must have the same size",
+                    img.width,
+                    img.height,
+                    first.display()
+                ),
+            });
+        }
+        let camera = frame.camera(rw, rh)?.downscaled(downscale);
+        debug_assert_eq!(img.rgb.len(), (camera.width * camera.height) as usize);
+        let view = View {
+            name: frame.file_path.trim_start_matches("./").to_string(),
+            width: camera.width,
+            height: camera.height,
+            camera,
+            rgb: img.rgb,
+        };
+        if is_test {
+            test.push(view);
+        } else {
+            train.push(view);
+        }
+    }
+    Ok(Dataset { train, test, name })
+}
+
+fn not_found(path: &Path, message: &str) -> Error {
+    Error::io(
+        path,
+        std::io::Error::new(std::io::ErrorKind::NotFound, message.to_string()),
+    )
+}
+
+/// Intrinsics as given at one level (top or frame) of a transforms file.
+#[derive(Clone, Copy, Debug, Default)]
+struct Intrinsics {
+    fl_x: Option<f64>,
+    fl_y: Option<f64>,
+    angle_x: Option<f64>,
+    angle_y: Option<f64>,
+    cx: Option<f64>,
+    cy: Option<f64>,
+    w: Option<f64>,
+    h: Option<f64>,
+    k1: Option<f64>,
+    k2: Option<f64>,
+    p1: Option<f64>,
+    p2: Option<f64>,
+}
+
+/// One frame of a transforms file, parsed and checked, image not yet read.
+#[derive(Clone, Debug)]
+struct Frame {
+    /// The transforms file (for errors).
+    json: PathBuf,
+    /// Position in its `frames` array.
+    index: usize,
+    file_path: String,
+    /// The image file, when it exists.
+    image: Option<PathBuf>,
+    /// Where the image was looked for (for errors).
+    tried: PathBuf,
+    c2w: Affine3A,
+    top: Intrinsics,
+    own: Intrinsics,
+}
+
+impl Frame {
+    fn err(&self, what: impl std::fmt::Display) -> Error {
+        Error::InvalidValue {
+            path: self.json.clone(),
+            what: format!("frame {} ({}): {what}", self.index, self.file_path),
+        }
+    }
+
+    /// The camera for an image of `iw × ih` pixels (before downscaling).
+    fn camera(&self, iw: u32, ih: u32) -> Result<Camera> {
+        let (own, top) = (&self.own, &self.top);
+        for (key, given, actual) in [("w", own.w.or(top.w), iw), ("h", own.h.or(top.h), ih)] {
+            if let Some(g) = given.filter(|&g| g != actual as f64) {
+                return Err(Error::Image {
+                    path: self.image.clone().unwrap_or_default(),
+                    message: format!(
+                        "image is {iw}×{ih} but {} gives {key} = {g}",
+                        self.json.display()
+                    ),
+                });
+            }
+        }
+        let angle = |a: Option<f64>, key: &str, size: u32| -> Result<Option<f64>> {
+            match a {
+                None => Ok(None),
+                Some(a) if a > 0.0 && a < std::f64::consts::PI => {
+                    Ok(Some(focal_from_fov(size as f32, a as f32) as f64))
+                }
+                Some(a) => Err(self.err(format!("{key} = {a} must be in (0, π) radians"))),
+            }
+        };
+        let fx = match own.fl_x {
+            Some(f) => Some(f),
+            None => match angle(own.angle_x, "camera_angle_x", iw)? {
+                Some(f) => Some(f),
+                None => match top.fl_x {
+                    Some(f) => Some(f),
+                    None => angle(top.angle_x, "camera_angle_x", iw)?,
+                },
+            },
+        };
+        let fy = match own.fl_y {
+            Some(f) => Some(f),
+            None => match angle(own.angle_y, "camera_angle_y", ih)? {
+                Some(f) => Some(f),
+                None => match top.fl_y {
+                    Some(f) => Some(f),
+                    None => angle(top.angle_y, "camera_angle_y", ih)?,
+                },
+            },
+        };
+        let (fx, fy) = match (fx, fy) {
+            (Some(x), Some(y)) => (x, y),
+            (Some(x), None) => (x, x),
+            (None, Some(y)) => (y, y),
+            (None, None) => {
+                return Err(self.err("no focal length: give fl_x (and fl_y) or camera_angle_x"));
+            }
+        };
+        let get = |a: Option<f64>, b: Option<f64>, default: f64| a.or(b).unwrap_or(default);
+        let cam = Camera {
+            width: iw,
+            height: ih,
+            fx: fx as f32,
+            fy: fy as f32,
+            cx: get(own.cx, top.cx, iw as f64 / 2.0) as f32,
+            cy: get(own.cy, top.cy, ih as f64 / 2.0) as f32,
+            k1: get(own.k1, top.k1, 0.0) as f32,
+            k2: get(own.k2, top.k2, 0.0) as f32,
+            p1: get(own.p1, top.p1, 0.0) as f32,
+            p2: get(own.p2, top.p2, 0.0) as f32,
+            c2w: self.c2w,
+        };
+        cam.validate().map_err(|e| self.err(e))?;
+        Ok(cam)
+    }
+}
+
+/// Errors unless every frame's image exists (NeRF-synthetic).
+fn require_images(json: &Path, frames: &[Frame]) -> Result<()> {
+    if let Some(f) = frames.iter().find(|f| f.image.is_none()) {
+        return Err(not_found(
+            &f.tried,
+            &format!(
+                "image of frame {} ({}) in {} does not exist",
+                f.index,
+                f.file_path,
+                json.display()
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Reads and checks a transforms file (both formats), resolving image paths.
+fn parse_transforms(path: &Path) -> Result<Vec<Frame>> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bad = |what: String| Error::InvalidValue {
+        path: path.to_path_buf(),
+        what,
+    };
+    let root: Value =
+        serde_json::from_slice(&bytes).map_err(|e| bad(format!("malformed JSON: {e}")))?;
+    let top = root
+        .as_object()
+        .ok_or_else(|| bad("the top level must be a JSON object".into()))?;
+    check_supported(path, top, "")?;
+    let top_intr = intrinsics(top).map_err(bad)?;
+    let frames = match top.get("frames") {
+        None => return Err(bad("no \"frames\" array".into())),
+        Some(Value::Array(a)) => a,
+        Some(_) => return Err(bad("\"frames\" must be an array".into())),
+    };
+    if frames.is_empty() {
+        return Err(bad("\"frames\" is empty".into()));
+    }
+    let base = path.parent().unwrap_or(Path::new("."));
+    let mut out = Vec::with_capacity(frames.len());
+    for (index, fv) in frames.iter().enumerate() {
+        let fobj = fv
+            .as_object()
+            .ok_or_else(|| bad(format!("frame {index}: must be a JSON object")))?;
+        let file_path = match fobj.get("file_path") {
+            Some(Value::String(s)) => s.clone(),
+            Some(_) => return Err(bad(format!("frame {index}: file_path must be a string"))),
+            None => return Err(bad(format!("frame {index}: no file_path"))),
+        };
+        let at = |what: String| bad(format!("frame {index} ({file_path}): {what}"));
+        check_supported(path, fobj, &format!("frame {index} ({file_path}): "))?;
+        let own = intrinsics(fobj).map_err(at)?;
+        let rows = matrix_rows(fobj.get("transform_matrix")).map_err(|w| at(w.into()))?;
+        let c2w = pose_from_rows(&rows).map_err(|e| at(e.to_string()))?;
+        let tried = base.join(&file_path);
+        let image = if tried.is_file() {
+            Some(tried.clone())
+        } else {
+            let mut png = tried.clone().into_os_string();
+            png.push(".png");
+            let png = PathBuf::from(png);
+            png.is_file().then_some(png)
+        };
+        out.push(Frame {
+            json: path.to_path_buf(),
+            index,
+            file_path,
+            image,
+            tried,
+            c2w,
+            top: top_intr,
+            own,
+        });
+    }
+    Ok(out)
+}
+
+/// `transform_matrix` as 3 or 4 rows of 4 numbers.
+fn matrix_rows(v: Option<&Value>) -> std::result::Result<Vec<[f64; 4]>, &'static str> {
+    const SHAPE: &str = "transform_matrix must be 4×4 (or 3×4) numbers";
+    let rows = match v {
+        None => return Err("no transform_matrix"),
+        Some(Value::Array(rows)) => rows,
+        Some(_) => return Err(SHAPE),
+    };
+    if rows.len() != 3 && rows.len() != 4 {
+        return Err(SHAPE);
+    }
+    rows.iter()
+        .map(|r| {
+            let r = r.as_array().filter(|r| r.len() == 4).ok_or(SHAPE)?;
+            let mut out = [0.0; 4];
+            for (o, x) in out.iter_mut().zip(r) {
+                *o = x.as_f64().ok_or(SHAPE)?;
+            }
+            Ok(out)
+        })
+        .collect()
+}
+
+/// The intrinsics keys of one JSON object.
+fn intrinsics(obj: &Map<String, Value>) -> std::result::Result<Intrinsics, String> {
+    let num = |key: &str| -> std::result::Result<Option<f64>, String> {
+        match obj.get(key) {
+            None | Some(Value::Null) => Ok(None),
+            Some(v) => v
+                .as_f64()
+                .filter(|x| x.is_finite())
+                .map(Some)
+                .ok_or_else(|| format!("{key} must be a number, got {v}")),
+        }
+    };
+    let size = |key: &str| -> std::result::Result<Option<f64>, String> {
+        match num(key)? {
+            Some(v) if v < 1.0 || v.fract() != 0.0 => Err(format!(
+                "{key} = {v} must be a positive whole number of pixels"
+            )),
+            v => Ok(v),
+        }
+    };
+    Ok(Intrinsics {
+        fl_x: num("fl_x")?,
+        fl_y: num("fl_y")?,
+        angle_x: num("camera_angle_x")?,
+        angle_y: num("camera_angle_y")?,
+        cx: num("cx")?,
+        cy: num("cy")?,
+        w: size("w")?,
+        h: size("h")?,
+        k1: num("k1")?,
+        k2: num("k2")?,
+        p1: num("p1")?,
+        p2: num("p2")?,
+    })
+}
+
+/// Rejects camera models this loader would silently get wrong.
+fn check_supported(path: &Path, obj: &Map<String, Value>, prefix: &str) -> Result<()> {
+    let unsupported = |what: String| Error::Unsupported {
+        path: path.to_path_buf(),
+        what: format!("{prefix}{what}"),
+    };
+    for key in ["k3", "k4", "k5", "k6", "p3", "p4"] {
+        if let Some(v) = obj.get(key).and_then(Value::as_f64).filter(|v| *v != 0.0) {
+            return Err(unsupported(format!(
+                "{key} = {v} (only OpenCV k1 k2 p1 p2 distortion is supported)"
+            )));
+        }
+    }
+    if obj.get("is_fisheye").and_then(Value::as_bool) == Some(true) {
+        return Err(unsupported("fisheye cameras".into()));
+    }
+    if let Some(model) = obj.get("camera_model").and_then(Value::as_str) {
+        const OK: [&str; 5] = [
+            "OPENCV",
+            "PINHOLE",
+            "SIMPLE_PINHOLE",
+            "SIMPLE_RADIAL",
+            "RADIAL",
+        ];
+        if !OK.contains(&model) {
+            return Err(unsupported(format!("camera_model {model}")));
+        }
+    }
+    Ok(())
+}
+
+/// A decoded image: its size before downscaling and its downscaled RGB pixels.
+struct Decoded {
+    width: u32,
+    height: u32,
+    rgb: Vec<[f32; 3]>,
+}
+
+/// Reads an image, composites alpha over white and averages `k × k` blocks.
+fn decode(path: &Path, k: u32) -> Result<Decoded> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let img = image::load_from_memory(&bytes).map_err(|e| Error::Image {
+        path: path.to_path_buf(),
+        message: format!("not a readable PNG or JPEG image: {e}"),
+    })?;
+    let (w, h) = (img.width(), img.height());
+    let lut: [f32; 256] = std::array::from_fn(|i| i as f32 / 255.0);
+    let over_white = |c: f32, a: f32| c * a + (1.0 - a);
+    let color = img.color();
+    let full: Vec<[f32; 3]> = match img {
+        image::DynamicImage::ImageRgb8(b) => b
+            .as_raw()
+            .chunks_exact(3)
+            .map(|p| [lut[p[0] as usize], lut[p[1] as usize], lut[p[2] as usize]])
+            .collect(),
+        other if color.bytes_per_pixel() == color.channel_count() => other
+            .to_rgba8()
+            .as_raw()
+            .chunks_exact(4)
+            .map(|p| {
+                let a = lut[p[3] as usize];
+                [0, 1, 2].map(|c| over_white(lut[p[c] as usize], a))
+            })
+            .collect(),
+        other => other
+            .to_rgba32f()
+            .as_raw()
+            .chunks_exact(4)
+            .map(|p| [0, 1, 2].map(|c| over_white(p[c], p[3])))
+            .collect(),
+    };
+    let rgb = if k == 1 {
+        full
+    } else {
+        box_downscale(&full, w as usize, h as usize, k as usize)
+    };
+    Ok(Decoded {
+        width: w,
+        height: h,
+        rgb,
+    })
+}
+
+/// Means of `k × k` blocks; output `(w / k) × (h / k)`, remainder dropped.
+fn box_downscale(src: &[[f32; 3]], w: usize, h: usize, k: usize) -> Vec<[f32; 3]> {
+    let (ow, oh) = (w / k, h / k);
+    let mut out = vec![[0.0f32; 3]; ow * oh];
+    let inv = 1.0 / (k * k) as f32;
+    for (oy, orow) in out.chunks_mut(ow.max(1)).enumerate().take(oh) {
+        for dy in 0..k {
+            let srow = &src[(oy * k + dy) * w..][..ow * k];
+            for (o, block) in orow.iter_mut().zip(srow.chunks_exact(k)) {
+                for p in block {
+                    for c in 0..3 {
+                        o[c] += p[c];
+                    }
+                }
+            }
+        }
+        for o in orow.iter_mut() {
+            *o = o.map(|v| v * inv);
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3;
+    use serde_json::json;
+
+    /// A fresh empty folder under the system temp folder.
+    fn scratch(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("diffsvg-dataset-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        d
+    }
+
+    /// Row-major 4×4 JSON for a pose.
+    fn rows(c2w: &Affine3A) -> Value {
+        let m = glam::Mat4::from(*c2w);
+        json!((0..4).map(|r| m.row(r).to_array()).collect::<Vec<_>>())
+    }
+
+    fn pose(i: usize) -> Affine3A {
+        let a = i as f32 * 0.7;
+        Camera::look_at(
+            Vec3::new(4.0 * a.cos(), 4.0 * a.sin(), 1.0),
+            Vec3::ZERO,
+            Vec3::Z,
+            0.8,
+            8,
+            8,
+        )
+        .unwrap()
+        .c2w
+    }
+
+    /// An `w × h` RGBA PNG: left half opaque (r, g, b) from `seed`, right half transparent.
+    fn write_png(path: &Path, w: u32, h: u32, seed: u8) {
+        std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+        image::RgbaImage::from_fn(w, h, |x, y| {
+            if x < w / 2 {
+                image::Rgba([seed, (x * 20) as u8, (y * 20) as u8, 255])
+            } else {
+                image::Rgba([0, 0, 0, 0])
+            }
+        })
+        .save(path)
+        .unwrap();
+    }
+
+    fn write_json(path: &Path, v: &Value) {
+        std::fs::write(path, serde_json::to_vec_pretty(v).unwrap()).unwrap();
+    }
+
+    /// A NeRF-synthetic folder: 2 train + 1 test views of 8×6.
+    fn synthetic(name: &str) -> PathBuf {
+        let dir = scratch(name);
+        for (split, n) in [("train", 2), ("test", 1)] {
+            let frames: Vec<Value> = (0..n)
+                .map(|i| {
+                    write_png(&dir.join(format!("{split}/r_{i}.png")), 8, 6, 10 * i as u8);
+                    json!({"file_path": format!("./{split}/r_{i}"), "rotation": 0.01,
+                           "transform_matrix": rows(&pose(i + 3 * (split == "test") as usize))})
+                })
+                .collect();
+            write_json(
+                &dir.join(format!("transforms_{split}.json")),
+                &json!({"camera_angle_x": 0.6911112070083618, "frames": frames}),
+            );
+        }
+        dir
+    }
+
+    fn err(dir: &Path, k: u32) -> String {
+        load(dir, k).unwrap_err().to_string()
+    }
+
+    #[test]
+    fn nerf_synthetic_loads_composites_on_white_and_downscales() {
+        let dir = synthetic("synthetic");
+        let ds = load(&dir, 1).unwrap();
+        assert_eq!((ds.train.len(), ds.test.len()), (2, 1));
+        assert!(ds.name.starts_with("diffsvg-dataset-synthetic"));
+        let v = &ds.train[1];
+        assert_eq!(v.name, "train/r_1");
+        assert_eq!((v.width, v.height), (8, 6));
+        assert_eq!(v.rgb.len(), 48);
+        // Pixel (1, 2): opaque (10, 20, 40); pixel (6, 0): transparent → white.
+        let p = v.rgb[2 * 8 + 1];
+        assert_eq!(p, [10.0 / 255.0, 20.0 / 255.0, 40.0 / 255.0]);
+        assert_eq!(v.rgb[6], [1.0; 3]);
+        let f = 4.0 / (0.5f32 * 0.691_111_2).tan();
+        assert!((v.camera.fx - f).abs() < 1e-4 && (v.camera.fy - f).abs() < 1e-4);
+        assert_eq!((v.camera.cx, v.camera.cy), (4.0, 3.0));
+        assert!(!v.camera.has_distortion());
+        assert_eq!(v.camera.c2w, pose(1));
+        assert_eq!(ds.test[0].camera.c2w, pose(3));
+
+        let half = load(&dir, 2).unwrap();
+        let h = &half.train[1];
+        assert_eq!((h.width, h.height, h.rgb.len()), (4, 3, 12));
+        assert_eq!(h.camera, v.camera.downscaled(2));
+        // Block (0, 1) = pixels x 0..2, y 2..4: mean of the four opaque pixels.
+        let want: [f32; 3] = [0, 1, 2].map(|c| {
+            [(0, 2), (1, 2), (0, 3), (1, 3)]
+                .iter()
+                .map(|&(x, y)| v.rgb[y * 8 + x][c])
+                .sum::<f32>()
+                / 4.0
+        });
+        for (got, want) in h.rgb[4].iter().zip(want) {
+            assert!((got - want).abs() < 1e-6);
+        }
+        assert_eq!(h.rgb[3], [1.0; 3]);
+        // 3× leaves 2×2 (remainder dropped).
+        let third = load(&dir, 3).unwrap();
+        assert_eq!((third.train[0].width, third.train[0].height), (2, 2));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn instant_ngp_skips_missing_images_and_holds_out_every_8th() {
+        let dir = scratch("ngp");
+        let mut frames = Vec::new();
+        for i in 0..11 {
+            let file = format!("images/{i:04}.jpg");
+            if i != 3 {
+                std::fs::create_dir_all(dir.join("images")).unwrap();
+                image::RgbImage::from_pixel(10, 6, image::Rgb([200, 100, i as u8 * 10]))
+                    .save(dir.join(&file))
+                    .unwrap();
+            }
+            let mut f = json!({"file_path": file, "sharpness": 30.0,
+                               "transform_matrix": rows(&pose(i))});
+            if i == 5 {
+                f["fl_x"] = json!(9.0);
+            }
+            frames.push(f);
+        }
+        write_json(
+            &dir.join("transforms.json"),
+            &json!({"fl_x": 12.0, "fl_y": 11.0, "cx": 4.5, "cy": 3.25, "w": 10.0, "h": 6.0,
+                    "k1": 0.05, "k2": -0.08, "p1": -0.001, "p2": 0.0002, "aabb_scale": 4,
+                    "frames": frames}),
+        );
+        let ds = load(&dir, 1).unwrap();
+        // Present: 0 1 2 4 5 6 7 8 9 10 → positions 0 and 8 (files 0 and 9) are test.
+        let names = |v: &[View]| v.iter().map(|v| v.name.clone()).collect::<Vec<_>>();
+        assert_eq!(names(&ds.test), ["images/0000.jpg", "images/0009.jpg"]);
+        assert_eq!(ds.train.len(), 8);
+        assert!(!names(&ds.train).contains(&"images/0003.jpg".to_string()));
+        let c = ds.train[0].camera;
+        assert_eq!((c.fx, c.fy, c.cx, c.cy), (12.0, 11.0, 4.5, 3.25));
+        assert_eq!((c.k1, c.k2, c.p1, c.p2), (0.05, -0.08, -0.001, 0.0002));
+        let five = ds
+            .train
+            .iter()
+            .find(|v| v.name == "images/0005.jpg")
+            .unwrap();
+        assert_eq!(five.camera.fx, 9.0);
+        // JPEG: close to the written color.
+        let p = ds.train[0].rgb[7];
+        assert!((p[0] - 200.0 / 255.0).abs() < 0.03 && (p[1] - 100.0 / 255.0).abs() < 0.03);
+        // w/h that disagree with the images are an error naming both.
+        let mut j: Value =
+            serde_json::from_slice(&std::fs::read(dir.join("transforms.json")).unwrap()).unwrap();
+        j["w"] = json!(20);
+        write_json(&dir.join("transforms.json"), &j);
+        let e = err(&dir, 1);
+        assert!(e.contains("10×6") && e.contains("w = 20"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn bad_inputs_give_errors_naming_the_file_and_problem() {
+        // Missing folder.
+        let e = err(Path::new("/nonexistent/diffsvg-scene"), 1);
+        assert!(
+            e.contains("diffsvg-scene") && e.contains("does not exist"),
+            "{e}"
+        );
+
+        // Folder without transforms.
+        let dir = scratch("bad");
+        let e = err(&dir, 1);
+        assert!(e.contains("transforms.json"), "{e}");
+
+        // Malformed JSON.
+        std::fs::write(dir.join("transforms.json"), "{\"frames\": [").unwrap();
+        let e = err(&dir, 1);
+        assert!(
+            e.contains("transforms.json") && e.contains("malformed JSON"),
+            "{e}"
+        );
+        write_json(&dir.join("transforms.json"), &json!({"fl_x": 10}));
+        assert!(err(&dir, 1).contains("no \"frames\""));
+
+        // A 3×3 transform_matrix.
+        std::fs::create_dir_all(dir.join("images")).unwrap();
+        for i in 0..2 {
+            write_png(&dir.join(format!("images/{i}.png")), 4, 4, 0);
+        }
+        let good = rows(&pose(0));
+        let frames = json!([
+            {"file_path": "images/0.png", "transform_matrix": good},
+            {"file_path": "images/1.png", "transform_matrix": [[1, 0, 0], [0, 1, 0], [0, 0, 1]]},
+        ]);
+        write_json(
+            &dir.join("transforms.json"),
+            &json!({"fl_x": 10, "frames": frames}),
+        );
+        let e = err(&dir, 1);
+        assert!(
+            e.contains("transforms.json")
+                && e.contains("frame 1 (images/1.png)")
+                && e.contains("4×4"),
+            "{e}"
+        );
+
+        // A degenerate (scaled) pose.
+        let scaled = json!([[2, 0, 0, 0], [0, 2, 0, 0], [0, 0, 2, 0], [0, 0, 0, 1]]);
+        let frames = json!([
+            {"file_path": "images/0.png", "transform_matrix": good},
+            {"file_path": "images/1.png", "transform_matrix": scaled},
+        ]);
+        write_json(
+            &dir.join("transforms.json"),
+            &json!({"fl_x": 10, "frames": frames}),
+        );
+        let e = err(&dir, 1);
+        assert!(
+            e.contains("frame 1 (images/1.png)") && e.contains("degenerate pose"),
+            "{e}"
+        );
+
+        // No focal length.
+        let frames = json!([{"file_path": "images/0.png", "transform_matrix": good}]);
+        write_json(&dir.join("transforms.json"), &json!({"frames": frames}));
+        assert!(err(&dir, 1).contains("no focal length"));
+
+        // No frame has its image.
+        let frames = json!([{"file_path": "images/9.png", "transform_matrix": good}]);
+        write_json(
+            &dir.join("transforms.json"),
+            &json!({"fl_x": 10, "frames": frames}),
+        );
+        let e = err(&dir, 1);
+        assert!(
+            e.contains("none of the 1 frames") && e.contains("9.png"),
+            "{e}"
+        );
+
+        // Mixed sizes.
+        write_png(&dir.join("images/1.png"), 6, 4, 0);
+        let frames = json!([
+            {"file_path": "images/0.png", "transform_matrix": good},
+            {"file_path": "images/1.png", "transform_matrix": good},
+        ]);
+        write_json(
+            &dir.join("transforms.json"),
+            &json!({"fl_x": 10, "frames": frames}),
+        );
+        let e = err(&dir, 1);
+        assert!(
+            e.contains("1.png") && e.contains("6×4") && e.contains("4×4") && e.contains("0.png"),
+            "{e}"
+        );
+
+        // Unreadable image.
+        std::fs::write(dir.join("images/1.png"), b"not a png").unwrap();
+        let e = err(&dir, 1);
+        assert!(e.contains("1.png") && e.contains("not a readable"), "{e}");
+
+        // Downscale 0, or larger than the images.
+        assert!(err(&dir, 0).contains("downscale"));
+        write_png(&dir.join("images/1.png"), 4, 4, 0);
+        assert!(load(&dir, 4).is_ok());
+        assert!(err(&dir, 5).contains("leaves no pixels"));
+
+        // Unsupported camera model.
+        write_json(
+            &dir.join("transforms.json"),
+            &json!({"fl_x": 10, "k3": 0.1, "frames": frames}),
+        );
+        assert!(err(&dir, 1).contains("k3"));
+        std::fs::remove_dir_all(&dir).unwrap();
+
+        // NeRF-synthetic: a missing image is an error, not a skip.
+        let dir = synthetic("synthetic-missing");
+        std::fs::remove_file(dir.join("test/r_0.png")).unwrap();
+        let e = err(&dir, 1);
+        assert!(
+            e.contains("test/r_0") && e.contains("transforms_test.json"),
+            "{e}"
+        );
+        // A malformed test split is reported with its file.
+        std::fs::write(dir.join("transforms_test.json"), "[]").unwrap();
+        let e = err(&dir, 1);
+        assert!(
+            e.contains("transforms_test.json") && e.contains("object"),
+            "{e}"
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// `shared/data/scenes` beside the checkout, or under `$DIFFSVG_DATA`, when present.
+    fn scenes(test: &str) -> Option<PathBuf> {
+        let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+        let candidates = [
+            std::env::var_os("DIFFSVG_DATA").map(PathBuf::from),
+            Some(root.join("../shared/data")),
+            Some(PathBuf::from("/work/shared/data")),
+        ];
+        let found = candidates
+            .into_iter()
+            .flatten()
+            .map(|d| d.join("scenes"))
+            .find(|d| d.is_dir());
+        if found.is_none() {
+            println!("SKIPPED {test}: ../shared/data/scenes not found (set DIFFSVG_DATA)");
+        }
+        found
+    }
+
+    #[test]
+    fn real_lego_and_fox_load_when_present() {
+        let Some(scenes) = scenes("real_lego_and_fox_load_when_present") else {
+            return;
+        };
+        let lego = scenes.join("nerf_synthetic_lego_400");
+        if lego.is_dir() {
+            let t = std::time::Instant::now();
+            let ds = load(&lego, 2).unwrap();
+            println!("lego --downscale 2: {:.2} s", t.elapsed().as_secs_f64());
+            assert_eq!((ds.train.len(), ds.test.len()), (100, 25));
+            assert_eq!(ds.name, "nerf_synthetic_lego_400");
+            let v = &ds.train[0];
+            assert_eq!(v.name, "train/r_0");
+            assert_eq!((v.width, v.height), (200, 200));
+            let f = 100.0 / (0.5f32 * 0.6911112).tan();
+            assert!((v.camera.fx - f).abs() < 1e-2);
+            // Corners are background (white); cameras look at the object at the origin.
+            assert!(v.rgb[0].iter().all(|&c| c > 0.99));
+            for v in ds.train.iter().chain(&ds.test) {
+                let r = v.camera.ray(100.0, 100.0);
+                let t = -r.origin.dot(r.dir);
+                assert!(r.at(t).length() < 0.5, "{}: misses the origin", v.name);
+            }
+        } else {
+            println!("SKIPPED lego: {} not found", lego.display());
+        }
+        let fox = scenes.join("fox");
+        if fox.is_dir() {
+            let t = std::time::Instant::now();
+            let ds = load(&fox, 4).unwrap();
+            println!("fox --downscale 4: {:.2} s", t.elapsed().as_secs_f64());
+            assert_eq!(ds.train.len() + ds.test.len(), 50);
+            assert_eq!(ds.test.len(), 7);
+            let c = ds.train[0].camera;
+            assert_eq!((c.width, c.height), (270, 480));
+            assert!((c.fx - 1375.52 / 4.0).abs() < 1e-3);
+            assert!((c.cx - 554.558 / 4.0).abs() < 1e-3);
+            assert!(c.has_distortion());
+        } else {
+            println!("SKIPPED fox: {} not found", fox.display());
+        }
+    }
+}
