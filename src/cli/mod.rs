@@ -19,6 +19,7 @@ mod progress;
 mod render;
 mod util;
 mod vectorize;
+mod volume;
 
 /// Differentiable vector rendering: render, compare and fit SVGs.
 #[derive(Parser, Debug)]
@@ -53,6 +54,10 @@ enum Command {
     Batch(batch::Args),
     /// Fit strokes to handwritten digits (MNIST IDX files): SVGs, summary.csv, contact.png.
     Digits(digits::Args),
+    /// Reconstruct a 3D scene from posed photos (a sparse voxel grid).
+    Recon(volume::ReconArgs),
+    /// Render a reconstructed model from held-out cameras (PSNR, SSIM) or an orbit.
+    View(volume::ViewArgs),
 }
 
 /// Runs the command line; returns the process exit code.
@@ -70,6 +75,8 @@ pub fn main() -> ExitCode {
         Command::Glyphs(a) => glyphs::run(a),
         Command::Batch(a) => return batch::main(a),
         Command::Digits(a) => digits::run(a),
+        Command::Recon(a) => volume::run_recon(a),
+        Command::View(a) => volume::run_view(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -46,6 +46,15 @@ pub fn interrupted() -> bool {
     INTERRUPTED.load(Ordering::SeqCst)
 }
 
+/// Installs (once per process) the Ctrl-C handler that sets [`interrupted`].
+pub fn install_interrupt_handler() {
+    HANDLER.get_or_init(|| {
+        // If a handler cannot be installed (another one exists), Ctrl-C just kills the
+        // process as usual; outputs are still never half-written.
+        let _ = ctrlc::set_handler(|| INTERRUPTED.store(true, Ordering::SeqCst));
+    });
+}
+
 /// Follows a run: progress, log rows, snapshots, Ctrl-C.
 pub struct Reporter {
     args: ReportArgs,
@@ -62,11 +71,7 @@ impl Reporter {
     /// A reporter for about `total` iterations. Installs the Ctrl-C handler (once per
     /// process): the first Ctrl-C asks the run to stop and write its best result.
     pub fn new(args: &ReportArgs, total: usize, background: Option<[f32; 4]>) -> Self {
-        HANDLER.get_or_init(|| {
-            // If a handler cannot be installed (another one exists), Ctrl-C just kills the
-            // process as usual; outputs are still never half-written.
-            let _ = ctrlc::set_handler(|| INTERRUPTED.store(true, Ordering::SeqCst));
-        });
+        install_interrupt_handler();
         let show_bar = !args.json && !args.quiet && std::io::stdout().is_terminal();
         let bar = show_bar.then(|| {
             let b = ProgressBar::new(total as u64);

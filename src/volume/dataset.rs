@@ -67,6 +67,43 @@ impl Dataset {
     pub fn load(dir: &Path, downscale: u32) -> Result<Dataset> {
         load(dir, downscale)
     }
+
+    /// Where the cameras look: the point closest (in least squares) to every training
+    /// camera's optical axis, and the median distance of the cameras from it, world units.
+    /// Falls back to the cameras' mean position when the axes are (near) parallel.
+    pub fn focus(&self) -> (glam::Vec3, f32) {
+        let views = if self.train.is_empty() {
+            &self.test
+        } else {
+            &self.train
+        };
+        // Σ (I − d dᵀ) p = Σ (I − d dᵀ) o over the axes o + t d.
+        let mut a = glam::DMat3::ZERO;
+        let mut b = glam::DVec3::ZERO;
+        let mut mean = glam::DVec3::ZERO;
+        for v in views {
+            let o = v.camera.position().as_dvec3();
+            let d = v.camera.forward().as_dvec3().normalize_or_zero();
+            let m = glam::DMat3::IDENTITY - glam::DMat3::from_cols(d * d.x, d * d.y, d * d.z);
+            a += m;
+            b += m * o;
+            mean += o;
+        }
+        mean /= views.len().max(1) as f64;
+        let center = if a.determinant().abs() > 1e-9 {
+            a.inverse() * b
+        } else {
+            mean
+        };
+        let center = center.as_vec3();
+        let mut dist: Vec<f32> = views
+            .iter()
+            .map(|v| v.camera.position().distance(center))
+            .collect();
+        dist.sort_by(|x, y| x.total_cmp(y));
+        let median = dist.get(dist.len() / 2).copied().unwrap_or(1.0);
+        (center, median)
+    }
 }
 
 /// Every `HOLDOUT`-th present frame of an instant-ngp dataset is a test view.

@@ -13,6 +13,9 @@ pub mod metrics;
 
 pub use glam::Vec3;
 
+pub mod sh;
+pub mod voxel;
+
 /// A ray `origin + t · dir`, `t ≥ 0`, with `dir` of unit length.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Ray {

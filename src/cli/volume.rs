@@ -1,0 +1,466 @@
+//! `diffsvg recon voxel` (fit a sparse voxel grid to posed photos) and `diffsvg view`
+//! (render a fitted model from held-out cameras or an orbit, with PSNR and SSIM).
+
+use std::fmt::Write as _;
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+use indicatif::{ProgressBar, ProgressStyle};
+use serde_json::json;
+
+use super::progress::{install_interrupt_handler, interrupted};
+use crate::image_io::{Image, contact_sheet, write_atomic};
+use crate::volume::camera::{Camera, orbit};
+use crate::volume::dataset::{Dataset, View};
+use crate::volume::metrics::{psnr, ssim};
+use crate::volume::voxel::{self, Grid, RenderSettings, TrainOptions, TrainStep};
+use crate::volume::{Ray, Vec3};
+
+/// Arguments of `diffsvg recon`.
+#[derive(clap::Args, Debug)]
+pub struct ReconArgs {
+    #[command(subcommand)]
+    model: ReconModel,
+}
+
+#[derive(clap::Subcommand, Debug)]
+enum ReconModel {
+    /// A sparse grid of density and spherical-harmonic color (Plenoxels).
+    Voxel(VoxelArgs),
+}
+
+/// Arguments of `diffsvg recon voxel`.
+#[derive(clap::Args, Debug)]
+pub struct VoxelArgs {
+    /// Dataset folder: NeRF-synthetic (transforms_train.json) or instant-ngp
+    /// (transforms.json).
+    #[arg(long)]
+    scene: PathBuf,
+    /// Model file to write (.vox).
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Final grid resolution, cells per axis; training starts coarser and doubles up to it.
+    #[arg(long, default_value_t = 128)]
+    res: u32,
+    /// Optimizer iterations (mini-batches of rays).
+    #[arg(long, default_value_t = 3000)]
+    iters: usize,
+    /// Rays per iteration.
+    #[arg(long, default_value_t = 8192)]
+    batch: usize,
+    /// Divide image sizes by this integer.
+    #[arg(long, default_value_t = 1)]
+    downscale: u32,
+    /// Spherical-harmonic degree of the color, 0 to 3.
+    #[arg(long, default_value_t = 2)]
+    degree: u32,
+    /// Half the box's side, world units (default: 0.4 × the cameras' median distance
+    /// from where they look).
+    #[arg(long)]
+    bound: Option<f32>,
+    /// Sample spacing along rays, in voxels.
+    #[arg(long, default_value_t = 0.5)]
+    step: f32,
+    /// Random seed of the ray batches.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Print one JSON object per 50 iterations and a summary instead of a progress bar.
+    #[arg(long)]
+    json: bool,
+    /// No progress output (the summary line is still printed).
+    #[arg(long, short)]
+    quiet: bool,
+}
+
+/// Arguments of `diffsvg view`.
+#[derive(clap::Args, Debug)]
+pub struct ViewArgs {
+    /// Model file written by `diffsvg recon voxel`.
+    model: PathBuf,
+    /// Dataset folder whose cameras to render from.
+    #[arg(long)]
+    scene: Option<PathBuf>,
+    /// Which views: test or train.
+    #[arg(long, default_value = "test")]
+    split: String,
+    /// Output folder: one PNG per view (rendering | photo), metrics.csv, and orbit frames.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Divide image sizes by this integer (as in training).
+    #[arg(long, default_value_t = 1)]
+    downscale: u32,
+    /// Also render this many views on a circle around the model: orbit-NNN.png,
+    /// orbit.gif and orbit.png (a contact sheet).
+    #[arg(long, default_value_t = 0)]
+    orbit: usize,
+    /// Elevation of the orbit, degrees above the horizontal plane.
+    #[arg(long, default_value_t = 30.0)]
+    elevation: f32,
+    /// Sample spacing along rays, in voxels.
+    #[arg(long, default_value_t = 0.5)]
+    step: f32,
+    /// Print a JSON summary instead of a table.
+    #[arg(long)]
+    json: bool,
+}
+
+/// Runs `diffsvg recon`.
+pub fn run_recon(a: ReconArgs) -> Result<()> {
+    match a.model {
+        ReconModel::Voxel(v) => run_voxel(v),
+    }
+}
+
+fn check_model_path(path: &Path) -> Result<()> {
+    super::util::check_output(path, "vox")
+}
+
+fn run_voxel(a: VoxelArgs) -> Result<()> {
+    check_model_path(&a.output)?;
+    if !(8..=voxel::MAX_RES).contains(&a.res) {
+        bail!("--res {} must be between 8 and {}", a.res, voxel::MAX_RES);
+    }
+    if a.degree > 3 {
+        bail!("--degree {} must be 0 to 3", a.degree);
+    }
+    if a.downscale == 0 || a.iters == 0 || a.batch == 0 {
+        bail!("--downscale, --iters and --batch must be at least 1");
+    }
+    let t_load = Instant::now();
+    let data = Dataset::load(&a.scene, a.downscale)?;
+    if data.train.is_empty() {
+        bail!("{}: no training views", a.scene.display());
+    }
+    let (rays, colors) = pixels(&data.train);
+    let (center, dist) = data.focus();
+    let half = a.bound.unwrap_or(0.4 * dist);
+    if !(half.is_finite() && half > 0.0) {
+        bail!("--bound {half} must be a positive number");
+    }
+    let load_s = t_load.elapsed().as_secs_f64();
+
+    // Coarse to fine: start at res/4 (at least 32 cells) and double at 20% and 50% of
+    // the run (at 30% when there are only two levels).
+    let mut levels = vec![a.res];
+    while levels.len() < 3 && levels[0] / 2 >= 32 {
+        levels.insert(0, levels[0] / 2);
+    }
+    let marks: &[f64] = if levels.len() == 3 {
+        &[0.2, 0.5]
+    } else {
+        &[0.3]
+    };
+    let upsample: Vec<(usize, u32)> = levels[1..]
+        .iter()
+        .zip(marks)
+        .map(|(&r, &m)| (((m * a.iters as f64) as usize).max(1), r))
+        .collect();
+    let mut grid = Grid::dense(
+        center - Vec3::splat(half),
+        center + Vec3::splat(half),
+        levels[0],
+        a.degree,
+        0.1,
+    );
+    let render = RenderSettings {
+        step: a.step,
+        ..RenderSettings::default()
+    };
+    let opts = TrainOptions {
+        iterations: a.iters,
+        batch_size: a.batch,
+        seed: a.seed,
+        render,
+        upsample,
+        ..TrainOptions::default()
+    };
+
+    install_interrupt_handler();
+    let bar = (!a.json && !a.quiet && std::io::stdout().is_terminal()).then(|| {
+        let b = ProgressBar::new(a.iters as u64);
+        b.set_style(
+            ProgressStyle::with_template("{bar:30} {pos}/{len} {msg}  eta {eta}")
+                .expect("static template"),
+        );
+        b
+    });
+    let mut log = String::from("iteration,seconds,res,allocated,batch_psnr,test_psnr\n");
+    let mut last: Option<TrainStep> = None;
+    let outcome = voxel::train(&mut grid, &rays, &colors, &opts, &mut |s: &TrainStep| {
+        last = Some(*s);
+        if let Some(b) = &bar {
+            b.set_position(s.iteration as u64);
+            b.set_message(format!(
+                "loss {:.2e}  PSNR {:.2} dB  {:.0}k rays/s  {}³  {} voxels",
+                s.loss,
+                s.psnr,
+                s.rays_per_second / 1e3,
+                s.res,
+                s.allocated
+            ));
+        }
+        if a.json && s.iteration % 50 == 0 {
+            println!(
+                "{}",
+                json!({"iteration": s.iteration, "loss": s.loss, "psnr": s.psnr,
+                    "rays_per_second": s.rays_per_second, "res": s.res, "allocated": s.allocated,
+                    "elapsed": s.elapsed})
+            );
+        }
+        !interrupted()
+    })?;
+    if let Some(b) = bar {
+        b.finish_and_clear();
+    }
+    voxel::save(&grid, &a.output)?;
+    let test_psnr = if data.test.is_empty() {
+        None
+    } else {
+        Some(mean_psnr(&grid, &data.test, &render))
+    };
+    if let Some(s) = last {
+        let _ = writeln!(
+            log,
+            "{},{:.3},{},{},{:.3},{}",
+            s.iteration,
+            outcome.seconds,
+            s.res,
+            s.allocated,
+            s.psnr,
+            test_psnr.map(|p| format!("{p:.3}")).unwrap_or_default()
+        );
+    }
+    write_atomic(
+        &super::util::sibling(&a.output, "log").with_extension("csv"),
+        log.as_bytes(),
+    )?;
+    let dense = (a.res as u64 + 1).pow(3);
+    if a.json {
+        println!(
+            "{}",
+            json!({"done": true, "output": a.output, "iterations": outcome.iterations,
+                "seconds": outcome.seconds, "load_seconds": load_s, "test_psnr": test_psnr,
+                "allocated": grid.allocated(), "dense": dense, "res": grid.res(),
+                "stopped": outcome.stopped})
+        );
+    } else {
+        println!(
+            "recon voxel: {} iterations in {:.1} s, {}³ grid with {} of {} voxels allocated ({:.1}%), \
+             test PSNR {}; wrote {}",
+            outcome.iterations,
+            outcome.seconds,
+            grid.res(),
+            grid.allocated(),
+            dense,
+            100.0 * grid.allocated() as f64 / dense as f64,
+            test_psnr
+                .map(|p| format!("{p:.2} dB"))
+                .unwrap_or_else(|| "n/a (no test views)".into()),
+            a.output.display()
+        );
+    }
+    if outcome.stopped {
+        eprintln!("interrupted: the model so far was written");
+        std::process::exit(130);
+    }
+    Ok(())
+}
+
+/// Every pixel of every view as a ray and its color.
+fn pixels(views: &[View]) -> (Vec<Ray>, Vec<[f32; 3]>) {
+    let mut rays = Vec::new();
+    let mut colors = Vec::new();
+    for v in views {
+        rays.extend(v.camera.rays());
+        colors.extend_from_slice(&v.rgb);
+    }
+    (rays, colors)
+}
+
+fn mean_psnr(grid: &Grid, views: &[View], render: &RenderSettings) -> f64 {
+    let sum: f64 = views
+        .iter()
+        .map(|v| psnr(&voxel::render_rays(grid, &v.camera.rays(), render), &v.rgb).min(99.0))
+        .sum();
+    sum / views.len() as f64
+}
+
+fn to_image(rgb: &[[f32; 3]], w: u32, h: u32) -> Image {
+    let mut img = Image::new(w, h);
+    for (d, c) in img.data.iter_mut().zip(rgb) {
+        *d = [
+            c[0].clamp(0.0, 1.0),
+            c[1].clamp(0.0, 1.0),
+            c[2].clamp(0.0, 1.0),
+            1.0,
+        ];
+    }
+    img
+}
+
+/// Runs `diffsvg view`.
+pub fn run_view(a: ViewArgs) -> Result<()> {
+    let grid = voxel::load(&a.model)?;
+    if a.split != "test" && a.split != "train" {
+        bail!("--split {}: must be test or train", a.split);
+    }
+    if a.scene.is_none() && a.orbit == 0 {
+        bail!("nothing to render: give --scene DIR and/or --orbit N");
+    }
+    std::fs::create_dir_all(&a.output)
+        .with_context(|| format!("{}: cannot create the output folder", a.output.display()))?;
+    let render = RenderSettings {
+        step: a.step,
+        ..RenderSettings::default()
+    };
+    let data = a
+        .scene
+        .as_ref()
+        .map(|d| Dataset::load(d, a.downscale.max(1)))
+        .transpose()?;
+    let mut summary = serde_json::Map::new();
+    if let Some(data) = &data {
+        let views = if a.split == "test" {
+            &data.test
+        } else {
+            &data.train
+        };
+        if views.is_empty() {
+            bail!(
+                "{}: no {} views",
+                a.scene.as_ref().unwrap().display(),
+                a.split
+            );
+        }
+        let mut csv = String::from("view,psnr,ssim,ms\n");
+        let (mut sp, mut ss) = (0.0, 0.0);
+        for v in views {
+            let t0 = Instant::now();
+            let out = voxel::render_rays(&grid, &v.camera.rays(), &render);
+            let ms = t0.elapsed().as_secs_f64() * 1e3;
+            let p = psnr(&out, &v.rgb);
+            let s = ssim(&out, &v.rgb, v.width as usize, v.height as usize);
+            sp += p.min(99.0);
+            ss += s;
+            let _ = writeln!(csv, "{},{p:.3},{s:.4},{ms:.1}", v.name);
+            let pair = crate::image_io::side_by_side(&[
+                &to_image(&out, v.width, v.height),
+                &to_image(&v.rgb, v.width, v.height),
+            ]);
+            pair.save_png(a.output.join(format!("{}.png", file_stem(&v.name))))?;
+        }
+        let n = views.len() as f64;
+        let _ = writeln!(csv, "mean,{:.3},{:.4},", sp / n, ss / n);
+        write_atomic(&a.output.join("metrics.csv"), csv.as_bytes())?;
+        summary.insert("views".into(), json!(views.len()));
+        summary.insert("psnr".into(), json!(sp / n));
+        summary.insert("ssim".into(), json!(ss / n));
+        if !a.json {
+            println!(
+                "view: {} {} views, mean PSNR {:.2} dB, SSIM {:.4}; wrote {}",
+                views.len(),
+                a.split,
+                sp / n,
+                ss / n,
+                a.output.join("metrics.csv").display()
+            );
+        }
+    }
+    if a.orbit > 0 {
+        let cams = orbit_cameras(&grid, data.as_ref(), a.orbit, a.elevation)?;
+        let mut frames = Vec::new();
+        for (i, cam) in cams.iter().enumerate() {
+            let out = voxel::render_rays(&grid, &cam.rays(), &render);
+            let img = to_image(&out, cam.width, cam.height);
+            img.save_png(a.output.join(format!("orbit-{i:03}.png")))?;
+            frames.push(img);
+        }
+        write_gif(&frames, &a.output.join("orbit.gif"))?;
+        let pairs: Vec<(&Image, &Image)> = frames
+            .chunks(2)
+            .filter(|c| c.len() == 2)
+            .map(|c| (&c[0], &c[1]))
+            .collect();
+        contact_sheet(&pairs, 8, 2, [1.0; 4]).save_png(a.output.join("orbit.png"))?;
+        summary.insert("orbit".into(), json!(frames.len()));
+        if !a.json {
+            println!(
+                "view: {} orbit frames, orbit.gif and orbit.png in {}",
+                frames.len(),
+                a.output.display()
+            );
+        }
+    }
+    if a.json {
+        summary.insert("done".into(), json!(true));
+        summary.insert("output".into(), json!(a.output));
+        println!("{}", serde_json::Value::Object(summary));
+    }
+    Ok(())
+}
+
+fn file_stem(name: &str) -> String {
+    Path::new(name)
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| name.replace(['/', '\\'], "_"))
+}
+
+/// Cameras on a circle around the model, level with the dataset's "up" (the mean of its
+/// cameras' up vectors, or +Z), at the dataset's camera distance and field of view.
+fn orbit_cameras(
+    grid: &Grid,
+    data: Option<&Dataset>,
+    n: usize,
+    elevation_deg: f32,
+) -> Result<Vec<Camera>> {
+    let center = (grid.min() + grid.max()) * 0.5;
+    let half = (grid.max() - grid.min()).max_element() * 0.5;
+    let (radius, up, fov, w, h) =
+        match data.and_then(|d| d.train.first().or(d.test.first()).map(|v| (d, v))) {
+            Some((d, v)) => {
+                let views = if d.train.is_empty() {
+                    &d.test
+                } else {
+                    &d.train
+                };
+                let up: Vec3 = views
+                    .iter()
+                    .map(|v| v.camera.c2w.matrix3.y_axis.into())
+                    .fold(Vec3::ZERO, |a: Vec3, b: Vec3| a + b);
+                let (_, dist) = d.focus();
+                (
+                    dist,
+                    up.try_normalize().unwrap_or(Vec3::Z),
+                    v.camera.fov_x(),
+                    v.width,
+                    v.height,
+                )
+            }
+            None => (3.0 * half, Vec3::Z, 0.69, 200, 200),
+        };
+    orbit(n, center, radius, elevation_deg.to_radians(), up, fov, w, h)
+        .map_err(|e| anyhow::anyhow!("orbit cameras: {e}"))
+}
+
+fn write_gif(frames: &[Image], path: &Path) -> Result<()> {
+    use image::codecs::gif::{GifEncoder, Repeat};
+    let mut buf = Vec::new();
+    {
+        let mut enc = GifEncoder::new_with_speed(&mut buf, 10);
+        enc.set_repeat(Repeat::Infinite)
+            .with_context(|| format!("{}: cannot encode GIF", path.display()))?;
+        for f in frames {
+            let rgba =
+                image::RgbaImage::from_raw(f.width, f.height, f.to_rgba8()).expect("sizes match");
+            let frame =
+                image::Frame::from_parts(rgba, 0, 0, image::Delay::from_numer_denom_ms(80, 1));
+            enc.encode_frame(frame)
+                .with_context(|| format!("{}: cannot encode GIF", path.display()))?;
+        }
+    }
+    write_atomic(path, &buf)?;
+    Ok(())
+}

@@ -1,0 +1,707 @@
+//! Fitting a grid to posed pixels: mini-batches of rays, MSE loss, per-group Adam or
+//! RMSProp, total-variation regularization and a coarse-to-fine schedule with pruning.
+//!
+//! One iteration: draw `batch_size` ray indices (with replacement, from a SplitMix64
+//! stream seeded by `seed`), split them into one contiguous part per rayon thread, render
+//! and back-propagate each ray into that thread's own gradient buffers (no locks), add the
+//! TV gradient of a random subset of slots, then update every slot touched this iteration
+//! (the update is lazy: untouched slots keep their values and optimizer moments). Results
+//! are deterministic for a fixed seed and thread count (the split into parts, and so the
+//! order of float sums, depends on the thread count).
+
+use std::time::Instant;
+
+use rayon::prelude::*;
+
+use super::grid::{Grid, MAX_RES};
+use super::render::{RenderSettings, Sink, backward, forward, max_weights, scatter, with_k};
+use crate::error::{Error, Result};
+use crate::volume::{Ray, sh};
+
+/// The per-slot update rule (the same for both parameter groups; rates differ per group).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Optimizer {
+    /// Adam with bias correction (the step count restarts at every resampling).
+    Adam {
+        /// Decay of the first moment.
+        beta1: f32,
+        /// Decay of the second moment.
+        beta2: f32,
+        /// Added to `√v̂`.
+        eps: f32,
+    },
+    /// RMSProp without momentum (Plenoxels' choice): `v ← β·v + (1 − β)·g²`,
+    /// `x ← x − lr·g / (√v + eps)`.
+    RmsProp {
+        /// Decay of the squared-gradient average.
+        beta: f32,
+        /// Added to `√v`.
+        eps: f32,
+    },
+}
+
+impl Optimizer {
+    /// Adam with β₁ = 0.9, β₂ = 0.99, ε = 1e-8.
+    pub const ADAM: Optimizer = Optimizer::Adam {
+        beta1: 0.9,
+        beta2: 0.99,
+        eps: 1e-8,
+    };
+    /// RMSProp with β = 0.95, ε = 1e-8 (Plenoxels' values).
+    pub const RMSPROP: Optimizer = Optimizer::RmsProp {
+        beta: 0.95,
+        eps: 1e-8,
+    };
+}
+
+/// Everything [`train`] needs besides the grid and the rays.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TrainOptions {
+    /// Number of iterations (mini-batches).
+    pub iterations: usize,
+    /// Rays per iteration.
+    pub batch_size: usize,
+    /// Seed of the ray sampling and of the TV subsets.
+    pub seed: u64,
+    /// How training rays are rendered (the background should be the one the photos were
+    /// composited over).
+    pub render: RenderSettings,
+    /// The update rule of the densities.
+    pub density_optimizer: Optimizer,
+    /// The update rule of the SH coefficients.
+    pub sh_optimizer: Optimizer,
+    /// Learning rate of the raw density (1 / world units per step) at the first and the
+    /// last iteration, decaying exponentially in between.
+    pub lr_density: [f32; 2],
+    /// Learning rate of the SH coefficients (pre-sigmoid units per step), first and last.
+    pub lr_sh: [f32; 2],
+    /// Weight of the density TV term: for each sampled slot with vertex `v`,
+    /// `λ·√(Δx² + Δy² + Δz² + ε)` where `Δx = raw(v + x̂) − raw(v)` (and so on) over
+    /// allocated neighbours (an unallocated neighbour adds no difference). Added to the
+    /// batch-mean MSE without normalization by the number of slots, as in Plenoxels.
+    pub tv_density: f32,
+    /// Weight of the same term on each SH coefficient separately.
+    pub tv_sh: f32,
+    /// Weight of a sparsity term, the batch mean over rays of the Cauchy penalty
+    /// `Σ_k Δ·ln(1 + 2σ_k²)` over the ray's marched samples (Plenoxels' sparsity prior, as
+    /// an integral along the ray). It removes faint density that no view needs (haze in
+    /// front of the background, which pruning then frees) while barely pulling on opaque
+    /// surfaces, whose gradient `4σ/(1 + 2σ²)` is small.
+    pub sparsity: f32,
+    /// Fraction of the allocated slots (drawn at random each iteration) that get the TV
+    /// term; 0 disables it.
+    pub tv_fraction: f32,
+    /// Coarse-to-fine schedule: before iteration `it` of each `(it, res)`, prune (when
+    /// `prune_threshold > 0`) and resample the grid to `res` cells per axis. Optimizer
+    /// moments are reset.
+    pub upsample: Vec<(usize, u32)>,
+    /// At each resampling, slots whose largest rendering weight over the pruning rays
+    /// ([`crate::volume::voxel::max_weights`]) is below this are freed; 0 disables.
+    pub prune_threshold: f32,
+    /// Vertices (Chebyshev distance) kept around every slot that passes the threshold.
+    pub prune_dilate: u32,
+    /// How many training rays (drawn at random) measure the weights for pruning; 0: all.
+    pub prune_rays: usize,
+}
+
+impl Default for TrainOptions {
+    /// A small-scene default: 2000 iterations of 8192 rays, RMSProp (β = 0.95) with
+    /// density rate 30 → 3 and SH rate 0.1 → 0.01, light TV, no resampling.
+    fn default() -> Self {
+        TrainOptions {
+            iterations: 2000,
+            batch_size: 8192,
+            seed: 0,
+            render: RenderSettings::default(),
+            density_optimizer: Optimizer::RMSPROP,
+            sh_optimizer: Optimizer::RMSPROP,
+            lr_density: [1.0, 0.1],
+            lr_sh: [0.3, 0.03],
+            tv_density: 1e-6,
+            tv_sh: 0.0,
+            sparsity: 0.0,
+            tv_fraction: 0.01,
+            upsample: Vec::new(),
+            prune_threshold: 1e-3,
+            prune_dilate: 1,
+            prune_rays: 0,
+        }
+    }
+}
+
+/// Progress after one iteration, passed to the observer of [`train`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TrainStep {
+    /// Iterations done so far (1 after the first).
+    pub iteration: usize,
+    /// The grid's cells per axis.
+    pub res: u32,
+    /// Mean squared error of this batch (over rays and channels), before the update.
+    pub loss: f32,
+    /// PSNR of this batch, dB (`−10·log10(loss)`, colors in `[0, 1]`).
+    pub psnr: f32,
+    /// Rays of this iteration per second of its wall time (render, backward and update).
+    pub rays_per_second: f32,
+    /// Allocated slots.
+    pub allocated: usize,
+    /// Seconds since training started.
+    pub elapsed: f32,
+}
+
+/// How [`train`] ended.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TrainOutcome {
+    /// Iterations done.
+    pub iterations: usize,
+    /// Whether the observer stopped training early.
+    pub stopped: bool,
+    /// Batch MSE of the last iteration.
+    pub loss: f32,
+    /// Wall time, seconds.
+    pub seconds: f32,
+}
+
+/// Fits `grid` to the colors `colors[i]` seen along `rays[i]` (unit directions, linear
+/// RGB in `[0, 1]` composited over `opts.render.background`). `observe` runs after every
+/// iteration and returns false to stop.
+///
+/// Errors: mismatched or empty ray and color lists, non-finite colors, and invalid
+/// options (named in the message).
+pub fn train(
+    grid: &mut Grid,
+    rays: &[Ray],
+    colors: &[[f32; 3]],
+    opts: &TrainOptions,
+    observe: &mut dyn FnMut(&TrainStep) -> bool,
+) -> Result<TrainOutcome> {
+    validate(rays, colors, opts).map_err(|what| Error::InvalidValue {
+        path: "voxel training".into(),
+        what,
+    })?;
+    let threads = rayon::current_num_threads().max(1);
+    let mut schedule = opts.upsample.clone();
+    schedule.sort_by_key(|u| u.0);
+    let mut sched = schedule.into_iter().peekable();
+    let mut rng = Rng(opts.seed);
+    let mut state = State::new(grid, threads, opts);
+    let start = Instant::now();
+    let mut outcome = TrainOutcome {
+        iterations: 0,
+        stopped: false,
+        loss: f32::NAN,
+        seconds: 0.0,
+    };
+    let n_it = opts.iterations;
+    for it in 0..n_it {
+        while let Some((_, res)) = sched.next_if(|u| u.0 <= it) {
+            resample(grid, rays, opts, res, &mut rng);
+            state = State::new(grid, threads, opts);
+        }
+        let t_step = Instant::now();
+        let mut batch: Vec<u32> = (0..opts.batch_size)
+            .map(|_| rng.below(rays.len()) as u32)
+            .collect();
+        if std::env::var("VOX_SORT").is_ok() {
+            batch.sort_unstable();
+        }
+        let part = batch.len().div_ceil(threads);
+        // ∂(mean over rays and channels of the squared error)/∂color.
+        let scale = 2.0 / (3.0 * batch.len() as f32);
+        let sparse = opts.sparsity / batch.len() as f32;
+        let g: &Grid = grid;
+        let sse: f64 = with_k!(g.degree(), K => state
+            .accs
+            .par_iter_mut()
+            .zip(batch.par_chunks(part))
+            .map(|(acc, idx)| {
+                let mut tape = Vec::with_capacity(256);
+                let mut sse = 0.0f64;
+                for &i in idx {
+                    let (ray, y) = (&rays[i as usize], colors[i as usize]);
+                    tape.clear();
+                    let (c, delta) = forward::<K>(g, ray, &opts.render, |r| tape.push(r));
+                    let mut d = [0.0f32; 3];
+                    for ch in 0..3 {
+                        let e = c[ch] - y[ch];
+                        sse += (e * e) as f64;
+                        d[ch] = scale * e;
+                    }
+                    let basis = sh::basis(g.degree(), ray.dir);
+                    backward::<K, _>(&tape, &basis, delta, c, d, sparse, acc);
+                }
+                sse
+            })
+            .sum());
+        let loss = (sse / (3.0 * batch.len() as f64)) as f32;
+        if opts.tv_fraction > 0.0 && (opts.tv_density > 0.0 || opts.tv_sh > 0.0) {
+            let n = g.allocated();
+            let count = ((opts.tv_fraction * n as f32).ceil() as usize).min(n);
+            let slots: Vec<usize> = (0..count).map(|_| rng.below(n)).collect();
+            add_tv(g, &mut state.accs[0], &slots, opts.tv_density, opts.tv_sh);
+        }
+        let frac = if n_it > 1 {
+            it as f32 / (n_it - 1) as f32
+        } else {
+            0.0
+        };
+        let lr = [decay(opts.lr_density, frac), decay(opts.lr_sh, frac)];
+        state.step += 1;
+        state.update(grid, lr, opts);
+        let secs = t_step.elapsed().as_secs_f32();
+        let step = TrainStep {
+            iteration: it + 1,
+            res: grid.res(),
+            loss,
+            psnr: -10.0 * loss.max(1e-12).log10(),
+            rays_per_second: batch.len() as f32 / secs.max(1e-9),
+            allocated: grid.allocated(),
+            elapsed: start.elapsed().as_secs_f32(),
+        };
+        outcome.iterations = it + 1;
+        outcome.loss = loss;
+        if !observe(&step) {
+            outcome.stopped = true;
+            break;
+        }
+    }
+    outcome.seconds = start.elapsed().as_secs_f32();
+    Ok(outcome)
+}
+
+fn validate(rays: &[Ray], colors: &[[f32; 3]], o: &TrainOptions) -> Result<(), String> {
+    if rays.is_empty() || rays.len() != colors.len() {
+        return Err(format!(
+            "{} rays and {} colors (need the same positive number)",
+            rays.len(),
+            colors.len()
+        ));
+    }
+    if let Some(i) = colors.iter().position(|c| !c.iter().all(|v| v.is_finite())) {
+        return Err(format!("color {i} is not finite: {:?}", colors[i]));
+    }
+    if o.batch_size == 0 {
+        return Err("batch_size is 0".into());
+    }
+    o.render.validate()?;
+    let rates = [o.lr_density, o.lr_sh].concat();
+    if !rates.iter().all(|r| r.is_finite() && *r >= 0.0) {
+        return Err(format!("learning rates {rates:?} must be finite and ≥ 0"));
+    }
+    for (name, v) in [
+        ("tv_density", o.tv_density),
+        ("tv_sh", o.tv_sh),
+        ("sparsity", o.sparsity),
+        ("tv_fraction", o.tv_fraction),
+        ("prune_threshold", o.prune_threshold),
+    ] {
+        if !(v.is_finite() && v >= 0.0) {
+            return Err(format!("{name} {v} must be finite and ≥ 0"));
+        }
+    }
+    if let Some(&(_, r)) = o.upsample.iter().find(|u| !(1..=MAX_RES).contains(&u.1)) {
+        return Err(format!("upsample resolution {r} outside 1..={MAX_RES}"));
+    }
+    for (name, opt) in [("density", o.density_optimizer), ("SH", o.sh_optimizer)] {
+        let ok = match opt {
+            Optimizer::Adam { beta1, beta2, eps } => {
+                (0.0..1.0).contains(&beta1) && (0.0..1.0).contains(&beta2) && eps > 0.0
+            }
+            Optimizer::RmsProp { beta, eps } => (0.0..1.0).contains(&beta) && eps > 0.0,
+        };
+        if !ok {
+            return Err(format!(
+                "{name} optimizer {opt:?}: betas must be in [0, 1), eps > 0"
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// `a[0]·(a[1]/a[0])^frac`, or linear when an end is 0.
+fn decay(a: [f32; 2], frac: f32) -> f32 {
+    if a[0] > 0.0 && a[1] > 0.0 {
+        a[0] * (a[1] / a[0]).powf(frac)
+    } else {
+        a[0] + (a[1] - a[0]) * frac
+    }
+}
+
+/// Prune (by rendering weight over training rays) and resample to `res`.
+fn resample(grid: &mut Grid, rays: &[Ray], opts: &TrainOptions, res: u32, rng: &mut Rng) {
+    if opts.prune_threshold > 0.0 {
+        let weights = if opts.prune_rays == 0 || opts.prune_rays >= rays.len() {
+            max_weights(grid, rays, &opts.render)
+        } else {
+            let pick: Vec<Ray> = (0..opts.prune_rays)
+                .map(|_| rays[rng.below(rays.len())])
+                .collect();
+            max_weights(grid, &pick, &opts.render)
+        };
+        grid.prune_by_weight(&weights, opts.prune_threshold, opts.prune_dilate);
+    }
+    if res != grid.res() {
+        grid.upsample(res);
+    }
+}
+
+/// Gradient buffers of one thread, dense over slots, with a touched flag per slot.
+struct Accum {
+    gd: Vec<f32>,
+    gsh: Vec<f32>,
+    flag: Vec<bool>,
+}
+
+impl Sink for Accum {
+    #[inline(always)]
+    fn add<const K: usize>(
+        &mut self,
+        slots: &[i32; 8],
+        w: &[f32; 8],
+        d_sigma: f32,
+        d_sh: &[[f32; K]; 3],
+    ) {
+        scatter::<K>(&mut self.gd, &mut self.gsh, slots, w, d_sigma, d_sh);
+        for &s in slots {
+            if s >= 0 {
+                self.flag[s as usize] = true;
+            }
+        }
+    }
+}
+
+/// Optimizer moments (first moments empty for RMSProp) and the gradient buffers.
+struct State {
+    accs: Vec<Accum>,
+    md: Vec<f32>,
+    vd: Vec<f32>,
+    msh: Vec<f32>,
+    vsh: Vec<f32>,
+    step: u32,
+}
+
+/// Slots per parallel update job.
+const UPDATE_CHUNK: usize = 2048;
+
+impl State {
+    fn new(grid: &Grid, threads: usize, opts: &TrainOptions) -> State {
+        let (n, m) = (grid.allocated(), grid.sh().len());
+        let adam_d = matches!(opts.density_optimizer, Optimizer::Adam { .. });
+        let adam_sh = matches!(opts.sh_optimizer, Optimizer::Adam { .. });
+        State {
+            accs: (0..threads)
+                .map(|_| Accum {
+                    gd: vec![0.0; n],
+                    gsh: vec![0.0; m],
+                    flag: vec![false; n],
+                })
+                .collect(),
+            md: if adam_d { vec![0.0; n] } else { Vec::new() },
+            vd: vec![0.0; n],
+            msh: if adam_sh { vec![0.0; m] } else { Vec::new() },
+            vsh: vec![0.0; m],
+            step: 0,
+        }
+    }
+
+    /// Sums the threads' gradients of every touched slot, applies the rule with rates
+    /// `lr = [density, sh]`, and clears the buffers. Parallel over blocks of slots.
+    fn update(&mut self, grid: &mut Grid, lr: [f32; 2], opts: &TrainOptions) {
+        let stride = grid.sh_stride();
+        let ch = UPDATE_CHUNK;
+        let (density, shv) = grid.data_mut();
+        // One job per block of slots, holding that block of every array.
+        let mut accs: Vec<_> = self
+            .accs
+            .iter_mut()
+            .map(|a| {
+                a.gd.chunks_mut(ch)
+                    .zip(a.gsh.chunks_mut(ch * stride))
+                    .zip(a.flag.chunks_mut(ch))
+            })
+            .collect();
+        let mut jobs = Vec::new();
+        let mut md = chunks_or_empty(&mut self.md, ch);
+        let mut msh = chunks_or_empty(&mut self.msh, ch * stride);
+        for (((d, s), vd), vsh) in density
+            .chunks_mut(ch)
+            .zip(shv.chunks_mut(ch * stride))
+            .zip(self.vd.chunks_mut(ch))
+            .zip(self.vsh.chunks_mut(ch * stride))
+        {
+            let grads: Vec<_> = accs
+                .iter_mut()
+                .map(|it| {
+                    let ((gd, gs), f) = it.next().expect("same number of blocks");
+                    (gd, gs, f)
+                })
+                .collect();
+            let (md, msh) = (
+                md.next().unwrap_or_default(),
+                msh.next().unwrap_or_default(),
+            );
+            jobs.push((d, s, md, vd, msh, vsh, grads));
+        }
+        let rule_d = Rule::new(&opts.density_optimizer, self.step);
+        let rule_sh = Rule::new(&opts.sh_optimizer, self.step);
+        jobs.into_par_iter()
+            .for_each(|(d, s, md, vd, msh, vsh, mut grads)| {
+                for i in 0..d.len() {
+                    if !grads.iter().any(|g| g.2[i]) {
+                        continue;
+                    }
+                    let mut g = 0.0;
+                    for a in grads.iter_mut() {
+                        g += a.0[i];
+                        a.0[i] = 0.0;
+                        a.2[i] = false;
+                    }
+                    rule_d.apply(&mut d[i], md.get_mut(i), &mut vd[i], g, lr[0]);
+                    for j in i * stride..(i + 1) * stride {
+                        let mut g = 0.0;
+                        for a in grads.iter_mut() {
+                            g += a.1[j];
+                            a.1[j] = 0.0;
+                        }
+                        rule_sh.apply(&mut s[j], msh.get_mut(j), &mut vsh[j], g, lr[1]);
+                    }
+                }
+            });
+    }
+}
+
+/// Blocks of `len` of `v`, or empty slices forever when `v` is empty (RMSProp's absent
+/// first moments).
+fn chunks_or_empty(v: &mut [f32], len: usize) -> Box<dyn Iterator<Item = &mut [f32]> + '_> {
+    if v.is_empty() {
+        Box::new(std::iter::repeat_with(<&mut [f32]>::default))
+    } else {
+        Box::new(v.chunks_mut(len))
+    }
+}
+
+/// One optimizer step's constants.
+struct Rule {
+    adam: bool,
+    b1: f32,
+    b2: f32,
+    eps: f32,
+    /// Adam's bias corrections `1 − β₁ᵗ`, `1 − β₂ᵗ`.
+    c1: f32,
+    c2: f32,
+}
+
+impl Rule {
+    fn new(opt: &Optimizer, step: u32) -> Rule {
+        match *opt {
+            Optimizer::Adam { beta1, beta2, eps } => Rule {
+                adam: true,
+                b1: beta1,
+                b2: beta2,
+                eps,
+                c1: 1.0 - beta1.powi(step as i32),
+                c2: 1.0 - beta2.powi(step as i32),
+            },
+            Optimizer::RmsProp { beta, eps } => Rule {
+                adam: false,
+                b1: 0.0,
+                b2: beta,
+                eps,
+                c1: 1.0,
+                c2: 1.0,
+            },
+        }
+    }
+
+    #[inline(always)]
+    fn apply(&self, x: &mut f32, m: Option<&mut f32>, v: &mut f32, g: f32, lr: f32) {
+        *v = self.b2 * *v + (1.0 - self.b2) * g * g;
+        if self.adam {
+            let m = m.expect("Adam keeps first moments");
+            *m = self.b1 * *m + (1.0 - self.b1) * g;
+            *x -= lr * (*m / self.c1) / ((*v / self.c2).sqrt() + self.eps);
+        } else {
+            *x -= lr * g / (v.sqrt() + self.eps);
+        }
+    }
+}
+
+/// Added under the square root of the TV term.
+const TV_EPS: f32 = 1e-8;
+
+/// The `+x`, `+y`, `+z` neighbours of slot `s` that are allocated.
+fn tv_neighbours(grid: &Grid, s: usize) -> [Option<usize>; 3] {
+    let res = grid.res();
+    let [x, y, z] = grid.vertex(s);
+    [
+        if x < res {
+            grid.slot(x + 1, y, z)
+        } else {
+            None
+        },
+        if y < res {
+            grid.slot(x, y + 1, z)
+        } else {
+            None
+        },
+        if z < res {
+            grid.slot(x, y, z + 1)
+        } else {
+            None
+        },
+    ]
+}
+
+/// Adds to `acc` the gradient of the TV term (see [`TrainOptions::tv_density`]) of the
+/// slots `slots` (repeats count again).
+fn add_tv(grid: &Grid, acc: &mut Accum, slots: &[usize], tv_density: f32, tv_sh: f32) {
+    let stride = grid.sh_stride();
+    let (dens, shv) = (grid.density(), grid.sh());
+    for &s in slots {
+        let nb = tv_neighbours(grid, s);
+        if nb.iter().all(Option::is_none) {
+            continue;
+        }
+        acc.flag[s] = true;
+        for t in nb.iter().flatten() {
+            acc.flag[*t] = true;
+        }
+        // One component: values at `s` and its neighbours, gradient added with weight λ.
+        let tv = |vals: &[f32], grads: &mut [f32], off: usize, str_: usize, lambda: f32| {
+            let v0 = vals[s * str_ + off];
+            let mut d = [0.0f32; 3];
+            for a in 0..3 {
+                if let Some(t) = nb[a] {
+                    d[a] = vals[t * str_ + off] - v0;
+                }
+            }
+            let r = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2] + TV_EPS).sqrt();
+            let k = lambda / r;
+            grads[s * str_ + off] -= k * (d[0] + d[1] + d[2]);
+            for a in 0..3 {
+                if let Some(t) = nb[a] {
+                    grads[t * str_ + off] += k * d[a];
+                }
+            }
+        };
+        if tv_density > 0.0 {
+            tv(dens, &mut acc.gd, 0, 1, tv_density);
+        }
+        if tv_sh > 0.0 {
+            for j in 0..stride {
+                tv(shv, &mut acc.gsh, j, stride, tv_sh);
+            }
+        }
+    }
+}
+
+/// SplitMix64.
+struct Rng(u64);
+
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+
+    /// Uniform in `0 .. n` (`n > 0`).
+    fn below(&mut self, n: usize) -> usize {
+        ((self.next() as u128 * n as u128) >> 64) as usize
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3;
+
+    /// The TV term of `slots` in f64, from values `dens`, `shv`.
+    fn tv_loss(g: &Grid, slots: &[usize], dens: &[f64], shv: &[f64], ld: f64, ls: f64) -> f64 {
+        let stride = g.sh_stride();
+        let mut total = 0.0;
+        for &s in slots {
+            let nb = tv_neighbours(g, s);
+            if nb.iter().all(Option::is_none) {
+                continue;
+            }
+            let term = |vals: &[f64], off: usize, st: usize| {
+                let v0 = vals[s * st + off];
+                let sq: f64 = nb
+                    .iter()
+                    .flatten()
+                    .map(|&t| (vals[t * st + off] - v0).powi(2))
+                    .sum();
+                (sq + TV_EPS as f64).sqrt()
+            };
+            total += ld * term(dens, 0, 1);
+            total += ls * (0..stride).map(|j| term(shv, j, stride)).sum::<f64>();
+        }
+        total
+    }
+
+    /// The TV gradient equals central differences of the TV term, also at the grid's
+    /// upper faces and next to unallocated vertices.
+    #[test]
+    fn tv_gradient_matches_finite_differences() {
+        let mut g = Grid::from_fn(Vec3::ZERO, Vec3::ONE, 4, 1, |p| {
+            (p.x + p.y < 1.6).then_some(p.z * 3.0 - p.x)
+        });
+        for (i, v) in g.sh_mut().iter_mut().enumerate() {
+            *v = ((i * 37 % 11) as f32 * 0.3).sin();
+        }
+        let n = g.allocated();
+        let mut rng = Rng(7);
+        let slots: Vec<usize> = (0..40).map(|_| rng.below(n)).collect();
+        let mut acc = Accum {
+            gd: vec![0.0; n],
+            gsh: vec![0.0; g.sh().len()],
+            flag: vec![false; n],
+        };
+        let (ld, ls) = (0.7f32, 0.2f32);
+        add_tv(&g, &mut acc, &slots, ld, ls);
+        let d0: Vec<f64> = g.density().iter().map(|&v| v as f64).collect();
+        let s0: Vec<f64> = g.sh().iter().map(|&v| v as f64).collect();
+        let h = 1e-6;
+        for i in 0..n {
+            let (mut p, mut m) = (d0.clone(), d0.clone());
+            p[i] += h;
+            m[i] -= h;
+            let fd = (tv_loss(&g, &slots, &p, &s0, ld as f64, ls as f64)
+                - tv_loss(&g, &slots, &m, &s0, ld as f64, ls as f64))
+                / (2.0 * h);
+            assert!(
+                (fd - acc.gd[i] as f64).abs() < 1e-4,
+                "density {i}: {} vs {fd}",
+                acc.gd[i]
+            );
+        }
+        for j in (0..s0.len()).step_by(5) {
+            let (mut p, mut m) = (s0.clone(), s0.clone());
+            p[j] += h;
+            m[j] -= h;
+            let fd = (tv_loss(&g, &slots, &d0, &p, ld as f64, ls as f64)
+                - tv_loss(&g, &slots, &d0, &m, ld as f64, ls as f64))
+                / (2.0 * h);
+            assert!(
+                (fd - acc.gsh[j] as f64).abs() < 1e-4,
+                "sh {j}: {} vs {fd}",
+                acc.gsh[j]
+            );
+        }
+        assert!(acc.gd.iter().any(|&v| v != 0.0));
+        for &s in &slots {
+            let has = tv_neighbours(&g, s).iter().any(Option::is_some);
+            assert!(acc.flag[s] || !has, "slot {s} is marked for the update");
+        }
+    }
+
+    #[test]
+    fn learning_rates_decay_exponentially() {
+        assert_eq!(decay([1.0, 0.01], 0.0), 1.0);
+        assert!((decay([1.0, 0.01], 0.5) - 0.1).abs() < 1e-6);
+        assert!((decay([1.0, 0.01], 1.0) - 0.01).abs() < 1e-7);
+        assert_eq!(decay([0.0, 1.0], 0.25), 0.25);
+    }
+}
