@@ -51,8 +51,8 @@ pub struct Grid {
 }
 
 /// Empty-space skipping: per block of `BLOCK³` cells, the Chebyshev distance (in blocks,
-/// capped at 255) to the nearest block that has an *active* vertex (allocated, raw density
-/// > 0) on its closed box; 0 for such blocks. A cell without active corners has
+/// capped at 255) to the nearest block that has an *active* vertex (allocated, with
+/// positive raw density) on its closed box; 0 for such blocks. A cell without active corners has
 /// interpolated raw density ≤ 0, so σ = 0 there: it contributes nothing to the color and
 /// (ReLU) nothing to any gradient. With distance `d > 0`, every block within `d − 1` is
 /// free of such contributions, so a ray can jump out of that cube of blocks exactly.
@@ -411,7 +411,7 @@ impl Grid {
 
 /// Checks a grid's box, resolution and degree; the message says what is wrong.
 pub(crate) fn check_geometry(min: Vec3, max: Vec3, res: u32, degree: u32) -> Result<(), String> {
-    if !(min.is_finite() && max.is_finite()) || !min.cmplt(max).all() {
+    if !min.is_finite() || !max.is_finite() || !min.cmplt(max).all() {
         return Err(format!(
             "box {min} .. {max} is not a finite box with min < max"
         ));
@@ -434,7 +434,7 @@ impl Skip {
         // The blocks whose closed box holds coordinate `x`.
         let range = |x: u32| {
             let hi = (x / BLOCK).min(nb - 1);
-            let lo = if x % BLOCK == 0 && x > 0 {
+            let lo = if x.is_multiple_of(BLOCK) && x > 0 {
                 (x / BLOCK - 1).min(nb - 1)
             } else {
                 hi
@@ -519,7 +519,7 @@ mod tests {
             seed = seed
                 .wrapping_mul(6364136223846793005)
                 .wrapping_add(1442695040888963407);
-            if (seed >> 33) % 40 == 0 {
+            if (seed >> 33).is_multiple_of(40) {
                 d[i] = 0;
                 src.push((i % n, (i / n) % n, i / (n * n)));
             }

@@ -124,12 +124,10 @@ pub fn from_bytes(b: &[u8], path: &Path) -> Result<Grid> {
             vertices[i - 1]
         )));
     }
-    if let Some(&last) = vertices.last() {
-        if last as u64 >= vertices_total {
-            return Err(bad(format!(
-                "vertex index {last} outside the {vertices_total} vertices of a {res}³ grid"
-            )));
-        }
+    if let Some(&last) = vertices.last().filter(|&&v| v as u64 >= vertices_total) {
+        return Err(bad(format!(
+            "vertex index {last} outside the {vertices_total} vertices of a {res}³ grid"
+        )));
     }
     let density: Vec<f32> = words(HEADER + 4 * n, n).map(f32_at).collect();
     let shv: Vec<f32> = words(HEADER + 8 * n, 3 * k * n).map(f32_at).collect();

@@ -15,6 +15,21 @@
 //! Units: world units for the box and ray parameters, density in 1 / world units, colors
 //! linear RGB in `[0, 1]`; ray directions are unit vectors pointing away from the camera.
 //!
+//! **Speed.** Everything is `f32` on the CPU: rayon over rays, one gradient buffer per
+//! thread (no locks or atomics per sample), a lazy sparse optimizer update of the touched
+//! slots only, early ray termination, and empty-space skipping over blocks of 4³ cells
+//! that have no vertex with positive density (Chebyshev distance field, so a ray jumps
+//! whole empty regions); SH degree is a compile-time constant in the inner loops.
+//!
+//! **A measured recipe** (NeRF-synthetic lego, 100 training views at 200×200 = 4 M rays,
+//! box `[−1.5, 1.5]³`, 2 cores): [`Grid::dense`] at 64³ with SH degree 2 and density 0.1,
+//! [`TrainOptions::default`] with `upsample: vec![(300, 128)]` reached a mean PSNR of
+//! 30.2 dB over 25 test views after 3000 iterations in 789 s. Learning rates of the
+//! density above about 1 (in these world units) diverge; density TV (`1e-6`) lowered
+//! lego to 27.0 dB but helps pruning on simple scenes; pruning at 1e-3 keeps most of a
+//! 128³ grid on lego (haze in front of the white background), so a 256³ stage needs a
+//! stronger pruning rule or regularizer than the defaults.
+//!
 //! ```
 //! use diffsvg::volume::{Ray, Vec3};
 //! use diffsvg::volume::voxel::{Grid, RenderSettings, render_ray};

@@ -105,26 +105,30 @@ pub struct TrainOptions {
 }
 
 impl Default for TrainOptions {
-    /// A small-scene default: 2000 iterations of 8192 rays, RMSProp (β = 0.95) with
-    /// density rate 30 → 3 and SH rate 0.1 → 0.01, light TV, no resampling.
+    /// The values measured best on NeRF-synthetic lego at 200×200 (see the module doc):
+    /// 3000 iterations of 8192 rays; Adam on densities with rate 1 → 0.1 (1 / world
+    /// units, for scenes a few units across), RMSProp on SH coefficients with rate
+    /// 0.3 → 0.03; no TV and no sparsity term; default rendering (half-voxel steps, white
+    /// background); no resampling; pruning at resampling below weight 1e-3 with a 1-vertex
+    /// margin, measured on 2²⁰ random training rays.
     fn default() -> Self {
         TrainOptions {
-            iterations: 2000,
+            iterations: 3000,
             batch_size: 8192,
             seed: 0,
             render: RenderSettings::default(),
-            density_optimizer: Optimizer::RMSPROP,
+            density_optimizer: Optimizer::ADAM,
             sh_optimizer: Optimizer::RMSPROP,
             lr_density: [1.0, 0.1],
             lr_sh: [0.3, 0.03],
-            tv_density: 1e-6,
+            tv_density: 0.0,
             tv_sh: 0.0,
             sparsity: 0.0,
             tv_fraction: 0.01,
             upsample: Vec::new(),
             prune_threshold: 1e-3,
             prune_dilate: 1,
-            prune_rays: 0,
+            prune_rays: 1 << 20,
         }
     }
 }
@@ -198,12 +202,9 @@ pub fn train(
             state = State::new(grid, threads, opts);
         }
         let t_step = Instant::now();
-        let mut batch: Vec<u32> = (0..opts.batch_size)
+        let batch: Vec<u32> = (0..opts.batch_size)
             .map(|_| rng.below(rays.len()) as u32)
             .collect();
-        if std::env::var("VOX_SORT").is_ok() {
-            batch.sort_unstable();
-        }
         let part = batch.len().div_ceil(threads);
         // ∂(mean over rays and channels of the squared error)/∂color.
         let scale = 2.0 / (3.0 * batch.len() as f32);
