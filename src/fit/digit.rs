@@ -335,7 +335,7 @@ fn stroke_along(walk: &[Point], segments: usize, width: f64, scale: f64, id: &st
 
 /// Control points (`3k + 1`) of `k` cubics through a polyline: it is cut into `k` runs of
 /// equal length, and each run gets the cubic through its ends whose inner control points
-/// fit its points best in least squares (chord-length parameters).
+/// fit its points best in least squares.
 fn fit_cubics(pts: &[Point], k: usize) -> Vec<Point> {
     let mut cum = vec![0.0];
     for w in pts.windows(2) {
@@ -358,47 +358,12 @@ fn fit_cubics(pts: &[Point], k: usize) -> Vec<Point> {
     out
 }
 
-/// Inner control points of the cubic through `run`'s ends that best fits its points.
+/// Inner control points of the cubic through `run`'s ends that best fits its points
+/// (the glyph fitter's least squares with Newton-improved parameters).
 fn fit_one(run: &[Point]) -> (Point, Point) {
-    let (p0, p3) = (run[0], run[run.len() - 1]);
-    let lerp = |t: f64| [p0[0] + (p3[0] - p0[0]) * t, p0[1] + (p3[1] - p0[1]) * t];
-    let fallback = (lerp(1.0 / 3.0), lerp(2.0 / 3.0));
-    let len = polyline_length(run);
-    if run.len() < 4 || len <= 1e-9 {
-        return fallback;
-    }
-    let (mut a11, mut a12, mut a22) = (0.0, 0.0, 0.0);
-    let (mut r1, mut r2) = ([0.0; 2], [0.0; 2]);
-    let mut acc = 0.0;
-    for (i, q) in run.iter().enumerate() {
-        if i > 0 {
-            acc += dist(run[i - 1], *q);
-        }
-        let t = acc / len;
-        let u = 1.0 - t;
-        let (b0, b1, b2, b3) = (u * u * u, 3.0 * u * u * t, 3.0 * u * t * t, t * t * t);
-        a11 += b1 * b1;
-        a12 += b1 * b2;
-        a22 += b2 * b2;
-        for d in 0..2 {
-            let rest = q[d] - b0 * p0[d] - b3 * p3[d];
-            r1[d] += b1 * rest;
-            r2[d] += b2 * rest;
-        }
-    }
-    let det = a11 * a22 - a12 * a12;
-    if det.abs() < 1e-12 {
-        return fallback;
-    }
-    let solve = |d: usize| {
-        (
-            (a22 * r1[d] - a12 * r2[d]) / det,
-            (a11 * r2[d] - a12 * r1[d]) / det,
-        )
-    };
-    let (x1, x2) = solve(0);
-    let (y1, y2) = solve(1);
-    ([x1, y1], [x2, y2])
+    let last = run.len() - 1;
+    let c = crate::fit::glyph::fit_cubic(run[0], run[last], &run[1..last.max(1)]);
+    (c[1], c[2])
 }
 
 fn mask(pixels: &[f32], threshold: f32) -> Vec<bool> {

@@ -472,7 +472,7 @@ fn chord_params(p0: Point, p3: Point, samples: &[Point]) -> Option<Vec<f64>> {
 /// Least-squares cubic from `p0` to `p3` through `samples` (in order, end points left
 /// out), all four points free but the ends; chord-length parameters improved by Newton
 /// passes. A straight cubic when there is too little to fit.
-fn fit_cubic(p0: Point, p3: Point, samples: &[Point]) -> Cubic {
+pub(crate) fn fit_cubic(p0: Point, p3: Point, samples: &[Point]) -> Cubic {
     let line = [p0, lerp(p0, p3, 1.0 / 3.0), lerp(p0, p3, 2.0 / 3.0), p3];
     if samples.len() < 2 {
         return line;
