@@ -426,7 +426,7 @@ fn synthetic_spheres_are_recovered_on_held_out_views() {
     let mut grid = box_grid();
     let t0 = Instant::now();
     let mut last = None;
-    let outcome = train(&mut grid, &rays, &colors, &opts, &mut |s| {
+    let outcome = train(&mut grid, &rays, &colors, &opts, &mut |s, _| {
         if s.iteration % 100 == 0 {
             eprintln!(
                 "it {:5}  res {:3}  loss {:.5}  psnr {:5.2}  {:7.0} rays/s  {} slots",
@@ -462,6 +462,61 @@ fn synthetic_spheres_are_recovered_on_held_out_views() {
     assert!(worst >= 30.0, "held-out PSNR {worst:.2} dB < 30 dB");
 }
 
+/// Pruning at the working resolution (`prune_every`) frees the empty space training has
+/// cleared, and the final prune leaves the rendered training views as they were.
+#[test]
+fn pruning_between_resamplings_frees_space_without_changing_the_picture() {
+    let (rays, colors, _, base) = scene_setup();
+    let opts = TrainOptions {
+        iterations: 400,
+        upsample: Vec::new(),
+        prune_every: 100,
+        prune_rays: 0,
+        ..base
+    };
+    let mut grid = box_grid();
+    let dense = grid.allocated();
+    let mut before_final = None;
+    let mut counts = Vec::new();
+    let outcome = train(&mut grid, &rays, &colors, &opts, &mut |s, g| {
+        counts.push(s.allocated);
+        if s.iteration == opts.iterations {
+            before_final = Some(render_rays(g, &rays, &opts.render));
+        }
+        true
+    })
+    .unwrap();
+    assert_eq!(outcome.iterations, 400);
+    // Pruned at iterations 100, 200 and 300 (never growing), and once more at the end.
+    assert!(counts.windows(2).all(|w| w[1] <= w[0]), "{counts:?}");
+    assert!(
+        counts[150] < dense,
+        "nothing pruned: {} of {dense}",
+        counts[150]
+    );
+    assert!(grid.allocated() <= counts[399]);
+    assert!(
+        grid.allocated() < dense / 3,
+        "{} of {dense}",
+        grid.allocated()
+    );
+    let after = render_rays(&grid, &rays, &opts.render);
+    let worst = before_final
+        .unwrap()
+        .iter()
+        .zip(&after)
+        .flat_map(|(a, b)| (0..3).map(move |c| (a[c] - b[c]).abs()))
+        .fold(0.0f32, f32::max);
+    eprintln!(
+        "allocated {dense} → {} → {} → {}; worst change {worst}",
+        counts[150],
+        counts[399],
+        grid.allocated()
+    );
+    assert!(worst < 0.01, "the final prune changed a pixel by {worst}");
+    assert!(psnr(&after, &colors) > 28.0, "{:.2}", psnr(&after, &colors));
+}
+
 #[test]
 fn saved_models_load_and_render_the_same() {
     let mut g = smooth_grid(2.0);
@@ -491,11 +546,11 @@ fn training_rejects_bad_input_with_reasons() {
     let mut g = box_grid();
     let r = [ray(Vec3::new(0.0, 0.0, 3.0), Vec3::NEG_Z)];
     let opts = TrainOptions::default();
-    let err = train(&mut g, &r, &[], &opts, &mut |_| true)
+    let err = train(&mut g, &r, &[], &opts, &mut |_, _| true)
         .unwrap_err()
         .to_string();
     assert!(err.contains("1 rays and 0 colors"), "{err}");
-    let err = train(&mut g, &r, &[[f32::NAN, 0.0, 0.0]], &opts, &mut |_| true)
+    let err = train(&mut g, &r, &[[f32::NAN, 0.0, 0.0]], &opts, &mut |_, _| true)
         .unwrap_err()
         .to_string();
     assert!(err.contains("color 0 is not finite"), "{err}");
@@ -507,13 +562,13 @@ fn training_rejects_bad_input_with_reasons() {
         },
         ..TrainOptions::default()
     };
-    let err = train(&mut g, &r, &[[0.5; 3]], &bad, &mut |_| true)
+    let err = train(&mut g, &r, &[[0.5; 3]], &bad, &mut |_, _| true)
         .unwrap_err()
         .to_string();
     assert!(err.contains("betas"), "{err}");
     // The observer can stop training.
     let mut seen = 0;
-    let out = train(&mut g, &r, &[[0.5; 3]], &opts, &mut |_| {
+    let out = train(&mut g, &r, &[[0.5; 3]], &opts, &mut |_, _| {
         seen += 1;
         seen < 3
     })
@@ -596,7 +651,7 @@ fn bench_128() {
         ..TrainOptions::default()
     };
     let t = Instant::now();
-    train(&mut grid, &rays, &img, &opts, &mut |_| true).unwrap();
+    train(&mut grid, &rays, &img, &opts, &mut |_, _| true).unwrap();
     eprintln!(
         "training (forward + backward + update), random rays: {:.0} rays/s",
         (opts.iterations * opts.batch_size) as f64 / t.elapsed().as_secs_f64()

@@ -286,6 +286,15 @@ impl Grid {
     /// # Panics
     /// If `weights.len() != allocated()`.
     pub fn prune_by_weight(&mut self, weights: &[f32], threshold: f32, dilate: u32) -> usize {
+        let keep = self.weight_mask(weights, threshold, dilate);
+        self.prune(|s| keep[s])
+    }
+
+    /// The slots [`Grid::prune_by_weight`] keeps, as one flag per slot.
+    ///
+    /// # Panics
+    /// If `weights.len() != allocated()`.
+    pub fn weight_mask(&self, weights: &[f32], threshold: f32, dilate: u32) -> Vec<bool> {
         assert_eq!(weights.len(), self.allocated(), "one weight per slot");
         let mut keep: Vec<bool> = weights.iter().map(|&w| w >= threshold).collect();
         let r = dilate as i64;
@@ -308,7 +317,7 @@ impl Grid {
                 }
             }
         }
-        self.prune(|s| keep[s])
+        keep
     }
 
     /// Resamples onto `new_res` cells per axis over the same box (usually `2·res`).

@@ -102,6 +102,11 @@ pub struct TrainOptions {
     pub prune_dilate: u32,
     /// How many training rays (drawn at random) measure the weights for pruning; 0: all.
     pub prune_rays: usize,
+    /// Also prune (same threshold and margin) at the current resolution before every
+    /// multiple of this many iterations and once after the last, keeping the optimizer
+    /// state of the slots that stay; 0 disables. Empty space is only recognizable once
+    /// training has cleared it, which is often after the coarse-to-fine steps.
+    pub prune_every: usize,
 }
 
 impl Default for TrainOptions {
@@ -110,7 +115,7 @@ impl Default for TrainOptions {
     /// units, for scenes a few units across), RMSProp on SH coefficients with rate
     /// 0.3 → 0.03; no TV and no sparsity term; default rendering (half-voxel steps, white
     /// background); no resampling; pruning at resampling below weight 1e-3 with a 1-vertex
-    /// margin, measured on 2²⁰ random training rays.
+    /// margin, measured on 2²⁰ random training rays, and no pruning between resamplings.
     fn default() -> Self {
         TrainOptions {
             iterations: 3000,
@@ -129,6 +134,7 @@ impl Default for TrainOptions {
             prune_threshold: 1e-3,
             prune_dilate: 1,
             prune_rays: 1 << 20,
+            prune_every: 0,
         }
     }
 }
@@ -148,7 +154,8 @@ pub struct TrainStep {
     pub rays_per_second: f32,
     /// Allocated slots.
     pub allocated: usize,
-    /// Seconds since training started.
+    /// Seconds of training so far (wall time since the start, less the time spent in the
+    /// observer).
     pub elapsed: f32,
 }
 
@@ -161,13 +168,14 @@ pub struct TrainOutcome {
     pub stopped: bool,
     /// Batch MSE of the last iteration.
     pub loss: f32,
-    /// Wall time, seconds.
+    /// Wall time of training, seconds (the time spent in the observer is not counted).
     pub seconds: f32,
 }
 
 /// Fits `grid` to the colors `colors[i]` seen along `rays[i]` (unit directions, linear
 /// RGB in `[0, 1]` composited over `opts.render.background`). `observe` runs after every
-/// iteration and returns false to stop.
+/// iteration with its progress and the updated grid (to log, evaluate or checkpoint) and
+/// returns false to stop.
 ///
 /// Errors: mismatched or empty ray and color lists, non-finite colors, and invalid
 /// options (named in the message).
@@ -176,7 +184,7 @@ pub fn train(
     rays: &[Ray],
     colors: &[[f32; 3]],
     opts: &TrainOptions,
-    observe: &mut dyn FnMut(&TrainStep) -> bool,
+    observe: &mut dyn FnMut(&TrainStep, &Grid) -> bool,
 ) -> Result<TrainOutcome> {
     validate(rays, colors, opts).map_err(|what| Error::InvalidValue {
         path: "voxel training".into(),
@@ -189,6 +197,8 @@ pub fn train(
     let mut rng = Rng(opts.seed);
     let mut state = State::new(grid, threads, opts);
     let start = Instant::now();
+    // Time spent inside `observe` (evaluations, logging) is not training time.
+    let mut observing = std::time::Duration::ZERO;
     let mut outcome = TrainOutcome {
         iterations: 0,
         stopped: false,
@@ -197,9 +207,14 @@ pub fn train(
     };
     let n_it = opts.iterations;
     for it in 0..n_it {
+        let mut resampled = false;
         while let Some((_, res)) = sched.next_if(|u| u.0 <= it) {
             resample(grid, rays, opts, res, &mut rng);
             state = State::new(grid, threads, opts);
+            resampled = true;
+        }
+        if !resampled && it > 0 && opts.prune_every > 0 && it % opts.prune_every == 0 {
+            prune_in_place(grid, rays, opts, &mut rng, &mut state);
         }
         let t_step = Instant::now();
         let batch: Vec<u32> = (0..opts.batch_size)
@@ -256,16 +271,22 @@ pub fn train(
             psnr: -10.0 * loss.max(1e-12).log10(),
             rays_per_second: batch.len() as f32 / secs.max(1e-9),
             allocated: grid.allocated(),
-            elapsed: start.elapsed().as_secs_f32(),
+            elapsed: (start.elapsed() - observing).as_secs_f32(),
         };
         outcome.iterations = it + 1;
         outcome.loss = loss;
-        if !observe(&step) {
+        let t_observe = Instant::now();
+        let go_on = observe(&step, grid);
+        observing += t_observe.elapsed();
+        if !go_on {
             outcome.stopped = true;
             break;
         }
     }
-    outcome.seconds = start.elapsed().as_secs_f32();
+    if opts.prune_every > 0 && outcome.iterations > 0 {
+        prune_in_place(grid, rays, opts, &mut rng, &mut state);
+    }
+    outcome.seconds = (start.elapsed() - observing).as_secs_f32();
     Ok(outcome)
 }
 
@@ -330,19 +351,45 @@ fn decay(a: [f32; 2], frac: f32) -> f32 {
 /// Prune (by rendering weight over training rays) and resample to `res`.
 fn resample(grid: &mut Grid, rays: &[Ray], opts: &TrainOptions, res: u32, rng: &mut Rng) {
     if opts.prune_threshold > 0.0 {
-        let weights = if opts.prune_rays == 0 || opts.prune_rays >= rays.len() {
-            max_weights(grid, rays, &opts.render)
-        } else {
-            let pick: Vec<Ray> = (0..opts.prune_rays)
-                .map(|_| rays[rng.below(rays.len())])
-                .collect();
-            max_weights(grid, &pick, &opts.render)
-        };
-        grid.prune_by_weight(&weights, opts.prune_threshold, opts.prune_dilate);
+        let keep = prune_mask(grid, rays, opts, rng);
+        grid.prune(|s| keep[s]);
     }
     if res != grid.res() {
         grid.upsample(res);
     }
+}
+
+/// Which slots pass the pruning threshold (or its margin) over the pruning rays.
+fn prune_mask(grid: &Grid, rays: &[Ray], opts: &TrainOptions, rng: &mut Rng) -> Vec<bool> {
+    let weights = if opts.prune_rays == 0 || opts.prune_rays >= rays.len() {
+        max_weights(grid, rays, &opts.render)
+    } else {
+        let pick: Vec<Ray> = (0..opts.prune_rays)
+            .map(|_| rays[rng.below(rays.len())])
+            .collect();
+        max_weights(grid, &pick, &opts.render)
+    };
+    grid.weight_mask(&weights, opts.prune_threshold, opts.prune_dilate)
+}
+
+/// Prunes at the current resolution, carrying the optimizer state of the kept slots.
+fn prune_in_place(
+    grid: &mut Grid,
+    rays: &[Ray],
+    opts: &TrainOptions,
+    rng: &mut Rng,
+    state: &mut State,
+) {
+    if opts.prune_threshold <= 0.0 {
+        return;
+    }
+    let keep = prune_mask(grid, rays, opts, rng);
+    if keep.iter().all(|&k| k) {
+        return;
+    }
+    let stride = grid.sh_stride();
+    grid.prune(|s| keep[s]);
+    state.retain(&keep, stride);
 }
 
 /// Gradient buffers of one thread, dense over slots, with a touched flag per slot.
@@ -401,6 +448,34 @@ impl State {
             msh: if adam_sh { vec![0.0; m] } else { Vec::new() },
             vsh: vec![0.0; m],
             step: 0,
+        }
+    }
+
+    /// Keeps the moments of the slots flagged in `keep` (in order, as [`Grid::prune`]
+    /// does) and resizes the gradient buffers to match. The step count carries on.
+    fn retain(&mut self, keep: &[bool], stride: usize) {
+        fn compact(v: &mut Vec<f32>, keep: &[bool], stride: usize) {
+            if v.is_empty() {
+                return;
+            }
+            let mut out = 0;
+            for (s, &k) in keep.iter().enumerate() {
+                if k {
+                    v.copy_within(s * stride..(s + 1) * stride, out * stride);
+                    out += 1;
+                }
+            }
+            v.truncate(out * stride);
+        }
+        compact(&mut self.md, keep, 1);
+        compact(&mut self.vd, keep, 1);
+        compact(&mut self.msh, keep, stride);
+        compact(&mut self.vsh, keep, stride);
+        let n = keep.iter().filter(|&&k| k).count();
+        for a in &mut self.accs {
+            a.gd = vec![0.0; n];
+            a.gsh = vec![0.0; n * stride];
+            a.flag = vec![false; n];
         }
     }
 
