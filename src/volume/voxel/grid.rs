@@ -391,31 +391,45 @@ impl Grid {
         let (fx, fy, fz) = (q.x - cx as f32, q.y - cy as f32, q.z - cz as f32);
         let n = self.res as usize + 1;
         let base = cx as usize + n * (cy as usize + n * cz as usize);
-        let nn = n * n;
-        let idx = &self.index;
-        let slots = [
-            idx[base],
-            idx[base + 1],
-            idx[base + n],
-            idx[base + n + 1],
-            idx[base + nn],
-            idx[base + nn + 1],
-            idx[base + nn + n],
-            idx[base + nn + n + 1],
-        ];
-        let (gx, gy, gz) = (1.0 - fx, 1.0 - fy, 1.0 - fz);
-        let w = [
-            gx * gy * gz,
-            fx * gy * gz,
-            gx * fy * gz,
-            fx * fy * gz,
-            gx * gy * fz,
-            fx * gy * fz,
-            gx * fy * fz,
-            fx * fy * fz,
-        ];
+        let slots = cell_slots(&self.index, base, n);
+        let w = trilinear(fx, fy, fz);
         (slots, w)
     }
+}
+
+/// The 8 corner entries of `index` (slot or −1) of the cell whose lowest vertex has flat
+/// index `base`, with `n` vertices per axis; corner `c` has offset
+/// `(c & 1, (c >> 1) & 1, c >> 2)`.
+#[inline(always)]
+pub(crate) fn cell_slots(index: &[i32], base: usize, n: usize) -> [i32; 8] {
+    let nn = n * n;
+    [
+        index[base],
+        index[base + 1],
+        index[base + n],
+        index[base + n + 1],
+        index[base + nn],
+        index[base + nn + 1],
+        index[base + nn + n],
+        index[base + nn + n + 1],
+    ]
+}
+
+/// Trilinear weights of the 8 corners (ordered as in [`cell_slots`]) at fractional
+/// position `(fx, fy, fz)` in `[0, 1]³` inside the cell. They sum to 1.
+#[inline(always)]
+pub(crate) fn trilinear(fx: f32, fy: f32, fz: f32) -> [f32; 8] {
+    let (gx, gy, gz) = (1.0 - fx, 1.0 - fy, 1.0 - fz);
+    [
+        gx * gy * gz,
+        fx * gy * gz,
+        gx * fy * gz,
+        fx * fy * gz,
+        gx * gy * fz,
+        fx * gy * fz,
+        gx * fy * fz,
+        fx * fy * fz,
+    ]
 }
 
 /// Checks a grid's box, resolution and degree; the message says what is wrong.

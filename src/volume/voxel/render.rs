@@ -24,7 +24,7 @@
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::grid::{BLOCK, Grid};
+use super::grid::{BLOCK, Grid, cell_slots, trilinear};
 use crate::volume::{Ray, sh};
 
 /// How rays are marched and composited.
@@ -288,7 +288,6 @@ fn march(grid: &Grid, s: &Setup, mut visit: impl FnMut(&[i32; 8], &[f32; 8]) -> 
     let skip = grid.skip();
     let nb = skip.nb as usize;
     let n = res as usize + 1;
-    let nn = n * n;
     let index = grid.index_table();
     let mut k: u32 = 0;
     loop {
@@ -320,32 +319,12 @@ fn march(grid: &Grid, s: &Setup, mut visit: impl FnMut(&[i32; 8], &[f32; 8]) -> 
             continue;
         }
         let base = cx as usize + n * (cy as usize + n * cz as usize);
-        let slots = [
-            index[base],
-            index[base + 1],
-            index[base + n],
-            index[base + n + 1],
-            index[base + nn],
-            index[base + nn + 1],
-            index[base + nn + n],
-            index[base + nn + n + 1],
-        ];
+        let slots = cell_slots(index, base, n);
         k += 1;
         if slots.iter().all(|&v| v < 0) {
             continue;
         }
-        let (fx, fy, fz) = (q.x - cx as f32, q.y - cy as f32, q.z - cz as f32);
-        let (gx, gy, gz) = (1.0 - fx, 1.0 - fy, 1.0 - fz);
-        let w = [
-            gx * gy * gz,
-            fx * gy * gz,
-            gx * fy * gz,
-            fx * fy * gz,
-            gx * gy * fz,
-            fx * gy * fz,
-            gx * fy * fz,
-            fx * fy * fz,
-        ];
+        let w = trilinear(q.x - cx as f32, q.y - cy as f32, q.z - cz as f32);
         if !visit(&slots, &w) {
             break;
         }

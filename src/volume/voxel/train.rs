@@ -740,31 +740,26 @@ mod tests {
         let d0: Vec<f64> = g.density().iter().map(|&v| v as f64).collect();
         let s0: Vec<f64> = g.sh().iter().map(|&v| v as f64).collect();
         let h = 1e-6;
-        for i in 0..n {
-            let (mut p, mut m) = (d0.clone(), d0.clone());
+        // Central difference of the TV loss in entry `i` of the densities (`sh` false) or
+        // of the SH coefficients (`sh` true).
+        let fd = |sh: bool, i: usize| {
+            let base = if sh { &s0 } else { &d0 };
+            let (mut p, mut m) = (base.clone(), base.clone());
             p[i] += h;
             m[i] -= h;
-            let fd = (tv_loss(&g, &slots, &p, &s0, ld as f64, ls as f64)
-                - tv_loss(&g, &slots, &m, &s0, ld as f64, ls as f64))
-                / (2.0 * h);
-            assert!(
-                (fd - acc.gd[i] as f64).abs() < 1e-4,
-                "density {i}: {} vs {fd}",
-                acc.gd[i]
-            );
+            let loss = |v: &[f64]| {
+                let (d, s) = if sh { (&d0[..], v) } else { (v, &s0[..]) };
+                tv_loss(&g, &slots, d, s, ld as f64, ls as f64)
+            };
+            (loss(&p) - loss(&m)) / (2.0 * h)
+        };
+        for i in 0..n {
+            let (want, got) = (fd(false, i), acc.gd[i] as f64);
+            assert!((want - got).abs() < 1e-4, "density {i}: {got} vs {want}");
         }
         for j in (0..s0.len()).step_by(5) {
-            let (mut p, mut m) = (s0.clone(), s0.clone());
-            p[j] += h;
-            m[j] -= h;
-            let fd = (tv_loss(&g, &slots, &d0, &p, ld as f64, ls as f64)
-                - tv_loss(&g, &slots, &d0, &m, ld as f64, ls as f64))
-                / (2.0 * h);
-            assert!(
-                (fd - acc.gsh[j] as f64).abs() < 1e-4,
-                "sh {j}: {} vs {fd}",
-                acc.gsh[j]
-            );
+            let (want, got) = (fd(true, j), acc.gsh[j] as f64);
+            assert!((want - got).abs() < 1e-4, "sh {j}: {got} vs {want}");
         }
         assert!(acc.gd.iter().any(|&v| v != 0.0));
         for &s in &slots {
