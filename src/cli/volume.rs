@@ -96,7 +96,8 @@ pub struct ViewArgs {
     #[arg(long, default_value_t = 1)]
     downscale: u32,
     /// Also render this many views on a circle around the model: orbit-NNN.png,
-    /// orbit.gif and orbit.png (a contact sheet).
+    /// orbit.gif and (from 2 views) orbit.png, a contact sheet of the first half of the
+    /// circle above the second.
     #[arg(long, default_value_t = 0)]
     orbit: usize,
     /// Elevation of the orbit, degrees above the horizontal plane.
@@ -132,6 +133,7 @@ fn run_voxel(a: VoxelArgs) -> Result<()> {
     if a.downscale == 0 || a.iters == 0 || a.batch == 0 {
         bail!("--downscale, --iters and --batch must be at least 1");
     }
+    let render = render_settings(a.step)?;
     let t_load = Instant::now();
     let data = Dataset::load(&a.scene, a.downscale)?;
     if data.train.is_empty() {
@@ -139,23 +141,33 @@ fn run_voxel(a: VoxelArgs) -> Result<()> {
     }
     let (rays, colors) = pixels(&data.train);
     let (center, dist) = data.focus();
-    let half = a.bound.unwrap_or(0.4 * dist);
-    if !(half.is_finite() && half > 0.0) {
-        bail!("--bound {half} must be a positive number");
-    }
+    let half = match a.bound {
+        Some(b) if !(b.is_finite() && b > 0.0) => bail!("--bound {b} must be a positive number"),
+        Some(b) => b,
+        None => {
+            let half = 0.4 * dist;
+            if !(half.is_finite() && half > 0.0 && center.is_finite()) {
+                bail!(
+                    "{}: cannot size the box from the cameras (median distance {dist} from \
+                     {center}); give --bound",
+                    a.scene.display()
+                );
+            }
+            half
+        }
+    };
     let load_s = t_load.elapsed().as_secs_f64();
 
-    // Coarse to fine: a dense grid at half the resolution (at least 32 cells), pruned and
-    // doubled after 10% of the run (64³ → 128³ reached 30.2 dB on lego at 200²). Slots
-    // that no training ray weighs are freed at every tenth of the run and at the end.
-    let levels: Vec<u32> = if a.res / 2 >= 32 {
-        vec![a.res / 2, a.res]
-    } else {
-        vec![a.res]
-    };
+    // Coarse to fine: a dense grid at 64³ (or half the resolution for small grids),
+    // doubled until `--res`: after 10% of the run, and every further 30%. Slots that no
+    // training ray weighs are freed at every resampling, at every tenth of the run and
+    // at the end (64³ → 128³ reached 30 dB on lego at 200²).
+    let levels = levels(a.res);
     let upsample: Vec<(usize, u32)> = levels[1..]
         .iter()
-        .map(|&r| ((a.iters / 10).max(1), r))
+        .enumerate()
+        .map(|(i, &r)| (((0.1 + 0.3 * i as f64) * a.iters as f64) as usize, r))
+        .map(|(it, r)| (it.max(1), r))
         .collect();
     let mut grid = Grid::dense(
         center - Vec3::splat(half),
@@ -164,13 +176,18 @@ fn run_voxel(a: VoxelArgs) -> Result<()> {
         a.degree,
         0.1,
     );
-    let render = RenderSettings {
-        step: a.step,
-        ..RenderSettings::default()
-    };
+    // Rays are drawn with replacement; more per batch than there are pixels only repeats.
+    let batch = a.batch.min(rays.len());
+    if batch < a.batch {
+        eprintln!(
+            "note: --batch {} is more than the {} training pixels; using {batch}",
+            a.batch,
+            rays.len()
+        );
+    }
     let opts = TrainOptions {
         iterations: a.iters,
-        batch_size: a.batch,
+        batch_size: batch,
         seed: a.seed,
         render,
         upsample,
@@ -293,6 +310,37 @@ fn run_voxel(a: VoxelArgs) -> Result<()> {
     Ok(())
 }
 
+/// The resolutions of the coarse-to-fine schedule: from 64 (or `res / 2` when that is
+/// at least 32 and `res` less than 128, or `res` itself for small grids) doubling to
+/// `res`.
+fn levels(res: u32) -> Vec<u32> {
+    let mut r = if res >= 128 {
+        64
+    } else if res / 2 >= 32 {
+        res / 2
+    } else {
+        res
+    };
+    let mut v = vec![r];
+    while r < res {
+        r = (2 * r).min(res);
+        v.push(r);
+    }
+    v
+}
+
+/// Rendering with `step` voxels between samples, or an error naming the flag.
+fn render_settings(step: f32) -> Result<RenderSettings> {
+    let render = RenderSettings {
+        step,
+        ..RenderSettings::default()
+    };
+    render
+        .validate()
+        .map_err(|e| anyhow::anyhow!("--step: {e}"))?;
+    Ok(render)
+}
+
 /// Every pixel of every view as a ray and its color.
 fn pixels(views: &[View]) -> (Vec<Ray>, Vec<[f32; 3]>) {
     let mut rays = Vec::new();
@@ -334,17 +382,23 @@ pub fn run_view(a: ViewArgs) -> Result<()> {
     if a.scene.is_none() && a.orbit == 0 {
         bail!("nothing to render: give --scene DIR and/or --orbit N");
     }
-    std::fs::create_dir_all(&a.output)
-        .with_context(|| format!("{}: cannot create the output folder", a.output.display()))?;
-    let render = RenderSettings {
-        step: a.step,
-        ..RenderSettings::default()
-    };
+    if a.downscale == 0 {
+        bail!("--downscale must be at least 1");
+    }
+    let render = render_settings(a.step)?;
     let data = a
         .scene
         .as_ref()
-        .map(|d| Dataset::load(d, a.downscale.max(1)))
+        .map(|d| Dataset::load(d, a.downscale))
         .transpose()?;
+    // Cameras first, so that a bad orbit fails before anything is written.
+    let orbit_cams = if a.orbit > 0 {
+        orbit_cameras(&grid, data.as_ref(), a.orbit, a.elevation)?
+    } else {
+        Vec::new()
+    };
+    std::fs::create_dir_all(&a.output)
+        .with_context(|| format!("{}: cannot create the output folder", a.output.display()))?;
     let mut summary = serde_json::Map::new();
     if let Some(data) = &data {
         let views = if a.split == "test" {
@@ -393,22 +447,23 @@ pub fn run_view(a: ViewArgs) -> Result<()> {
             );
         }
     }
-    if a.orbit > 0 {
-        let cams = orbit_cameras(&grid, data.as_ref(), a.orbit, a.elevation)?;
+    if !orbit_cams.is_empty() {
         let mut frames = Vec::new();
-        for (i, cam) in cams.iter().enumerate() {
+        for (i, cam) in orbit_cams.iter().enumerate() {
             let out = voxel::render_rays(&grid, &cam.rays(), &render);
             let img = to_image(&out, cam.width, cam.height);
             img.save_png(a.output.join(format!("orbit-{i:03}.png")))?;
             frames.push(img);
         }
         write_gif(&frames, &a.output.join("orbit.gif"))?;
-        let pairs: Vec<(&Image, &Image)> = frames
-            .chunks(2)
-            .filter(|c| c.len() == 2)
-            .map(|c| (&c[0], &c[1]))
-            .collect();
-        contact_sheet(&pairs, 8, 2, [1.0; 4]).save_png(a.output.join("orbit.png"))?;
+        // The sheet stacks pairs: first half of the orbit above, second half below, so
+        // that frames read in order along each row.
+        let half = frames.len() / 2;
+        let pairs: Vec<(&Image, &Image)> =
+            (0..half).map(|i| (&frames[i], &frames[i + half])).collect();
+        if !pairs.is_empty() {
+            contact_sheet(&pairs, half.min(8), 2, [1.0; 4]).save_png(a.output.join("orbit.png"))?;
+        }
         summary.insert("orbit".into(), json!(frames.len()));
         if !a.json {
             println!(
@@ -488,4 +543,18 @@ fn write_gif(frames: &[Image], path: &Path) -> Result<()> {
     }
     write_atomic(path, &buf)?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::levels;
+
+    #[test]
+    fn coarse_to_fine_levels_start_at_64_and_double() {
+        assert_eq!(levels(256), [64, 128, 256]);
+        assert_eq!(levels(128), [64, 128]);
+        assert_eq!(levels(200), [64, 128, 200]);
+        assert_eq!(levels(64), [32, 64]);
+        assert_eq!(levels(40), [40]);
+    }
 }

@@ -201,9 +201,12 @@ impl Camera {
         let forward = (target - eye)
             .try_normalize()
             .ok_or(CameraError::Degenerate("eye and target coincide"))?;
-        let right = forward
-            .cross(up)
-            .try_normalize()
+        // Within about 0.06° of parallel, round-off leaves a cross product too short to
+        // give an orthonormal frame.
+        let right = forward.cross(up);
+        let right = (right.length() > 1e-3 * up.length())
+            .then(|| right.try_normalize())
+            .flatten()
             .ok_or(CameraError::Degenerate(
                 "up is zero or parallel to the view direction",
             ))?;
@@ -685,5 +688,12 @@ mod tests {
         assert!(Camera::new(4, 4, 1.0, 1.0, 2.0, 2.0, zero).is_err());
         assert!(Camera::new(4, 4, -1.0, 1.0, 2.0, 2.0, Affine3A::IDENTITY).is_err());
         assert!(Camera::new(0, 4, 1.0, 1.0, 2.0, 2.0, Affine3A::IDENTITY).is_err());
+        // Looking straight down the up vector, also after round-off (an orbit at 90°).
+        let parallel = CameraError::Degenerate("up is zero or parallel to the view direction");
+        let down = Camera::look_at(Vec3::Z, Vec3::ZERO, Vec3::Z, 0.7, 8, 8);
+        assert_eq!(down.unwrap_err(), parallel);
+        let top = orbit(4, Vec3::ZERO, 3.0, 90f32.to_radians(), Vec3::Z, 0.7, 8, 8);
+        assert_eq!(top.unwrap_err(), parallel);
+        assert!(orbit(4, Vec3::ZERO, 3.0, 89f32.to_radians(), Vec3::Z, 0.7, 8, 8).is_ok());
     }
 }

@@ -420,7 +420,7 @@ fn parse_transforms(path: &Path) -> Result<Vec<Frame>> {
         let own = intrinsics(fobj).map_err(at)?;
         let rows = matrix_rows(fobj.get("transform_matrix")).map_err(|w| at(w.into()))?;
         let c2w = pose_from_rows(&rows).map_err(|e| at(e.to_string()))?;
-        let tried = base.join(&file_path);
+        let tried = base.join(file_path.trim_start_matches("./"));
         let image = if tried.is_file() {
             Some(tried.clone())
         } else {

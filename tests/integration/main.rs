@@ -11,3 +11,4 @@ mod gradients;
 mod parity;
 mod roundtrip;
 mod vectorize;
+mod volume;
