@@ -11,6 +11,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
 
 use super::progress::{install_interrupt_handler, interrupted};
+use crate::fit::plot::{PlotSpec, Series, write_plot};
 use crate::image_io::{Image, contact_sheet, write_atomic};
 use crate::volume::camera::{Camera, orbit};
 use crate::volume::dataset::{Dataset, View};
@@ -204,19 +205,8 @@ fn run_voxel(a: VoxelArgs) -> Result<()> {
         );
         b
     });
-    let mut log = String::from("iteration,seconds,res,allocated,batch_psnr,test_psnr\n");
-    let log_row = |log: &mut String, s: &TrainStep, test: Option<f64>| {
-        let _ = writeln!(
-            log,
-            "{},{:.3},{},{},{:.3},{}",
-            s.iteration,
-            s.elapsed,
-            s.res,
-            s.allocated,
-            s.psnr,
-            test.map(|p| format!("{p:.3}")).unwrap_or_default()
-        );
-    };
+    // One row per 50 iterations and per evaluation: (step, test PSNR).
+    let mut log: Vec<(TrainStep, Option<f64>)> = Vec::new();
     let mut last: Option<TrainStep> = None;
     let outcome = voxel::train(&mut grid, &rays, &colors, &opts, &mut |s, g| {
         last = Some(*s);
@@ -226,7 +216,7 @@ fn run_voxel(a: VoxelArgs) -> Result<()> {
             && !data.test.is_empty();
         let test = eval.then(|| mean_psnr(g, &data.test, &render));
         if test.is_some() || s.iteration % 50 == 0 {
-            log_row(&mut log, s, test);
+            log.push((*s, test));
         }
         if let Some(b) = &bar {
             b.set_position(s.iteration as u64);
@@ -265,19 +255,15 @@ fn run_voxel(a: VoxelArgs) -> Result<()> {
         Some(mean_psnr(&grid, &data.test, &render))
     };
     if let Some(s) = last {
-        // The last row carries the final test PSNR; drop a row already logged for it.
-        let body = log.trim_end_matches('\n');
-        if let Some(cut) = body.rfind('\n')
-            && body[cut + 1..].starts_with(&format!("{},", s.iteration))
-        {
-            log.truncate(cut + 1);
-        }
-        log_row(&mut log, &s, test_psnr);
+        // The last row carries the final test PSNR (and the size after the final prune).
+        log.retain(|r| r.0.iteration != s.iteration);
+        let s = TrainStep {
+            allocated: grid.allocated(),
+            ..s
+        };
+        log.push((s, test_psnr));
     }
-    write_atomic(
-        &super::util::sibling(&a.output, "log").with_extension("csv"),
-        log.as_bytes(),
-    )?;
+    write_log(&a.output, &log)?;
     let dense = (a.res as u64 + 1).pow(3);
     if a.json {
         println!(
@@ -327,6 +313,56 @@ fn levels(res: u32) -> Vec<u32> {
         v.push(r);
     }
     v
+}
+
+/// Writes `<model>.log.csv` (iteration, training seconds, resolution, allocated slots,
+/// batch PSNR, test PSNR where evaluated) and, when the test views were evaluated more
+/// than once, `<model>.psnr.png` and `.psnr.svg`: PSNR against training time.
+fn write_log(model: &Path, rows: &[(TrainStep, Option<f64>)]) -> Result<()> {
+    let mut csv = String::from("iteration,seconds,res,allocated,batch_psnr,test_psnr\n");
+    for (s, test) in rows {
+        let _ = writeln!(
+            csv,
+            "{},{:.3},{},{},{:.3},{}",
+            s.iteration,
+            s.elapsed,
+            s.res,
+            s.allocated,
+            s.psnr,
+            test.map(|p| format!("{p:.3}")).unwrap_or_default()
+        );
+    }
+    let stem = model.with_extension("");
+    let path = |suffix: &str| {
+        let mut p = stem.clone().into_os_string();
+        p.push(suffix);
+        PathBuf::from(p)
+    };
+    write_atomic(&path(".log.csv"), csv.as_bytes())?;
+    let tests: Vec<(f64, f64)> = rows
+        .iter()
+        .filter_map(|(s, t)| t.map(|p| (s.elapsed as f64, p)))
+        .collect();
+    if tests.len() >= 2 {
+        let batches = rows
+            .iter()
+            .map(|(s, _)| (s.elapsed as f64, s.psnr as f64))
+            .collect();
+        let spec = PlotSpec::new(
+            format!(
+                "{}: PSNR against training time",
+                file_stem(&model.to_string_lossy())
+            ),
+            "training seconds",
+            "PSNR (dB)",
+        );
+        let series = [
+            Series::new("test views", tests),
+            Series::new("training batches", batches),
+        ];
+        write_plot(&spec, &series, path(".psnr.png"), path(".psnr.svg"))?;
+    }
+    Ok(())
 }
 
 /// Rendering with `step` voxels between samples, or an error naming the flag.
