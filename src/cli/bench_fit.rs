@@ -23,6 +23,9 @@ pub enum Which {
     /// several path counts against the painterly baseline and vtracer; writes a Markdown
     /// report and plots.
     Fit(SuiteArgs),
+    /// Rays per second of the voxel renderer and of its training, on a synthetic scene
+    /// held as a sparse and as a dense grid (see docs/3d.md).
+    Voxel(super::bench_voxel::VoxelBenchArgs),
 }
 
 /// Arguments of `diffsvg bench painterly`.
@@ -179,6 +182,7 @@ pub fn run(w: Which) -> Result<()> {
     match w {
         Which::Painterly(a) => run_painterly(a),
         Which::Fit(a) => super::bench_suite::run(a),
+        Which::Voxel(a) => super::bench_voxel::run(a),
     }
 }
 

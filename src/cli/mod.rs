@@ -9,6 +9,7 @@ mod batch;
 mod bench;
 mod bench_fit;
 mod bench_suite;
+mod bench_voxel;
 mod digits;
 mod fit;
 mod glyphs;

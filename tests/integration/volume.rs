@@ -629,3 +629,45 @@ fn view_rejects_bad_render_flags_cleanly() {
     ]);
     assert_clean_failure(&r, &["orbit", "parallel"], &out);
 }
+
+/// `bench voxel` runs on its own synthetic scene and reports both grids; the sparse one
+/// holds less (speeds are printed, never asserted).
+#[test]
+fn bench_voxel_reports_sparse_and_dense_grids() {
+    let r = diffsvg(&[
+        "bench",
+        "voxel",
+        "--res",
+        "16",
+        "--size",
+        "16",
+        "--views",
+        "2",
+        "--iters",
+        "2",
+        "--runs",
+        "1",
+        "--threads",
+        "1",
+    ]);
+    assert!(r.status.success(), "{}", stderr(&r));
+    let out = stdout(&r);
+    let row = |name: &str| -> Vec<String> {
+        let line = out
+            .lines()
+            .find(|l| l.starts_with(&format!("| {name} |")))
+            .unwrap_or_else(|| panic!("no {name} row in {out}"));
+        line.split('|').map(|c| c.trim().to_string()).collect()
+    };
+    let (sparse, dense) = (row("sparse"), row("dense"));
+    let allocated = |r: &[String]| r[3].parse::<usize>().unwrap();
+    assert_eq!(allocated(&dense), 17 * 17 * 17);
+    assert!(allocated(&sparse) < allocated(&dense), "{out}");
+    for r in [&sparse, &dense] {
+        for c in &r[5..7] {
+            let v: f64 = c.parse().unwrap();
+            assert!(v.is_finite() && v > 0.0, "{out}");
+        }
+    }
+    assert!(out.contains("sparse/dense speed"), "{out}");
+}
