@@ -60,6 +60,10 @@ pub struct Dataset {
     pub test: Vec<View>,
     /// The dataset folder's name.
     pub name: String,
+    /// Whether the photos show an object composited over white (NeRF-synthetic), so that
+    /// a ray leaving the scene sees white; false for real photos (instant-ngp), whose
+    /// surroundings fill every pixel and must be inside the model.
+    pub white_background: bool,
 }
 
 impl Dataset {
@@ -244,7 +248,12 @@ pub fn load(dir: &Path, downscale: u32) -> Result<Dataset> {
             train.push(view);
         }
     }
-    Ok(Dataset { train, test, name })
+    Ok(Dataset {
+        train,
+        test,
+        name,
+        white_background: synthetic.is_file(),
+    })
 }
 
 fn not_found(path: &Path, message: &str) -> Error {
@@ -689,6 +698,7 @@ mod tests {
         let ds = load(&dir, 1).unwrap();
         assert_eq!((ds.train.len(), ds.test.len()), (2, 1));
         assert!(ds.name.starts_with("diffsvg-dataset-synthetic"));
+        assert!(ds.white_background);
         let v = &ds.train[1];
         assert_eq!(v.name, "train/r_1");
         assert_eq!((v.width, v.height), (8, 6));
@@ -752,6 +762,7 @@ mod tests {
                     "frames": frames}),
         );
         let ds = load(&dir, 1).unwrap();
+        assert!(!ds.white_background, "real photos fill every pixel");
         // Present: 0 1 2 4 5 6 7 8 9 10 → positions 0 and 8 (files 0 and 9) are test.
         let names = |v: &[View]| v.iter().map(|v| v.name.clone()).collect::<Vec<_>>();
         assert_eq!(names(&ds.test), ["images/0000.jpg", "images/0009.jpg"]);
