@@ -114,7 +114,9 @@ pub struct ViewArgs {
     /// circle above the second.
     #[arg(long, default_value_t = 0)]
     orbit: usize,
-    /// Elevation of the orbit, degrees above the horizontal plane.
+    /// Elevation of the orbit, degrees above the horizontal plane (objects on white; real
+    /// photos are orbited along the arc and at the elevation of their cameras, since the
+    /// far side was never seen).
     #[arg(long, default_value_t = 30.0)]
     elevation: f32,
     /// Sample spacing along rays, in voxels.
@@ -552,7 +554,8 @@ fn file_stem(name: &str) -> String {
 }
 
 /// Cameras on a circle around the model, level with the dataset's "up" (the mean of its
-/// cameras' up vectors, or +Z), at the dataset's camera distance and field of view.
+/// cameras' up vectors, or +Z), at the dataset's camera distance and field of view; for
+/// real photos, along the arc their cameras span instead ([`arc_cameras`]).
 fn orbit_cameras(
     grid: &Grid,
     data: Option<&Dataset>,
@@ -574,18 +577,66 @@ fn orbit_cameras(
                     .map(|v| v.camera.c2w.matrix3.y_axis.into())
                     .fold(Vec3::ZERO, |a: Vec3, b: Vec3| a + b);
                 let (_, dist) = d.focus();
-                (
-                    dist,
-                    up.try_normalize().unwrap_or(Vec3::Z),
-                    v.camera.fov_x(),
-                    v.width,
-                    v.height,
-                )
+                let up = up.try_normalize().unwrap_or(Vec3::Z);
+                let fov = v.camera.fov_x();
+                if !d.white_background {
+                    return arc_cameras(views, center, dist, up, n, fov, v.width, v.height);
+                }
+                (dist, up, fov, v.width, v.height)
             }
             None => (3.0 * half, Vec3::Z, 0.69, 200, 200),
         };
     orbit(n, center, radius, elevation_deg.to_radians(), up, fov, w, h)
         .map_err(|e| anyhow::anyhow!("orbit cameras: {e}"))
+}
+
+/// For real photos, which show one side of the scene: `n` cameras looking at `center`
+/// along the arc the training cameras span around `up` (the circle less its largest
+/// empty gap), at their mean elevation and at distance `radius`.
+#[allow(clippy::too_many_arguments)]
+fn arc_cameras(
+    views: &[View],
+    center: Vec3,
+    radius: f32,
+    up: Vec3,
+    n: usize,
+    fov: f32,
+    w: u32,
+    h: u32,
+) -> Result<Vec<Camera>> {
+    use std::f32::consts::TAU;
+    let e1 = up.any_orthonormal_vector();
+    let e2 = up.cross(e1);
+    let mut az = Vec::new();
+    let mut elev = 0.0;
+    for v in views {
+        let p = (v.camera.position() - center).normalize_or_zero();
+        az.push(p.dot(e2).atan2(p.dot(e1)).rem_euclid(TAU));
+        elev += p.dot(up).clamp(-1.0, 1.0).asin();
+    }
+    elev /= views.len().max(1) as f32;
+    az.sort_by(|a, b| a.total_cmp(b));
+    // The largest gap between neighbouring azimuths (the last one wraps around).
+    let (mut start, mut gap) = (az[0], az[0] + TAU - az[az.len() - 1]);
+    for pair in az.windows(2) {
+        if pair[1] - pair[0] > gap {
+            (start, gap) = (pair[1], pair[1] - pair[0]);
+        }
+    }
+    let span = TAU - gap;
+    (0..n)
+        .map(|i| {
+            let t = if n > 1 {
+                i as f32 / (n - 1) as f32
+            } else {
+                0.5
+            };
+            let a = start + span * t;
+            let dir = (e1 * a.cos() + e2 * a.sin()) * elev.cos() + up * elev.sin();
+            Camera::look_at(center + dir * radius, center, up, fov, w, h)
+                .map_err(|e| anyhow::anyhow!("orbit cameras: {e}"))
+        })
+        .collect()
 }
 
 fn write_gif(frames: &[Image], path: &Path) -> Result<()> {
