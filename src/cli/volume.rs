@@ -661,7 +661,56 @@ fn write_gif(frames: &[Image], path: &Path) -> Result<()> {
 
 #[cfg(test)]
 mod tests {
-    use super::levels;
+    use super::{arc_cameras, levels};
+    use crate::volume::Vec3;
+    use crate::volume::camera::Camera;
+    use crate::volume::dataset::View;
+
+    #[test]
+    fn real_photo_orbits_follow_the_cameras_arc() {
+        // Cameras from azimuth 300° through 0° to 60° (wrapping), 20° above the plane.
+        let (center, up) = (Vec3::new(1.0, 2.0, 0.5), Vec3::Z);
+        let at = |deg: f32, elev: f32| {
+            let (a, e) = (deg.to_radians(), elev.to_radians());
+            center + 4.0 * Vec3::new(a.cos() * e.cos(), a.sin() * e.cos(), e.sin())
+        };
+        let views: Vec<View> = [300.0f32, 330.0, 0.0, 20.0, 60.0]
+            .iter()
+            .map(|&d| View {
+                name: format!("{d}"),
+                camera: Camera::look_at(at(d, 20.0), center, up, 0.7, 4, 4).unwrap(),
+                width: 4,
+                height: 4,
+                rgb: vec![[1.0; 3]; 16],
+            })
+            .collect();
+        let cams = arc_cameras(&views, center, 4.0, up, 5, 0.7, 4, 4).unwrap();
+        assert_eq!(cams.len(), 5);
+        for c in &cams {
+            let p = c.position() - center;
+            assert!((p.length() - 4.0).abs() < 1e-4);
+            let elev = (p.z / p.length()).asin().to_degrees();
+            assert!((elev - 20.0).abs() < 1e-2, "elevation {elev}");
+            // Looking at the center.
+            assert!(c.forward().dot(-p.normalize()) > 0.9999);
+        }
+        // Along the arc, from one end to the other, never behind (azimuth 60°..300°).
+        let az: Vec<f32> = cams
+            .iter()
+            .map(|c| {
+                let p = c.position() - center;
+                p.y.atan2(p.x).to_degrees().rem_euclid(360.0)
+            })
+            .collect();
+        let ends = [az[0], az[4]];
+        assert!(ends.iter().any(|a| (a - 300.0).abs() < 0.1), "{az:?}");
+        assert!(ends.iter().any(|a| (a - 60.0).abs() < 0.1), "{az:?}");
+        assert!(
+            (az[2] - 0.0).abs() < 0.1 || (az[2] - 360.0).abs() < 0.1,
+            "{az:?}"
+        );
+        assert!(az.iter().all(|&a| !(60.5..299.5).contains(&a)), "{az:?}");
+    }
 
     #[test]
     fn coarse_to_fine_levels_start_at_64_and_double() {
