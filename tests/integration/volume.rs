@@ -592,42 +592,28 @@ fn view_rejects_bad_render_flags_cleanly() {
     )
     .unwrap();
     let out = dir.join("views");
-    for step in ["0", "0.001", "NaN"] {
-        let r = diffsvg(&[
+    // (flag, value, what the message must name); the last looks straight down the up
+    // vector and is refused before anything is written.
+    let cases = [
+        ("--step", "0", vec!["step", "0"]),
+        ("--step", "0.001", vec!["step", "0.001"]),
+        ("--step", "NaN", vec!["step", "NaN"]),
+        ("--downscale", "0", vec!["--downscale"]),
+        ("--elevation", "90", vec!["orbit", "parallel"]),
+    ];
+    for (flag, value, needles) in cases {
+        let args = [
             "view",
             s(&model),
             "--orbit",
             "2",
             "-o",
             s(&out),
-            "--step",
-            step,
-        ]);
-        assert_clean_failure(&r, &["step", step], &out);
+            flag,
+            value,
+        ];
+        assert_clean_failure(&diffsvg(&args), &needles, &out);
     }
-    let r = diffsvg(&[
-        "view",
-        s(&model),
-        "--orbit",
-        "2",
-        "-o",
-        s(&out),
-        "--downscale",
-        "0",
-    ]);
-    assert_clean_failure(&r, &["--downscale"], &out);
-    // Looking straight down the up vector: refused before anything is written.
-    let r = diffsvg(&[
-        "view",
-        s(&model),
-        "--orbit",
-        "2",
-        "-o",
-        s(&out),
-        "--elevation",
-        "90",
-    ]);
-    assert_clean_failure(&r, &["orbit", "parallel"], &out);
 }
 
 /// `bench voxel` runs on its own synthetic scene and reports both grids; the sparse one
