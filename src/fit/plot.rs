@@ -11,6 +11,7 @@
 //! are skipped. Axes snap to "nice" ticks (1, 2 or 5 times a power of ten) that cover the
 //! data; an empty chart gets a default range, and a single value a range around it.
 
+use crate::scene::svg_out::escape;
 use crate::scene::{
     FRAME_IDENTITY, Fill, FillRule, LineCap, LineJoin, Node, Paint, Path as ScenePath, Point,
     Stroke,
@@ -850,21 +851,6 @@ fn num(v: f64) -> String {
 fn hex(c: [f64; 3]) -> String {
     let b = |v: f64| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
     format!("#{:02x}{:02x}{:02x}", b(c[0]), b(c[1]), b(c[2]))
-}
-
-fn escape(s: &str) -> String {
-    let mut out = String::with_capacity(s.len());
-    for c in s.chars() {
-        match c {
-            '&' => out.push_str("&amp;"),
-            '<' => out.push_str("&lt;"),
-            '>' => out.push_str("&gt;"),
-            '"' => out.push_str("&quot;"),
-            c if (c as u32) < 0x20 && c != '\t' => out.push(' '),
-            c => out.push(c),
-        }
-    }
-    out
 }
 
 fn solid_stroke(color: [f64; 3], width: f64, cap: LineCap) -> Stroke {

@@ -302,11 +302,23 @@ pub fn path_data(p: &Path, t: &Affine) -> String {
     d
 }
 
-fn escape(s: &str) -> String {
-    s.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
-        .replace('"', "&quot;")
+/// Escapes text for XML or HTML content and quoted attribute values: `& < > " '` become
+/// entities, and control characters other than tab (not allowed in XML 1.0, or unwanted in
+/// one-line labels) become spaces. Shared by the SVG writer, the plots and the batch report.
+pub(crate) fn escape(s: &str) -> String {
+    let mut out = String::with_capacity(s.len());
+    for c in s.chars() {
+        match c {
+            '&' => out.push_str("&amp;"),
+            '<' => out.push_str("&lt;"),
+            '>' => out.push_str("&gt;"),
+            '"' => out.push_str("&quot;"),
+            '\'' => out.push_str("&#39;"),
+            c if (c as u32) < 0x20 && c != '\t' => out.push(' '),
+            c => out.push(c),
+        }
+    }
+    out
 }
 
 impl Scene {
@@ -358,6 +370,15 @@ impl Scene {
 mod tests {
     use super::*;
     use crate::scene::svg_in::Sizing;
+
+    #[test]
+    fn markup_is_escaped_and_control_characters_dropped() {
+        assert_eq!(
+            escape("a<b & \"c\" 'd'>\n\te"),
+            "a&lt;b &amp; &quot;c&quot; &#39;d&#39;&gt; \te"
+        );
+        assert_eq!(escape("plain ünïcode"), "plain ünïcode");
+    }
 
     #[test]
     fn numbers_are_compact() {

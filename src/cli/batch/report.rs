@@ -8,6 +8,7 @@ use serde_json::json;
 use super::Shard;
 use super::runner::{Outcome, Status};
 use crate::image_io::write_atomic;
+use crate::scene::svg_out::escape as esc;
 
 /// Counts of a batch's outcomes.
 #[derive(Debug, Default, Clone, Copy)]
@@ -111,22 +112,6 @@ fn csv_field(f: &str) -> String {
     } else {
         f.to_string()
     }
-}
-
-/// Escapes text for HTML.
-fn esc(s: &str) -> String {
-    let mut out = String::with_capacity(s.len());
-    for c in s.chars() {
-        match c {
-            '&' => out.push_str("&amp;"),
-            '<' => out.push_str("&lt;"),
-            '>' => out.push_str("&gt;"),
-            '"' => out.push_str("&quot;"),
-            '\'' => out.push_str("&#39;"),
-            c => out.push(c),
-        }
-    }
-    out
 }
 
 /// A page with one table row per job.
