@@ -8,6 +8,7 @@ use std::time::Instant;
 
 use anyhow::{Result, bail};
 
+use crate::fit::refine::median;
 use crate::volume::camera::orbit;
 use crate::volume::voxel::{self, Grid, RenderSettings, TrainOptions};
 use crate::volume::{Ray, Vec3};
@@ -80,11 +81,6 @@ fn bytes(g: &Grid) -> usize {
     4 * n * n * n + 4 * g.allocated() + 4 * g.sh().len()
 }
 
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(|a, b| a.total_cmp(b));
-    v[v.len() / 2]
-}
-
 /// Runs `diffsvg bench voxel`.
 pub fn run(a: VoxelBenchArgs) -> Result<()> {
     if !(8..=512).contains(&a.res) || a.size == 0 || a.views == 0 || a.iters == 0 {
@@ -134,7 +130,7 @@ pub fn run(a: VoxelBenchArgs) -> Result<()> {
                     let o = voxel::train(&mut g, &rays, &colors, &opts, &mut |_, _| true)?;
                     tr.push((o.iterations * opts.batch_size) as f64 / o.seconds as f64);
                 }
-                Ok((median(f), median(tr)))
+                Ok((median(&mut f), median(&mut tr)))
             })?;
             let _ = writeln!(
                 out,
