@@ -19,6 +19,7 @@ pub mod error;
 pub mod fit;
 pub mod gradcheck;
 pub mod image_io;
+pub mod limits;
 pub mod loss;
 pub mod metrics;
 pub mod mnist;

@@ -8,8 +8,8 @@ use super::{
 };
 use crate::error::{Error, Result};
 
-/// The largest canvas side accepted, in pixels.
-pub const MAX_SIDE: u32 = 16384;
+pub use crate::limits::MAX_SIDE;
+use crate::limits::MAX_COORDINATE;
 
 /// How to size the canvas when loading an SVG.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -131,9 +131,6 @@ const GEOMETRY_ATTRIBUTES: &[&str] = &[
     "stroke-width",
     "viewBox",
 ];
-
-/// Largest coordinate magnitude accepted (far beyond any drawing, well inside `f32`).
-const MAX_COORDINATE: f64 = 1e30;
 
 /// Describes the first NaN, infinity or out-of-range number in an attribute value.
 fn bad_number(value: &str) -> Option<String> {

@@ -1,0 +1,39 @@
+//! Every limit that input can reach, in one place.
+//!
+//! diffsvg sizes its memory and time by the work asked for, never by what a file makes it
+//! allocate: each count or size below is checked **before** the allocation it bounds.
+//! Past a limit the input is refused with an error naming the file and the limit, except
+//! where a fallback is documented (dashes). `docs/limits.md` explains each one; a test
+//! beside each check feeds it the case that used to break.
+
+/// Largest canvas side, in pixels (rendered scenes and targets).
+pub const MAX_SIDE: u32 = 16384;
+
+/// Largest canvas area, in pixels: a rendered `f32` RGBA canvas takes 16 bytes a pixel,
+/// so this caps one canvas at 512 MiB (8192 × 4096, or about 5792²).
+pub const MAX_PIXELS: u64 = 1 << 25;
+
+/// Largest image read from disk (target photos, dataset photos), in pixels, read from
+/// the file's header before anything is decoded.
+pub const MAX_IMAGE_PIXELS: u64 = MAX_PIXELS;
+
+/// Largest input file read whole (SVG, job file, camera file, PLY header), in bytes.
+pub const MAX_FILE_BYTES: u64 = 64 << 20;
+
+/// Largest decompressed size of a gzip stream (`.svgz`, `.gz` IDX files), in bytes.
+pub const MAX_DECOMPRESSED_BYTES: u64 = 256 << 20;
+
+/// Most dashes cut from one path's stroke. Past it the dash pattern is dropped and the
+/// stroke drawn solid, with a warning (Skia gives up dashing at a fixed count too).
+pub const MAX_DASHES_PER_PATH: usize = 100_000;
+
+/// Most flattened chords in one scene (fills and stroke centerlines together), so memory
+/// follows the drawing's size rather than a file's claims.
+pub const MAX_SCENE_CHORDS: usize = 4_000_000;
+
+/// Deepest nesting of groups composited as layers.
+pub const MAX_GROUP_DEPTH: usize = 256;
+
+/// Largest coordinate magnitude accepted on input and written on output, in the file's
+/// own units (far beyond any drawing, well inside `f32`).
+pub const MAX_COORDINATE: f64 = 1e30;
