@@ -6,7 +6,7 @@ use anyhow::{Result, bail};
 use serde_json::{Value, json};
 
 use super::util::{SizeArgs, parse_color};
-use crate::gradcheck::{analytic, check};
+use crate::gradcheck::{analytic, compare, numeric};
 use crate::image_io::Image;
 use crate::loss::Loss;
 use crate::raster::{RenderOptions, render};
@@ -48,9 +48,25 @@ pub struct GradArgs {
     #[arg(long)]
     json: bool,
     /// Also compare every gradient with central finite differences (chord counts held
-    /// fixed) and print the worst relative error per parameter group.
+    /// fixed) and print the worst relative error per parameter group; exits with status 1
+    /// when a group's worst error exceeds `--tolerance`.
     #[arg(long)]
     check: bool,
+    /// Largest relative error `--check` accepts.
+    #[arg(long, default_value_t = crate::gradcheck::DEFAULT_TOLERANCE, requires = "check")]
+    tolerance: f64,
+    /// Testing the checker: negate the analytic gradient of this parameter slot before
+    /// checking, which `--check` must catch.
+    #[arg(long, hide = true, requires = "check")]
+    corrupt: Option<usize>,
+}
+
+/// What `diffsvg grad` found: whether `--check` (when asked) passed.
+pub enum GradOutcome {
+    /// No check asked, or every group within tolerance.
+    Passed,
+    /// Some group exceeded the tolerance.
+    CheckFailed,
 }
 
 struct Job {
@@ -102,10 +118,19 @@ pub fn run_loss(a: LossArgs) -> Result<()> {
 }
 
 /// Runs `diffsvg grad`.
-pub fn run_grad(a: GradArgs) -> Result<()> {
+pub fn run_grad(a: GradArgs) -> Result<GradOutcome> {
+    if !(a.tolerance > 0.0 && a.tolerance.is_finite()) {
+        bail!("--tolerance {} must be a positive number", a.tolerance);
+    }
     let job = load(&a.common)?;
     let opts = RenderOptions::default();
-    let (loss, grad) = analytic(&job.scene, &job.target, job.loss, &opts, job.background);
+    let (loss, mut grad) = analytic(&job.scene, &job.target, job.loss, &opts, job.background);
+    if let Some(i) = a.corrupt {
+        if i >= grad.len() {
+            bail!("--corrupt {i}: the scene has {} parameters", grad.len());
+        }
+        grad[i] = -grad[i];
+    }
     if a.json {
         let doc = gradient_json(&job.scene, loss, &grad);
         println!("{}", serde_json::to_string_pretty(&doc)?);
@@ -126,25 +151,40 @@ pub fn run_grad(a: GradArgs) -> Result<()> {
             println!("{kind} {id}: |gradient| {norm:.4e}");
         }
     }
-    if a.check {
-        let (_, _, groups) = check(
-            &job.scene,
-            &job.target,
-            job.loss,
-            &opts,
-            job.background,
-            None,
-        );
-        let out = if a.json {
-            &mut std::io::stderr() as &mut dyn std::io::Write
-        } else {
-            &mut std::io::stdout()
-        };
-        for g in groups {
-            writeln!(out, "check {g}")?;
-        }
+    if !a.check {
+        return Ok(GradOutcome::Passed);
     }
-    Ok(())
+    let which: Vec<usize> = (0..grad.len()).collect();
+    let num = numeric(
+        &job.scene,
+        &job.target,
+        job.loss,
+        &opts,
+        job.background,
+        &which,
+    );
+    let groups = compare(&ParamLayout::new(&job.scene), &which, &grad, &num);
+    let out = if a.json {
+        &mut std::io::stderr() as &mut dyn std::io::Write
+    } else {
+        &mut std::io::stdout()
+    };
+    let mut failed = false;
+    for g in groups {
+        let ok = g.passes(a.tolerance);
+        failed |= !ok;
+        writeln!(out, "check {g} {}", if ok { "ok" } else { "FAILED" })?;
+    }
+    Ok(if failed {
+        eprintln!(
+            "error: {}: the gradient check failed (worst relative error above {})",
+            a.common.input.display(),
+            a.tolerance
+        );
+        GradOutcome::CheckFailed
+    } else {
+        GradOutcome::Passed
+    })
 }
 
 /// The gradient as a JSON document, one entry per shape and group in paint order.

@@ -69,7 +69,10 @@ pub fn main() -> ExitCode {
         Command::Parity(a) => parity::run(a),
         Command::Bench(a) => bench::run(a),
         Command::Loss(a) => grad::run_loss(a),
-        Command::Grad(a) => grad::run_grad(a),
+        Command::Grad(a) => match grad::run_grad(a) {
+            Ok(grad::GradOutcome::CheckFailed) => return ExitCode::from(1),
+            r => r.map(|_| ()),
+        },
         Command::Fit(a) => fit::run(a),
         Command::Perturb(a) => perturb::run(a),
         Command::Vectorize(a) => vectorize::run(a),

@@ -7,6 +7,7 @@ mod digits;
 mod exactness;
 mod fit;
 mod glyphs;
+mod gradcheck_cli;
 mod gradients;
 mod parity;
 mod roundtrip;
