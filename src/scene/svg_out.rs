@@ -14,7 +14,8 @@ use super::{
     Affine, FRAME_IDENTITY, FillRule, GradientKind, LineCap, LineJoin, Node, Paint, Path, Scene,
     SegmentKind, Spread, apply, concat, invert,
 };
-use crate::error::Result;
+use crate::error::{Error, Result};
+use crate::limits::MAX_COORDINATE;
 
 /// Formats a number with at most four decimals and no trailing zeros.
 pub fn num(v: f64) -> String {
@@ -361,8 +362,169 @@ impl Scene {
     }
 
     /// Writes the scene as an SVG file, atomically (temporary file, then rename).
+    ///
+    /// A scene holding a number that is not finite or beyond [`MAX_COORDINATE`] (see
+    /// [`check_numbers`]) is refused with an error naming `path` and the value, and nothing
+    /// is written: diffsvg never writes an SVG that it refuses to read.
     pub fn save_svg(&self, path: impl AsRef<FsPath>) -> Result<()> {
-        crate::image_io::write_atomic(path.as_ref(), self.to_svg_string().as_bytes())
+        let path = path.as_ref();
+        check_numbers(self).map_err(|what| Error::InvalidValue {
+            path: path.to_path_buf(),
+            what: format!("refusing to write {what}"),
+        })?;
+        crate::image_io::write_atomic(path, self.to_svg_string().as_bytes())
+    }
+}
+
+/// Reader slack for `f32` rounding: a number written at exactly [`MAX_COORDINATE`] may read
+/// back a few `f32` ulps above it.
+pub(crate) const READ_SLACK: f64 = 1.0 + 1e-6;
+
+/// Checks every number the SVG of `scene` holds, as [`Scene::to_svg_string`] writes it and
+/// as [`Scene::load`] reads it back in device pixels: control points (in device space and,
+/// for a stroke drawn in a frame, in the frame's space too), stroke widths, miter limits,
+/// dash arrays and offsets, stroke frames, gradient geometry and transforms, stop offsets,
+/// opacities. Each must be finite with magnitude at most [`MAX_COORDINATE`].
+///
+/// The reader runs this on every scene it loads and the writer before it writes, so what
+/// one accepts the other accepts. The error describes the first bad value and its element:
+/// `path "id": stroke width 1e38 is out of range (at most 1e30 in magnitude)`. Paths and
+/// groups without an id are named by their position (`path #3`, 1-based, document order).
+pub fn check_numbers(scene: &Scene) -> std::result::Result<(), String> {
+    check_numbers_with(scene, 1.0)
+}
+
+/// [`check_numbers`] with the limit scaled by `slack` (the reader allows `f32` rounding).
+pub(crate) fn check_numbers_with(scene: &Scene, slack: f64) -> std::result::Result<(), String> {
+    let mut c = Checker {
+        limit: MAX_COORDINATE * slack,
+        paths: 0,
+        groups: 0,
+    };
+    c.nodes(&scene.nodes)
+}
+
+struct Checker {
+    limit: f64,
+    paths: usize,
+    groups: usize,
+}
+
+impl Checker {
+    fn value(
+        &self,
+        owner: &dyn Fn() -> String,
+        what: &str,
+        v: f64,
+    ) -> std::result::Result<(), String> {
+        if v.is_finite() && v.abs() <= self.limit {
+            Ok(())
+        } else if v.is_finite() {
+            Err(format!(
+                "{}: {what} {v:e} is out of range (at most {MAX_COORDINATE:e} in magnitude)",
+                owner()
+            ))
+        } else {
+            Err(format!("{}: {what} is {v} (not a finite number)", owner()))
+        }
+    }
+
+    fn nodes(&mut self, nodes: &[Node]) -> std::result::Result<(), String> {
+        for n in nodes {
+            match n {
+                Node::Group(g) => {
+                    self.groups += 1;
+                    let k = self.groups;
+                    let owner = || name("group", &g.id, k);
+                    self.value(&owner, "opacity", g.opacity)?;
+                    self.nodes(&g.children)?;
+                }
+                Node::Path(p) => {
+                    self.paths += 1;
+                    self.path(p)?;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn path(&self, p: &Path) -> std::result::Result<(), String> {
+        let k = self.paths;
+        let owner = || name("path", &p.id, k);
+        // As the writer: a stroke frame other than the identity puts the path in it.
+        let mut to_local = None;
+        if let Some(s) = &p.stroke {
+            if s.frame != FRAME_IDENTITY {
+                for v in s.frame {
+                    self.value(&owner, "stroke frame entry", v)?;
+                }
+                let [a, b, c, d] = s.frame;
+                to_local = invert(&[a, b, c, d, 0.0, 0.0]);
+            }
+        }
+        for q in &p.points {
+            self.value(&owner, "coordinate", q[0])?;
+            self.value(&owner, "coordinate", q[1])?;
+            if let Some(t) = &to_local {
+                let l = apply(t, *q);
+                self.value(&owner, "coordinate in the stroke's frame", l[0])?;
+                self.value(&owner, "coordinate in the stroke's frame", l[1])?;
+            }
+        }
+        let to_local = to_local.unwrap_or(super::IDENTITY);
+        if let Some(f) = &p.fill {
+            self.value(&owner, "fill opacity", f.opacity)?;
+            self.paint(&owner, &f.paint, &to_local)?;
+        }
+        if let Some(s) = &p.stroke {
+            self.value(&owner, "stroke opacity", s.opacity)?;
+            self.value(&owner, "stroke width", s.width)?;
+            self.value(&owner, "stroke miter limit", s.miter_limit)?;
+            for &v in s.dash.iter().flatten() {
+                self.value(&owner, "stroke dash length", v)?;
+            }
+            self.value(&owner, "stroke dash offset", s.dash_offset)?;
+            self.paint(&owner, &s.paint, &to_local)?;
+        }
+        Ok(())
+    }
+
+    fn paint(
+        &self,
+        owner: &dyn Fn() -> String,
+        paint: &Paint,
+        to_local: &Affine,
+    ) -> std::result::Result<(), String> {
+        let Paint::Gradient(g) = paint else {
+            return Ok(());
+        };
+        let geometry: Vec<f64> = match g.kind {
+            GradientKind::Linear { p1, p2 } => vec![p1[0], p1[1], p2[0], p2[1]],
+            GradientKind::Radial { c, r, f, fr } => vec![c[0], c[1], r, f[0], f[1], fr],
+        };
+        for v in geometry {
+            self.value(owner, "gradient coordinate", v)?;
+        }
+        for v in g
+            .transform
+            .into_iter()
+            .chain(concat(to_local, &g.transform))
+        {
+            self.value(owner, "gradient transform entry", v)?;
+        }
+        for s in &g.stops {
+            self.value(owner, "gradient stop offset", s.offset)?;
+            self.value(owner, "gradient stop opacity", s.opacity)?;
+        }
+        Ok(())
+    }
+}
+
+fn name(kind: &str, id: &str, k: usize) -> String {
+    if id.is_empty() {
+        format!("{kind} #{k}")
+    } else {
+        format!("{kind} \"{id}\"")
     }
 }
 
