@@ -450,4 +450,77 @@ mod tests {
         assert!(e.contains("a.png"), "{e}");
         std::fs::remove_dir_all(&dir).unwrap();
     }
+
+    /// `digits --indices 0,0` had two threads write one output through one temporary
+    /// name: one rename failed and a temporary file was left. Names are now per writer.
+    #[test]
+    fn parallel_writers_of_one_output_all_succeed() {
+        let dir = std::env::temp_dir().join(format!("diffsvg-par-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let f = dir.join("same.svg");
+        let body = vec![b'x'; 1 << 16];
+        std::thread::scope(|s| {
+            let handles: Vec<_> = (0..8)
+                .map(|_| s.spawn(|| (0..20).map(|_| write_atomic(&f, &body)).collect::<Vec<_>>()))
+                .collect();
+            for h in handles {
+                for r in h.join().unwrap() {
+                    r.unwrap();
+                }
+            }
+        });
+        assert_eq!(std::fs::read(&f).unwrap(), body);
+        assert_eq!(
+            std::fs::read_dir(&dir).unwrap().count(),
+            1,
+            "no temporary file left"
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn reads_are_bounded() {
+        let dir = std::env::temp_dir().join(format!("diffsvg-bound-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let f = dir.join("ten");
+        std::fs::write(&f, [7u8; 10]).unwrap();
+        assert_eq!(read_bounded(&f, 10).unwrap().len(), 10);
+        let e = read_bounded(&f, 9).unwrap_err().to_string();
+        assert!(e.contains("ten") && e.contains("limit of 9 bytes"), "{e}");
+        // An endless file stops one byte past the limit.
+        let e = read_bounded(Path::new("/dev/zero"), 1 << 20)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("/dev/zero") && e.contains("1 MiB"), "{e}");
+        assert!(read_bounded(&dir, 10).is_err());
+        std::fs::remove_dir_all(&dir).unwrap();
+        // A gzip stream is inflated only up to its limit.
+        let mut z = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+        z.write_all(&[b' '; 5000]).unwrap();
+        let gz = z.finish().unwrap();
+        assert!(is_gzip(&gz));
+        assert_eq!(
+            gunzip_bounded(&gz, 5000, Path::new("a.svgz"))
+                .unwrap()
+                .len(),
+            5000
+        );
+        let e = gunzip_bounded(&gz, 4999, Path::new("a.svgz"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("a.svgz") && e.contains("more than the limit"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn image_sizes_are_checked() {
+        let p = Path::new("t.png");
+        assert!(check_image_size(MAX_SIDE, 2, p).is_ok());
+        let e = check_image_size(11000, 11000, p).unwrap_err().to_string();
+        assert!(e.contains("t.png") && e.contains("11000x11000"), "{e}");
+        assert!(check_image_size(MAX_SIDE + 1, 1, p).is_err());
+        assert!(check_image_size(0, 5, p).is_err());
+    }
 }

@@ -146,4 +146,20 @@ mod tests {
         assert_eq!((s.opacity, s.width), (1.0, 0.0));
         assert_eq!(s.paint, Paint::Solid([1.0, 0.5, 0.0]));
     }
+
+    /// `fit --lr-points 1e308`: after a huge step, projection brings every coordinate
+    /// back within the readable range, so the scene is written and read back.
+    #[test]
+    fn lr_points_1e308_step_stays_readable() {
+        let mut scene = crate::scene::random::curved_paths(2, 32, 3);
+        let mut p = scene.params();
+        for (k, v) in p.iter_mut().enumerate() {
+            *v += if k % 2 == 0 { 1e308 } else { -1e308 };
+        }
+        scene.set_params(&p);
+        project(&mut scene);
+        assert!(crate::scene::svg_out::check_numbers(&scene).is_ok());
+        let text = scene.to_svg_string();
+        crate::Scene::from_svg_str(&text, "back.svg", crate::Sizing::Natural).unwrap();
+    }
 }

@@ -97,18 +97,32 @@ fn reject_unsupported_xml(text: &str, name: &FsPath) -> Result<()> {
                     what: format!("markers ({})", describe(tag, n.attribute("id"))),
                 });
             }
-            if GEOMETRY_ATTRIBUTES.contains(&a.name()) {
-                if let Some(bad) = bad_number(a.value()) {
-                    return Err(Error::InvalidValue {
-                        path: name.to_path_buf(),
-                        what: format!(
-                            "{} in attribute {} of {}",
-                            bad,
-                            a.name(),
-                            describe(tag, n.attribute("id"))
-                        ),
-                    });
-                }
+            let bad = if a.name() == "style" {
+                css_bad_number(a.value())
+            } else if GEOMETRY_ATTRIBUTES.contains(&a.name()) {
+                bad_number(a.value()).map(|bad| (a.name().to_string(), bad))
+            } else {
+                None
+            };
+            if let Some((property, bad)) = bad {
+                let place = if a.name() == "style" {
+                    format!("property {property} in the style of")
+                } else {
+                    format!("attribute {property} of")
+                };
+                return Err(Error::InvalidValue {
+                    path: name.to_path_buf(),
+                    what: format!("{bad} in {place} {}", describe(tag, n.attribute("id"))),
+                });
+            }
+        }
+        if tag == "style" {
+            let css: String = n.children().filter_map(|c| c.text()).collect();
+            if let Some((property, bad)) = css_bad_number(&css) {
+                return Err(Error::InvalidValue {
+                    path: name.to_path_buf(),
+                    what: format!("{bad} in property {property} of a <style> rule"),
+                });
             }
         }
     }
@@ -150,6 +164,17 @@ const GEOMETRY_ATTRIBUTES: &[&str] = &[
     "stroke-miterlimit",
     "viewBox",
 ];
+
+/// The first CSS declaration (`name: value`, in a `style` attribute or a `<style>` sheet)
+/// of a [`GEOMETRY_ATTRIBUTES`] property whose value holds a number usvg cannot represent:
+/// the property and [`bad_number`]'s description.
+fn css_bad_number(css: &str) -> Option<(String, String)> {
+    css.split([';', '{', '}'])
+        .filter_map(|decl| decl.split_once(':'))
+        .map(|(k, v)| (k.trim(), v.trim().trim_end_matches("!important")))
+        .filter(|(k, _)| GEOMETRY_ATTRIBUTES.contains(k))
+        .find_map(|(k, v)| bad_number(v).map(|b| (k.to_string(), b)))
+}
 
 /// Describes the first NaN, infinity or number beyond `f32` in an attribute value.
 fn bad_number(value: &str) -> Option<String> {
@@ -530,6 +555,15 @@ mod tests {
             e.contains("nan.svg") && e.contains("NaN") && e.contains("\"r\""),
             "{e}"
         );
+    }
+
+    #[test]
+    fn css_numbers_beyond_f32_are_reported() {
+        assert_eq!(css_bad_number("fill:#1e40af; stroke-width: 2"), None);
+        let (k, b) = css_bad_number(".a { fill: red } .b{stroke-width:1e39 !important}").unwrap();
+        assert_eq!(k, "stroke-width");
+        assert!(b.contains("1e39"), "{b}");
+        assert!(css_bad_number("stroke-dasharray: 1 NaN").is_some());
     }
 
     fn load(s: &str) -> Result<Scene> {

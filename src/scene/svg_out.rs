@@ -420,9 +420,18 @@ impl Checker {
         if v.is_finite() && v.abs() <= self.limit {
             Ok(())
         } else if v.is_finite() {
+            // Lengths are in device pixels; shown as the nearest `f32`, the precision they
+            // were read with.
+            let unitless = ["opacity", "stop offset", "miter", "entry"];
+            let unit = if unitless.iter().any(|u| what.contains(u)) {
+                ""
+            } else {
+                " px"
+            };
             Err(format!(
-                "{}: {what} {v:e} is out of range (at most {MAX_COORDINATE:e} in magnitude)",
-                owner()
+                "{}: {what} {:e}{unit} is out of range (at most {MAX_COORDINATE:e} in magnitude)",
+                owner(),
+                v as f32
             ))
         } else {
             Err(format!("{}: {what} is {v} (not a finite number)", owner()))
@@ -563,5 +572,50 @@ mod tests {
         assert!(out.contains(r#"id="p""#));
         let back = Scene::from_svg_str(&out, "out.svg", Sizing::Natural).unwrap();
         assert_eq!(back.params().len(), s.params().len());
+    }
+
+    /// `fit --lr-points 1e308` and `perturb --points 1e300` wrote coordinates near 1e306
+    /// that the reader refuses: the writer now refuses them, and writes nothing.
+    #[test]
+    fn writer_refuses_what_the_reader_refuses() {
+        let dir = std::env::temp_dir().join(format!("diffsvg-out-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let svg = r##"<svg xmlns="http://www.w3.org/2000/svg" width="10" height="10">
+            <path id="p" d="M1 1 L5 1 L5 5 Z" fill="#ff0000" stroke="#000000"/></svg>"##;
+        let good = Scene::from_svg_str(svg, "t.svg", Sizing::Natural).unwrap();
+        let f = dir.join("out.svg");
+        let cases: [(&str, fn(&mut Path)); 4] = [
+            ("coordinate 1e306 px", |p| p.points[1][0] = 1e306),
+            ("coordinate is NaN", |p| p.points[0][1] = f64::NAN),
+            ("stroke width 1e31 px", |p| {
+                p.stroke.as_mut().unwrap().width = 1e31
+            }),
+            ("dash length inf", |p| {
+                p.stroke.as_mut().unwrap().dash = Some(vec![1.0, f64::INFINITY])
+            }),
+        ];
+        for (want, spoil) in cases {
+            let mut bad = good.clone();
+            let Node::Path(p) = &mut bad.nodes[0] else {
+                unreachable!()
+            };
+            spoil(p);
+            let e = bad.save_svg(&f).unwrap_err().to_string();
+            assert!(e.contains("out.svg") && e.contains("path \"p\""), "{e}");
+            assert!(e.contains(want.split(' ').next().unwrap()), "{want}: {e}");
+            assert!(!f.exists());
+            // And the reader refuses the same scene's text.
+            let back = Scene::from_svg_str(&bad.to_svg_string(), "back.svg", Sizing::Natural);
+            assert!(back.is_err() || want.contains("NaN"), "{want}");
+        }
+        // At the limit, a written scene reads back.
+        let mut edge = good.clone();
+        let Node::Path(p) = &mut edge.nodes[0] else {
+            unreachable!()
+        };
+        p.points[1] = [MAX_COORDINATE, -MAX_COORDINATE];
+        edge.save_svg(&f).unwrap();
+        Scene::load(&f, Sizing::Natural).unwrap();
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

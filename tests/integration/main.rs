@@ -9,6 +9,7 @@ mod fit;
 mod glyphs;
 mod gradients;
 mod parity;
+mod regress_input;
 mod roundtrip;
 mod vectorize;
 mod volume;
