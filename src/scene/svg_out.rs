@@ -471,7 +471,14 @@ impl Checker {
                 to_local = invert(&[a, b, c, d, 0.0, 0.0]);
             }
         }
-        for q in &p.points {
+        // End points first, so that the value reported is one the file shows (a line's
+        // control points sit a third of the way along it).
+        let ends = p
+            .subpaths
+            .iter()
+            .flat_map(|sp| (0..=sp.kinds.len()).map(move |k| sp.start + 3 * k))
+            .filter_map(|i| p.points.get(i));
+        for q in ends.chain(&p.points) {
             self.value(&owner, "coordinate", q[0])?;
             self.value(&owner, "coordinate", q[1])?;
             if let Some(t) = &to_local {
