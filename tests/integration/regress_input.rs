@@ -349,6 +349,7 @@ fn digits_gzip_bomb_is_refused_before_inflating() {
     let long = gz("long-idx3-ubyte.gz", &[10, 28, 28], 64 << 20);
     let o = diffsvg_bounded(&["digits", "--images", s(&long), "-o", s(&out)]);
     assert_fails(&o, "long-idx3-ubyte.gz", "promises 7840 bytes", &out);
+    assert!(stderr(&o).contains("holds more"), "{}", stderr(&o));
 }
 
 #[test]
