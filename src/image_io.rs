@@ -182,8 +182,17 @@ impl Image {
         write_atomic(path, &buf)
     }
 
+    /// [`resized`](Self::resized) to a size chosen by the user, checked first with
+    /// [`check_image_size`]; `what` names the choice in the error (a flag such as
+    /// `--width`, or a file).
+    pub fn resized_checked(&self, width: u32, height: u32, what: &Path) -> Result<Image> {
+        check_image_size(width, height, what)?;
+        Ok(self.resized(width, height))
+    }
+
     /// Resamples to `width × height` with a triangle filter (premultiplied, so edges do
-    /// not pick up the color of transparent pixels).
+    /// not pick up the color of transparent pixels). The size is not checked: for a size
+    /// that comes from input use [`resized_checked`](Self::resized_checked).
     pub fn resized(&self, width: u32, height: u32) -> Image {
         let mut buf = image::Rgba32FImage::new(self.width, self.height);
         for (i, px) in buf.pixels_mut().enumerate() {
@@ -522,5 +531,12 @@ mod tests {
         assert!(e.contains("t.png") && e.contains("11000x11000"), "{e}");
         assert!(check_image_size(MAX_SIDE + 1, 1, p).is_err());
         assert!(check_image_size(0, 5, p).is_err());
+        // `vectorize --width 16000` resampled a target to 16000 × 16000 (4 GB) unchecked.
+        let e = Image::new(2, 2)
+            .resized_checked(16000, 16000, Path::new("--width"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("--width: image size 16000x16000"), "{e}");
+        assert_eq!(Image::new(2, 2).resized_checked(3, 1, p).unwrap().width, 3);
     }
 }
