@@ -4,10 +4,12 @@
 //! linearization, as browsers and resvg composite), row-major, y down. Files hold straight
 //! (not premultiplied) 8-bit RGBA or RGB: PNG and JPEG are read, PNG is written.
 
-use std::io::Write as _;
+use std::io::{Read as _, Write as _};
 use std::path::Path;
+use std::sync::atomic::{AtomicU64, Ordering};
 
 use crate::error::{Error, Result};
+use crate::limits::{MAX_FILE_BYTES, MAX_IMAGE_PIXELS, MAX_SIDE};
 
 /// A premultiplied RGBA image.
 #[derive(Clone, Debug, PartialEq)]
@@ -125,14 +127,34 @@ impl Image {
     }
 
     /// Reads a PNG or JPEG file (straight alpha in the file), premultiplying.
+    ///
+    /// The file is read with a bound ([`MAX_FILE_BYTES`]) and its dimensions are taken
+    /// from its header and checked against [`MAX_SIDE`] and [`MAX_IMAGE_PIXELS`] before
+    /// anything is decoded, so a small file claiming a huge picture is refused cheaply.
     pub fn load(path: impl AsRef<Path>) -> Result<Image> {
         let path = path.as_ref();
-        let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-        let img = image::load_from_memory(&bytes).map_err(|e| Error::Image {
+        let bytes = read_bounded(path, MAX_FILE_BYTES)?;
+        let unreadable = |e: &dyn std::fmt::Display| Error::Image {
             path: path.to_path_buf(),
             message: format!("not a readable PNG or JPEG image: {e}"),
-        })?;
+        };
+        let reader = || {
+            image::ImageReader::new(std::io::Cursor::new(&bytes[..]))
+                .with_guessed_format()
+                .map_err(|e| unreadable(&e))
+        };
+        let (w, h) = reader()?.into_dimensions().map_err(|e| unreadable(&e))?;
+        check_image_size(w, h, path)?;
+        let mut r = reader()?;
+        let mut limits = image::Limits::default();
+        limits.max_image_width = Some(MAX_SIDE);
+        limits.max_image_height = Some(MAX_SIDE);
+        // The decoded picture at 16 bits × 4 channels, with room for the decoder's own use.
+        limits.max_alloc = Some(MAX_IMAGE_PIXELS * 8 + (64 << 20));
+        r.limits(limits);
+        let img = r.decode().map_err(|e| unreadable(&e))?;
         let rgba = img.to_rgba8();
+        drop(img);
         Ok(Image::from_rgba8(
             rgba.width(),
             rgba.height(),
@@ -160,8 +182,17 @@ impl Image {
         write_atomic(path, &buf)
     }
 
+    /// [`resized`](Self::resized) to a size chosen by the user, checked first with
+    /// [`check_image_size`]; `what` names the choice in the error (a flag such as
+    /// `--width`, or a file).
+    pub fn resized_checked(&self, width: u32, height: u32, what: &Path) -> Result<Image> {
+        check_image_size(width, height, what)?;
+        Ok(self.resized(width, height))
+    }
+
     /// Resamples to `width × height` with a triangle filter (premultiplied, so edges do
-    /// not pick up the color of transparent pixels).
+    /// not pick up the color of transparent pixels). The size is not checked: for a size
+    /// that comes from input use [`resized_checked`](Self::resized_checked).
     pub fn resized(&self, width: u32, height: u32) -> Image {
         let mut buf = image::Rgba32FImage::new(self.width, self.height);
         for (i, px) in buf.pixels_mut().enumerate() {
@@ -243,7 +274,116 @@ pub fn contact_sheet(
     out
 }
 
+/// Refuses an image size of zero or above [`MAX_SIDE`] per side or [`MAX_IMAGE_PIXELS`]
+/// in all; the error names `path` (a file, or a flag such as `--width`).
+pub fn check_image_size(width: u32, height: u32, path: &Path) -> Result<()> {
+    let bad = |message: String| {
+        Err(Error::Image {
+            path: path.to_path_buf(),
+            message,
+        })
+    };
+    if width == 0 || height == 0 {
+        return bad(format!("image size {width}x{height} is empty"));
+    }
+    if width > MAX_SIDE || height > MAX_SIDE {
+        return bad(format!(
+            "image size {width}x{height} exceeds the limit of {MAX_SIDE} pixels per side"
+        ));
+    }
+    let pixels = width as u64 * height as u64;
+    if pixels > MAX_IMAGE_PIXELS {
+        return bad(format!(
+            "image size {width}x{height} ({pixels} pixels) exceeds the limit of \
+             {MAX_IMAGE_PIXELS} pixels"
+        ));
+    }
+    Ok(())
+}
+
+/// Reads a whole file of at most `limit` bytes; a longer file (or an endless one such as
+/// `/dev/zero`) is refused after reading `limit + 1` bytes, with an error naming it.
+pub fn read_bounded(path: &Path, limit: u64) -> Result<Vec<u8>> {
+    let too_big = || {
+        Error::io(
+            path,
+            std::io::Error::other(format!(
+                "file is larger than the limit of {}",
+                describe_bytes(limit)
+            )),
+        )
+    };
+    let f = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let meta = f.metadata().map_err(|e| Error::io(path, e))?;
+    if meta.is_dir() {
+        return Err(Error::io(
+            path,
+            std::io::Error::other("is a folder, not a file"),
+        ));
+    }
+    if meta.is_file() && meta.len() > limit {
+        return Err(too_big());
+    }
+    let mut out = Vec::with_capacity(if meta.is_file() {
+        meta.len() as usize
+    } else {
+        0
+    });
+    f.take(limit + 1)
+        .read_to_end(&mut out)
+        .map_err(|e| Error::io(path, e))?;
+    if out.len() as u64 > limit {
+        return Err(too_big());
+    }
+    Ok(out)
+}
+
+/// Whether `bytes` start like a gzip stream.
+pub fn is_gzip(bytes: &[u8]) -> bool {
+    bytes.starts_with(&[0x1f, 0x8b])
+}
+
+/// Decompresses a gzip stream into at most `limit` bytes; a stream that inflates to more
+/// (a "gzip bomb") is refused once `limit + 1` bytes have come out. `path` names the file
+/// in errors.
+pub fn gunzip_bounded(bytes: &[u8], limit: u64, path: &Path) -> Result<Vec<u8>> {
+    let mut out = Vec::new();
+    flate2::read::GzDecoder::new(bytes)
+        .take(limit + 1)
+        .read_to_end(&mut out)
+        .map_err(|e| Error::Image {
+            path: path.to_path_buf(),
+            message: format!("gzip: {e}"),
+        })?;
+    if out.len() as u64 > limit {
+        return Err(Error::Image {
+            path: path.to_path_buf(),
+            message: format!(
+                "gzip stream decompresses to more than the limit of {}",
+                describe_bytes(limit)
+            ),
+        });
+    }
+    Ok(out)
+}
+
+/// `67108864` → `64 MiB`.
+pub fn describe_bytes(n: u64) -> String {
+    if n >= 1 << 20 && n % (1 << 20) == 0 {
+        format!("{} MiB", n >> 20)
+    } else {
+        format!("{n} bytes")
+    }
+}
+
+/// Distinguishes the temporary files of concurrent writers within one process.
+static TEMP_COUNTER: AtomicU64 = AtomicU64::new(0);
+
 /// Writes `bytes` to `path` through a temporary file in the same folder and a rename.
+///
+/// The temporary name holds the process id, the writing thread and a process-wide
+/// counter, so writers never share one, even when they write the same output at once
+/// (the last rename wins; each rename is whole).
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
         std::fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
@@ -256,7 +396,12 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_else(|| "out".into());
-    let tmp = dir.join(format!(".{name}.{}.tmp", std::process::id()));
+    let thread: String = format!("{:?}", std::thread::current().id())
+        .chars()
+        .filter(char::is_ascii_digit)
+        .collect();
+    let n = TEMP_COUNTER.fetch_add(1, Ordering::Relaxed);
+    let tmp = dir.join(format!(".{name}.{}-{thread}-{n}.tmp", std::process::id()));
     let res = (|| {
         let mut f = std::fs::File::create(&tmp)?;
         f.write_all(bytes)?;
@@ -313,5 +458,85 @@ mod tests {
         let e = Image::new(1, 1).save_png(&bad).unwrap_err().to_string();
         assert!(e.contains("a.png"), "{e}");
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// `digits --indices 0,0` had two threads write one output through one temporary
+    /// name: one rename failed and a temporary file was left. Names are now per writer.
+    #[test]
+    fn parallel_writers_of_one_output_all_succeed() {
+        let dir = std::env::temp_dir().join(format!("diffsvg-par-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let f = dir.join("same.svg");
+        let body = vec![b'x'; 1 << 16];
+        std::thread::scope(|s| {
+            let handles: Vec<_> = (0..8)
+                .map(|_| s.spawn(|| (0..20).map(|_| write_atomic(&f, &body)).collect::<Vec<_>>()))
+                .collect();
+            for h in handles {
+                for r in h.join().unwrap() {
+                    r.unwrap();
+                }
+            }
+        });
+        assert_eq!(std::fs::read(&f).unwrap(), body);
+        assert_eq!(
+            std::fs::read_dir(&dir).unwrap().count(),
+            1,
+            "no temporary file left"
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn reads_are_bounded() {
+        let dir = std::env::temp_dir().join(format!("diffsvg-bound-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let f = dir.join("ten");
+        std::fs::write(&f, [7u8; 10]).unwrap();
+        assert_eq!(read_bounded(&f, 10).unwrap().len(), 10);
+        let e = read_bounded(&f, 9).unwrap_err().to_string();
+        assert!(e.contains("ten") && e.contains("limit of 9 bytes"), "{e}");
+        // An endless file stops one byte past the limit.
+        let e = read_bounded(Path::new("/dev/zero"), 1 << 20)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("/dev/zero") && e.contains("1 MiB"), "{e}");
+        assert!(read_bounded(&dir, 10).is_err());
+        std::fs::remove_dir_all(&dir).unwrap();
+        // A gzip stream is inflated only up to its limit.
+        let mut z = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+        z.write_all(&[b' '; 5000]).unwrap();
+        let gz = z.finish().unwrap();
+        assert!(is_gzip(&gz));
+        assert_eq!(
+            gunzip_bounded(&gz, 5000, Path::new("a.svgz"))
+                .unwrap()
+                .len(),
+            5000
+        );
+        let e = gunzip_bounded(&gz, 4999, Path::new("a.svgz"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("a.svgz") && e.contains("more than the limit"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn image_sizes_are_checked() {
+        let p = Path::new("t.png");
+        assert!(check_image_size(MAX_SIDE, 2, p).is_ok());
+        let e = check_image_size(11000, 11000, p).unwrap_err().to_string();
+        assert!(e.contains("t.png") && e.contains("11000x11000"), "{e}");
+        assert!(check_image_size(MAX_SIDE + 1, 1, p).is_err());
+        assert!(check_image_size(0, 5, p).is_err());
+        // `vectorize --width 16000` resampled a target to 16000 × 16000 (4 GB) unchecked.
+        let e = Image::new(2, 2)
+            .resized_checked(16000, 16000, Path::new("--width"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("--width: image size 16000x16000"), "{e}");
+        assert_eq!(Image::new(2, 2).resized_checked(3, 1, p).unwrap().width, 3);
     }
 }

@@ -9,6 +9,8 @@ use std::io::Read;
 use std::path::Path;
 
 use crate::error::{Error, Result};
+use crate::image_io::{describe_bytes, is_gzip, read_bounded};
+use crate::limits::{MAX_DECOMPRESSED_BYTES, MAX_FILE_BYTES};
 
 /// A set of equally sized grayscale images.
 #[derive(Clone, Debug)]
@@ -81,21 +83,44 @@ fn bad(path: &Path, message: String) -> Error {
 }
 
 /// Reads any unsigned-byte IDX file: its dimensions and its data, checked to be complete.
+///
+/// The file is read with a bound ([`MAX_FILE_BYTES`]); a gzip stream is decompressed only
+/// after its header's counts have been checked against [`MAX_DECOMPRESSED_BYTES`], and
+/// never past the size the header promises, so a small "gzip bomb" costs no memory.
 fn read_idx(path: &Path) -> Result<(Vec<usize>, Vec<u8>)> {
-    let raw = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    let bytes = if raw.starts_with(&[0x1f, 0x8b]) {
-        let mut out = Vec::new();
-        flate2::read::GzDecoder::new(&raw[..])
-            .read_to_end(&mut out)
-            .map_err(|e| bad(path, format!("gzip: {e}")))?;
-        out
-    } else {
-        raw
-    };
-    parse_idx(&bytes).map_err(|m| bad(path, m))
+    let raw = read_bounded(path, MAX_FILE_BYTES)?;
+    if !is_gzip(&raw) {
+        return parse_idx(&raw).map_err(|m| bad(path, m));
+    }
+    let gz = |e: std::io::Error| bad(path, format!("gzip: {e}"));
+    let mut dec = flate2::read::GzDecoder::new(&raw[..]);
+    let mut head = [0u8; 4];
+    dec.read_exact(&mut head).map_err(gz)?;
+    let nd = check_magic(&head).map_err(|m| bad(path, m))?;
+    let mut header = head.to_vec();
+    header.resize(4 + 4 * nd, 0);
+    dec.read_exact(&mut header[4..]).map_err(gz)?;
+    let (dims, n) = dims_and_size(&header, nd).map_err(|m| bad(path, m))?;
+    if n as u64 > MAX_DECOMPRESSED_BYTES {
+        return Err(bad(
+            path,
+            format!(
+                "the header promises {n} bytes of data ({dims:?}), above the limit of {}",
+                describe_bytes(MAX_DECOMPRESSED_BYTES)
+            ),
+        ));
+    }
+    // Read one byte more than promised, to tell a longer stream from a complete one.
+    let mut body = Vec::new();
+    dec.take(n as u64 + 1).read_to_end(&mut body).map_err(gz)?;
+    if body.len() != n {
+        return Err(bad(path, size_mismatch(n, &dims, body.len())));
+    }
+    Ok((dims, body))
 }
 
-fn parse_idx(b: &[u8]) -> std::result::Result<(Vec<usize>, Vec<u8>), String> {
+/// Checks the first four header bytes; returns the number of dimensions.
+fn check_magic(b: &[u8]) -> std::result::Result<usize, String> {
     if b.len() < 4 || b[0] != 0 || b[1] != 0 {
         return Err("the header does not start with two zero bytes".into());
     }
@@ -105,23 +130,44 @@ fn parse_idx(b: &[u8]) -> std::result::Result<(Vec<usize>, Vec<u8>), String> {
             b[2]
         ));
     }
-    let nd = b[3] as usize;
-    if nd == 0 || b.len() < 4 + 4 * nd {
+    match b[3] as usize {
+        0 => Err("the header is cut short".into()),
+        nd => Ok(nd),
+    }
+}
+
+/// The dimensions in a complete header of `nd` dimensions, and the data size they promise.
+fn dims_and_size(b: &[u8], nd: usize) -> std::result::Result<(Vec<usize>, usize), String> {
+    if b.len() < 4 + 4 * nd {
         return Err("the header is cut short".into());
     }
     let dims: Vec<usize> = (0..nd)
         .map(|k| u32::from_be_bytes(b[4 + 4 * k..8 + 4 * k].try_into().unwrap()) as usize)
         .collect();
-    let n = dims.iter().try_fold(1usize, |a, &d| a.checked_mul(d));
-    let body = &b[4 + 4 * nd..];
-    match n {
-        Some(n) if n == body.len() => Ok((dims, body.to_vec())),
-        Some(n) => Err(format!(
-            "the header promises {n} bytes of data ({dims:?}), the file holds {}",
-            body.len()
-        )),
+    match dims.iter().try_fold(1usize, |a, &d| a.checked_mul(d)) {
+        Some(n) => Ok((dims, n)),
         None => Err(format!("dimensions {dims:?} overflow")),
     }
+}
+
+/// `found` is what was read, at most one byte past the promise when the stream is longer.
+fn size_mismatch(n: usize, dims: &[usize], found: usize) -> String {
+    let holds = if found > n {
+        "more".to_string()
+    } else {
+        found.to_string()
+    };
+    format!("the header promises {n} bytes of data ({dims:?}), the file holds {holds}")
+}
+
+fn parse_idx(b: &[u8]) -> std::result::Result<(Vec<usize>, Vec<u8>), String> {
+    let nd = check_magic(b)?;
+    let (dims, n) = dims_and_size(b, nd)?;
+    let body = &b[4 + 4 * nd..];
+    if n != body.len() {
+        return Err(size_mismatch(n, &dims, body.len()));
+    }
+    Ok((dims, body.to_vec()))
 }
 
 /// Parses an index list such as `0..100`, `7`, `0..10,20,30..32` (ranges half-open) into
@@ -214,6 +260,39 @@ mod tests {
                 .unwrap_err()
                 .contains("cut short")
         );
+    }
+
+    /// A 1.5 MB gzip stream whose header promises 60000 images of 28×28 ... and then
+    /// 1.6 GB of zeros used to be inflated whole before the header was checked. Now the
+    /// promise is checked against the limit first, and a stream longer than its promise
+    /// is refused without inflating the rest.
+    #[test]
+    fn idx_gzip_bomb_is_refused_before_inflating() {
+        let dir = std::env::temp_dir().join(format!("diffsvg-bomb-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let gzip = |header: &[u8], zeros: usize| {
+            let mut enc = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::best());
+            std::io::Write::write_all(&mut enc, header).unwrap();
+            let chunk = vec![0u8; 1 << 20];
+            for _ in 0..zeros >> 20 {
+                std::io::Write::write_all(&mut enc, &chunk).unwrap();
+            }
+            enc.finish().unwrap()
+        };
+        // A header promising 20 GB (200000 images of 300 × 333).
+        let big = dir.join("big.gz");
+        std::fs::write(&big, gzip(&idx(&[200_000, 300, 333], &[]), 1 << 20)).unwrap();
+        let e = read_images(&big).unwrap_err().to_string();
+        assert!(e.contains("big.gz") && e.contains("limit"), "{e}");
+        // A small promise followed by far more data: refused, reading only one byte past.
+        let long = dir.join("long.gz");
+        std::fs::write(&long, gzip(&idx(&[2, 2, 2], &[0; 8]), 64 << 20)).unwrap();
+        let e = read_images(&long).unwrap_err().to_string();
+        assert!(
+            e.contains("promises 8 bytes") && e.contains("holds more"),
+            "{e}"
+        );
+        std::fs::remove_dir_all(&dir).ok();
     }
 
     #[test]

@@ -85,8 +85,24 @@ pub fn run(a: Args) -> Result<()> {
         }
         None => None,
     };
-    let indices = parse_indices(&a.indices, images.len())
+    let listed = parse_indices(&a.indices, images.len())
         .map_err(|e| anyhow::anyhow!("--indices {}: {e}", a.indices))?;
+    // Each digit is fitted and written once: a repeated index would only race two
+    // writers of the same file.
+    let (indices, repeated) = dedupe(&listed);
+    if repeated > 0 {
+        eprintln!(
+            "note: --indices {} lists {repeated} index(es) more than once; each digit is fitted once",
+            a.indices
+        );
+    }
+    // The fitting canvas is the digit's size times --scale.
+    let (fw, fh) = (
+        (images.cols as u64 * a.scale as u64).min(u32::MAX as u64) as u32,
+        (images.rows as u64 * a.scale as u64).min(u32::MAX as u64) as u32,
+    );
+    crate::image_io::check_image_size(fw, fh, &a.images)
+        .with_context(|| format!("--scale {}: fitting canvas too large", a.scale))?;
     std::fs::create_dir_all(&a.output)
         .with_context(|| format!("{}: cannot create the output folder", a.output.display()))?;
 
@@ -135,6 +151,12 @@ pub fn run(a: Args) -> Result<()> {
     let secs = start.elapsed().as_secs_f64();
     rows.sort_by_key(|r| r.index);
     write_atomic(&a.output.join("summary.csv"), summary_csv(&rows).as_bytes())?;
+    if rows.len() > CONTACT_SHEET_DIGITS {
+        eprintln!(
+            "note: the contact sheet shows the first {CONTACT_SHEET_DIGITS} of {} digits",
+            rows.len()
+        );
+    }
     contact(&rows, &images, w, h).save_png(a.output.join("contact.png"))?;
 
     let n = rows.len() as f64;
@@ -182,6 +204,18 @@ fn options(a: &Args) -> Result<DigitOptions> {
     })
 }
 
+/// `v` without repeats, in first-seen order, and how many repeats were dropped.
+fn dedupe(v: &[usize]) -> (Vec<usize>, usize) {
+    let mut seen = std::collections::HashSet::new();
+    let out: Vec<usize> = v.iter().copied().filter(|i| seen.insert(*i)).collect();
+    let dropped = v.len() - out.len();
+    (out, dropped)
+}
+
+/// Most digits shown on the contact sheet, so that it stays a small picture (about 4
+/// megapixels) whatever the number of digits fitted.
+const CONTACT_SHEET_DIGITS: usize = 2000;
+
 /// The fitted strokes over a black square, as the digit is shown.
 fn on_black(scene: &Scene) -> Scene {
     let (w, h) = (scene.width as f64, scene.height as f64);
@@ -224,8 +258,10 @@ fn summary_csv(rows: &[Row]) -> String {
     s
 }
 
-/// Target above fit for every digit, 2× enlarged when there are few.
+/// Target above fit for every digit (the first [`CONTACT_SHEET_DIGITS`]), 2× enlarged when
+/// there are few.
 fn contact(rows: &[Row], images: &crate::mnist::Images, w: usize, h: usize) -> Image {
+    let rows = &rows[..rows.len().min(CONTACT_SHEET_DIGITS)];
     let k = if rows.len() <= 200 { 2 } else { 1 };
     let up = |img: Image| {
         let mut out = Image::new(img.width * k, img.height * k);

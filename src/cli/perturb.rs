@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use anyhow::{Result, bail};
 
 use super::util::{SizeArgs, check_output};
+use crate::limits::MAX_COORDINATE;
 use crate::scene::Scene;
 use crate::scene::random::perturb;
 
@@ -16,7 +17,8 @@ pub struct Args {
     /// Output SVG.
     #[arg(short, long)]
     output: PathBuf,
-    /// Largest control-point move in pixels (x and y each).
+    /// Largest control-point move in pixels (x and y each), at most 1e30; moved points are
+    /// kept within ±1e30 pixels.
     #[arg(long, default_value_t = 8.0)]
     points: f64,
     /// Largest color channel shift.
@@ -34,6 +36,12 @@ pub fn run(a: Args) -> Result<()> {
     check_output(&a.output, "svg")?;
     if !(a.points.is_finite() && a.points >= 0.0 && a.colors.is_finite() && a.colors >= 0.0) {
         bail!("--points and --colors must be finite numbers ≥ 0");
+    }
+    if a.points > MAX_COORDINATE {
+        bail!(
+            "--points {:e} is out of range (at most {MAX_COORDINATE:e} pixels)",
+            a.points
+        );
     }
     let scene = Scene::load(&a.input, a.size.sizing()?)?;
     perturb(&scene, a.points, a.colors, a.seed).save_svg(&a.output)?;

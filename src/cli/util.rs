@@ -62,9 +62,13 @@ pub fn sibling(path: &Path, suffix: &str) -> PathBuf {
     path.with_file_name(format!("{stem}.{suffix}.png"))
 }
 
-/// Reads a whole file, naming it in the error.
+/// Reads a whole file of at most [`MAX_FILE_BYTES`](crate::limits::MAX_FILE_BYTES) bytes,
+/// naming it in the error.
 pub fn read(path: &Path) -> Result<Vec<u8>> {
-    std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))
+    Ok(crate::image_io::read_bounded(
+        path,
+        crate::limits::MAX_FILE_BYTES,
+    )?)
 }
 
 /// Refuses output paths that are not `.png`.

@@ -1,11 +1,18 @@
 //! Projection onto valid scenes, applied after every optimizer step.
 
+use crate::limits::MAX_COORDINATE;
+use crate::scene::params::{clamp_coordinate, clamp_points};
 use crate::scene::{GradientKind, Node, Paint, Scene};
 
 /// Clamps every parameter back into its valid range: colors and opacities to `[0, 1]`,
-/// stroke widths and gradient radii to ≥ 0, gradient stop offsets to `[0, 1]` and
-/// non-decreasing (each offset at least the one before it). Control points and gradient
-/// end points are free. NaN values become the nearest bound's lower end (0).
+/// stroke widths and gradient radii to `[0, MAX_COORDINATE]`, gradient stop offsets to
+/// `[0, 1]` and non-decreasing (each offset at least the one before it). Control points
+/// and gradient end points are free within the readable range: ±[`MAX_COORDINATE`] in
+/// device pixels, and for a stroke drawn in a non-uniform frame tighter still, so that the
+/// coordinates the SVG writer puts in that frame stay within it too. NaN values become 0.
+///
+/// So however large a step the optimizer takes, the scene can be written and read back
+/// (see [`check_numbers`](crate::scene::svg_out::check_numbers)).
 pub fn project(scene: &mut Scene) {
     project_nodes(&mut scene.nodes);
 }
@@ -15,7 +22,11 @@ fn unit(v: &mut f64) {
 }
 
 fn non_negative(v: &mut f64) {
-    *v = if v.is_nan() { 0.0 } else { v.max(0.0) };
+    *v = if v.is_nan() {
+        0.0
+    } else {
+        v.clamp(0.0, MAX_COORDINATE)
+    };
 }
 
 fn project_nodes(nodes: &mut [Node]) {
@@ -26,6 +37,7 @@ fn project_nodes(nodes: &mut [Node]) {
                 project_nodes(&mut g.children);
             }
             Node::Path(p) => {
+                clamp_points(p);
                 if let Some(f) = &mut p.fill {
                     unit(&mut f.opacity);
                     project_paint(&mut f.paint);
@@ -44,9 +56,19 @@ fn project_paint(paint: &mut Paint) {
     match paint {
         Paint::Solid(c) => c.iter_mut().for_each(unit),
         Paint::Gradient(g) => {
-            if let GradientKind::Radial { r, fr, .. } = &mut g.kind {
-                non_negative(r);
-                non_negative(fr);
+            match &mut g.kind {
+                GradientKind::Linear { p1, p2 } => {
+                    p1.iter_mut()
+                        .chain(p2.iter_mut())
+                        .for_each(|v| clamp_coordinate(v, MAX_COORDINATE));
+                }
+                GradientKind::Radial { c, r, f, fr } => {
+                    c.iter_mut()
+                        .chain(f.iter_mut())
+                        .for_each(|v| clamp_coordinate(v, MAX_COORDINATE));
+                    non_negative(r);
+                    non_negative(fr);
+                }
             }
             let mut floor = 0.0;
             for s in &mut g.stops {
@@ -123,5 +145,21 @@ mod tests {
         let s = p.stroke.as_ref().unwrap();
         assert_eq!((s.opacity, s.width), (1.0, 0.0));
         assert_eq!(s.paint, Paint::Solid([1.0, 0.5, 0.0]));
+    }
+
+    /// `fit --lr-points 1e308`: after a huge step, projection brings every coordinate
+    /// back within the readable range, so the scene is written and read back.
+    #[test]
+    fn lr_points_1e308_step_stays_readable() {
+        let mut scene = crate::scene::random::curved_paths(2, 32, 3);
+        let mut p = scene.params();
+        for (k, v) in p.iter_mut().enumerate() {
+            *v += if k % 2 == 0 { 1e308 } else { -1e308 };
+        }
+        scene.set_params(&p);
+        project(&mut scene);
+        assert!(crate::scene::svg_out::check_numbers(&scene).is_ok());
+        let text = scene.to_svg_string();
+        crate::Scene::from_svg_str(&text, "back.svg", crate::Sizing::Natural).unwrap();
     }
 }

@@ -361,6 +361,39 @@ impl Scene {
     }
 }
 
+/// `v` clamped to `[-bound, bound]`, NaN to 0.
+pub fn clamp_coordinate(v: &mut f64, bound: f64) {
+    *v = if v.is_nan() {
+        0.0
+    } else {
+        v.clamp(-bound, bound)
+    };
+}
+
+/// Largest control-point magnitude for `p`, in device pixels: [`MAX_COORDINATE`](crate::limits::MAX_COORDINATE), divided
+/// by the row-sum norm of the inverse stroke frame when that frame magnifies.
+pub fn point_bound(p: &Path) -> f64 {
+    let frame = p
+        .stroke
+        .as_ref()
+        .map(|s| s.frame)
+        .filter(|f| *f != super::FRAME_IDENTITY);
+    let gain = match frame.and_then(|[a, b, c, d]| super::invert(&[a, b, c, d, 0.0, 0.0])) {
+        Some(i) => (i[0].abs() + i[2].abs()).max(i[1].abs() + i[3].abs()),
+        None => 1.0,
+    };
+    crate::limits::MAX_COORDINATE / gain.max(1.0)
+}
+
+/// Clamps the control points of `p` into the readable range (see [`crate::optim::project`]).
+pub fn clamp_points(p: &mut Path) {
+    let bound = point_bound(p);
+    for q in &mut p.points {
+        clamp_coordinate(&mut q[0], bound);
+        clamp_coordinate(&mut q[1], bound);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -63,6 +63,11 @@ pub fn curved_paths(n: usize, size: u32, seed: u64) -> Scene {
 /// A perturbed copy of `scene`: every control point moved by up to `max_px` pixels in x
 /// and y, and every color channel (solid and stop colors) shifted by up to `max_color`
 /// (then clamped to `[0, 1]`), uniformly at random. Used to test that refinement recovers.
+/// Moved points are kept within the readable range (±[`MAX_COORDINATE`] device pixels, see
+/// [`super::params::clamp_points`]), so the copy can always be written and read
+/// back.
+///
+/// [`MAX_COORDINATE`]: crate::limits::MAX_COORDINATE
 pub fn perturb(scene: &Scene, max_px: f64, max_color: f64, seed: u64) -> Scene {
     let mut rng = Rng::new(seed);
     let layout = ParamLayout::new(scene);
@@ -76,7 +81,17 @@ pub fn perturb(scene: &Scene, max_px: f64, max_color: f64, seed: u64) -> Scene {
     }
     let mut out = scene.clone();
     out.set_params(&p);
+    clamp_all_points(&mut out.nodes);
     out
+}
+
+fn clamp_all_points(nodes: &mut [Node]) {
+    for n in nodes {
+        match n {
+            Node::Group(g) => clamp_all_points(&mut g.children),
+            Node::Path(p) => super::params::clamp_points(p),
+        }
+    }
 }
 
 #[cfg(test)]
@@ -108,5 +123,19 @@ mod tests {
             moved += (x != y) as usize;
         }
         assert!(moved > a.len() / 2);
+    }
+
+    /// `perturb --points 1e300` used to write coordinates near 1e306 that the reader
+    /// refuses: moved points now stay in the readable range and the copy reads back.
+    #[test]
+    fn perturb_points_1e300_stays_readable() {
+        let s = curved_paths(3, 64, 1);
+        let t = perturb(&s, 1e300, 0.2, 2);
+        let max = t.params().iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        assert!(max <= crate::limits::MAX_COORDINATE, "{max}");
+        assert!(max > 1e29, "the points did move far: {max}");
+        let text = t.to_svg_string();
+        let back = Scene::from_svg_str(&text, "back.svg", crate::Sizing::Natural).unwrap();
+        assert_eq!(back.params().len(), t.params().len());
     }
 }

@@ -8,8 +8,9 @@ use super::{
 };
 use crate::error::{Error, Result};
 
-use crate::limits::MAX_COORDINATE;
+use crate::image_io::{gunzip_bounded, is_gzip, read_bounded};
 pub use crate::limits::MAX_SIDE;
+use crate::limits::{MAX_DECOMPRESSED_BYTES, MAX_FILE_BYTES, MAX_PIXELS};
 
 /// How to size the canvas when loading an SVG.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -26,10 +27,11 @@ pub enum Sizing {
 }
 
 impl Scene {
-    /// Loads an SVG file. Errors name the file.
+    /// Loads an SVG file (plain or gzip-compressed, `.svgz`), of at most
+    /// [`MAX_FILE_BYTES`] bytes. Errors name the file.
     pub fn load(path: impl AsRef<FsPath>, sizing: Sizing) -> Result<Scene> {
         let path = path.as_ref();
-        let data = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        let data = read_bounded(path, MAX_FILE_BYTES)?;
         Scene::from_svg_data(&data, path, sizing)
     }
 
@@ -44,8 +46,16 @@ impl Scene {
     }
 }
 
-/// Parses SVG bytes with usvg, refusing elements usvg would silently drop.
+/// Parses SVG bytes with usvg, refusing elements usvg would silently drop. Gzip-compressed
+/// bytes (`.svgz`) are decompressed first, to at most [`MAX_DECOMPRESSED_BYTES`].
 pub fn parse_tree(data: &[u8], name: &FsPath) -> Result<usvg::Tree> {
+    let unzipped;
+    let data = if is_gzip(data) {
+        unzipped = gunzip_bounded(data, MAX_DECOMPRESSED_BYTES, name)?;
+        &unzipped[..]
+    } else {
+        data
+    };
     if let Ok(text) = std::str::from_utf8(data) {
         reject_unsupported_xml(text, name)?;
     }
@@ -87,26 +97,46 @@ fn reject_unsupported_xml(text: &str, name: &FsPath) -> Result<()> {
                     what: format!("markers ({})", describe(tag, n.attribute("id"))),
                 });
             }
-            if GEOMETRY_ATTRIBUTES.contains(&a.name()) {
-                if let Some(bad) = bad_number(a.value()) {
-                    return Err(Error::InvalidValue {
-                        path: name.to_path_buf(),
-                        what: format!(
-                            "{} in attribute {} of {}",
-                            bad,
-                            a.name(),
-                            describe(tag, n.attribute("id"))
-                        ),
-                    });
-                }
+            let bad = if a.name() == "style" {
+                css_bad_number(a.value())
+            } else if GEOMETRY_ATTRIBUTES.contains(&a.name()) {
+                bad_number(a.value()).map(|bad| (a.name().to_string(), bad))
+            } else {
+                None
+            };
+            if let Some((property, bad)) = bad {
+                let place = if a.name() == "style" {
+                    format!("property {property} in the style of")
+                } else {
+                    format!("attribute {property} of")
+                };
+                return Err(Error::InvalidValue {
+                    path: name.to_path_buf(),
+                    what: format!("{bad} in {place} {}", describe(tag, n.attribute("id"))),
+                });
+            }
+        }
+        if tag == "style" {
+            let css: String = n.children().filter_map(|c| c.text()).collect();
+            if let Some((property, bad)) = css_bad_number(&css) {
+                return Err(Error::InvalidValue {
+                    path: name.to_path_buf(),
+                    what: format!("{bad} in property {property} of a <style> rule"),
+                });
             }
         }
     }
     Ok(())
 }
 
-/// Attributes holding coordinates; usvg silently drops a shape whose numbers are not
-/// finite, so they are checked here to report the file instead.
+/// Attributes holding numbers that usvg would silently drop a shape (or a property) for
+/// when they are not finite in `f32`: NaN, infinities and magnitudes above `f32::MAX`
+/// never reach the resolved tree, so this raw scan stays only to report them.
+///
+/// Every other range check (|v| ≤ [`MAX_COORDINATE`](crate::limits::MAX_COORDINATE),
+/// wherever the value came from: attribute, `style`, `<style>` rule, inheritance) is made
+/// once on the resolved values, by [`check_numbers`](super::svg_out::check_numbers) in
+/// [`from_tree`].
 const GEOMETRY_ATTRIBUTES: &[&str] = &[
     "d",
     "points",
@@ -129,10 +159,24 @@ const GEOMETRY_ATTRIBUTES: &[&str] = &[
     "transform",
     "gradientTransform",
     "stroke-width",
+    "stroke-dasharray",
+    "stroke-dashoffset",
+    "stroke-miterlimit",
     "viewBox",
 ];
 
-/// Describes the first NaN, infinity or out-of-range number in an attribute value.
+/// The first CSS declaration (`name: value`, in a `style` attribute or a `<style>` sheet)
+/// of a [`GEOMETRY_ATTRIBUTES`] property whose value holds a number usvg cannot represent:
+/// the property and [`bad_number`]'s description.
+fn css_bad_number(css: &str) -> Option<(String, String)> {
+    css.split([';', '{', '}'])
+        .filter_map(|decl| decl.split_once(':'))
+        .map(|(k, v)| (k.trim(), v.trim().trim_end_matches("!important")))
+        .filter(|(k, _)| GEOMETRY_ATTRIBUTES.contains(k))
+        .find_map(|(k, v)| bad_number(v).map(|b| (k.to_string(), b)))
+}
+
+/// Describes the first NaN, infinity or number beyond `f32` in an attribute value.
 fn bad_number(value: &str) -> Option<String> {
     let lower = value.to_ascii_lowercase();
     if lower.contains("nan") {
@@ -170,7 +214,7 @@ fn bad_number(value: &str) -> Option<String> {
             }
         }
         if let Ok(v) = value[start..i].parse::<f64>() {
-            if !(v.abs() <= MAX_COORDINATE) {
+            if !(v.abs() <= f32::MAX as f64) {
                 return Some(format!("number {} out of range", &value[start..i]));
             }
         }
@@ -250,16 +294,30 @@ pub fn canvas_size(tree: &usvg::Tree, sizing: Sizing, name: &FsPath) -> Result<(
             "output size {cw}x{ch} exceeds the limit of {MAX_SIDE} pixels per side"
         )));
     }
+    if cw * ch > MAX_PIXELS as f64 {
+        return Err(bad(format!(
+            "output size {cw}x{ch} ({} pixels) exceeds the limit of {MAX_PIXELS} pixels",
+            cw * ch
+        )));
+    }
     Ok((cw as u32, ch as u32, [sx, 0.0, 0.0, sy, 0.0, 0.0]))
 }
 
 /// Converts a parsed usvg tree into a [`Scene`] of the requested size.
+///
+/// Every converted number (resolved by usvg, so CSS and inheritance count) is checked
+/// once, in device pixels, by [`check_numbers`](super::svg_out::check_numbers): finite and
+/// within [`MAX_COORDINATE`](crate::limits::MAX_COORDINATE), the same rule the writer
+/// applies.
 pub fn from_tree(tree: &usvg::Tree, name: &FsPath, sizing: Sizing) -> Result<Scene> {
     let (w, h, root) = canvas_size(tree, sizing, name)?;
     let ctx = Ctx { name, root };
     let mut scene = Scene::new(w, h);
     let t = concat(&ctx.root, &to_affine(tree.root().transform()));
     scene.nodes = convert_group_children(tree.root(), &ctx, &t)?;
+
+    super::svg_out::check_numbers_with(&scene, super::svg_out::READ_SLACK)
+        .map_err(|what| ctx.invalid(what))?;
     Ok(scene)
 }
 
@@ -497,6 +555,15 @@ mod tests {
             e.contains("nan.svg") && e.contains("NaN") && e.contains("\"r\""),
             "{e}"
         );
+    }
+
+    #[test]
+    fn css_numbers_beyond_f32_are_reported() {
+        assert_eq!(css_bad_number("fill:#1e40af; stroke-width: 2"), None);
+        let (k, b) = css_bad_number(".a { fill: red } .b{stroke-width:1e39 !important}").unwrap();
+        assert_eq!(k, "stroke-width");
+        assert!(b.contains("1e39"), "{b}");
+        assert!(css_bad_number("stroke-dasharray: 1 NaN").is_some());
     }
 
     fn load(s: &str) -> Result<Scene> {

@@ -14,7 +14,8 @@ use super::{
     Affine, FRAME_IDENTITY, FillRule, GradientKind, LineCap, LineJoin, Node, Paint, Path, Scene,
     SegmentKind, Spread, apply, concat, invert,
 };
-use crate::error::Result;
+use crate::error::{Error, Result};
+use crate::limits::MAX_COORDINATE;
 
 /// Formats a number with at most four decimals and no trailing zeros.
 pub fn num(v: f64) -> String {
@@ -361,8 +362,185 @@ impl Scene {
     }
 
     /// Writes the scene as an SVG file, atomically (temporary file, then rename).
+    ///
+    /// A scene holding a number that is not finite or beyond [`MAX_COORDINATE`] (see
+    /// [`check_numbers`]) is refused with an error naming `path` and the value, and nothing
+    /// is written: diffsvg never writes an SVG that it refuses to read.
     pub fn save_svg(&self, path: impl AsRef<FsPath>) -> Result<()> {
-        crate::image_io::write_atomic(path.as_ref(), self.to_svg_string().as_bytes())
+        let path = path.as_ref();
+        check_numbers(self).map_err(|what| Error::InvalidValue {
+            path: path.to_path_buf(),
+            what: format!("refusing to write {what}"),
+        })?;
+        crate::image_io::write_atomic(path, self.to_svg_string().as_bytes())
+    }
+}
+
+/// Reader slack for `f32` rounding: a number written at exactly [`MAX_COORDINATE`] may read
+/// back a few `f32` ulps above it.
+pub(crate) const READ_SLACK: f64 = 1.0 + 1e-6;
+
+/// Checks every number the SVG of `scene` holds, as [`Scene::to_svg_string`] writes it and
+/// as [`Scene::load`] reads it back in device pixels: control points (in device space and,
+/// for a stroke drawn in a frame, in the frame's space too), stroke widths, miter limits,
+/// dash arrays and offsets, stroke frames, gradient geometry and transforms, stop offsets,
+/// opacities. Each must be finite with magnitude at most [`MAX_COORDINATE`].
+///
+/// The reader runs this on every scene it loads and the writer before it writes, so what
+/// one accepts the other accepts. The error describes the first bad value and its element:
+/// `path "id": stroke width 1e38 is out of range (at most 1e30 in magnitude)`. Paths and
+/// groups without an id are named by their position (`path #3`, 1-based, document order).
+pub fn check_numbers(scene: &Scene) -> std::result::Result<(), String> {
+    check_numbers_with(scene, 1.0)
+}
+
+/// [`check_numbers`] with the limit scaled by `slack` (the reader allows `f32` rounding).
+pub(crate) fn check_numbers_with(scene: &Scene, slack: f64) -> std::result::Result<(), String> {
+    let mut c = Checker {
+        limit: MAX_COORDINATE * slack,
+        paths: 0,
+        groups: 0,
+    };
+    c.nodes(&scene.nodes)
+}
+
+struct Checker {
+    limit: f64,
+    paths: usize,
+    groups: usize,
+}
+
+impl Checker {
+    fn value(
+        &self,
+        owner: &dyn Fn() -> String,
+        what: &str,
+        v: f64,
+    ) -> std::result::Result<(), String> {
+        if v.is_finite() && v.abs() <= self.limit {
+            Ok(())
+        } else if v.is_finite() {
+            // Lengths are in device pixels; shown as the nearest `f32`, the precision they
+            // were read with.
+            let unitless = ["opacity", "stop offset", "miter", "entry"];
+            let unit = if unitless.iter().any(|u| what.contains(u)) {
+                ""
+            } else {
+                " px"
+            };
+            Err(format!(
+                "{}: {what} {:e}{unit} is out of range (at most {MAX_COORDINATE:e} in magnitude)",
+                owner(),
+                v as f32
+            ))
+        } else {
+            Err(format!("{}: {what} is {v} (not a finite number)", owner()))
+        }
+    }
+
+    fn nodes(&mut self, nodes: &[Node]) -> std::result::Result<(), String> {
+        for n in nodes {
+            match n {
+                Node::Group(g) => {
+                    self.groups += 1;
+                    let k = self.groups;
+                    let owner = || name("group", &g.id, k);
+                    self.value(&owner, "opacity", g.opacity)?;
+                    self.nodes(&g.children)?;
+                }
+                Node::Path(p) => {
+                    self.paths += 1;
+                    self.path(p)?;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn path(&self, p: &Path) -> std::result::Result<(), String> {
+        let k = self.paths;
+        let owner = || name("path", &p.id, k);
+        // As the writer: a stroke frame other than the identity puts the path in it.
+        let mut to_local = None;
+        if let Some(s) = &p.stroke {
+            if s.frame != FRAME_IDENTITY {
+                for v in s.frame {
+                    self.value(&owner, "stroke frame entry", v)?;
+                }
+                let [a, b, c, d] = s.frame;
+                to_local = invert(&[a, b, c, d, 0.0, 0.0]);
+            }
+        }
+        // End points first, so that the value reported is one the file shows (a line's
+        // control points sit a third of the way along it).
+        let ends = p
+            .subpaths
+            .iter()
+            .flat_map(|sp| (0..=sp.kinds.len()).map(move |k| sp.start + 3 * k))
+            .filter_map(|i| p.points.get(i));
+        for q in ends.chain(&p.points) {
+            self.value(&owner, "coordinate", q[0])?;
+            self.value(&owner, "coordinate", q[1])?;
+            if let Some(t) = &to_local {
+                let l = apply(t, *q);
+                self.value(&owner, "coordinate in the stroke's frame", l[0])?;
+                self.value(&owner, "coordinate in the stroke's frame", l[1])?;
+            }
+        }
+        let to_local = to_local.unwrap_or(super::IDENTITY);
+        if let Some(f) = &p.fill {
+            self.value(&owner, "fill opacity", f.opacity)?;
+            self.paint(&owner, &f.paint, &to_local)?;
+        }
+        if let Some(s) = &p.stroke {
+            self.value(&owner, "stroke opacity", s.opacity)?;
+            self.value(&owner, "stroke width", s.width)?;
+            self.value(&owner, "stroke miter limit", s.miter_limit)?;
+            for &v in s.dash.iter().flatten() {
+                self.value(&owner, "stroke dash length", v)?;
+            }
+            self.value(&owner, "stroke dash offset", s.dash_offset)?;
+            self.paint(&owner, &s.paint, &to_local)?;
+        }
+        Ok(())
+    }
+
+    fn paint(
+        &self,
+        owner: &dyn Fn() -> String,
+        paint: &Paint,
+        to_local: &Affine,
+    ) -> std::result::Result<(), String> {
+        let Paint::Gradient(g) = paint else {
+            return Ok(());
+        };
+        let geometry: Vec<f64> = match g.kind {
+            GradientKind::Linear { p1, p2 } => vec![p1[0], p1[1], p2[0], p2[1]],
+            GradientKind::Radial { c, r, f, fr } => vec![c[0], c[1], r, f[0], f[1], fr],
+        };
+        for v in geometry {
+            self.value(owner, "gradient coordinate", v)?;
+        }
+        for v in g
+            .transform
+            .into_iter()
+            .chain(concat(to_local, &g.transform))
+        {
+            self.value(owner, "gradient transform entry", v)?;
+        }
+        for s in &g.stops {
+            self.value(owner, "gradient stop offset", s.offset)?;
+            self.value(owner, "gradient stop opacity", s.opacity)?;
+        }
+        Ok(())
+    }
+}
+
+fn name(kind: &str, id: &str, k: usize) -> String {
+    if id.is_empty() {
+        format!("{kind} #{k}")
+    } else {
+        format!("{kind} \"{id}\"")
     }
 }
 
@@ -401,5 +579,50 @@ mod tests {
         assert!(out.contains(r#"id="p""#));
         let back = Scene::from_svg_str(&out, "out.svg", Sizing::Natural).unwrap();
         assert_eq!(back.params().len(), s.params().len());
+    }
+
+    /// `fit --lr-points 1e308` and `perturb --points 1e300` wrote coordinates near 1e306
+    /// that the reader refuses: the writer now refuses them, and writes nothing.
+    #[test]
+    fn writer_refuses_what_the_reader_refuses() {
+        let dir = std::env::temp_dir().join(format!("diffsvg-out-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let svg = r##"<svg xmlns="http://www.w3.org/2000/svg" width="10" height="10">
+            <path id="p" d="M1 1 L5 1 L5 5 Z" fill="#ff0000" stroke="#000000"/></svg>"##;
+        let good = Scene::from_svg_str(svg, "t.svg", Sizing::Natural).unwrap();
+        let f = dir.join("out.svg");
+        let cases: [(&str, fn(&mut Path)); 4] = [
+            ("coordinate 1e306 px", |p| p.points[1][0] = 1e306),
+            ("coordinate is NaN", |p| p.points[0][1] = f64::NAN),
+            ("stroke width 1e31 px", |p| {
+                p.stroke.as_mut().unwrap().width = 1e31
+            }),
+            ("dash length inf", |p| {
+                p.stroke.as_mut().unwrap().dash = Some(vec![1.0, f64::INFINITY])
+            }),
+        ];
+        for (want, spoil) in cases {
+            let mut bad = good.clone();
+            let Node::Path(p) = &mut bad.nodes[0] else {
+                unreachable!()
+            };
+            spoil(p);
+            let e = bad.save_svg(&f).unwrap_err().to_string();
+            assert!(e.contains("out.svg") && e.contains("path \"p\""), "{e}");
+            assert!(e.contains(want.split(' ').next().unwrap()), "{want}: {e}");
+            assert!(!f.exists());
+            // And the reader refuses the same scene's text.
+            let back = Scene::from_svg_str(&bad.to_svg_string(), "back.svg", Sizing::Natural);
+            assert!(back.is_err() || want.contains("NaN"), "{want}");
+        }
+        // At the limit, a written scene reads back.
+        let mut edge = good.clone();
+        let Node::Path(p) = &mut edge.nodes[0] else {
+            unreachable!()
+        };
+        p.points[1] = [MAX_COORDINATE, -MAX_COORDINATE];
+        edge.save_svg(&f).unwrap();
+        Scene::load(&f, Sizing::Natural).unwrap();
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }
