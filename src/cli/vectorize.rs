@@ -41,7 +41,7 @@ pub struct Args {
     /// Cubic segments per new closed path.
     #[arg(long, default_value_t = 4)]
     segments: usize,
-    /// Optimizer steps in all.
+    /// Optimizer steps in all rounds together (0: place the paths, optimize nothing).
     #[arg(long, default_value_t = 1000)]
     iters: usize,
     /// Resize the target to this width first (height keeps the aspect ratio).
