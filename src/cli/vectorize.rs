@@ -59,6 +59,11 @@ pub struct Args {
 /// Runs `diffsvg vectorize`.
 pub fn run(a: Args) -> Result<()> {
     check_output(&a.output, "svg")?;
+    let compare_path = sibling(&a.output, "compare");
+    if a.compare {
+        check_output(&compare_path, "png")?;
+    }
+    a.report.check_outputs()?;
     let mut mode: Mode = a
         .mode
         .parse()
@@ -109,13 +114,20 @@ pub fn run(a: Args) -> Result<()> {
         }
         Event::Step(s, sc) => reporter.step(s, sc),
     });
-    let snapshot_error = reporter.error.take();
+    // A snapshot that could not be written fails the run before anything is written.
     reporter.finish()?;
     let out = out?;
-    out.scene.save_svg(&a.output)?;
-    if a.compare {
+    let compare = a.compare.then(|| {
         let img = objective.composite(&render(&out.scene, &RenderOptions::default()));
-        side_by_side(&[objective.target(), &img]).save_png(sibling(&a.output, "compare"))?;
+        side_by_side(&[objective.target(), &img])
+    });
+    out.scene.save_svg(&a.output)?;
+    if let Some(img) = compare {
+        if let Err(e) = img.save_png(&compare_path) {
+            // All or nothing: no SVG without the comparison asked for.
+            let _ = std::fs::remove_file(&a.output);
+            return Err(e.into());
+        }
     }
     let secs = out.elapsed.as_secs_f64();
     let n = out.scene.path_count();
@@ -138,9 +150,6 @@ pub fn run(a: Args) -> Result<()> {
             out.pruned,
             a.output.display()
         );
-    }
-    if let Some(e) = snapshot_error {
-        return Err(e);
     }
     if super::progress::interrupted() {
         eprintln!("interrupted: the best result so far was written");
