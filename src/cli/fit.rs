@@ -203,7 +203,6 @@ pub fn run(a: Args) -> Result<()> {
     if a.compare {
         check_output(&compare_path, "png")?;
     }
-    a.report.check_outputs()?;
     let opts = a.optim.fit_options(a.iters)?;
     let target = load_target(&a.target)?;
     let objective = a.optim.objective(&target)?;
@@ -227,6 +226,8 @@ pub fn run(a: Args) -> Result<()> {
         );
     }
     let start = Instant::now();
+    // Last of the checks, as it creates the snapshots folder: inputs were good.
+    a.report.check_outputs()?;
     let mut reporter = Reporter::new(&a.report, a.iters + 1, objective.background());
     let initial = scene.clone();
     let out = refine(scene, &objective, &opts, &mut |s, sc| reporter.step(s, sc));

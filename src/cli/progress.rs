@@ -45,6 +45,9 @@ impl ReportArgs {
     /// to write.
     pub fn check_outputs(&self) -> Result<()> {
         if let Some(dir) = &self.snapshots {
+            if self.every == 0 {
+                anyhow::bail!("--every must be at least 1 with --snapshots");
+            }
             check_folder(dir, "--snapshots")?;
         }
         if let Some(log) = &self.log {

@@ -63,7 +63,6 @@ pub fn run(a: Args) -> Result<()> {
     if a.compare {
         check_output(&compare_path, "png")?;
     }
-    a.report.check_outputs()?;
     let mut mode: Mode = a
         .mode
         .parse()
@@ -106,6 +105,8 @@ pub fn run(a: Args) -> Result<()> {
         fit,
         seed: a.optim.seed,
     };
+    // Last of the checks, as it creates the snapshots folder: inputs were good.
+    a.report.check_outputs()?;
     let mut reporter = Reporter::new(&a.report, a.iters + 1, objective.background());
     let out = vectorize(&objective, &opts, &mut |e| match e {
         Event::Round { round, paths } => {
