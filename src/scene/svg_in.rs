@@ -8,8 +8,8 @@ use super::{
 };
 use crate::error::{Error, Result};
 
-use crate::limits::MAX_COORDINATE;
 pub use crate::limits::MAX_SIDE;
+use crate::limits::MAX_COORDINATE;
 
 /// How to size the canvas when loading an SVG.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
