@@ -28,7 +28,7 @@ pub fn render_resvg(tree: &usvg::Tree, name: &Path, sizing: Sizing) -> Result<Im
         what: format!("resvg cannot render this file: {why}"),
     };
     let reach = device_reach(tree, &t);
-    if !(reach <= RESVG_MAX_DEVICE_COORDINATE) {
+    if reach.is_nan() || reach > RESVG_MAX_DEVICE_COORDINATE {
         return Err(cannot(format!(
             "the drawing reaches {reach:.3e} px from the origin, past the {RESVG_MAX_DEVICE_COORDINATE:.1e} px tiny-skia can rasterize"
         )));

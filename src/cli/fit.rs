@@ -240,12 +240,10 @@ pub fn run(a: Args) -> Result<()> {
         side_by_side(&[objective.target(), &before, &after])
     });
     out.best.save_svg(&a.output)?;
-    if let Some(img) = compare {
-        if let Err(e) = img.save_png(&compare_path) {
-            // All or nothing: no SVG without the comparison asked for.
-            let _ = std::fs::remove_file(&a.output);
-            return Err(e.into());
-        }
+    // All or nothing: no SVG without the comparison asked for.
+    if let Some(Err(e)) = compare.map(|img| img.save_png(&compare_path)) {
+        let _ = std::fs::remove_file(&a.output);
+        return Err(e.into());
     }
     let first = out.history.first().map_or(f64::NAN, |s| s.psnr);
     let secs = start.elapsed().as_secs_f64();

@@ -123,12 +123,10 @@ pub fn run(a: Args) -> Result<()> {
         side_by_side(&[objective.target(), &img])
     });
     out.scene.save_svg(&a.output)?;
-    if let Some(img) = compare {
-        if let Err(e) = img.save_png(&compare_path) {
-            // All or nothing: no SVG without the comparison asked for.
-            let _ = std::fs::remove_file(&a.output);
-            return Err(e.into());
-        }
+    // All or nothing: no SVG without the comparison asked for.
+    if let Some(Err(e)) = compare.map(|img| img.save_png(&compare_path)) {
+        let _ = std::fs::remove_file(&a.output);
+        return Err(e.into());
     }
     let secs = out.elapsed.as_secs_f64();
     let n = out.scene.path_count();
