@@ -6,10 +6,33 @@ use crate::error::{Error, Result};
 use crate::image_io::Image;
 use crate::scene::svg_in::{Sizing, canvas_size};
 
+/// Largest coordinate magnitude, in device pixels, of anything resvg is asked to draw.
+///
+/// tiny-skia's rasterizer works in fixed point: from about 2³¹ device pixels its scan
+/// converter indexes out of its buffers and panics (`alpha_runs.rs`, `pipeline`). A tree
+/// reaching past this bound (a thousand canvases of the largest size away) is not given
+/// to resvg at all; [`render_resvg`] reports it as a file resvg cannot render.
+pub const RESVG_MAX_DEVICE_COORDINATE: f64 = 1.6e7;
+
 /// Renders a parsed tree with resvg onto a transparent canvas sized exactly as
 /// [`Scene::load`](crate::Scene::load) would size it for `sizing`.
+///
+/// resvg is fed only what it accepts: a tree whose drawing reaches beyond
+/// [`RESVG_MAX_DEVICE_COORDINATE`] device pixels is refused before rendering, and a panic
+/// inside resvg or tiny-skia is caught (its message silenced) and returned as an
+/// [`Error::Unsupported`] naming the file, "resvg cannot render this file: …".
 pub fn render_resvg(tree: &usvg::Tree, name: &Path, sizing: Sizing) -> Result<Image> {
     let (w, h, t) = canvas_size(tree, sizing, name)?;
+    let cannot = |why: String| Error::Unsupported {
+        path: name.to_path_buf(),
+        what: format!("resvg cannot render this file: {why}"),
+    };
+    let reach = device_reach(tree, &t);
+    if reach.is_nan() || reach > RESVG_MAX_DEVICE_COORDINATE {
+        return Err(cannot(format!(
+            "the drawing reaches {reach:.3e} px from the origin, past the {RESVG_MAX_DEVICE_COORDINATE:.1e} px tiny-skia can rasterize"
+        )));
+    }
     let mut pixmap = tiny_skia::Pixmap::new(w, h).ok_or_else(|| Error::InvalidValue {
         path: name.to_path_buf(),
         what: format!("cannot allocate a {w}x{h} canvas"),
@@ -22,8 +45,74 @@ pub fn render_resvg(tree: &usvg::Tree, name: &Path, sizing: Sizing) -> Result<Im
         t[4] as f32,
         t[5] as f32,
     );
-    resvg::render(tree, ts, &mut pixmap.as_mut());
+    quietly(|| resvg::render(tree, ts, &mut pixmap.as_mut()))
+        .map_err(|why| cannot(format!("it panicked ({why})")))?;
     Ok(Image::from_premultiplied_rgba8(w, h, pixmap.data()))
+}
+
+/// The largest coordinate magnitude, in device pixels, of any node's stroked bounding box
+/// (clip paths, masks and patterns included), under the canvas transform `t`. Infinite or
+/// NaN when a box is not finite.
+fn device_reach(tree: &usvg::Tree, t: &crate::scene::Affine) -> f64 {
+    fn visit(g: &usvg::Group, t: &crate::scene::Affine, reach: &mut f64) {
+        for node in g.children() {
+            let b = node.stroke_bounding_box();
+            let m = node.abs_transform();
+            for (x, y) in [
+                (b.left(), b.top()),
+                (b.right(), b.top()),
+                (b.left(), b.bottom()),
+                (b.right(), b.bottom()),
+            ] {
+                let (x, y) = (x as f64, y as f64);
+                // The node's own transform, then the canvas transform.
+                let ux = m.sx as f64 * x + m.kx as f64 * y + m.tx as f64;
+                let uy = m.ky as f64 * x + m.sy as f64 * y + m.ty as f64;
+                let dx = t[0] * ux + t[2] * uy + t[4];
+                let dy = t[1] * ux + t[3] * uy + t[5];
+                let r = dx.abs().max(dy.abs());
+                // NaN propagates: `max` would drop it.
+                *reach = if r.is_nan() { f64::NAN } else { reach.max(r) };
+            }
+            if let usvg::Node::Group(child) = node {
+                visit(child, t, reach);
+            }
+            node.subroots(|sub| visit(sub, t, reach));
+        }
+    }
+    let mut reach = 0.0;
+    visit(tree.root(), t, &mut reach);
+    reach
+}
+
+thread_local! {
+    /// Set while this thread runs resvg under [`quietly`]: its panic message is dropped.
+    static QUIET: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// Runs `f`, catching a panic and returning its message instead. While `f` runs, the panic
+/// hook (installed once, passing every other panic to the previous hook) prints nothing
+/// for this thread, so a caught panic costs no stray lines on stderr.
+fn quietly<R>(f: impl FnOnce() -> R) -> std::result::Result<R, String> {
+    static HOOK: std::sync::Once = std::sync::Once::new();
+    HOOK.call_once(|| {
+        let previous = std::panic::take_hook();
+        std::panic::set_hook(Box::new(move |info| {
+            if !QUIET.with(|q| q.get()) {
+                previous(info);
+            }
+        }));
+    });
+    let was = QUIET.with(|q| q.replace(true));
+    let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(f));
+    QUIET.with(|q| q.set(was));
+    r.map_err(|payload| {
+        payload
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| payload.downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "no message".to_string())
+    })
 }
 
 /// Largest mean absolute difference (0–255 levels) for a file to count as matching resvg.
@@ -49,17 +138,97 @@ impl Parity {
     }
 }
 
+/// Why [`parity_checked`] could not compare a file.
+#[derive(Debug)]
+pub enum ParityError {
+    /// diffsvg refused the file (unreadable, malformed, unsupported, out of range).
+    Ours(Error),
+    /// diffsvg rendered it but resvg could not (see [`render_resvg`]).
+    Reference(Error),
+}
+
+impl std::fmt::Display for ParityError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            ParityError::Ours(e) | ParityError::Reference(e) => e.fmt(f),
+        }
+    }
+}
+
+impl std::error::Error for ParityError {}
+
 /// Renders the SVG file at `path` with diffsvg and with resvg at the same size.
 pub fn parity(path: &Path, sizing: Sizing, opts: &crate::raster::RenderOptions) -> Result<Parity> {
-    let data = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    let tree = crate::scene::svg_in::parse_tree(&data, path)?;
-    let scene = crate::scene::svg_in::from_tree(&tree, path, sizing)?;
-    let ours = crate::raster::render(&scene, opts);
-    let reference = render_resvg(&tree, path, sizing)?;
+    parity_checked(path, sizing, opts).map_err(|e| match e {
+        ParityError::Ours(e) | ParityError::Reference(e) => e,
+    })
+}
+
+/// [`parity`], telling a file diffsvg refuses from one only resvg cannot render.
+pub fn parity_checked(
+    path: &Path,
+    sizing: Sizing,
+    opts: &crate::raster::RenderOptions,
+) -> std::result::Result<Parity, ParityError> {
+    let ours = || -> Result<_> {
+        let data = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        let tree = crate::scene::svg_in::parse_tree(&data, path)?;
+        let scene = crate::scene::svg_in::from_tree(&tree, path, sizing)?;
+        Ok((tree, crate::raster::render(&scene, opts)))
+    };
+    let (tree, ours) = ours().map_err(ParityError::Ours)?;
+    let reference = render_resvg(&tree, path, sizing).map_err(ParityError::Reference)?;
     let comparison = crate::metrics::compare(&ours.quantized(), &reference);
     Ok(Parity {
         ours,
         reference,
         comparison,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// issue 13, case 2: the line that made tiny-skia panic.
+    const LINE_1E9: &str = r#"<svg xmlns="http://www.w3.org/2000/svg" width="100" height="100"><line x2="1e9" y2="-1e9" stroke="black" stroke-width="1e6"/></svg>"#;
+
+    fn tree(svg: &str) -> usvg::Tree {
+        crate::scene::svg_in::parse_tree(svg.as_bytes(), Path::new("t.svg")).unwrap()
+    }
+
+    #[test]
+    fn line_1e9_is_refused_before_resvg_runs() {
+        let err = render_resvg(&tree(LINE_1E9), Path::new("t.svg"), Sizing::Width(128))
+            .unwrap_err()
+            .to_string();
+        assert!(err.starts_with("t.svg: "), "{err}");
+        assert!(err.contains("resvg cannot render this file"), "{err}");
+        assert!(!err.contains('\n'), "{err}");
+    }
+
+    #[test]
+    fn tiny_skia_panic_is_caught_quietly() {
+        // Past the bound: rendered anyway here, to show the panic is caught.
+        let t = tree(&LINE_1E9.replace("1e9", "1e12"));
+        let mut pixmap = tiny_skia::Pixmap::new(128, 128).unwrap();
+        let ts = tiny_skia::Transform::from_scale(1.28, 1.28);
+        let r = quietly(|| resvg::render(&t, ts, &mut pixmap.as_mut()));
+        let why = r.expect_err("tiny-skia panics on this line");
+        assert!(!why.is_empty());
+        // The hook is back to normal for everything else.
+        assert!(!QUIET.with(|q| q.get()));
+        assert_eq!(quietly(|| 7), Ok(7));
+    }
+
+    #[test]
+    fn ordinary_files_still_render() {
+        let line = LINE_1E9.replace("1e9", "90").replace("1e6", "4");
+        let img = render_resvg(&tree(&line), Path::new("t.svg"), Sizing::Width(128)).unwrap();
+        assert_eq!((img.width, img.height), (128, 128));
+        assert!(img.data.iter().any(|p| p[3] > 0.5));
+        // Still far out, but within what tiny-skia rasterizes.
+        let far = LINE_1E9.replace("1e9", "1e6");
+        assert!(render_resvg(&tree(&far), Path::new("t.svg"), Sizing::Width(128)).is_ok());
+    }
 }

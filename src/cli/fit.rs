@@ -199,6 +199,10 @@ pub fn load_target(path: &std::path::Path) -> Result<Image> {
 /// Runs `diffsvg fit`.
 pub fn run(a: Args) -> Result<()> {
     check_output(&a.output, "svg")?;
+    let compare_path = sibling(&a.output, "compare");
+    if a.compare {
+        check_output(&compare_path, "png")?;
+    }
     let opts = a.optim.fit_options(a.iters)?;
     let target = load_target(&a.target)?;
     let objective = a.optim.objective(&target)?;
@@ -222,18 +226,24 @@ pub fn run(a: Args) -> Result<()> {
         );
     }
     let start = Instant::now();
+    // Last of the checks, as it creates the snapshots folder: inputs were good.
+    a.report.check_outputs()?;
     let mut reporter = Reporter::new(&a.report, a.iters + 1, objective.background());
     let initial = scene.clone();
     let out = refine(scene, &objective, &opts, &mut |s, sc| reporter.step(s, sc));
-    let snapshot_error = reporter.error.take();
+    // A snapshot that could not be written fails the run before anything is written.
     reporter.finish()?;
-    out.best.save_svg(&a.output)?;
-    if a.compare {
+    let compare = a.compare.then(|| {
         let opts = RenderOptions::default();
         let before = objective.composite(&render(&initial, &opts));
         let after = objective.composite(&render(&out.best, &opts));
         side_by_side(&[objective.target(), &before, &after])
-            .save_png(sibling(&a.output, "compare"))?;
+    });
+    out.best.save_svg(&a.output)?;
+    // All or nothing: no SVG without the comparison asked for.
+    if let Some(Err(e)) = compare.map(|img| img.save_png(&compare_path)) {
+        let _ = std::fs::remove_file(&a.output);
+        return Err(e.into());
     }
     let first = out.history.first().map_or(f64::NAN, |s| s.psnr);
     let secs = start.elapsed().as_secs_f64();
@@ -260,9 +270,6 @@ pub fn run(a: Args) -> Result<()> {
             out.median_ms.1,
             a.output.display()
         );
-    }
-    if let Some(e) = snapshot_error {
-        return Err(e);
     }
     if out.reason == StopReason::Interrupted && super::progress::interrupted() {
         eprintln!("interrupted: the best result so far was written");

@@ -7,7 +7,7 @@ use anyhow::{Context, Result};
 
 use super::util::SizeArgs;
 use crate::raster::RenderOptions;
-use crate::reference::{PARITY_MAE, PARITY_PSNR, parity};
+use crate::reference::{PARITY_MAE, PARITY_PSNR, ParityError, parity, parity_checked};
 
 /// Arguments of `diffsvg parity`.
 #[derive(clap::Args, Debug)]
@@ -37,6 +37,9 @@ pub enum Outcome {
     },
     /// diffsvg refused it (unsupported feature or invalid file).
     Refused(String),
+    /// diffsvg rendered it but the reference could not (resvg panicked, or the drawing
+    /// lies beyond what tiny-skia rasterizes), or a renderer panicked: a failed file.
+    Failed(String),
 }
 
 /// Finds SVG files under `inputs`, sorted.
@@ -65,16 +68,20 @@ fn walk(dir: &Path, out: &mut Vec<PathBuf>) -> std::io::Result<()> {
     Ok(())
 }
 
-/// Compares one file.
+/// Compares one file. A panic of either renderer is caught and reported as
+/// [`Outcome::Failed`], so that one file cannot stop a run over a folder.
 pub fn check(path: &Path, sizing: crate::Sizing) -> Outcome {
-    match parity(path, sizing, &RenderOptions::default()) {
-        Ok(p) => Outcome::Compared {
+    let run = || parity_checked(path, sizing, &RenderOptions::default());
+    match std::panic::catch_unwind(run) {
+        Ok(Ok(p)) => Outcome::Compared {
             mae: p.comparison.mae,
             max: p.comparison.max,
             psnr: p.comparison.psnr,
             pass: p.passes(),
         },
-        Err(e) => Outcome::Refused(e.to_string()),
+        Ok(Err(ParityError::Ours(e))) => Outcome::Refused(e.to_string()),
+        Ok(Err(ParityError::Reference(e))) => Outcome::Failed(e.to_string()),
+        Err(_) => Outcome::Failed(format!("{}: diffsvg panicked", path.display())),
     }
 }
 
@@ -123,7 +130,10 @@ pub fn run(a: Args) -> Result<()> {
                     if let Some(dir) = &a.failures {
                         std::fs::create_dir_all(dir)
                             .with_context(|| format!("{}: cannot create folder", dir.display()))?;
-                        let p = parity(f, sizing, &RenderOptions::default())?;
+                        // It rendered a moment ago; should it not now, skip the picture.
+                        let Ok(p) = parity(f, sizing, &RenderOptions::default()) else {
+                            continue;
+                        };
                         let stem = f.file_stem().unwrap_or_default().to_string_lossy();
                         let side = crate::image_io::side_by_side(&[
                             &p.ours,
@@ -138,6 +148,7 @@ pub fn run(a: Args) -> Result<()> {
                 e[2] += 1;
                 println!("REFUSED {why}");
             }
+            Outcome::Failed(why) => println!("FAIL {why}"),
         }
     }
     let rate = |pass: usize, files: usize, refused: usize| {

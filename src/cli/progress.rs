@@ -38,6 +38,44 @@ pub struct ReportArgs {
     pub quiet: bool,
 }
 
+impl ReportArgs {
+    /// Checks, before a run, that every output these flags name can be written: the
+    /// `--snapshots` folder is created and written to, the `--log` file's folder too. A
+    /// run then cannot stop at its first snapshot, or fail at its end, for want of a place
+    /// to write.
+    pub fn check_outputs(&self) -> Result<()> {
+        if let Some(dir) = &self.snapshots {
+            if self.every == 0 {
+                anyhow::bail!("--every must be at least 1 with --snapshots");
+            }
+            check_folder(dir, "--snapshots")?;
+        }
+        if let Some(log) = &self.log {
+            if log.is_dir() {
+                anyhow::bail!("--log {}: is a folder", log.display());
+            }
+            let parent = match log.parent() {
+                Some(d) if !d.as_os_str().is_empty() => d,
+                _ => std::path::Path::new("."),
+            };
+            check_folder(parent, "--log")?;
+        }
+        Ok(())
+    }
+}
+
+/// Creates `dir` (with its parents) and checks that a file can be written in it; errors
+/// name `flag` and the folder.
+pub fn check_folder(dir: &std::path::Path, flag: &str) -> Result<()> {
+    std::fs::create_dir_all(dir)
+        .with_context(|| format!("{flag} {}: cannot create the folder", dir.display()))?;
+    let probe = dir.join(format!(".diffsvg-probe-{}", std::process::id()));
+    std::fs::write(&probe, b"")
+        .with_context(|| format!("{flag} {}: folder is not writable", dir.display()))?;
+    let _ = std::fs::remove_file(&probe);
+    Ok(())
+}
+
 static INTERRUPTED: AtomicBool = AtomicBool::new(false);
 static HANDLER: OnceLock<()> = OnceLock::new();
 
@@ -155,18 +193,19 @@ impl Reporter {
         }
     }
 
-    /// Clears the bar and writes the log; returns the first snapshot error, if any.
+    /// Clears the bar and writes the log; returns the first snapshot error instead, if
+    /// any, writing no log (a failed run leaves no outputs).
     pub fn finish(mut self) -> Result<()> {
         if let Some(b) = self.bar.take() {
             b.finish_and_clear();
         }
+        if let Some(e) = self.error.take() {
+            return Err(e);
+        }
         if let Some(p) = &self.args.log {
             write_atomic(p, self.log.as_bytes())?;
         }
-        match self.error.take() {
-            Some(e) => Err(e),
-            None => Ok(()),
-        }
+        Ok(())
     }
 }
 

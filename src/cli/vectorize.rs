@@ -41,7 +41,7 @@ pub struct Args {
     /// Cubic segments per new closed path.
     #[arg(long, default_value_t = 4)]
     segments: usize,
-    /// Optimizer steps in all.
+    /// Optimizer steps in all rounds together (0: place the paths, optimize nothing).
     #[arg(long, default_value_t = 1000)]
     iters: usize,
     /// Resize the target to this width first (height keeps the aspect ratio).
@@ -59,6 +59,10 @@ pub struct Args {
 /// Runs `diffsvg vectorize`.
 pub fn run(a: Args) -> Result<()> {
     check_output(&a.output, "svg")?;
+    let compare_path = sibling(&a.output, "compare");
+    if a.compare {
+        check_output(&compare_path, "png")?;
+    }
     let mut mode: Mode = a
         .mode
         .parse()
@@ -101,6 +105,8 @@ pub fn run(a: Args) -> Result<()> {
         fit,
         seed: a.optim.seed,
     };
+    // Last of the checks, as it creates the snapshots folder: inputs were good.
+    a.report.check_outputs()?;
     let mut reporter = Reporter::new(&a.report, a.iters + 1, objective.background());
     let out = vectorize(&objective, &opts, &mut |e| match e {
         Event::Round { round, paths } => {
@@ -109,13 +115,18 @@ pub fn run(a: Args) -> Result<()> {
         }
         Event::Step(s, sc) => reporter.step(s, sc),
     });
-    let snapshot_error = reporter.error.take();
+    // A snapshot that could not be written fails the run before anything is written.
     reporter.finish()?;
     let out = out?;
-    out.scene.save_svg(&a.output)?;
-    if a.compare {
+    let compare = a.compare.then(|| {
         let img = objective.composite(&render(&out.scene, &RenderOptions::default()));
-        side_by_side(&[objective.target(), &img]).save_png(sibling(&a.output, "compare"))?;
+        side_by_side(&[objective.target(), &img])
+    });
+    out.scene.save_svg(&a.output)?;
+    // All or nothing: no SVG without the comparison asked for.
+    if let Some(Err(e)) = compare.map(|img| img.save_png(&compare_path)) {
+        let _ = std::fs::remove_file(&a.output);
+        return Err(e.into());
     }
     let secs = out.elapsed.as_secs_f64();
     let n = out.scene.path_count();
@@ -138,9 +149,6 @@ pub fn run(a: Args) -> Result<()> {
             out.pruned,
             a.output.display()
         );
-    }
-    if let Some(e) = snapshot_error {
-        return Err(e);
     }
     if super::progress::interrupted() {
         eprintln!("interrupted: the best result so far was written");

@@ -2,11 +2,13 @@
 //! picture, with as few paths as it needs.
 //!
 //! **Adaptive** (the default): paths are added in rounds where the error is largest —
-//! connected regions of pixels whose error is above the mean, largest total error first —
-//! each a small closed cubic "circle" at the region's center, colored with the region's
-//! mean target color. After each round every path is optimized, then paths whose removal
-//! no longer changes the image are pruned. Rounds go on until the path budget or the PSNR
-//! goal is reached. **Fixed** places all paths at once (DiffVG's random blobs), **painterly**
+//! connected regions of pixels whose error is at least the mean, largest total error
+//! first — each a small closed cubic "circle" at the region's center (or, for a region
+//! that fills its bounding box and is wider than the largest circle, such as a flat
+//! background, that box), colored with the region's mean target color. After each round
+//! every path is optimized, then paths whose removal no longer changes the image are
+//! pruned. Rounds go on until the path budget or the PSNR goal is reached; `iters` caps
+//! the optimizer steps of all rounds together (0: paths are placed, not optimized). **Fixed** places all paths at once (DiffVG's random blobs), **painterly**
 //! uses DiffVG's random open strokes, and **trace** starts from vtracer's tracing pruned
 //! to the budget; these three are then optimized in one run.
 
@@ -156,11 +158,12 @@ pub fn vectorize(
         Mode::Adaptive => round_sizes(opts.paths),
         _ => vec![0],
     };
-    // Rounds share 60% of the steps; the last round gets the rest.
-    let per_round = if schedule.len() > 1 {
+    // Rounds share 60% of the steps; the last round gets the rest. Never more than
+    // `opts.iters` in all: 0 places the paths and optimizes nothing.
+    let per_round = if schedule.len() > 1 && opts.iters > 0 {
         (opts.iters * 3 / 5 / (schedule.len() - 1)).max(1)
     } else {
-        opts.iters
+        0
     };
     let (mut fwd, mut bwd) = (Vec::new(), Vec::new());
     let mut stopped = false;
@@ -178,11 +181,8 @@ pub fn vectorize(
         {
             break;
         }
-        let iters = if last {
-            opts.iters.saturating_sub(out.steps)
-        } else {
-            per_round
-        };
+        let left = opts.iters.saturating_sub(out.steps);
+        let iters = if last { left } else { per_round.min(left) };
         let fit = FitOptions {
             iters,
             until_psnr: if last { opts.target_psnr } else { None },
@@ -271,7 +271,9 @@ fn add_paths(
         .map(|(p, t)| (0..4).map(|c| (p[c] - t[c]).powi(2)).sum())
         .collect();
     let mean = err.iter().map(|&e| e as f64).sum::<f64>() / err.len().max(1) as f64;
-    let hot: Vec<bool> = err.iter().map(|&e| e as f64 > mean && e > 1e-6).collect();
+    // At least the mean, not above it: where the error is the same everywhere (a
+    // single-color target against an empty scene) every pixel qualifies.
+    let hot: Vec<bool> = err.iter().map(|&e| e as f64 >= mean && e > 1e-6).collect();
     let mut regions = components(&hot, w, h, &err);
     regions.sort_by(|a, b| b.score.total_cmp(&a.score));
     let base = scene.path_count();
@@ -299,21 +301,75 @@ fn add_paths(
             }
         }
         let color = color.map(|c| (c / n).clamp(0.0, 1.0));
+        let id = format!("p{}", base + k);
+        if let Some(b) = r.rectangle(w, h) {
+            // A region filling its bounding box and wider than the largest circle (a
+            // flat background, a single-color picture) starts as that box.
+            scene
+                .nodes
+                .push(Node::Path(rectangle(id, b, segments, color)));
+            continue;
+        }
         let radius = (0.5 * (n / std::f64::consts::PI).sqrt()).clamp(1.5, 0.25 * w.min(h) as f64);
         let c = [(center % w) as f64 + 0.5, (center / w) as f64 + 0.5];
-        scene.nodes.push(Node::Path(circle(
-            format!("p{}", base + k),
-            c,
-            radius,
-            segments,
-            color,
-        )));
+        scene
+            .nodes
+            .push(Node::Path(circle(id, c, radius, segments, color)));
     }
 }
 
 struct Region {
     pixels: Vec<usize>,
     score: f64,
+}
+
+impl Region {
+    /// The region's pixel bounding box `[x0, y0, x1, y1]` (pixel edges) when the region
+    /// fills at least 90% of it and its smaller side exceeds half the canvas's smaller
+    /// side (the largest starting circle's diameter).
+    fn rectangle(&self, w: usize, h: usize) -> Option<[f64; 4]> {
+        let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0, 0);
+        for &i in &self.pixels {
+            let (x, y) = (i % w, i / w);
+            (x0, y0, x1, y1) = (x0.min(x), y0.min(y), x1.max(x + 1), y1.max(y + 1));
+        }
+        let (bw, bh) = (x1.checked_sub(x0)?, y1.checked_sub(y0)?);
+        let filled = self.pixels.len() as f64 >= 0.9 * (bw * bh) as f64;
+        let wide = 2 * bw.min(bh) > w.min(h);
+        (filled && wide).then_some([x0 as f64, y0 as f64, x1 as f64, y1 as f64])
+    }
+}
+
+/// A closed path of straight cubic segments along the rectangle `[x0, y0, x1, y1]`
+/// (at least one per side, `segments` in all when that is 4 or more), filled with an
+/// opaque straight RGB `color`, nonzero rule.
+fn rectangle(id: String, b: [f64; 4], segments: usize, color: [f64; 3]) -> crate::scene::Path {
+    let [x0, y0, x1, y1] = b;
+    let corners = [[x0, y0], [x1, y0], [x1, y1], [x0, y1], [x0, y0]];
+    let n = segments.max(4);
+    let mut p = crate::scene::Path::new(id);
+    p.move_to(corners[0]);
+    for side in 0..4 {
+        let (a, b) = (corners[side], corners[side + 1]);
+        let k = n / 4 + usize::from(side < n % 4);
+        let at = |t: f64| [a[0] + (b[0] - a[0]) * t, a[1] + (b[1] - a[1]) * t];
+        for j in 0..k {
+            let (t0, t1) = (j as f64 / k as f64, (j + 1) as f64 / k as f64);
+            let end = if j + 1 == k { b } else { at(t1) };
+            p.cubic_to(
+                at(t0 + (t1 - t0) / 3.0),
+                at(t0 + 2.0 * (t1 - t0) / 3.0),
+                end,
+            );
+        }
+    }
+    p.close();
+    p.fill = Some(crate::scene::Fill {
+        paint: crate::scene::Paint::Solid(color),
+        opacity: 1.0,
+        rule: crate::scene::FillRule::NonZero,
+    });
+    p
 }
 
 /// 4-connected components of `hot` pixels, each with its summed error.
@@ -407,5 +463,45 @@ mod tests {
         assert!(a.psnr > 22.0, "{}", a.psnr);
         let again = obj.psnr(&render(&a.scene, &RenderOptions::default()));
         assert!((again - a.psnr).abs() < 1e-9);
+    }
+
+    /// issue 13, case 5: a single-color picture used to give 0 paths (no pixel's error
+    /// was strictly above the mean). It now starts from one canvas-sized rectangle.
+    #[test]
+    fn single_color_image_gets_a_path() {
+        let target = Image::filled(40, 30, [0.2, 0.4, 0.8, 1.0]);
+        let obj = Objective::new(&target, Loss::Mse, Some([1.0; 4]), 1);
+        let opts = VectorizeOptions {
+            paths: 4,
+            iters: 20,
+            ..VectorizeOptions::default()
+        };
+        let out = vectorize(&obj, &opts, &mut |_| Control::Continue).unwrap();
+        assert_eq!(out.scene.path_count(), 1);
+        assert!(out.psnr > 40.0, "{}", out.psnr);
+    }
+
+    /// issue 13: `--iters 0` ran 8 steps (one per round at least). 0 means none.
+    #[test]
+    fn iters_0_takes_no_steps() {
+        let truth = curved_paths(3, 32, 2);
+        let mut target = render(&truth, &RenderOptions::default());
+        target.over_background([1.0; 4]);
+        let obj = Objective::new(&target, Loss::Mse, Some([1.0; 4]), 1);
+        for (mode, iters) in [(Mode::Adaptive, 0), (Mode::Fixed, 0), (Mode::Adaptive, 5)] {
+            let opts = VectorizeOptions {
+                mode,
+                paths: 64,
+                iters,
+                ..VectorizeOptions::default()
+            };
+            let out = vectorize(&obj, &opts, &mut |_| Control::Continue).unwrap();
+            assert!(
+                out.steps <= iters,
+                "{mode:?}: {} steps for {iters}",
+                out.steps
+            );
+            assert!(out.scene.path_count() > 0, "{mode:?}");
+        }
     }
 }

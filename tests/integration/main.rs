@@ -10,6 +10,7 @@ mod glyphs;
 mod gradcheck_cli;
 mod gradients;
 mod parity;
+mod regress_cli;
 mod regress_input;
 mod roundtrip;
 mod vectorize;

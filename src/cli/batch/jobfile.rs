@@ -213,7 +213,7 @@ fn expand(table: usize, t: &Map<String, Value>, base: &Path) -> Result<Vec<Job>>
         }
         Some(v) => bail!("`name` must be a string, not {v}"),
     };
-    let inputs = input_values(t, &spec)?;
+    let inputs = input_values(t, &spec, base)?;
     let flags = flags(t, &spec)?;
     let proto = Job {
         index: 0,
@@ -229,7 +229,7 @@ fn expand(table: usize, t: &Map<String, Value>, base: &Path) -> Result<Vec<Job>>
     let glob = spec
         .glob_key
         .and_then(|k| inputs.iter().find(|(key, _)| *key == k))
-        .filter(|(_, v)| is_glob(v))
+        .filter(|(_, v)| is_glob(v) && !base.join(v).exists())
         .map(|(k, v)| (*k, v.clone()));
     let Some((gkey, pattern)) = glob else {
         return Ok(vec![build(proto, &spec, &inputs, &flags, base)]);
@@ -257,8 +257,13 @@ fn expand(table: usize, t: &Map<String, Value>, base: &Path) -> Result<Vec<Job>>
 }
 
 /// The input keys' values, in positional order; checks that required ones are present and
-/// that only the glob key holds a pattern.
-fn input_values(t: &Map<String, Value>, spec: &KindSpec) -> Result<Vec<(&'static str, String)>> {
+/// that only the glob key holds a pattern (a value naming an existing file is a plain path,
+/// brackets and all).
+fn input_values(
+    t: &Map<String, Value>,
+    spec: &KindSpec,
+    base: &Path,
+) -> Result<Vec<(&'static str, String)>> {
     let mut out = Vec::new();
     for &key in spec.input_keys {
         match t.get(key) {
@@ -266,7 +271,7 @@ fn input_values(t: &Map<String, Value>, spec: &KindSpec) -> Result<Vec<(&'static
             None => bail!("no `{key}` (an input file{})", glob_note(spec, key)),
             Some(Value::String(v)) if v.is_empty() => bail!("`{key}` is empty"),
             Some(Value::String(v)) => {
-                if is_glob(v) && spec.glob_key != Some(key) {
+                if is_glob(v) && spec.glob_key != Some(key) && !base.join(v).exists() {
                     bail!("`{key}` must be a plain path, not a glob ({v:?})");
                 }
                 out.push((key, v.clone()));
@@ -300,7 +305,9 @@ fn glob_matches(base: &Path, pattern: &str) -> Result<Vec<PathBuf>> {
     Ok(v)
 }
 
-/// Whether a value is a glob pattern rather than a plain path.
+/// Whether a value has glob characters. It is taken as a pattern only when no file of
+/// that exact name exists (`a [1].svg` is a plain path when it is there); to match a
+/// literal `[`, `*` or `?` in a pattern, write `[[]`, `[*]` or `[?]`.
 fn is_glob(s: &str) -> bool {
     s.contains(['*', '?', '['])
 }
@@ -317,18 +324,33 @@ fn stem(p: &Path) -> String {
         .unwrap_or_else(|| "input".into())
 }
 
-/// Keeps `[A-Za-z0-9._-]`, replaces anything else (and a leading `.` or `-`) with `_`.
+/// Longest name [`sanitize`] returns, in bytes: a job's folder name, under the usual
+/// 255-byte limit of a file name with room for a prefix.
+const MAX_NAME_BYTES: usize = 200;
+
+/// A name safe as a folder name and in a link: keeps ASCII `[A-Za-z0-9._-]` and every
+/// other non-ASCII character (so `日本` and `中国` stay apart), replaces with `_` the
+/// rest of ASCII (path separators, spaces, punctuation), control characters, other
+/// whitespace and invisible direction marks, and a leading `.` or `-`; cuts the name to
+/// [`MAX_NAME_BYTES`] bytes on a character boundary.
 fn sanitize(s: &str) -> String {
-    let mut out: String = s
-        .chars()
-        .map(|c| {
-            if c.is_ascii_alphanumeric() || matches!(c, '.' | '_' | '-') {
-                c
-            } else {
-                '_'
-            }
-        })
-        .collect();
+    let keep = |c: char| {
+        if c.is_ascii() {
+            c.is_ascii_alphanumeric() || matches!(c, '.' | '_' | '-')
+        } else {
+            !(c.is_control()
+                || c.is_whitespace()
+                || matches!(c, '\u{200b}'..='\u{200f}' | '\u{202a}'..='\u{202e}' | '\u{2066}'..='\u{2069}' | '\u{feff}'))
+        }
+    };
+    let mut out = String::new();
+    for c in s.chars() {
+        let c = if keep(c) { c } else { '_' };
+        if out.len() + c.len_utf8() > MAX_NAME_BYTES {
+            break;
+        }
+        out.push(c);
+    }
     if out.is_empty() {
         out.push('_');
     }
@@ -481,6 +503,18 @@ mod tests {
         assert_eq!(sanitize("a b/c"), "a_b_c");
         assert_eq!(sanitize(".hidden"), "_hidden");
         assert_eq!(sanitize("-x"), "_x");
+    }
+
+    /// issue 13, case 10: non-ASCII stems collapsed to underscores and collided.
+    #[test]
+    fn sanitize_keeps_unicode_letters() {
+        assert_eq!(sanitize("日本"), "日本");
+        assert_eq!(sanitize("中国"), "中国");
+        assert_eq!(sanitize("café नमस्ते"), "café_नमस्ते");
+        assert_eq!(sanitize("a\u{202e}b\u{3000}c\u{7f}d\\e"), "a_b_c_d_e");
+        let long = sanitize(&"字".repeat(100));
+        assert!(long.len() <= MAX_NAME_BYTES && long.chars().all(|c| c == '字'));
+        assert!(check_name("日本").is_ok());
     }
 
     #[test]

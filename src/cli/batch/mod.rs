@@ -8,7 +8,7 @@ use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::mpsc;
 
-use anyhow::{Context as _, Result, anyhow, bail};
+use anyhow::{Result, anyhow, bail};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde_json::json;
 
@@ -104,8 +104,8 @@ fn run(a: Args) -> Result<ExitCode> {
         .iter()
         .filter(|j| a.shard.is_none_or(|s| j.index % s.n == s.k))
         .collect();
-    std::fs::create_dir_all(&root)
-        .with_context(|| format!("{}: cannot create the output folder", root.display()))?;
+    // Created and written to before any job runs.
+    super::progress::check_folder(&root, "output folder")?;
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let ctx = Context {
         root: root.clone(),
