@@ -20,6 +20,10 @@ pub const MAX_IMAGE_PIXELS: u64 = MAX_PIXELS;
 /// Largest input file read whole (SVG, job file, camera file, PLY header), in bytes.
 pub const MAX_FILE_BYTES: u64 = 64 << 20;
 
+/// Largest model file read (a voxel grid), in bytes; its header's counts are checked
+/// against its length before anything else is allocated.
+pub const MAX_MODEL_BYTES: u64 = 4 << 30;
+
 /// Largest decompressed size of a gzip stream (`.svgz`, `.gz` IDX files), in bytes.
 pub const MAX_DECOMPRESSED_BYTES: u64 = 256 << 20;
 

@@ -171,7 +171,7 @@ pub fn parity_checked(
     opts: &crate::raster::RenderOptions,
 ) -> std::result::Result<Parity, ParityError> {
     let ours = || -> Result<_> {
-        let data = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        let data = crate::image_io::read_bounded(path, crate::limits::MAX_FILE_BYTES)?;
         let tree = crate::scene::svg_in::parse_tree(&data, path)?;
         let scene = crate::scene::svg_in::from_tree(&tree, path, sizing)?;
         Ok((tree, crate::raster::render(&scene, opts)))

@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 
 use super::parity::collect_svgs;
 use crate::Sizing;
@@ -115,7 +115,7 @@ pub fn run(a: Args) -> Result<()> {
     };
     let mut cases: Vec<(String, usvg::Tree, Sizing)> = Vec::new();
     for f in collect_svgs(&inputs)? {
-        let data = std::fs::read(&f).with_context(|| format!("{}: cannot read", f.display()))?;
+        let data = crate::image_io::read_bounded(&f, crate::limits::MAX_FILE_BYTES)?;
         let tree = parse_tree(&data, &f)?;
         let name = f
             .file_name()

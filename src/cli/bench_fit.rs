@@ -87,7 +87,7 @@ fn photo(path: &Path, w: u32, h: u32) -> Result<crate::Image> {
     } else {
         h
     };
-    Ok(t.resized(w, h))
+    Ok(t.resized_checked(w, h, path)?)
 }
 
 /// One painterly run: (median forward ms, median backward ms, seconds, final MSE).

@@ -93,7 +93,7 @@ pub fn run(a: Args) -> Result<()> {
             bail!("--width must be at least 1 pixel");
         }
         let h = ((target.height as f64 * w as f64 / target.width as f64).round() as u32).max(1);
-        target = target.resized(w, h);
+        target = target.resized_checked(w, h, std::path::Path::new("--width"))?;
     }
     let objective = a.optim.objective(&target)?;
     let opts = VectorizeOptions {

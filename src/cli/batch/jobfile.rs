@@ -104,8 +104,10 @@ fn read_raw(path: &Path) -> Result<RawFile> {
             path.display()
         );
     }
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| anyhow!("{}: cannot read the job file: {e}", path.display()))?;
+    let bytes = crate::image_io::read_bounded(path, crate::limits::MAX_FILE_BYTES)
+        .map_err(|e| anyhow!("cannot read the job file: {e}"))?;
+    let text = String::from_utf8(bytes)
+        .map_err(|_| anyhow!("{}: the job file is not UTF-8 text", path.display()))?;
     if ext.as_deref() == Some("json") {
         serde_json::from_str(&text)
             .map_err(|e| anyhow!("{}: not a valid job file: {e}", path.display()))

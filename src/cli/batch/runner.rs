@@ -258,7 +258,8 @@ fn cached(job: &Job, dir: &Path, inputs: &[InputHash], retry_failed: bool) -> Op
 }
 
 fn read_manifest(dir: &Path) -> Option<Manifest> {
-    let bytes = std::fs::read(dir.join(MANIFEST)).ok()?;
+    let bytes =
+        crate::image_io::read_bounded(&dir.join(MANIFEST), crate::limits::MAX_FILE_BYTES).ok()?;
     serde_json::from_slice(&bytes).ok()
 }
 
@@ -331,7 +332,7 @@ fn error_text(stderr: &str, code: i32) -> String {
 /// The SHA-256 of an input file, or why it cannot be read.
 fn hash_input(p: &Path) -> (InputHash, Option<String>) {
     let path = p.display().to_string();
-    match std::fs::read(p) {
+    match crate::image_io::read_bounded(p, crate::limits::MAX_FILE_BYTES) {
         Ok(bytes) => (
             InputHash {
                 path,
@@ -344,7 +345,7 @@ fn hash_input(p: &Path) -> (InputHash, Option<String>) {
                 path: path.clone(),
                 sha256: None,
             },
-            Some(format!("{path}: cannot read: {e}")),
+            Some(format!("cannot read: {e}")),
         ),
     }
 }

@@ -66,7 +66,7 @@ pub fn save(grid: &Grid, path: impl AsRef<Path>) -> Result<()> {
 /// Reads a grid written by [`save`].
 pub fn load(path: impl AsRef<Path>) -> Result<Grid> {
     let path = path.as_ref();
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = crate::image_io::read_bounded(path, crate::limits::MAX_MODEL_BYTES)?;
     from_bytes(&bytes, path)
 }
 
