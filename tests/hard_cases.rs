@@ -423,3 +423,41 @@ fn colors_and_opacities_at_their_bounds() {
         );
     }
 }
+
+/// A linear gradient whose end points nearly coincide (issue 13): with `pad` it paints the
+/// last stop, with `repeat` and `reflect` the gradient's mean color, as resvg does; the
+/// gradient of that color reaches the stops, and no geometry gradient is invented.
+#[test]
+fn linear_gradient_of_near_zero_length_with_repeat_and_reflect() {
+    for spread in ["pad", "repeat", "reflect"] {
+        let svg = format!(
+            r##"<svg xmlns="http://www.w3.org/2000/svg" width="{W}" height="{W}">
+            <linearGradient id="g" x1="10" y1="10" x2="10.00001" y2="10" gradientUnits="userSpaceOnUse" spreadMethod="{spread}">
+              <stop offset="0.1" stop-color="#ff0000"/><stop offset="0.4" stop-color="#00ff00" stop-opacity="0.5"/>
+              <stop offset="0.8" stop-color="#0000ff"/></linearGradient>
+            <path d="M3.3 3.1 L20.6 4.2 L18.1 19.7 L4.4 17.3 Z" fill="url(#g)"/></svg>"##
+        );
+        let tree = diffsvg::scene::svg_in::parse_tree(svg.as_bytes(), "g.svg".as_ref()).unwrap();
+        let scene =
+            diffsvg::scene::svg_in::from_tree(&tree, "g.svg".as_ref(), Sizing::Natural).unwrap();
+        let ours = render(&scene, &RenderOptions::default());
+        let theirs =
+            diffsvg::reference::render_resvg(&tree, "g.svg".as_ref(), Sizing::Natural).unwrap();
+        let cmp = diffsvg::metrics::compare(&ours.quantized(), &theirs);
+        assert!(cmp.mae < 0.5, "{spread}: MAE {} / 255", cmp.mae);
+        // The stops' parameters. (The polygon's points are checked by the other cases; the
+        // gradient's geometry has no derivative here: a step of the end points leaves the
+        // degenerate case, where the paint jumps.)
+        finite(&format!("degenerate {spread}"), &scene);
+        let layout = ParamLayout::new(&scene);
+        let paint: Vec<usize> = (0..layout.slots.len())
+            .filter(|&i| {
+                !matches!(
+                    layout.slots[i].group,
+                    ParamGroup::Points | ParamGroup::PaintGeometry
+                )
+            })
+            .collect();
+        agrees_on(&format!("degenerate {spread}"), &scene, Some(&paint));
+    }
+}

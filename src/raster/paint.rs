@@ -46,7 +46,16 @@ pub struct GradientEval {
     pub stops: Vec<Stop>,
     /// Item opacity.
     pub opacity: f64,
+    /// A linear gradient whose end points (in gradient space) are closer than
+    /// [`DEGENERATE_LENGTH`]: it paints one color, as resvg does.
+    pub degenerate: bool,
 }
+
+/// Below this distance between its end points, in gradient space, a linear gradient is
+/// degenerate and paints one color: the last stop's with `pad`, the gradient's average
+/// with `repeat` and `reflect` (its stripes would be far thinner than a pixel). The value
+/// and the fallbacks are tiny-skia's, so diffsvg draws what resvg draws.
+pub const DEGENERATE_LENGTH: f64 = 1.0 / 32768.0;
 
 impl PaintEval {
     /// Prepares `paint` drawn with `opacity`. `None` when nothing would be painted (a
@@ -119,22 +128,61 @@ impl GradientEval {
         if g.stops.is_empty() {
             return None;
         }
+        let degenerate = match g.kind {
+            GradientKind::Linear { p1, p2 } => {
+                (p2[0] - p1[0]).hypot(p2[1] - p1[1]) < DEGENERATE_LENGTH
+            }
+            GradientKind::Radial { .. } => false,
+        };
         Some(GradientEval {
             inv: invert(&g.transform)?,
             kind: g.kind.clone(),
             spread: g.spread,
             stops: g.stops.clone(),
             opacity: opacity.clamp(0.0, 1.0),
+            degenerate,
         })
+    }
+
+    /// The one straight RGBA color of a degenerate gradient, and the weight of each stop's
+    /// color in it: the last stop for `pad`, else the mean of the piecewise-linear color
+    /// over `[0, 1]` (ends held flat before the first and after the last stop).
+    fn fallback(&self) -> ([f64; 4], Vec<f64>) {
+        let st = &self.stops;
+        let n = st.len();
+        let mut w = vec![0.0; n];
+        if self.spread == Spread::Pad || n == 1 {
+            w[n - 1] = 1.0;
+        } else {
+            w[0] += st[0].offset;
+            w[n - 1] += 1.0 - st[n - 1].offset;
+            for i in 0..n - 1 {
+                let half = 0.5 * (st[i + 1].offset - st[i].offset);
+                w[i] += half;
+                w[i + 1] += half;
+            }
+        }
+        let mut c = [0.0; 4];
+        for (s, &wi) in st.iter().zip(&w) {
+            for k in 0..3 {
+                c[k] += wi * s.color[k];
+            }
+            c[3] += wi * s.opacity;
+        }
+        (c, w)
     }
 
     /// Premultiplied color at device point `p`.
     pub fn at(&self, p: Point) -> [f32; 4] {
-        let q = apply(&self.inv, p);
-        let Some(t) = gradient_t(&geometry(&self.kind), q) else {
-            return [0.0; 4];
+        let c = if self.degenerate {
+            self.fallback().0
+        } else {
+            let q = apply(&self.inv, p);
+            let Some(t) = gradient_t(&geometry(&self.kind), q) else {
+                return [0.0; 4];
+            };
+            stop_color(&self.stops, spread(self.spread, t).0)
         };
-        let c = stop_color(&self.stops, spread(self.spread, t).0);
         let a = c[3] * self.opacity;
         [
             (c[0] * a) as f32,
@@ -148,6 +196,9 @@ impl GradientEval {
 impl GradientEval {
     /// See [`PaintEval::backward`].
     fn backward(&self, p: Point, gs: [f64; 4], out: &mut [f64]) {
+        if self.degenerate {
+            return self.fallback_backward(gs, out);
+        }
         let q = apply(&self.inv, p);
         let geo = geometry(&self.kind);
         let ng = geo.len();
@@ -199,6 +250,41 @@ impl GradientEval {
             for k in 0..ng {
                 out[k] += gt * t.d[k];
             }
+        }
+    }
+
+    /// [`backward`](Self::backward) of a degenerate gradient: no geometry gradient; stop
+    /// colors through their weights, stop offsets through the interval lengths.
+    fn fallback_backward(&self, gs: [f64; 4], out: &mut [f64]) {
+        let (c, w) = self.fallback();
+        let op = self.opacity;
+        let g_rgb = |k: usize| gs[k] * c[3] * op;
+        let g_alpha = (gs[0] * c[0] + gs[1] * c[1] + gs[2] * c[2] + gs[3]) * op;
+        let n = out.len();
+        out[n - 1] += (gs[0] * c[0] + gs[1] * c[1] + gs[2] * c[2] + gs[3]) * c[3];
+        let ng = geometry(&self.kind).len();
+        let slot = |s: usize| ng + 5 * s;
+        for (s, &ws) in w.iter().enumerate() {
+            for k in 0..3 {
+                out[slot(s) + 1 + k] += ws * g_rgb(k);
+            }
+            out[slot(s) + 4] += ws * g_alpha;
+        }
+        let st = &self.stops;
+        if self.spread == Spread::Pad || st.len() == 1 {
+            return;
+        }
+        // ∂c/∂o_i = (c_{i−1} − c_{i+1}) / 2, with c_{−1} = c_0 and c_n = c_{n−1}.
+        let rgba = |i: usize| {
+            let s = &st[i];
+            [s.color[0], s.color[1], s.color[2], s.opacity]
+        };
+        let last = st.len() - 1;
+        for i in 0..=last {
+            let (a, b) = (rgba(i.saturating_sub(1)), rgba((i + 1).min(last)));
+            let d: f64 =
+                (0..3).map(|k| g_rgb(k) * (a[k] - b[k])).sum::<f64>() + g_alpha * (a[3] - b[3]);
+            out[slot(i)] += 0.5 * d;
         }
     }
 }
