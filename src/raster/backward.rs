@@ -27,7 +27,7 @@ use rayon::prelude::*;
 
 use super::coverage::{Cells, backward_line, coverage, coverage_slopes};
 use super::prepare::{ItemKind, Op, Prepared, prepare};
-use super::render::{BAND_ROWS, BandRenderer, RenderOptions, composite_layer};
+use super::render::{Area, BAND_ROWS, BandRenderer, RenderOptions, composite_layer};
 use super::stroke::NONE;
 use crate::image_io::Image;
 use crate::scene::{ParamLayout, Path, Point, Scene};
@@ -96,8 +96,11 @@ enum Rec {
     Pop {
         group: usize,
         opacity: f32,
+        /// The layer, over `area`.
         top: Vec<[f32; 4]>,
+        /// The color below it, over `area` only (elsewhere the layer is transparent).
         below: Vec<[f32; 4]>,
+        area: Area,
     },
 }
 
@@ -116,6 +119,10 @@ pub fn backward_with_stats(
         (d_image.width, d_image.height),
         (p.width, p.height),
         "gradient image size must match the canvas"
+    );
+    assert!(
+        p.for_backward,
+        "the backward pass needs a scene made by prepare, not prepare_forward"
     );
     let (w, h) = (p.width as usize, p.height as usize);
     let layout = ParamLayout::new(scene);
@@ -293,55 +300,76 @@ fn band_backward(p: &Prepared, y0: usize, rows: usize, d_out: &[[f32; 4]]) -> Ba
     let width = p.width as usize;
     // 1. Replay, recording.
     let mut base = vec![[0.0f32; 4]; rows * width];
-    let mut layers: Vec<Vec<[f32; 4]>> = Vec::new();
-    let mut tape: Vec<Rec> = Vec::new();
     let mut r = BandRenderer::new(p, y0, rows);
-    for op in &p.ops {
-        match *op {
-            Op::Draw(i) => {
-                let item = &p.items[i];
+    let base_area = r.band_area();
+    let mut layers: Vec<(Area, Vec<[f32; 4]>)> = Vec::new();
+    let mut tape: Vec<Rec> = Vec::new();
+    let (mut i, mut group_ix) = (0usize, 0usize);
+    while i < p.ops.len() {
+        match p.ops[i] {
+            Op::Draw(ix) => {
+                let item = &p.items[ix];
                 if !r.winding(item) {
+                    i += 1;
                     continue;
                 }
-                let target = match layers.last_mut() {
-                    Some(l) => l.as_mut_slice(),
-                    None => base.as_mut_slice(),
+                let (area, target) = match layers.last_mut() {
+                    Some((a, l)) => (*a, l.as_mut_slice()),
+                    None => (base_area, base.as_mut_slice()),
                 };
                 let acc = &r.acc;
                 let cols = acc.w.min(width - acc.x0 as usize);
                 let mut below = Vec::with_capacity(acc.h * cols);
                 for row in 0..acc.h {
-                    let start = (acc.y0 as usize + row - y0) * width + acc.x0 as usize;
+                    let start = area.index(acc.x0 as usize, acc.y0 as usize + row);
                     below.extend_from_slice(&target[start..start + cols]);
                 }
-                r.composite(item, target);
+                r.composite(item, target, area);
                 tape.push(Rec::Draw {
-                    item: i,
+                    item: ix,
                     acc: std::mem::take(&mut r.acc),
                     below,
                     cols,
                 });
             }
             Op::Push => {
-                layers.push(vec![[0.0; 4]; rows * width]);
-                tape.push(Rec::Push);
+                let span = p.groups[group_ix];
+                match r.layer_area(&span) {
+                    Some(a) => {
+                        layers.push((a, vec![[0.0; 4]; a.len()]));
+                        tape.push(Rec::Push);
+                        group_ix += 1;
+                    }
+                    None => {
+                        // Nothing inside touches this band: no layer, no gradient.
+                        group_ix = span.groups_end;
+                        i = span.end + 1;
+                        continue;
+                    }
+                }
             }
             Op::Pop { opacity, group } => {
-                let top = layers.pop().unwrap_or_default();
-                let below_buf = match layers.last_mut() {
-                    Some(l) => l,
-                    None => &mut base,
+                let (ta, top) = layers.pop().expect("a layer per group");
+                let (ba, below_buf) = match layers.last_mut() {
+                    Some((a, l)) => (*a, l.as_mut_slice()),
+                    None => (base_area, base.as_mut_slice()),
                 };
-                let below = below_buf.clone();
-                composite_layer(below_buf, &top, opacity);
+                let mut below = Vec::with_capacity(ta.len());
+                for row in 0..ta.h {
+                    let start = ba.index(ta.x0, ta.y0 + row);
+                    below.extend_from_slice(&below_buf[start..start + ta.w]);
+                }
+                composite_layer(below_buf, ba, &top, ta, opacity);
                 tape.push(Rec::Pop {
                     group,
                     opacity,
                     top,
                     below,
+                    area: ta,
                 });
             }
         }
+        i += 1;
     }
     // 2. Reverse walk with ∂L/∂(current layer).
     let mut out = BandGrads::default();
@@ -354,7 +382,8 @@ fn band_backward(p: &Prepared, y0: usize, rows: usize, d_out: &[[f32; 4]]) -> Ba
         })
         .sum::<usize>()
         + 2 * d_out.len() * 16;
-    let mut g_stack: Vec<Vec<[f32; 4]>> = vec![d_out.to_vec()];
+    drop(base);
+    let mut g_stack: Vec<(Area, Vec<[f32; 4]>)> = vec![(base_area, d_out.to_vec())];
     let mut gw = Cells::<[f32; 2]>::default();
     for rec in tape.iter().rev() {
         match rec {
@@ -363,24 +392,33 @@ fn band_backward(p: &Prepared, y0: usize, rows: usize, d_out: &[[f32; 4]]) -> Ba
                 opacity,
                 top,
                 below,
+                area,
             } => {
-                let g = g_stack.last_mut().expect("layer gradient");
+                let (ga, g) = g_stack.last_mut().expect("layer gradient");
+                let ga = *ga;
                 let op = *opacity;
-                let mut g_top = vec![[0.0f32; 4]; g.len()];
+                let mut g_top = vec![[0.0f32; 4]; area.len()];
                 let mut g_op = 0.0f64;
-                for k in 0..g.len() {
-                    let (go, t, b) = (g[k], top[k], below[k]);
-                    let gb: f32 = (0..4).map(|c| go[c] * b[c]).sum();
-                    let gt: f32 = (0..4).map(|c| go[c] * t[c]).sum();
-                    for c in 0..4 {
-                        g_top[k][c] = go[c] * op;
-                        g[k][c] = go[c] * (1.0 - t[3] * op);
+                // Outside `area` the layer is transparent: the gradient below passes
+                // unchanged and adds nothing to the opacity's.
+                for row in 0..area.h {
+                    let kg0 = ga.index(area.x0, area.y0 + row);
+                    for col in 0..area.w {
+                        let k = row * area.w + col;
+                        let kg = kg0 + col;
+                        let (go, t, b) = (g[kg], top[k], below[k]);
+                        let gb: f32 = (0..4).map(|c| go[c] * b[c]).sum();
+                        let gt: f32 = (0..4).map(|c| go[c] * t[c]).sum();
+                        for c in 0..4 {
+                            g_top[k][c] = go[c] * op;
+                            g[kg][c] = go[c] * (1.0 - t[3] * op);
+                        }
+                        g_top[k][3] -= op * gb;
+                        g_op += (gt - t[3] * gb) as f64;
                     }
-                    g_top[k][3] -= op * gb;
-                    g_op += (gt - t[3] * gb) as f64;
                 }
                 out.groups.push((*group as u32, g_op));
-                g_stack.push(g_top);
+                g_stack.push((*area, g_top));
             }
             Rec::Push => {
                 g_stack.pop();
@@ -392,7 +430,8 @@ fn band_backward(p: &Prepared, y0: usize, rows: usize, d_out: &[[f32; 4]]) -> Ba
                 cols,
             } => {
                 let it = &p.items[*item];
-                let g = g_stack.last_mut().expect("layer gradient");
+                let (ga, g) = g_stack.last_mut().expect("layer gradient");
+                let ga = *ga;
                 gw.reset(acc.x0, acc.y0, acc.w, acc.h);
                 let mut pg = vec![0.0f64; it.paint.grad_len()];
                 let solid = it.paint.is_solid();
@@ -413,7 +452,7 @@ fn band_backward(p: &Prepared, y0: usize, rows: usize, d_out: &[[f32; 4]]) -> Ba
                         let x = acc.x0 as usize + col;
                         let center = [x as f64 + 0.5, y as f64 + 0.5];
                         let s = it.paint.at(center);
-                        let k = (y - y0) * width + x;
+                        let k = ga.index(x, y);
                         let go = g[k];
                         let d = below[row * cols + col];
                         let gd: f32 = (0..4).map(|c| go[c] * d[c]).sum();

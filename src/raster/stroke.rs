@@ -267,6 +267,30 @@ pub struct Style {
     pub miter_limit: f64,
     /// Chord tolerance for round joins and caps, in frame units.
     pub tolerance: f64,
+    /// Whether to keep each vertex's [`Recipe`] (the backward pass needs them; a forward
+    /// render does not, and they are most of an outline's memory).
+    pub keep_recipes: bool,
+}
+
+impl Style {
+    /// Chords of a round join or cap sweeping `angle` radians (1 to 256).
+    pub fn arc_steps(&self, angle: f64) -> usize {
+        let h = self.half_width;
+        if h <= self.tolerance {
+            return 1;
+        }
+        let step = 2.0 * (1.0 - self.tolerance / h).clamp(-1.0, 1.0).acos();
+        ((angle.abs() / step.max(1e-3)).ceil() as usize).clamp(1, 256)
+    }
+
+    /// Vertices one end cap adds to an outline (0 for butt caps).
+    pub fn cap_vertices(&self) -> usize {
+        match self.cap {
+            LineCap::Butt => 0,
+            LineCap::Square => 2,
+            LineCap::Round => self.arc_steps(std::f64::consts::PI).max(2) - 1,
+        }
+    }
 }
 
 /// Outline rings: vertices with their recipes; ring `r` spans `rings[r]` as `(start, len)`.
@@ -298,16 +322,13 @@ impl Builder<'_> {
         };
         let q = r.eval(p(a), p(b), p(c), self.style.half_width);
         self.out.pts.push(q);
-        self.out.recipes.push(r);
+        if self.style.keep_recipes {
+            self.out.recipes.push(r);
+        }
     }
 
     fn arc_steps(&self, angle: f64) -> usize {
-        let h = self.style.half_width;
-        if h <= self.style.tolerance {
-            return 1;
-        }
-        let step = 2.0 * (1.0 - self.style.tolerance / h).clamp(-1.0, 1.0).acos();
-        ((angle.abs() / step.max(1e-3)).ceil() as usize).clamp(1, 256)
+        self.style.arc_steps(angle)
     }
 
     /// One side of a polyline (left of travel), joins included, from the start offset of
@@ -447,7 +468,7 @@ impl Builder<'_> {
             self.out.rings.push((start, len));
         } else {
             self.out.pts.truncate(start);
-            self.out.recipes.truncate(start);
+            self.out.recipes.truncate(start.min(self.out.recipes.len()));
         }
     }
 
@@ -566,6 +587,7 @@ mod tests {
             cap,
             miter_limit: 4.0,
             tolerance: 0.01,
+            keep_recipes: true,
         }
     }
 

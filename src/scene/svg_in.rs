@@ -8,8 +8,8 @@ use super::{
 };
 use crate::error::{Error, Result};
 
-pub use crate::limits::MAX_SIDE;
 use crate::limits::MAX_COORDINATE;
+pub use crate::limits::MAX_SIDE;
 
 /// How to size the canvas when loading an SVG.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -260,6 +260,7 @@ pub fn from_tree(tree: &usvg::Tree, name: &FsPath, sizing: Sizing) -> Result<Sce
     let mut scene = Scene::new(w, h);
     let t = concat(&ctx.root, &to_affine(tree.root().transform()));
     scene.nodes = convert_group_children(tree.root(), &ctx, &t)?;
+    scene.check_limits(name)?;
     Ok(scene)
 }
 
