@@ -515,3 +515,61 @@ fn band_backward(p: &Prepared, y0: usize, rows: usize, d_out: &[[f32; 4]]) -> Ba
     }
     out
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::{Fill, FillRule, Group, Node, Paint};
+
+    /// A 10-pixel square inside `levels` nested groups of opacity 0.9, on a wide canvas.
+    fn nested(levels: usize, size: u32) -> Scene {
+        let mut p = Path::new("sq");
+        p.move_to([10.5, 10.0]);
+        p.line_to([20.5, 10.0]);
+        p.line_to([20.5, 20.0]);
+        p.line_to([10.5, 20.0]);
+        p.close();
+        p.fill = Some(Fill {
+            paint: Paint::Solid([1.0, 0.0, 0.0]),
+            opacity: 1.0,
+            rule: FillRule::NonZero,
+        });
+        let mut node = Node::Path(p);
+        for _ in 0..levels {
+            node = Node::Group(Group {
+                id: String::new(),
+                opacity: 0.9,
+                children: vec![node],
+            });
+        }
+        let mut s = Scene::new(size, size);
+        s.nodes.push(node);
+        s
+    }
+
+    #[test]
+    fn nested_group_layers_cover_only_their_content() {
+        let opts = RenderOptions::default();
+        let s = nested(100, 1024);
+        let p = prepare(&s, opts.tolerance, None);
+        let img = super::super::render::render_prepared(&p);
+        let want = 0.9f32.powi(100);
+        assert!((img.get(15, 15)[3] - want).abs() < 1e-5);
+        assert_eq!(img.get(500, 500)[3], 0.0);
+        let d = Image::filled(1024, 1024, [0.0, 0.0, 0.0, 1.0]);
+        let (g, stats) = backward_with_stats(&s, &p, &d);
+        // A band-wide layer per level would record 100 × 2 × 16 rows × 1024 px × 16 bytes
+        // (52 MB) per band; a layer the size of the square, a few hundred kB.
+        assert!(stats.band_bytes_max < 1 << 20, "{stats:?}");
+        // ∂(Σ alpha)/∂(opacity) of each group: 100 px of alpha 0.9^100, divided by 0.9.
+        let layout = ParamLayout::new(&s);
+        let want = 100.0 * 0.9f64.powi(99);
+        for &slot in &layout.groups {
+            assert!(
+                (g[slot] - want).abs() < 1e-3 * want,
+                "{} vs {want}",
+                g[slot]
+            );
+        }
+    }
+}

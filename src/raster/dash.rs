@@ -449,4 +449,73 @@ mod tests {
         );
         assert!(lengths(&d).iter().all(|&l| l == 0.0));
     }
+
+    #[test]
+    fn only_the_visible_part_of_a_line_to_1e20_is_cut() {
+        let pts = vec![[10.0, 0.0], [10.0, 1e20]];
+        let corner = vec![true, true];
+        let k = vec![Contour {
+            start: 0,
+            len: 2,
+            closed: false,
+            drawn: true,
+        }];
+        let vis = Visible {
+            device: &pts,
+            rect: [-5.0, -5.0, 105.0, 105.0],
+        };
+        assert!(dash_count(&pts, &k, &[5.0, 5.0], None) > 1e18);
+        let n = dash_count(&pts, &k, &[5.0, 5.0], Some(vis));
+        assert!((11.0..=12.0).contains(&n), "{n}");
+        let d = dash(&pts, &corner, &k, &[5.0, 5.0], 0.0, Some(vis));
+        // On 0–5, 10–15, …, 100–105 (where the rectangle ends).
+        assert_eq!(d.contours.len(), 11);
+        for l in lengths(&d) {
+            assert!((l - 5.0).abs() < 1e-6, "{l}");
+        }
+        assert!(d.pts.iter().all(|q| q[1] <= 105.0 + 1e-9));
+    }
+
+    #[test]
+    fn clipping_changes_nothing_when_all_is_visible() {
+        let p = vec![[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]];
+        let c = vec![true; 4];
+        let k = vec![Contour {
+            start: 0,
+            len: 4,
+            closed: true,
+            drawn: true,
+        }];
+        let vis = Visible {
+            device: &p,
+            rect: [-100.0, -100.0, 100.0, 100.0],
+        };
+        for (pattern, offset) in [(&[12.0, 2.0][..], 0.0), (&[3.0, 1.0, 0.0, 2.0][..], 1.5)] {
+            let a = dash(&p, &c, &k, pattern, offset, None);
+            let b = dash(&p, &c, &k, pattern, offset, Some(vis));
+            assert_eq!((a.pts, a.src, a.contours), (b.pts, b.src, b.contours));
+        }
+    }
+
+    #[test]
+    fn a_dash_leaving_the_rectangle_ends_at_its_edge() {
+        // A square half outside the rectangle: the dashes are cut where it leaves.
+        let p = vec![[-50.0, 0.0], [50.0, 0.0], [50.0, 10.0], [-50.0, 10.0]];
+        let c = vec![true; 4];
+        let k = vec![Contour {
+            start: 0,
+            len: 4,
+            closed: true,
+            drawn: true,
+        }];
+        let vis = Visible {
+            device: &p,
+            rect: [0.0, -1.0, 100.0, 11.0],
+        };
+        let d = dash(&p, &c, &k, &[30.0, 10.0], 0.0, Some(vis));
+        assert!(d.pts.iter().all(|q| q[0] >= -1e-9), "{:?}", d.pts);
+        // The top edge: on −50…−20, off, on −10…20, off, on 30…60 (turning the corner).
+        assert!((d.pts[d.contours[0].start][0] - 0.0).abs() < 1e-9);
+        assert!((d.pts[d.contours[0].start + 1][0] - 20.0).abs() < 1e-9);
+    }
 }

@@ -495,3 +495,82 @@ fn item(
         bbox,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::Sizing;
+    use crate::raster::{RenderOptions, render, render_backward};
+
+    fn load(svg: &str) -> Scene {
+        Scene::from_svg_str(svg, "t.svg", Sizing::Natural).unwrap()
+    }
+
+    fn rect(dash: &str) -> String {
+        format!(
+            r#"<svg xmlns="http://www.w3.org/2000/svg" width="40" height="40"><rect x="5" y="5" width="28" height="28" fill="none" stroke="black" stroke-width="3" {dash}/></svg>"#
+        )
+    }
+
+    #[test]
+    fn dasharray_past_the_limit_strokes_solid_forward_and_backward() {
+        let opts = RenderOptions::default();
+        let dashed = load(&rect(r#"stroke-dasharray="1e-5""#));
+        let solid = load(&rect(""));
+        let w = warnings(&dashed, &opts);
+        assert_eq!(w.len(), 1, "{w:?}");
+        assert!(
+            w[0].contains("stroked solid") && w[0].contains("100000"),
+            "{w:?}"
+        );
+        assert!(warnings(&solid, &opts).is_empty());
+        // An ordinary pattern is cut, with no warning.
+        let ordinary = load(&rect(r#"stroke-dasharray="4 2""#));
+        assert!(warnings(&ordinary, &opts).is_empty());
+        let p = prepare(&ordinary, opts.tolerance, None);
+        assert!(p.solid_dashes.is_empty() && p.geoms[0].dashed.is_some());
+
+        let p = prepare(&dashed, opts.tolerance, None);
+        assert_eq!(p.solid_dashes, vec![0]);
+        assert!(p.geoms[0].dashed.is_none());
+        let q = prepare(&solid, opts.tolerance, None);
+        assert_eq!(p.items[0].pts, q.items[0].pts);
+        assert_eq!(render(&dashed, &opts).data, render(&solid, &opts).data);
+        // The backward pass sees the same solid stroke.
+        let mut d = crate::Image::new(40, 40);
+        for (i, px) in d.data.iter_mut().enumerate() {
+            *px = [0.1, -0.2, 0.3, (i % 7) as f32 * 0.05];
+        }
+        assert_eq!(
+            render_backward(&dashed, &opts, &d),
+            render_backward(&solid, &opts, &d)
+        );
+    }
+
+    #[test]
+    fn forward_prepare_draws_the_same_items() {
+        let s = load(&rect(r#"stroke-dasharray="4 2" stroke-linejoin="round""#));
+        let full = prepare(&s, 0.02, None);
+        let fwd = prepare_forward(&s, 0.02);
+        assert!(!fwd.for_backward && fwd.geoms[0].outline.is_none());
+        assert_eq!(full.items.len(), fwd.items.len());
+        for (a, b) in full.items.iter().zip(&fwd.items) {
+            assert_eq!((&a.pts, &a.rings, a.bbox), (&b.pts, &b.rings, b.bbox));
+        }
+        assert_eq!(full.geoms[0].counts, fwd.geoms[0].counts);
+    }
+
+    #[test]
+    fn group_rect_is_the_union_of_its_items() {
+        let s = load(
+            r#"<svg xmlns="http://www.w3.org/2000/svg" width="100" height="100"><g opacity="0.5"><rect x="10.5" y="20" width="5" height="5"/><g opacity="0.5"><rect x="50" y="60" width="10" height="10"/></g></g><g opacity="0.5"><rect x="-50" y="0" width="10" height="10"/></g></svg>"#,
+        );
+        let p = prepare(&s, 0.02, None);
+        assert_eq!(p.groups.len(), 3);
+        assert_eq!(p.groups[0].rect, Some([9, 19, 62, 71]));
+        assert_eq!(p.groups[0].groups_end, 2);
+        assert_eq!(p.groups[1].rect, Some([49, 59, 62, 71]));
+        assert_eq!(p.groups[2].rect, None);
+        assert!(matches!(p.ops[p.groups[0].end], Op::Pop { group: 0, .. }));
+    }
+}

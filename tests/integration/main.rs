@@ -9,6 +9,7 @@ mod fit;
 mod glyphs;
 mod gradients;
 mod parity;
+mod regress_raster;
 mod roundtrip;
 mod vectorize;
 mod volume;
