@@ -26,7 +26,7 @@
 use rayon::prelude::*;
 
 use super::coverage::{Cells, backward_line, coverage, coverage_slopes};
-use super::prepare::{ItemKind, Op, Prepared, prepare};
+use super::prepare::{ItemKind, Op, Prepared, prepare, stroke_outline};
 use super::render::{Area, BAND_ROWS, BandRenderer, RenderOptions, composite_layer};
 use super::stroke::NONE;
 use crate::image_io::Image;
@@ -193,9 +193,7 @@ pub fn backward_with_stats(
                 }
             }
             ItemKind::Stroke => {
-                let (Some(stroke), Some(ol), Some(inv)) =
-                    (&path.stroke, &geom.outline, geom.frame_inv)
-                else {
+                let (Some(stroke), Some(inv)) = (&path.stroke, geom.frame_inv) else {
                     continue;
                 };
                 let [fa, fb, fc, fd] = stroke.frame;
@@ -206,6 +204,9 @@ pub fn backward_with_stats(
                     .iter()
                     .map(|q| [inv[0] * q[0] + inv[2] * q[1], inv[1] * q[0] + inv[3] * q[1]])
                     .collect();
+                // The outline's recipes, rebuilt as prepare built them (not kept there).
+                let ol = stroke_outline(stroke, geom, &fpts, p.tolerance);
+                debug_assert_eq!(ol.recipes.len(), item.pts.len());
                 let center: &[Point] = match &geom.dashed {
                     Some(d) => &d.pts,
                     None => &fpts,

@@ -3,7 +3,7 @@
 use super::dash::{Dashed, Visible, dash, dash_count};
 use super::flatten::{ChordCounts, Flattened, flatten};
 use super::paint::PaintEval;
-use super::stroke::{Outline, Style, outline};
+use super::stroke::{Style, outline};
 use crate::limits::MAX_DASHES_PER_PATH;
 use crate::scene::{FillRule, Node, Path, Point, Scene, Stroke};
 
@@ -68,11 +68,9 @@ pub struct PathGeom {
     pub counts: ChordCounts,
     /// Device → stroke frame linear map `[a, b, c, d]`, when the path is stroked.
     pub frame_inv: Option<[f64; 4]>,
-    /// The dashed centerline in the stroke frame, when the stroke is dashed.
+    /// The dashed centerline in the stroke frame, when the stroke is dashed (and the
+    /// pattern was not dropped for a solid stroke).
     pub dashed: Option<Dashed>,
-    /// The stroke outline's recipes and rings (its points live on as the stroke item's,
-    /// mapped to device space). Kept only by [`prepare`], for the backward pass.
-    pub outline: Option<Outline>,
 }
 
 /// Where a group's layer lies, so that a band it does not touch skips it and a band it
@@ -109,8 +107,11 @@ pub struct Prepared {
     /// would cut more than [`MAX_DASHES_PER_PATH`] dashes; see [`warnings`].
     pub solid_dashes: Vec<usize>,
     /// Whether the geometry the backward pass needs was kept ([`prepare`]) or dropped
-    /// ([`prepare_forward`]).
+    /// ([`prepare_forward`]). Outline recipes are never kept: the backward pass rebuilds
+    /// them one stroke at a time from the kept centerline ([`stroke_outline`]).
     pub for_backward: bool,
+    /// The flattening tolerance used, in device pixels.
+    pub tolerance: f64,
 }
 
 /// Prepares `scene` with flattening `tolerance` (device pixels). With `counts` (one list
@@ -142,6 +143,7 @@ fn prepare_with(
         groups: Vec::new(),
         solid_dashes: Vec::new(),
         for_backward,
+        tolerance,
     };
     let mut b = Builder {
         tolerance,
@@ -184,7 +186,24 @@ fn frame_inverse(s: &Stroke) -> Option<[f64; 4]> {
     inv.iter().all(|v| v.is_finite()).then_some(inv)
 }
 
-pub(crate) fn stroke_style(s: &Stroke, tolerance: f64, keep_recipes: bool) -> Style {
+/// The outline of `path`'s stroke with its recipes, in the stroke frame, rebuilt from a
+/// prepared geometry exactly as [`prepare`] built it (vertex `j` is vertex `j` of the
+/// stroke item): `fpts` is the flattened centerline mapped into the stroke frame.
+pub(crate) fn stroke_outline(
+    s: &Stroke,
+    geom: &PathGeom,
+    fpts: &[Point],
+    tolerance: f64,
+) -> super::stroke::Outline {
+    let style = stroke_style(s, tolerance, true);
+    match &geom.dashed {
+        Some(d) => outline(&d.pts, &d.corner, &d.contours, style),
+        None => outline(fpts, &geom.flat.corner, &geom.flat.contours, style),
+    }
+}
+
+/// The stroke's style in its frame; `for_backward` keeps recipes instead of points.
+pub(crate) fn stroke_style(s: &Stroke, tolerance: f64, for_backward: bool) -> Style {
     let [a, b, c, d] = s.frame;
     let det = a * d - b * c;
     Style {
@@ -193,7 +212,8 @@ pub(crate) fn stroke_style(s: &Stroke, tolerance: f64, keep_recipes: bool) -> St
         cap: s.cap,
         miter_limit: s.miter_limit,
         tolerance: tolerance / det.abs().sqrt(),
-        keep_recipes,
+        keep_recipes: for_backward,
+        keep_points: !for_backward,
     }
 }
 
@@ -373,7 +393,7 @@ impl Builder<'_> {
             let to_frame =
                 |q: &Point| [inv[0] * q[0] + inv[2] * q[1], inv[1] * q[0] + inv[3] * q[1]];
             let fpts: Vec<Point> = geom.flat.pts.iter().map(to_frame).collect();
-            let style = stroke_style(s, self.tolerance, keep);
+            let style = stroke_style(s, self.tolerance, false);
             // Past the dash limit the pattern is dropped and the stroke drawn solid.
             let pattern = s.dash.as_ref().filter(|pattern| {
                 let cost = dash_cost(s, pattern, &geom.flat, &fpts, &style, width, height);
@@ -412,16 +432,9 @@ impl Builder<'_> {
                 .into_iter()
                 .map(|q| [a * q[0] + c * q[1], b * q[0] + d * q[1]])
                 .collect();
-            let rings = if keep {
-                ol.rings.clone()
-            } else {
-                std::mem::take(&mut ol.rings)
-            };
+            let rings = std::mem::take(&mut ol.rings);
             let src = Vec::new();
             geom.frame_inv = Some(inv);
-            if keep {
-                geom.outline = Some(ol);
-            }
             item(ix, ItemKind::Stroke, pts, src, rings, false, paint)
         });
         if solid {
@@ -552,7 +565,7 @@ mod tests {
         let s = load(&rect(r#"stroke-dasharray="4 2" stroke-linejoin="round""#));
         let full = prepare(&s, 0.02, None);
         let fwd = prepare_forward(&s, 0.02);
-        assert!(!fwd.for_backward && fwd.geoms[0].outline.is_none());
+        assert!(!fwd.for_backward && fwd.geoms[0].flat.pts.is_empty());
         assert_eq!(full.items.len(), fwd.items.len());
         for (a, b) in full.items.iter().zip(&fwd.items) {
             assert_eq!((&a.pts, &a.rings, a.bbox), (&b.pts, &b.rings, b.bbox));

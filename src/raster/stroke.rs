@@ -270,6 +270,9 @@ pub struct Style {
     /// Whether to keep each vertex's [`Recipe`] (the backward pass needs them; a forward
     /// render does not, and they are most of an outline's memory).
     pub keep_recipes: bool,
+    /// Whether to keep each vertex's position (the backward pass, which rebuilds an
+    /// outline only for its recipes, does not need them).
+    pub keep_points: bool,
 }
 
 impl Style {
@@ -296,15 +299,17 @@ impl Style {
 /// Outline rings: vertices with their recipes; ring `r` spans `rings[r]` as `(start, len)`.
 #[derive(Clone, Debug, Default)]
 pub struct Outline {
-    /// Vertex positions (stroke frame).
+    /// Vertex positions (stroke frame); empty without [`Style::keep_points`].
     pub pts: Vec<Point>,
-    /// How each vertex was made.
+    /// How each vertex was made; empty without [`Style::keep_recipes`].
     pub recipes: Vec<Recipe>,
     /// Closed rings as `(start, len)`.
     pub rings: Vec<(usize, usize)>,
 }
 
 struct Builder<'a> {
+    /// Vertices pushed so far (kept or not).
+    count: usize,
     pts: &'a [Point],
     style: Style,
     out: Outline,
@@ -312,16 +317,19 @@ struct Builder<'a> {
 
 impl Builder<'_> {
     fn push(&mut self, r: Recipe) {
-        let [a, b, c] = r.inputs();
-        let p = |i: u32| {
-            if i == NONE {
-                [0.0, 0.0]
-            } else {
-                self.pts[i as usize]
-            }
-        };
-        let q = r.eval(p(a), p(b), p(c), self.style.half_width);
-        self.out.pts.push(q);
+        self.count += 1;
+        if self.style.keep_points {
+            let [a, b, c] = r.inputs();
+            let p = |i: u32| {
+                if i == NONE {
+                    [0.0, 0.0]
+                } else {
+                    self.pts[i as usize]
+                }
+            };
+            let q = r.eval(p(a), p(b), p(c), self.style.half_width);
+            self.out.pts.push(q);
+        }
         if self.style.keep_recipes {
             self.out.recipes.push(r);
         }
@@ -463,17 +471,18 @@ impl Builder<'_> {
     }
 
     fn ring_from(&mut self, start: usize) {
-        let len = self.out.pts.len() - start;
+        let len = self.count - start;
         if len >= 3 {
             self.out.rings.push((start, len));
         } else {
+            self.count = start;
             self.out.pts.truncate(start);
-            self.out.recipes.truncate(start.min(self.out.recipes.len()));
+            self.out.recipes.truncate(start);
         }
     }
 
     fn dot_ring(&mut self, b: u32) {
-        let start = self.out.pts.len();
+        let start = self.count;
         match self.style.cap {
             LineCap::Butt => return,
             LineCap::Square => {
@@ -540,7 +549,7 @@ impl Builder<'_> {
                         vc.iter().rev().copied().collect(),
                     )
                 };
-                let start = self.out.pts.len();
+                let start = self.count;
                 for i in 0..m {
                     let prev = vv[(i + m - 1) % m];
                     let next = vv[(i + 1) % m];
@@ -549,7 +558,7 @@ impl Builder<'_> {
                 self.ring_from(start);
             }
         } else {
-            let start = self.out.pts.len();
+            let start = self.count;
             let m = v.len();
             self.side(&v, &vc);
             self.cap(v[m - 2], v[m - 1]);
@@ -566,6 +575,7 @@ impl Builder<'_> {
 /// `corner[i]` tells whether vertex `i` ends an original segment.
 pub fn outline(pts: &[Point], corner: &[bool], contours: &[Contour], style: Style) -> Outline {
     let mut b = Builder {
+        count: 0,
         pts,
         style,
         out: Outline::default(),
@@ -588,6 +598,7 @@ mod tests {
             miter_limit: 4.0,
             tolerance: 0.01,
             keep_recipes: true,
+            keep_points: true,
         }
     }
 
