@@ -26,7 +26,7 @@
 use rayon::prelude::*;
 
 use super::coverage::{Cells, backward_line, coverage, coverage_slopes};
-use super::prepare::{ItemKind, Op, Prepared, prepare, stroke_outline};
+use super::prepare::{ItemKind, Op, Prepared, item_rect, prepare, stroke_outline};
 use super::render::{Area, BAND_ROWS, BandRenderer, RenderOptions, composite_layer};
 use super::stroke::NONE;
 use crate::image_io::Image;
@@ -51,6 +51,39 @@ pub fn render_and_backward(
 /// [`Scene::params`] order), given `d_image = ∂L/∂image`.
 pub fn render_backward(scene: &Scene, opts: &RenderOptions, d_image: &Image) -> Vec<f64> {
     backward_prepared(scene, &prepare(scene, opts.tolerance, None), d_image)
+}
+
+/// Replay records the bands computed at once may hold together, in bytes, by an upper
+/// estimate from the boxes of the items and layers in each band; one band always runs.
+pub const TAPE_BUDGET_BYTES: usize = 256 << 20;
+
+/// Upper estimate of each band's replay record, in bytes: every cell of every item's box
+/// in the band, and two colors per pixel of every layer's box.
+fn tape_estimates(p: &Prepared, bands: usize) -> Vec<usize> {
+    let mut est = vec![0usize; bands];
+    let mut add = |r: [usize; 4], per_pixel: usize| {
+        let cols = r[2] - r[0] + 2;
+        for (b, e) in est
+            .iter_mut()
+            .enumerate()
+            .take((r[3] - 1) / BAND_ROWS + 1)
+            .skip(r[1] / BAND_ROWS)
+        {
+            let rows = (r[3].min((b + 1) * BAND_ROWS)).saturating_sub(r[1].max(b * BAND_ROWS));
+            *e = e.saturating_add(rows * cols * per_pixel);
+        }
+    };
+    for it in &p.items {
+        if let Some(r) = item_rect(it.bbox, p.width, p.height) {
+            add(r, std::mem::size_of::<TapeCell>());
+        }
+    }
+    for g in &p.groups {
+        if let Some(r) = g.rect {
+            add(r, 32);
+        }
+    }
+    est
 }
 
 /// Gradients of one band.
@@ -82,15 +115,27 @@ impl BackwardStats {
     }
 }
 
+/// One pixel of a drawn item kept by the replay.
+#[derive(Clone, Copy)]
+struct TapeCell {
+    /// Index in the item's box (`row * acc.w + col`).
+    ix: u32,
+    /// Winding integral.
+    wv: f32,
+    /// Color below the item.
+    below: [f32; 4],
+}
+
 /// What the replay kept for the reverse walk.
 enum Rec {
     Draw {
         item: usize,
-        /// Winding integrals over the item's box in this band (with guard columns).
+        /// The item's box in this band (with guard columns), as `Cells` without data.
         acc: Cells<f32>,
-        /// Color below, `acc.h × cols` where `cols` stops at the canvas edge.
-        below: Vec<[f32; 4]>,
-        cols: usize,
+        /// The cells that take part in the reverse walk, in row-major order: only those
+        /// with coverage or a coverage slope (an edge passes), so that memory follows
+        /// the pixels a shape's boundary and interior cover, not its box.
+        cells: Vec<TapeCell>,
     },
     Push,
     Pop {
@@ -144,10 +189,19 @@ pub fn backward_with_stats(
     let mut group_g: Vec<f64> = vec![0.0; layout.groups.len()];
     let bands = h.div_ceil(BAND_ROWS);
     // Bands are computed in parallel a chunk at a time and summed strictly in band order.
-    let chunk = 4 * rayon::current_num_threads().max(1);
-    stats.bands_in_flight = chunk.min(bands);
-    for first in (0..bands).step_by(chunk) {
-        let results: Vec<BandGrads> = (first..(first + chunk).min(bands))
+    // A chunk holds at most 4 bands per thread, and no more than `TAPE_BUDGET_BYTES` of
+    // replay records by an estimate from the items' and layers' boxes (one band at least).
+    let est = tape_estimates(p, bands);
+    let max_chunk = 4 * rayon::current_num_threads().max(1);
+    let mut first = 0;
+    while first < bands {
+        let (mut end, mut sum) = (first + 1, est[first]);
+        while end < bands && end - first < max_chunk && sum + est[end] <= TAPE_BUDGET_BYTES {
+            sum += est[end];
+            end += 1;
+        }
+        stats.bands_in_flight = stats.bands_in_flight.max(end - first);
+        let results: Vec<BandGrads> = (first..end)
             .into_par_iter()
             .map(|b| {
                 let y0 = b * BAND_ROWS;
@@ -155,6 +209,7 @@ pub fn backward_with_stats(
                 band_backward(p, y0, rows, &d_image.data[y0 * w..(y0 + rows) * w])
             })
             .collect();
+        first = end;
         for r in results {
             stats.band_bytes_max = stats.band_bytes_max.max(r.tape_bytes);
             for (item, list) in r.verts {
@@ -297,6 +352,18 @@ fn scatter_paint(
     grad[opacity] += pg[n - 1];
 }
 
+/// Whether a cell with winding integral `wv` takes part in the reverse walk: touched by
+/// an edge (or on a grid-aligned item, where untouched cells next to an edge count), with
+/// coverage or a coverage slope.
+fn takes_part(wv: f32, evenodd: bool, grid_aligned: bool) -> bool {
+    if wv == 0.0 && !grid_aligned {
+        return false;
+    }
+    let (cov, _) = coverage(wv, evenodd);
+    let (up, down) = coverage_slopes(wv, evenodd);
+    !(cov == 0.0 && up == 0.0 && down == 0.0)
+}
+
 fn band_backward(p: &Prepared, y0: usize, rows: usize, d_out: &[[f32; 4]]) -> BandGrads {
     let width = p.width as usize;
     // 1. Replay, recording.
@@ -320,17 +387,32 @@ fn band_backward(p: &Prepared, y0: usize, rows: usize, d_out: &[[f32; 4]]) -> Ba
                 };
                 let acc = &r.acc;
                 let cols = acc.w.min(width - acc.x0 as usize);
-                let mut below = Vec::with_capacity(acc.h * cols);
+                let mut cells = Vec::new();
                 for row in 0..acc.h {
                     let start = area.index(acc.x0 as usize, acc.y0 as usize + row);
-                    below.extend_from_slice(&target[start..start + cols]);
+                    for col in 0..cols {
+                        let wv = acc.data[row * acc.w + col];
+                        if takes_part(wv, item.evenodd, item.grid_aligned) {
+                            cells.push(TapeCell {
+                                ix: (row * acc.w + col) as u32,
+                                wv,
+                                below: target[start + col],
+                            });
+                        }
+                    }
                 }
                 r.composite(item, target, area);
+                let shape = Cells {
+                    x0: acc.x0,
+                    y0: acc.y0,
+                    w: acc.w,
+                    h: acc.h,
+                    data: Vec::new(),
+                };
                 tape.push(Rec::Draw {
                     item: ix,
-                    acc: std::mem::take(&mut r.acc),
-                    below,
-                    cols,
+                    acc: shape,
+                    cells,
                 });
             }
             Op::Push => {
@@ -377,7 +459,7 @@ fn band_backward(p: &Prepared, y0: usize, rows: usize, d_out: &[[f32; 4]]) -> Ba
     out.tape_bytes = tape
         .iter()
         .map(|r| match r {
-            Rec::Draw { acc, below, .. } => acc.data.len() * 4 + below.len() * 16,
+            Rec::Draw { cells, .. } => cells.len() * std::mem::size_of::<TapeCell>(),
             Rec::Push => 0,
             Rec::Pop { top, below, .. } => (top.len() + below.len()) * 16,
         })
@@ -424,12 +506,7 @@ fn band_backward(p: &Prepared, y0: usize, rows: usize, d_out: &[[f32; 4]]) -> Ba
             Rec::Push => {
                 g_stack.pop();
             }
-            Rec::Draw {
-                item,
-                acc,
-                below,
-                cols,
-            } => {
+            Rec::Draw { item, acc, cells } => {
                 let it = &p.items[*item];
                 let (ga, g) = g_stack.last_mut().expect("layer gradient");
                 let ga = *ga;
@@ -437,48 +514,40 @@ fn band_backward(p: &Prepared, y0: usize, rows: usize, d_out: &[[f32; 4]]) -> Ba
                 let mut pg = vec![0.0f64; it.paint.grad_len()];
                 let solid = it.paint.is_solid();
                 let mut gs_sum = [0.0f64; 4];
-                for row in 0..acc.h {
+                for cell in cells {
+                    let (row, col) = (cell.ix as usize / acc.w, cell.ix as usize % acc.w);
                     let y = acc.y0 as usize + row;
-                    for col in 0..*cols {
-                        let wv = acc.data[row * acc.w + col];
-                        if wv == 0.0 && !it.grid_aligned {
-                            // Untouched by any edge: no coverage, no boundary here.
-                            continue;
-                        }
-                        let (cov, _) = coverage(wv, it.evenodd);
-                        let (up, down) = coverage_slopes(wv, it.evenodd);
-                        if cov == 0.0 && up == 0.0 && down == 0.0 {
-                            continue;
-                        }
-                        let x = acc.x0 as usize + col;
-                        let center = [x as f64 + 0.5, y as f64 + 0.5];
-                        let s = it.paint.at(center);
-                        let k = ga.index(x, y);
-                        let go = g[k];
-                        let d = below[row * cols + col];
-                        let gd: f32 = (0..4).map(|c| go[c] * d[c]).sum();
-                        let gsrc: f32 = (0..4).map(|c| go[c] * s[c]).sum();
-                        let g_cov = gsrc - s[3] * gd;
-                        gw.data[row * acc.w + col] = [g_cov * up, g_cov * down];
-                        if cov == 0.0 {
-                            continue;
-                        }
-                        let mut gs = [0.0f64; 4];
+                    let wv = cell.wv;
+                    let (cov, _) = coverage(wv, it.evenodd);
+                    let (up, down) = coverage_slopes(wv, it.evenodd);
+                    let x = acc.x0 as usize + col;
+                    let center = [x as f64 + 0.5, y as f64 + 0.5];
+                    let s = it.paint.at(center);
+                    let k = ga.index(x, y);
+                    let go = g[k];
+                    let d = cell.below;
+                    let gd: f32 = (0..4).map(|c| go[c] * d[c]).sum();
+                    let gsrc: f32 = (0..4).map(|c| go[c] * s[c]).sum();
+                    let g_cov = gsrc - s[3] * gd;
+                    gw.data[row * acc.w + col] = [g_cov * up, g_cov * down];
+                    if cov == 0.0 {
+                        continue;
+                    }
+                    let mut gs = [0.0f64; 4];
+                    for c in 0..4 {
+                        gs[c] = (go[c] * cov) as f64;
+                    }
+                    gs[3] -= (cov * gd) as f64;
+                    if solid {
                         for c in 0..4 {
-                            gs[c] = (go[c] * cov) as f64;
+                            gs_sum[c] += gs[c];
                         }
-                        gs[3] -= (cov * gd) as f64;
-                        if solid {
-                            for c in 0..4 {
-                                gs_sum[c] += gs[c];
-                            }
-                        } else {
-                            it.paint.backward(center, gs, &mut pg);
-                        }
-                        let keep = 1.0 - s[3] * cov;
-                        for c in 0..4 {
-                            g[k][c] = go[c] * keep;
-                        }
+                    } else {
+                        it.paint.backward(center, gs, &mut pg);
+                    }
+                    let keep = 1.0 - s[3] * cov;
+                    for c in 0..4 {
+                        g[k][c] = go[c] * keep;
                     }
                 }
                 if solid {
