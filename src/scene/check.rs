@@ -32,7 +32,7 @@ impl Scene {
                 path: name.to_path_buf(),
                 what: format!(
                     "the drawing flattens to more than {MAX_SCENE_CHORDS} line segments at \
-                     {}×{} px (limit MAX_SCENE_CHORDS); render it smaller or simplify it",
+                     {}×{} px (the limit); render it smaller or simplify it",
                     self.width, self.height
                 ),
             });
