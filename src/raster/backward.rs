@@ -26,8 +26,8 @@
 use rayon::prelude::*;
 
 use super::coverage::{Cells, backward_line, coverage, coverage_slopes};
-use super::prepare::{ItemKind, Op, Prepared, prepare};
-use super::render::{BAND_ROWS, BandRenderer, RenderOptions, composite_layer};
+use super::prepare::{ItemKind, Op, Prepared, item_rect, prepare, stroke_outline};
+use super::render::{Area, BAND_ROWS, BandRenderer, RenderOptions, composite_layer};
 use super::stroke::NONE;
 use crate::image_io::Image;
 use crate::scene::{ParamLayout, Path, Point, Scene};
@@ -51,6 +51,39 @@ pub fn render_and_backward(
 /// [`Scene::params`] order), given `d_image = ∂L/∂image`.
 pub fn render_backward(scene: &Scene, opts: &RenderOptions, d_image: &Image) -> Vec<f64> {
     backward_prepared(scene, &prepare(scene, opts.tolerance, None), d_image)
+}
+
+/// Replay records the bands computed at once may hold together, in bytes, by an upper
+/// estimate from the boxes of the items and layers in each band; one band always runs.
+pub const TAPE_BUDGET_BYTES: usize = 256 << 20;
+
+/// Upper estimate of each band's replay record, in bytes: every cell of every item's box
+/// in the band, and two colors per pixel of every layer's box.
+fn tape_estimates(p: &Prepared, bands: usize) -> Vec<usize> {
+    let mut est = vec![0usize; bands];
+    let mut add = |r: [usize; 4], per_pixel: usize| {
+        let cols = r[2] - r[0] + 2;
+        for (b, e) in est
+            .iter_mut()
+            .enumerate()
+            .take((r[3] - 1) / BAND_ROWS + 1)
+            .skip(r[1] / BAND_ROWS)
+        {
+            let rows = (r[3].min((b + 1) * BAND_ROWS)).saturating_sub(r[1].max(b * BAND_ROWS));
+            *e = e.saturating_add(rows * cols * per_pixel);
+        }
+    };
+    for it in &p.items {
+        if let Some(r) = item_rect(it.bbox, p.width, p.height) {
+            add(r, std::mem::size_of::<TapeCell>());
+        }
+    }
+    for g in &p.groups {
+        if let Some(r) = g.rect {
+            add(r, 32);
+        }
+    }
+    est
 }
 
 /// Gradients of one band.
@@ -82,22 +115,37 @@ impl BackwardStats {
     }
 }
 
+/// One pixel of a drawn item kept by the replay.
+#[derive(Clone, Copy)]
+struct TapeCell {
+    /// Index in the item's box (`row * acc.w + col`).
+    ix: u32,
+    /// Winding integral.
+    wv: f32,
+    /// Color below the item.
+    below: [f32; 4],
+}
+
 /// What the replay kept for the reverse walk.
 enum Rec {
     Draw {
         item: usize,
-        /// Winding integrals over the item's box in this band (with guard columns).
+        /// The item's box in this band (with guard columns), as `Cells` without data.
         acc: Cells<f32>,
-        /// Color below, `acc.h × cols` where `cols` stops at the canvas edge.
-        below: Vec<[f32; 4]>,
-        cols: usize,
+        /// The cells that take part in the reverse walk, in row-major order: only those
+        /// with coverage or a coverage slope (an edge passes), so that memory follows
+        /// the pixels a shape's boundary and interior cover, not its box.
+        cells: Vec<TapeCell>,
     },
     Push,
     Pop {
         group: usize,
         opacity: f32,
+        /// The layer, over `area`.
         top: Vec<[f32; 4]>,
+        /// The color below it, over `area` only (elsewhere the layer is transparent).
         below: Vec<[f32; 4]>,
+        area: Area,
     },
 }
 
@@ -116,6 +164,10 @@ pub fn backward_with_stats(
         (d_image.width, d_image.height),
         (p.width, p.height),
         "gradient image size must match the canvas"
+    );
+    assert!(
+        p.for_backward,
+        "the backward pass needs a scene made by prepare, not prepare_forward"
     );
     let (w, h) = (p.width as usize, p.height as usize);
     let layout = ParamLayout::new(scene);
@@ -137,10 +189,19 @@ pub fn backward_with_stats(
     let mut group_g: Vec<f64> = vec![0.0; layout.groups.len()];
     let bands = h.div_ceil(BAND_ROWS);
     // Bands are computed in parallel a chunk at a time and summed strictly in band order.
-    let chunk = 4 * rayon::current_num_threads().max(1);
-    stats.bands_in_flight = chunk.min(bands);
-    for first in (0..bands).step_by(chunk) {
-        let results: Vec<BandGrads> = (first..(first + chunk).min(bands))
+    // A chunk holds at most 4 bands per thread, and no more than `TAPE_BUDGET_BYTES` of
+    // replay records by an estimate from the items' and layers' boxes (one band at least).
+    let est = tape_estimates(p, bands);
+    let max_chunk = 4 * rayon::current_num_threads().max(1);
+    let mut first = 0;
+    while first < bands {
+        let (mut end, mut sum) = (first + 1, est[first]);
+        while end < bands && end - first < max_chunk && sum + est[end] <= TAPE_BUDGET_BYTES {
+            sum += est[end];
+            end += 1;
+        }
+        stats.bands_in_flight = stats.bands_in_flight.max(end - first);
+        let results: Vec<BandGrads> = (first..end)
             .into_par_iter()
             .map(|b| {
                 let y0 = b * BAND_ROWS;
@@ -148,6 +209,7 @@ pub fn backward_with_stats(
                 band_backward(p, y0, rows, &d_image.data[y0 * w..(y0 + rows) * w])
             })
             .collect();
+        first = end;
         for r in results {
             stats.band_bytes_max = stats.band_bytes_max.max(r.tape_bytes);
             for (item, list) in r.verts {
@@ -186,9 +248,7 @@ pub fn backward_with_stats(
                 }
             }
             ItemKind::Stroke => {
-                let (Some(stroke), Some(ol), Some(inv)) =
-                    (&path.stroke, &geom.outline, geom.frame_inv)
-                else {
+                let (Some(stroke), Some(inv)) = (&path.stroke, geom.frame_inv) else {
                     continue;
                 };
                 let [fa, fb, fc, fd] = stroke.frame;
@@ -199,6 +259,9 @@ pub fn backward_with_stats(
                     .iter()
                     .map(|q| [inv[0] * q[0] + inv[2] * q[1], inv[1] * q[0] + inv[3] * q[1]])
                     .collect();
+                // The outline's recipes, rebuilt as prepare built them (not kept there).
+                let ol = stroke_outline(stroke, geom, &fpts, p.tolerance);
+                debug_assert_eq!(ol.recipes.len(), item.pts.len());
                 let center: &[Point] = match &geom.dashed {
                     Some(d) => &d.pts,
                     None => &fpts,
@@ -289,72 +352,121 @@ fn scatter_paint(
     grad[opacity] += pg[n - 1];
 }
 
+/// Whether a cell with winding integral `wv` takes part in the reverse walk: touched by
+/// an edge (or on a grid-aligned item, where untouched cells next to an edge count), with
+/// coverage or a coverage slope.
+fn takes_part(wv: f32, evenodd: bool, grid_aligned: bool) -> bool {
+    if wv == 0.0 && !grid_aligned {
+        return false;
+    }
+    let (cov, _) = coverage(wv, evenodd);
+    let (up, down) = coverage_slopes(wv, evenodd);
+    !(cov == 0.0 && up == 0.0 && down == 0.0)
+}
+
 fn band_backward(p: &Prepared, y0: usize, rows: usize, d_out: &[[f32; 4]]) -> BandGrads {
     let width = p.width as usize;
     // 1. Replay, recording.
     let mut base = vec![[0.0f32; 4]; rows * width];
-    let mut layers: Vec<Vec<[f32; 4]>> = Vec::new();
-    let mut tape: Vec<Rec> = Vec::new();
     let mut r = BandRenderer::new(p, y0, rows);
-    for op in &p.ops {
-        match *op {
-            Op::Draw(i) => {
-                let item = &p.items[i];
+    let base_area = r.band_area();
+    let mut layers: Vec<(Area, Vec<[f32; 4]>)> = Vec::new();
+    let mut tape: Vec<Rec> = Vec::new();
+    let (mut i, mut group_ix) = (0usize, 0usize);
+    while i < p.ops.len() {
+        match p.ops[i] {
+            Op::Draw(ix) => {
+                let item = &p.items[ix];
                 if !r.winding(item) {
+                    i += 1;
                     continue;
                 }
-                let target = match layers.last_mut() {
-                    Some(l) => l.as_mut_slice(),
-                    None => base.as_mut_slice(),
+                let (area, target) = match layers.last_mut() {
+                    Some((a, l)) => (*a, l.as_mut_slice()),
+                    None => (base_area, base.as_mut_slice()),
                 };
                 let acc = &r.acc;
                 let cols = acc.w.min(width - acc.x0 as usize);
-                let mut below = Vec::with_capacity(acc.h * cols);
+                let mut cells = Vec::new();
                 for row in 0..acc.h {
-                    let start = (acc.y0 as usize + row - y0) * width + acc.x0 as usize;
-                    below.extend_from_slice(&target[start..start + cols]);
+                    let start = area.index(acc.x0 as usize, acc.y0 as usize + row);
+                    for col in 0..cols {
+                        let wv = acc.data[row * acc.w + col];
+                        if takes_part(wv, item.evenodd, item.grid_aligned) {
+                            cells.push(TapeCell {
+                                ix: (row * acc.w + col) as u32,
+                                wv,
+                                below: target[start + col],
+                            });
+                        }
+                    }
                 }
-                r.composite(item, target);
+                r.composite(item, target, area);
+                let shape = Cells {
+                    x0: acc.x0,
+                    y0: acc.y0,
+                    w: acc.w,
+                    h: acc.h,
+                    data: Vec::new(),
+                };
                 tape.push(Rec::Draw {
-                    item: i,
-                    acc: std::mem::take(&mut r.acc),
-                    below,
-                    cols,
+                    item: ix,
+                    acc: shape,
+                    cells,
                 });
             }
             Op::Push => {
-                layers.push(vec![[0.0; 4]; rows * width]);
-                tape.push(Rec::Push);
+                let span = p.groups[group_ix];
+                match r.layer_area(&span) {
+                    Some(a) => {
+                        layers.push((a, vec![[0.0; 4]; a.len()]));
+                        tape.push(Rec::Push);
+                        group_ix += 1;
+                    }
+                    None => {
+                        // Nothing inside touches this band: no layer, no gradient.
+                        group_ix = span.groups_end;
+                        i = span.end + 1;
+                        continue;
+                    }
+                }
             }
             Op::Pop { opacity, group } => {
-                let top = layers.pop().unwrap_or_default();
-                let below_buf = match layers.last_mut() {
-                    Some(l) => l,
-                    None => &mut base,
+                let (ta, top) = layers.pop().expect("a layer per group");
+                let (ba, below_buf) = match layers.last_mut() {
+                    Some((a, l)) => (*a, l.as_mut_slice()),
+                    None => (base_area, base.as_mut_slice()),
                 };
-                let below = below_buf.clone();
-                composite_layer(below_buf, &top, opacity);
+                let mut below = Vec::with_capacity(ta.len());
+                for row in 0..ta.h {
+                    let start = ba.index(ta.x0, ta.y0 + row);
+                    below.extend_from_slice(&below_buf[start..start + ta.w]);
+                }
+                composite_layer(below_buf, ba, &top, ta, opacity);
                 tape.push(Rec::Pop {
                     group,
                     opacity,
                     top,
                     below,
+                    area: ta,
                 });
             }
         }
+        i += 1;
     }
     // 2. Reverse walk with ∂L/∂(current layer).
     let mut out = BandGrads::default();
     out.tape_bytes = tape
         .iter()
         .map(|r| match r {
-            Rec::Draw { acc, below, .. } => acc.data.len() * 4 + below.len() * 16,
+            Rec::Draw { cells, .. } => cells.len() * std::mem::size_of::<TapeCell>(),
             Rec::Push => 0,
             Rec::Pop { top, below, .. } => (top.len() + below.len()) * 16,
         })
         .sum::<usize>()
         + 2 * d_out.len() * 16;
-    let mut g_stack: Vec<Vec<[f32; 4]>> = vec![d_out.to_vec()];
+    drop(base);
+    let mut g_stack: Vec<(Area, Vec<[f32; 4]>)> = vec![(base_area, d_out.to_vec())];
     let mut gw = Cells::<[f32; 2]>::default();
     for rec in tape.iter().rev() {
         match rec {
@@ -363,82 +475,79 @@ fn band_backward(p: &Prepared, y0: usize, rows: usize, d_out: &[[f32; 4]]) -> Ba
                 opacity,
                 top,
                 below,
+                area,
             } => {
-                let g = g_stack.last_mut().expect("layer gradient");
+                let (ga, g) = g_stack.last_mut().expect("layer gradient");
+                let ga = *ga;
                 let op = *opacity;
-                let mut g_top = vec![[0.0f32; 4]; g.len()];
+                let mut g_top = vec![[0.0f32; 4]; area.len()];
                 let mut g_op = 0.0f64;
-                for k in 0..g.len() {
-                    let (go, t, b) = (g[k], top[k], below[k]);
-                    let gb: f32 = (0..4).map(|c| go[c] * b[c]).sum();
-                    let gt: f32 = (0..4).map(|c| go[c] * t[c]).sum();
-                    for c in 0..4 {
-                        g_top[k][c] = go[c] * op;
-                        g[k][c] = go[c] * (1.0 - t[3] * op);
+                // Outside `area` the layer is transparent: the gradient below passes
+                // unchanged and adds nothing to the opacity's.
+                for row in 0..area.h {
+                    let kg0 = ga.index(area.x0, area.y0 + row);
+                    for col in 0..area.w {
+                        let k = row * area.w + col;
+                        let kg = kg0 + col;
+                        let (go, t, b) = (g[kg], top[k], below[k]);
+                        let gb: f32 = (0..4).map(|c| go[c] * b[c]).sum();
+                        let gt: f32 = (0..4).map(|c| go[c] * t[c]).sum();
+                        for c in 0..4 {
+                            g_top[k][c] = go[c] * op;
+                            g[kg][c] = go[c] * (1.0 - t[3] * op);
+                        }
+                        g_top[k][3] -= op * gb;
+                        g_op += (gt - t[3] * gb) as f64;
                     }
-                    g_top[k][3] -= op * gb;
-                    g_op += (gt - t[3] * gb) as f64;
                 }
                 out.groups.push((*group as u32, g_op));
-                g_stack.push(g_top);
+                g_stack.push((*area, g_top));
             }
             Rec::Push => {
                 g_stack.pop();
             }
-            Rec::Draw {
-                item,
-                acc,
-                below,
-                cols,
-            } => {
+            Rec::Draw { item, acc, cells } => {
                 let it = &p.items[*item];
-                let g = g_stack.last_mut().expect("layer gradient");
+                let (ga, g) = g_stack.last_mut().expect("layer gradient");
+                let ga = *ga;
                 gw.reset(acc.x0, acc.y0, acc.w, acc.h);
                 let mut pg = vec![0.0f64; it.paint.grad_len()];
                 let solid = it.paint.is_solid();
                 let mut gs_sum = [0.0f64; 4];
-                for row in 0..acc.h {
+                for cell in cells {
+                    let (row, col) = (cell.ix as usize / acc.w, cell.ix as usize % acc.w);
                     let y = acc.y0 as usize + row;
-                    for col in 0..*cols {
-                        let wv = acc.data[row * acc.w + col];
-                        if wv == 0.0 && !it.grid_aligned {
-                            // Untouched by any edge: no coverage, no boundary here.
-                            continue;
-                        }
-                        let (cov, _) = coverage(wv, it.evenodd);
-                        let (up, down) = coverage_slopes(wv, it.evenodd);
-                        if cov == 0.0 && up == 0.0 && down == 0.0 {
-                            continue;
-                        }
-                        let x = acc.x0 as usize + col;
-                        let center = [x as f64 + 0.5, y as f64 + 0.5];
-                        let s = it.paint.at(center);
-                        let k = (y - y0) * width + x;
-                        let go = g[k];
-                        let d = below[row * cols + col];
-                        let gd: f32 = (0..4).map(|c| go[c] * d[c]).sum();
-                        let gsrc: f32 = (0..4).map(|c| go[c] * s[c]).sum();
-                        let g_cov = gsrc - s[3] * gd;
-                        gw.data[row * acc.w + col] = [g_cov * up, g_cov * down];
-                        if cov == 0.0 {
-                            continue;
-                        }
-                        let mut gs = [0.0f64; 4];
+                    let wv = cell.wv;
+                    let (cov, _) = coverage(wv, it.evenodd);
+                    let (up, down) = coverage_slopes(wv, it.evenodd);
+                    let x = acc.x0 as usize + col;
+                    let center = [x as f64 + 0.5, y as f64 + 0.5];
+                    let s = it.paint.at(center);
+                    let k = ga.index(x, y);
+                    let go = g[k];
+                    let d = cell.below;
+                    let gd: f32 = (0..4).map(|c| go[c] * d[c]).sum();
+                    let gsrc: f32 = (0..4).map(|c| go[c] * s[c]).sum();
+                    let g_cov = gsrc - s[3] * gd;
+                    gw.data[row * acc.w + col] = [g_cov * up, g_cov * down];
+                    if cov == 0.0 {
+                        continue;
+                    }
+                    let mut gs = [0.0f64; 4];
+                    for c in 0..4 {
+                        gs[c] = (go[c] * cov) as f64;
+                    }
+                    gs[3] -= (cov * gd) as f64;
+                    if solid {
                         for c in 0..4 {
-                            gs[c] = (go[c] * cov) as f64;
+                            gs_sum[c] += gs[c];
                         }
-                        gs[3] -= (cov * gd) as f64;
-                        if solid {
-                            for c in 0..4 {
-                                gs_sum[c] += gs[c];
-                            }
-                        } else {
-                            it.paint.backward(center, gs, &mut pg);
-                        }
-                        let keep = 1.0 - s[3] * cov;
-                        for c in 0..4 {
-                            g[k][c] = go[c] * keep;
-                        }
+                    } else {
+                        it.paint.backward(center, gs, &mut pg);
+                    }
+                    let keep = 1.0 - s[3] * cov;
+                    for c in 0..4 {
+                        g[k][c] = go[c] * keep;
                     }
                 }
                 if solid {
@@ -475,4 +584,62 @@ fn band_backward(p: &Prepared, y0: usize, rows: usize, d_out: &[[f32; 4]]) -> Ba
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::{Fill, FillRule, Group, Node, Paint};
+
+    /// A 10-pixel square inside `levels` nested groups of opacity 0.9, on a wide canvas.
+    fn nested(levels: usize, size: u32) -> Scene {
+        let mut p = Path::new("sq");
+        p.move_to([10.5, 10.0]);
+        p.line_to([20.5, 10.0]);
+        p.line_to([20.5, 20.0]);
+        p.line_to([10.5, 20.0]);
+        p.close();
+        p.fill = Some(Fill {
+            paint: Paint::Solid([1.0, 0.0, 0.0]),
+            opacity: 1.0,
+            rule: FillRule::NonZero,
+        });
+        let mut node = Node::Path(p);
+        for _ in 0..levels {
+            node = Node::Group(Group {
+                id: String::new(),
+                opacity: 0.9,
+                children: vec![node],
+            });
+        }
+        let mut s = Scene::new(size, size);
+        s.nodes.push(node);
+        s
+    }
+
+    #[test]
+    fn nested_group_layers_cover_only_their_content() {
+        let opts = RenderOptions::default();
+        let s = nested(100, 1024);
+        let p = prepare(&s, opts.tolerance, None);
+        let img = super::super::render::render_prepared(&p);
+        let want = 0.9f32.powi(100);
+        assert!((img.get(15, 15)[3] - want).abs() < 1e-5);
+        assert_eq!(img.get(500, 500)[3], 0.0);
+        let d = Image::filled(1024, 1024, [0.0, 0.0, 0.0, 1.0]);
+        let (g, stats) = backward_with_stats(&s, &p, &d);
+        // A band-wide layer per level would record 100 × 2 × 16 rows × 1024 px × 16 bytes
+        // (52 MB) per band; a layer the size of the square, a few hundred kB.
+        assert!(stats.band_bytes_max < 1 << 20, "{stats:?}");
+        // ∂(Σ alpha)/∂(opacity) of each group: 100 px of alpha 0.9^100, divided by 0.9.
+        let layout = ParamLayout::new(&s);
+        let want = 100.0 * 0.9f64.powi(99);
+        for &slot in &layout.groups {
+            assert!(
+                (g[slot] - want).abs() < 1e-3 * want,
+                "{} vs {want}",
+                g[slot]
+            );
+        }
+    }
 }

@@ -21,5 +21,5 @@ pub mod stroke;
 pub use backward::{
     BackwardStats, backward_prepared, backward_with_stats, render_and_backward, render_backward,
 };
-pub use prepare::{Prepared, prepare};
+pub use prepare::{Prepared, prepare, prepare_forward, warnings};
 pub use render::{RenderOptions, render, render_prepared};

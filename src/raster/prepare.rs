@@ -1,10 +1,11 @@
 //! Turning a scene into drawable polygons, once per render.
 
-use super::dash::{Dashed, dash};
+use super::dash::{Dashed, Visible, dash, dash_count};
 use super::flatten::{ChordCounts, Flattened, flatten};
 use super::paint::PaintEval;
-use super::stroke::{Outline, Style, outline};
-use crate::scene::{FillRule, Node, Path, Point, Scene};
+use super::stroke::{Style, outline};
+use crate::limits::MAX_DASHES_PER_PATH;
+use crate::scene::{FillRule, Node, Path, Point, Scene, Stroke};
 
 /// Whether an item is a path's fill or its stroke.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -24,8 +25,8 @@ pub struct Item {
     pub kind: ItemKind,
     /// Polygon vertices, device pixels.
     pub pts: Vec<Point>,
-    /// For a fill, the index in [`PathGeom::flat`] of each vertex; for a stroke, the index
-    /// in [`PathGeom::outline`] (the identity).
+    /// For a fill, the index in [`PathGeom::flat`] of each vertex (empty when prepared for
+    /// a forward render only); for a stroke, empty: vertex `j` is outline vertex `j`.
     pub src: Vec<u32>,
     /// Closed rings as `(start, len)` into `pts`.
     pub rings: Vec<(usize, usize)>,
@@ -67,10 +68,24 @@ pub struct PathGeom {
     pub counts: ChordCounts,
     /// Device → stroke frame linear map `[a, b, c, d]`, when the path is stroked.
     pub frame_inv: Option<[f64; 4]>,
-    /// The dashed centerline in the stroke frame, when the stroke is dashed.
+    /// The dashed centerline in the stroke frame, when the stroke is dashed (and the
+    /// pattern was not dropped for a solid stroke).
     pub dashed: Option<Dashed>,
-    /// The stroke outline in the stroke frame.
-    pub outline: Option<Outline>,
+}
+
+/// Where a group's layer lies, so that a band it does not touch skips it and a band it
+/// touches allocates and composites only the group's box.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct GroupSpan {
+    /// Index in [`Prepared::ops`] of the group's [`Op::Pop`].
+    pub end: usize,
+    /// Number of groups opened up to and including this group's descendants (the next
+    /// group opened after it has this index).
+    pub groups_end: usize,
+    /// Pixels the group's content can touch, `[x0, y0, x1, y1]` (end exclusive, within
+    /// the canvas): the union of the boxes of the items drawn inside. `None` when
+    /// nothing inside reaches the canvas.
+    pub rect: Option<[usize; 4]>,
 }
 
 /// A scene ready to be rasterized.
@@ -86,20 +101,51 @@ pub struct Prepared {
     pub items: Vec<Item>,
     /// Per path geometry, in paint order.
     pub geoms: Vec<PathGeom>,
+    /// Per group, in walk order (the order of the [`Op::Push`]es).
+    pub groups: Vec<GroupSpan>,
+    /// Paths (paint order) whose dash pattern was dropped for a solid stroke because it
+    /// would cut more than [`MAX_DASHES_PER_PATH`] dashes; see [`warnings`].
+    pub solid_dashes: Vec<usize>,
+    /// Whether the geometry the backward pass needs was kept ([`prepare`]) or dropped
+    /// ([`prepare_forward`]). Outline recipes are never kept: the backward pass rebuilds
+    /// them one stroke at a time from the kept centerline ([`stroke_outline`]).
+    pub for_backward: bool,
+    /// The flattening tolerance used, in device pixels.
+    pub tolerance: f64,
 }
 
 /// Prepares `scene` with flattening `tolerance` (device pixels). With `counts` (one list
 /// per path, as in [`PathGeom::counts`]) the chord counts are fixed instead of computed.
+/// Keeps everything the backward pass needs.
 pub fn prepare(scene: &Scene, tolerance: f64, counts: Option<&[ChordCounts]>) -> Prepared {
+    prepare_with(scene, tolerance, counts, true)
+}
+
+/// Like [`prepare`] for a forward render only: the per-path geometry the backward pass
+/// reads (flattened points and their provenance, dashes, outline recipes) is not kept,
+/// which makes memory a fraction of [`prepare`]'s on scenes with many stroked curves.
+pub fn prepare_forward(scene: &Scene, tolerance: f64) -> Prepared {
+    prepare_with(scene, tolerance, None, false)
+}
+
+fn prepare_with(
+    scene: &Scene,
+    tolerance: f64,
+    counts: Option<&[ChordCounts]>,
+    for_backward: bool,
+) -> Prepared {
     let mut p = Prepared {
         width: scene.width,
         height: scene.height,
         ops: Vec::new(),
         items: Vec::new(),
         geoms: Vec::new(),
+        groups: Vec::new(),
+        solid_dashes: Vec::new(),
+        for_backward,
+        tolerance,
     };
     let mut b = Builder {
-        groups: 0,
         tolerance,
         counts,
         out: &mut p,
@@ -108,8 +154,149 @@ pub fn prepare(scene: &Scene, tolerance: f64, counts: Option<&[ChordCounts]>) ->
     p
 }
 
+/// The pixels an item can touch, `[x0, y0, x1, y1]` (end exclusive, clipped to the
+/// canvas): its box grown as [`BandRenderer::winding`](super::render) grows it (one pixel
+/// each side, two guard columns on the right).
+pub fn item_rect(bbox: [f64; 4], width: u32, height: u32) -> Option<[usize; 4]> {
+    let (w, h) = (width as f64, height as f64);
+    if bbox[2] <= 0.0 || bbox[0] >= w {
+        return None;
+    }
+    let x0 = (bbox[0].floor() - 1.0).clamp(0.0, w);
+    let x1 = (bbox[2].ceil() + 2.0).clamp(0.0, w);
+    let y0 = (bbox[1].floor() - 1.0).clamp(0.0, h);
+    let y1 = (bbox[3].ceil() + 1.0).clamp(0.0, h);
+    (x0 < x1 && y0 < y1).then_some([x0 as usize, y0 as usize, x1 as usize, y1 as usize])
+}
+
+/// Where a stroke's dashes can show: the canvas grown by how far a cap or join can reach
+/// from the centerline, in device pixels (with a pixel to spare).
+fn dash_rect(s: &Stroke, width: u32, height: u32) -> [f64; 4] {
+    let [a, b, c, d] = s.frame;
+    let norm = (a * a + b * b + c * c + d * d).sqrt();
+    let m = 2.0 + 0.5 * s.width.abs() * s.miter_limit.max(2.0) * norm;
+    [-m, -m, width as f64 + m, height as f64 + m]
+}
+
+/// The stroke frame's inverse, when the frame is invertible.
+fn frame_inverse(s: &Stroke) -> Option<[f64; 4]> {
+    let [a, b, c, d] = s.frame;
+    let det = a * d - b * c;
+    let inv = [d / det, -b / det, -c / det, a / det];
+    inv.iter().all(|v| v.is_finite()).then_some(inv)
+}
+
+/// The outline of `path`'s stroke with its recipes, in the stroke frame, rebuilt from a
+/// prepared geometry exactly as [`prepare`] built it (vertex `j` is vertex `j` of the
+/// stroke item): `fpts` is the flattened centerline mapped into the stroke frame.
+pub(crate) fn stroke_outline(
+    s: &Stroke,
+    geom: &PathGeom,
+    fpts: &[Point],
+    tolerance: f64,
+) -> super::stroke::Outline {
+    let style = stroke_style(s, tolerance, true);
+    match &geom.dashed {
+        Some(d) => outline(&d.pts, &d.corner, &d.contours, style),
+        None => outline(fpts, &geom.flat.corner, &geom.flat.contours, style),
+    }
+}
+
+/// The stroke's style in its frame; `for_backward` keeps recipes instead of points.
+pub(crate) fn stroke_style(s: &Stroke, tolerance: f64, for_backward: bool) -> Style {
+    let [a, b, c, d] = s.frame;
+    let det = a * d - b * c;
+    Style {
+        half_width: 0.5 * s.width,
+        join: s.join,
+        cap: s.cap,
+        miter_limit: s.miter_limit,
+        tolerance: tolerance / det.abs().sqrt(),
+        keep_recipes: for_backward,
+        keep_points: !for_backward,
+    }
+}
+
+/// Upper bound of the cost of dashing `flat` (device pixels) with `s`'s pattern, in
+/// butt-capped dashes (a dash whose caps add vertices counts for more), before cutting.
+fn dash_cost(
+    s: &Stroke,
+    pattern: &[f64],
+    flat: &Flattened,
+    fpts: &[Point],
+    style: &Style,
+    width: u32,
+    height: u32,
+) -> f64 {
+    let visible = Visible {
+        device: &flat.pts,
+        rect: dash_rect(s, width, height),
+    };
+    let n = dash_count(fpts, &flat.contours, pattern, Some(visible));
+    n * (1.0 + 0.5 * style.cap_vertices() as f64)
+}
+
+/// Warnings about how `scene` will be drawn at `opts`, one line each (the caller adds
+/// the file name): strokes whose dash pattern would cut more than
+/// [`MAX_DASHES_PER_PATH`] dashes are drawn solid. Flattens only the dashed strokes;
+/// call it after loading, before rendering.
+pub fn warnings(scene: &Scene, opts: &super::RenderOptions) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut ix = 0usize;
+    scene.for_each_path(|path| {
+        let k = ix;
+        ix += 1;
+        let Some(s) = &path.stroke else { return };
+        let Some(pattern) = &s.dash else { return };
+        if !(s.width > 0.0) {
+            return;
+        }
+        let Some(inv) = frame_inverse(s) else { return };
+        let visible = flatten_rect(path, scene.width, scene.height);
+        let (flat, _) = flatten(path, opts.tolerance, visible, None);
+        let fpts: Vec<Point> = flat
+            .pts
+            .iter()
+            .map(|q| [inv[0] * q[0] + inv[2] * q[1], inv[1] * q[0] + inv[3] * q[1]])
+            .collect();
+        let style = stroke_style(s, opts.tolerance, false);
+        let cost = dash_cost(s, pattern, &flat, &fpts, &style, scene.width, scene.height);
+        if cost > MAX_DASHES_PER_PATH as f64 {
+            out.push(dash_warning(path, k, cost));
+        }
+    });
+    out
+}
+
+fn dash_warning(path: &Path, index: usize, cost: f64) -> String {
+    let name = if path.id.is_empty() {
+        format!("path #{}", index + 1)
+    } else {
+        format!("path \"{}\"", path.id)
+    };
+    let about = if cost.is_finite() {
+        format!("about {cost:.0}")
+    } else {
+        "too many".to_string()
+    };
+    format!(
+        "{name}: stroke-dasharray would cut {about} dashes (limit {MAX_DASHES_PER_PATH}); stroked solid"
+    )
+}
+
+/// The region where `path` is flattened finely: the canvas grown by the stroke's reach.
+pub(crate) fn flatten_rect(path: &Path, width: u32, height: u32) -> [f64; 4] {
+    let (w, h) = (width as f64, height as f64);
+    // Strokes reach beyond the centerline; flatten generously near the canvas.
+    let margin = path.stroke.as_ref().map_or(1.0, |s| {
+        let [a, b, c, d] = s.frame;
+        let norm = a.hypot(b).max(c.hypot(d));
+        1.0 + 0.5 * s.width.abs() * s.miter_limit.max(1.0) * norm
+    });
+    [-margin, -margin, w + margin, h + margin]
+}
+
 struct Builder<'a> {
-    groups: usize,
     tolerance: f64,
     counts: Option<&'a [ChordCounts]>,
     out: &'a mut Prepared,
@@ -121,14 +308,39 @@ impl Builder<'_> {
             match n {
                 Node::Path(p) => self.path(p),
                 Node::Group(g) => {
-                    let group = self.groups;
-                    self.groups += 1;
+                    let group = self.out.groups.len();
+                    self.out.groups.push(GroupSpan {
+                        end: 0,
+                        groups_end: 0,
+                        rect: None,
+                    });
+                    let first_item = self.out.items.len();
                     self.out.ops.push(Op::Push);
                     self.nodes(&g.children);
                     self.out.ops.push(Op::Pop {
                         opacity: g.opacity.clamp(0.0, 1.0) as f32,
                         group,
                     });
+                    let (w, h) = (self.out.width, self.out.height);
+                    let mut rect: Option<[usize; 4]> = None;
+                    for it in &self.out.items[first_item..] {
+                        if let Some(r) = item_rect(it.bbox, w, h) {
+                            rect = Some(match rect {
+                                None => r,
+                                Some(u) => [
+                                    u[0].min(r[0]),
+                                    u[1].min(r[1]),
+                                    u[2].max(r[2]),
+                                    u[3].max(r[3]),
+                                ],
+                            });
+                        }
+                    }
+                    self.out.groups[group] = GroupSpan {
+                        end: self.out.ops.len() - 1,
+                        groups_end: self.out.groups.len(),
+                        rect,
+                    };
                 }
             }
         }
@@ -136,14 +348,9 @@ impl Builder<'_> {
 
     fn path(&mut self, path: &Path) {
         let ix = self.out.geoms.len();
-        let (w, h) = (self.out.width as f64, self.out.height as f64);
-        // Strokes reach beyond the centerline; flatten generously near the canvas.
-        let margin = path.stroke.as_ref().map_or(1.0, |s| {
-            let [a, b, c, d] = s.frame;
-            let norm = a.hypot(b).max(c.hypot(d));
-            1.0 + 0.5 * s.width.abs() * s.miter_limit.max(1.0) * norm
-        });
-        let visible = [-margin, -margin, w + margin, h + margin];
+        let (width, height) = (self.out.width, self.out.height);
+        let keep = self.out.for_backward;
+        let visible = flatten_rect(path, width, height);
         let fixed = self.counts.and_then(|c| c.get(ix)).map(|c| c.as_slice());
         let (flat, counts) = flatten(path, self.tolerance, visible, fixed);
         let mut geom = PathGeom {
@@ -154,13 +361,15 @@ impl Builder<'_> {
         let fill_item = path.fill.as_ref().and_then(|f| {
             let paint = PaintEval::new(&f.paint, f.opacity)?;
             let mut pts = Vec::with_capacity(geom.flat.pts.len());
-            let mut src = Vec::with_capacity(geom.flat.pts.len());
+            let mut src = Vec::with_capacity(if keep { geom.flat.pts.len() } else { 0 });
             let mut rings = Vec::new();
             for c in &geom.flat.contours {
                 if c.len >= 3 {
                     rings.push((pts.len(), c.len));
                     pts.extend_from_slice(&geom.flat.pts[c.start..c.start + c.len]);
-                    src.extend(c.start as u32..(c.start + c.len) as u32);
+                    if keep {
+                        src.extend(c.start as u32..(c.start + c.len) as u32);
+                    }
                 }
             }
             item(
@@ -173,53 +382,64 @@ impl Builder<'_> {
                 paint,
             )
         });
+        let mut solid = false;
         let stroke_item = path.stroke.as_ref().and_then(|s| {
             if !(s.width > 0.0) {
                 return None;
             }
             let paint = PaintEval::new(&s.paint, s.opacity)?;
             let [a, b, c, d] = s.frame;
-            let det = a * d - b * c;
-            let inv = [d / det, -b / det, -c / det, a / det];
-            if !inv.iter().all(|v| v.is_finite()) {
-                return None;
-            }
+            let inv = frame_inverse(s)?;
             let to_frame =
                 |q: &Point| [inv[0] * q[0] + inv[2] * q[1], inv[1] * q[0] + inv[3] * q[1]];
             let fpts: Vec<Point> = geom.flat.pts.iter().map(to_frame).collect();
-            let style = Style {
-                half_width: 0.5 * s.width,
-                join: s.join,
-                cap: s.cap,
-                miter_limit: s.miter_limit,
-                tolerance: self.tolerance / det.abs().sqrt(),
-            };
-            let ol = match &s.dash {
+            let style = stroke_style(s, self.tolerance, false);
+            // Past the dash limit the pattern is dropped and the stroke drawn solid.
+            let pattern = s.dash.as_ref().filter(|pattern| {
+                let cost = dash_cost(s, pattern, &geom.flat, &fpts, &style, width, height);
+                solid = cost > MAX_DASHES_PER_PATH as f64;
+                !solid
+            });
+            let mut ol = match pattern {
                 Some(pattern) => {
+                    let visible = Visible {
+                        device: &geom.flat.pts,
+                        rect: dash_rect(s, width, height),
+                    };
                     let dashed = dash(
                         &fpts,
                         &geom.flat.corner,
                         &geom.flat.contours,
                         pattern,
                         s.dash_offset,
+                        Some(visible),
                     );
+                    drop(fpts);
                     let ol = outline(&dashed.pts, &dashed.corner, &dashed.contours, style);
-                    geom.dashed = Some(dashed);
+                    if keep {
+                        geom.dashed = Some(dashed);
+                    }
                     ol
                 }
-                None => outline(&fpts, &geom.flat.corner, &geom.flat.contours, style),
+                None => {
+                    let ol = outline(&fpts, &geom.flat.corner, &geom.flat.contours, style);
+                    drop(fpts);
+                    ol
+                }
             };
-            let pts: Vec<Point> = ol
-                .pts
-                .iter()
+            // The outline's points become the item's, mapped to device space in place.
+            let pts: Vec<Point> = std::mem::take(&mut ol.pts)
+                .into_iter()
                 .map(|q| [a * q[0] + c * q[1], b * q[0] + d * q[1]])
                 .collect();
-            let rings = ol.rings.clone();
-            let src = (0..pts.len() as u32).collect();
+            let rings = std::mem::take(&mut ol.rings);
+            let src = Vec::new();
             geom.frame_inv = Some(inv);
-            geom.outline = Some(ol);
             item(ix, ItemKind::Stroke, pts, src, rings, false, paint)
         });
+        if solid {
+            self.out.solid_dashes.push(ix);
+        }
         let mut push = |it: Option<Item>| {
             if let Some(it) = it {
                 self.out.ops.push(Op::Draw(self.out.items.len()));
@@ -232,6 +452,10 @@ impl Builder<'_> {
         } else {
             push(fill_item);
             push(stroke_item);
+        }
+        if !keep {
+            // Only the chord counts are read after a forward render (gradient checks).
+            geom.flat = Flattened::default();
         }
         self.out.geoms.push(geom);
     }
@@ -283,4 +507,83 @@ fn item(
         paint,
         bbox,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::Sizing;
+    use crate::raster::{RenderOptions, render, render_backward};
+
+    fn load(svg: &str) -> Scene {
+        Scene::from_svg_str(svg, "t.svg", Sizing::Natural).unwrap()
+    }
+
+    fn rect(dash: &str) -> String {
+        format!(
+            r#"<svg xmlns="http://www.w3.org/2000/svg" width="40" height="40"><rect x="5" y="5" width="28" height="28" fill="none" stroke="black" stroke-width="3" {dash}/></svg>"#
+        )
+    }
+
+    #[test]
+    fn dasharray_past_the_limit_strokes_solid_forward_and_backward() {
+        let opts = RenderOptions::default();
+        let dashed = load(&rect(r#"stroke-dasharray="1e-5""#));
+        let solid = load(&rect(""));
+        let w = warnings(&dashed, &opts);
+        assert_eq!(w.len(), 1, "{w:?}");
+        assert!(
+            w[0].contains("stroked solid") && w[0].contains("100000"),
+            "{w:?}"
+        );
+        assert!(warnings(&solid, &opts).is_empty());
+        // An ordinary pattern is cut, with no warning.
+        let ordinary = load(&rect(r#"stroke-dasharray="4 2""#));
+        assert!(warnings(&ordinary, &opts).is_empty());
+        let p = prepare(&ordinary, opts.tolerance, None);
+        assert!(p.solid_dashes.is_empty() && p.geoms[0].dashed.is_some());
+
+        let p = prepare(&dashed, opts.tolerance, None);
+        assert_eq!(p.solid_dashes, vec![0]);
+        assert!(p.geoms[0].dashed.is_none());
+        let q = prepare(&solid, opts.tolerance, None);
+        assert_eq!(p.items[0].pts, q.items[0].pts);
+        assert_eq!(render(&dashed, &opts).data, render(&solid, &opts).data);
+        // The backward pass sees the same solid stroke.
+        let mut d = crate::Image::new(40, 40);
+        for (i, px) in d.data.iter_mut().enumerate() {
+            *px = [0.1, -0.2, 0.3, (i % 7) as f32 * 0.05];
+        }
+        assert_eq!(
+            render_backward(&dashed, &opts, &d),
+            render_backward(&solid, &opts, &d)
+        );
+    }
+
+    #[test]
+    fn forward_prepare_draws_the_same_items() {
+        let s = load(&rect(r#"stroke-dasharray="4 2" stroke-linejoin="round""#));
+        let full = prepare(&s, 0.02, None);
+        let fwd = prepare_forward(&s, 0.02);
+        assert!(!fwd.for_backward && fwd.geoms[0].flat.pts.is_empty());
+        assert_eq!(full.items.len(), fwd.items.len());
+        for (a, b) in full.items.iter().zip(&fwd.items) {
+            assert_eq!((&a.pts, &a.rings, a.bbox), (&b.pts, &b.rings, b.bbox));
+        }
+        assert_eq!(full.geoms[0].counts, fwd.geoms[0].counts);
+    }
+
+    #[test]
+    fn group_rect_is_the_union_of_its_items() {
+        let s = load(
+            r#"<svg xmlns="http://www.w3.org/2000/svg" width="100" height="100"><g opacity="0.5"><rect x="10.5" y="20" width="5" height="5"/><g opacity="0.5"><rect x="50" y="60" width="10" height="10"/></g></g><g opacity="0.5"><rect x="-50" y="0" width="10" height="10"/></g></svg>"#,
+        );
+        let p = prepare(&s, 0.02, None);
+        assert_eq!(p.groups.len(), 3);
+        assert_eq!(p.groups[0].rect, Some([9, 19, 62, 71]));
+        assert_eq!(p.groups[0].groups_end, 2);
+        assert_eq!(p.groups[1].rect, Some([49, 59, 62, 71]));
+        assert_eq!(p.groups[2].rect, None);
+        assert!(matches!(p.ops[p.groups[0].end], Op::Pop { group: 0, .. }));
+    }
 }

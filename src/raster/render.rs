@@ -3,7 +3,7 @@
 use rayon::prelude::*;
 
 use super::coverage::{Cells, accumulate_line, coverage, integrate_rows};
-use super::prepare::{Item, Op, Prepared, prepare};
+use super::prepare::{GroupSpan, Item, Op, Prepared, prepare_forward};
 use crate::image_io::Image;
 use crate::scene::Scene;
 
@@ -27,7 +27,7 @@ pub const BAND_ROWS: usize = 16;
 /// are evaluated at pixel centers and coverage is the exact area of each pixel square
 /// inside the (flattened) shape.
 pub fn render(scene: &Scene, opts: &RenderOptions) -> Image {
-    render_prepared(&prepare(scene, opts.tolerance, None))
+    render_prepared(&prepare_forward(scene, opts.tolerance))
 }
 
 /// Renders an already prepared scene.
@@ -66,28 +66,70 @@ impl<'a> BandRenderer<'a> {
         }
     }
 
+    /// The whole band, as an [`Area`].
+    pub fn band_area(&self) -> Area {
+        Area {
+            x0: 0,
+            y0: self.y0,
+            w: self.p.width as usize,
+            h: self.rows,
+        }
+    }
+
+    /// The part of this band a group's layer covers; `None` when the group draws nothing
+    /// here (its ops can be skipped: compositing a transparent layer changes nothing).
+    pub fn layer_area(&self, span: &GroupSpan) -> Option<Area> {
+        let r = span.rect?;
+        let y0 = r[1].max(self.y0);
+        let y1 = r[3].min(self.y0 + self.rows);
+        (y0 < y1).then_some(Area {
+            x0: r[0],
+            y0,
+            w: r[2] - r[0],
+            h: y1 - y0,
+        })
+    }
+
     /// Runs the whole program onto `out` (`rows × width`, transparent or not).
     pub fn run(&mut self, out: &mut [[f32; 4]]) {
-        let mut layers: Vec<Vec<[f32; 4]>> = Vec::new();
-        for op in &self.p.ops {
-            match *op {
-                Op::Draw(i) => {
-                    let target = match layers.last_mut() {
-                        Some(l) => l.as_mut_slice(),
-                        None => &mut *out,
+        let base = self.band_area();
+        // Open layers, each only as large as its group's content in this band.
+        let mut layers: Vec<(Area, Vec<[f32; 4]>)> = Vec::new();
+        let ops = &self.p.ops;
+        let (mut i, mut group) = (0usize, 0usize);
+        while i < ops.len() {
+            match ops[i] {
+                Op::Draw(it) => {
+                    let (area, target) = match layers.last_mut() {
+                        Some((a, l)) => (*a, l.as_mut_slice()),
+                        None => (base, &mut *out),
                     };
-                    self.draw(&self.p.items[i], target);
+                    self.draw(&self.p.items[it], target, area);
                 }
-                Op::Push => layers.push(vec![[0.0; 4]; out.len()]),
+                Op::Push => {
+                    let span = self.p.groups[group];
+                    match self.layer_area(&span) {
+                        Some(a) => {
+                            layers.push((a, vec![[0.0; 4]; a.w * a.h]));
+                            group += 1;
+                        }
+                        None => {
+                            group = span.groups_end;
+                            i = span.end + 1;
+                            continue;
+                        }
+                    }
+                }
                 Op::Pop { opacity, .. } => {
-                    let top = layers.pop().unwrap_or_default();
-                    let below = match layers.last_mut() {
-                        Some(l) => l.as_mut_slice(),
-                        None => &mut *out,
+                    let (ta, top) = layers.pop().expect("a layer per group");
+                    let (ba, below) = match layers.last_mut() {
+                        Some((a, l)) => (*a, l.as_mut_slice()),
+                        None => (base, &mut *out),
                     };
-                    composite_layer(below, &top, opacity);
+                    composite_layer(below, ba, &top, ta, opacity);
                 }
             }
+            i += 1;
         }
     }
 
@@ -126,22 +168,24 @@ impl<'a> BandRenderer<'a> {
         true
     }
 
-    /// Draws one item source-over onto `target` (this band's rows of a layer).
-    pub fn draw(&mut self, item: &Item, target: &mut [[f32; 4]]) {
+    /// Draws one item source-over onto `target`, a layer covering `area` (which holds
+    /// every pixel the item touches in this band).
+    pub fn draw(&mut self, item: &Item, target: &mut [[f32; 4]], area: Area) {
         if self.winding(item) {
-            self.composite(item, target);
+            self.composite(item, target, area);
         }
     }
 
-    /// Composites `item` onto `target` using the winding integrals in `self.acc`.
-    pub fn composite(&self, item: &Item, target: &mut [[f32; 4]]) {
+    /// Composites `item` onto `target` (covering `area`) using the winding integrals in
+    /// `self.acc`.
+    pub fn composite(&self, item: &Item, target: &mut [[f32; 4]], area: Area) {
         let width = self.p.width as usize;
         let acc = &self.acc;
         let cols = acc.w.min(width - acc.x0 as usize);
         for r in 0..acc.h {
             let y = acc.y0 as usize + r;
             let row = &acc.data[r * acc.w..r * acc.w + cols];
-            let dst = &mut target[(y - self.y0) * width + acc.x0 as usize..][..cols];
+            let dst = &mut target[area.index(acc.x0 as usize, y)..][..cols];
             for (i, (&wv, d)) in row.iter().zip(dst.iter_mut()).enumerate() {
                 let (cov, _) = coverage(wv, item.evenodd);
                 if cov <= 0.0 {
@@ -155,6 +199,30 @@ impl<'a> BandRenderer<'a> {
     }
 }
 
+/// A rectangle of pixels `[x0, x0 + w) × [y0, y0 + h)` (device coordinates) stored
+/// row-major: a band, or the part of a band a group's layer covers.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct Area {
+    pub x0: usize,
+    pub y0: usize,
+    pub w: usize,
+    pub h: usize,
+}
+
+impl Area {
+    /// Index of pixel `(x, y)`, which must lie inside.
+    #[inline]
+    pub fn index(&self, x: usize, y: usize) -> usize {
+        debug_assert!(x >= self.x0 && x < self.x0 + self.w && y >= self.y0 && y < self.y0 + self.h);
+        (y - self.y0) * self.w + (x - self.x0)
+    }
+
+    /// Number of pixels.
+    pub fn len(&self) -> usize {
+        self.w * self.h
+    }
+}
+
 /// `d = s·cov + d·(1 − s.a·cov)`, premultiplied.
 #[inline]
 pub(crate) fn over(d: &mut [f32; 4], s: [f32; 4], cov: f32) {
@@ -164,10 +232,22 @@ pub(crate) fn over(d: &mut [f32; 4], s: [f32; 4], cov: f32) {
     }
 }
 
-/// Composites a layer onto `below` with `opacity`.
-pub(crate) fn composite_layer(below: &mut [[f32; 4]], top: &[[f32; 4]], opacity: f32) {
-    for (d, s) in below.iter_mut().zip(top) {
-        over(d, *s, opacity);
+/// Composites a layer `top` (covering `ta`) onto `below` (covering `ba`, which contains
+/// `ta`) with `opacity`. Pixels of `below` outside `ta` are left as they are, which is
+/// what compositing a transparent pixel does.
+pub(crate) fn composite_layer(
+    below: &mut [[f32; 4]],
+    ba: Area,
+    top: &[[f32; 4]],
+    ta: Area,
+    opacity: f32,
+) {
+    for r in 0..ta.h {
+        let src = &top[r * ta.w..][..ta.w];
+        let dst = &mut below[ba.index(ta.x0, ta.y0 + r)..][..ta.w];
+        for (d, s) in dst.iter_mut().zip(src) {
+            over(d, *s, opacity);
+        }
     }
 }
 

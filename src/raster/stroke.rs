@@ -267,20 +267,49 @@ pub struct Style {
     pub miter_limit: f64,
     /// Chord tolerance for round joins and caps, in frame units.
     pub tolerance: f64,
+    /// Whether to keep each vertex's [`Recipe`] (the backward pass needs them; a forward
+    /// render does not, and they are most of an outline's memory).
+    pub keep_recipes: bool,
+    /// Whether to keep each vertex's position (the backward pass, which rebuilds an
+    /// outline only for its recipes, does not need them).
+    pub keep_points: bool,
+}
+
+impl Style {
+    /// Chords of a round join or cap sweeping `angle` radians (1 to 256).
+    pub fn arc_steps(&self, angle: f64) -> usize {
+        let h = self.half_width;
+        if h <= self.tolerance {
+            return 1;
+        }
+        let step = 2.0 * (1.0 - self.tolerance / h).clamp(-1.0, 1.0).acos();
+        ((angle.abs() / step.max(1e-3)).ceil() as usize).clamp(1, 256)
+    }
+
+    /// Vertices one end cap adds to an outline (0 for butt caps).
+    pub fn cap_vertices(&self) -> usize {
+        match self.cap {
+            LineCap::Butt => 0,
+            LineCap::Square => 2,
+            LineCap::Round => self.arc_steps(std::f64::consts::PI).max(2) - 1,
+        }
+    }
 }
 
 /// Outline rings: vertices with their recipes; ring `r` spans `rings[r]` as `(start, len)`.
 #[derive(Clone, Debug, Default)]
 pub struct Outline {
-    /// Vertex positions (stroke frame).
+    /// Vertex positions (stroke frame); empty without [`Style::keep_points`].
     pub pts: Vec<Point>,
-    /// How each vertex was made.
+    /// How each vertex was made; empty without [`Style::keep_recipes`].
     pub recipes: Vec<Recipe>,
     /// Closed rings as `(start, len)`.
     pub rings: Vec<(usize, usize)>,
 }
 
 struct Builder<'a> {
+    /// Vertices pushed so far (kept or not).
+    count: usize,
     pts: &'a [Point],
     style: Style,
     out: Outline,
@@ -288,26 +317,26 @@ struct Builder<'a> {
 
 impl Builder<'_> {
     fn push(&mut self, r: Recipe) {
-        let [a, b, c] = r.inputs();
-        let p = |i: u32| {
-            if i == NONE {
-                [0.0, 0.0]
-            } else {
-                self.pts[i as usize]
-            }
-        };
-        let q = r.eval(p(a), p(b), p(c), self.style.half_width);
-        self.out.pts.push(q);
-        self.out.recipes.push(r);
+        self.count += 1;
+        if self.style.keep_points {
+            let [a, b, c] = r.inputs();
+            let p = |i: u32| {
+                if i == NONE {
+                    [0.0, 0.0]
+                } else {
+                    self.pts[i as usize]
+                }
+            };
+            let q = r.eval(p(a), p(b), p(c), self.style.half_width);
+            self.out.pts.push(q);
+        }
+        if self.style.keep_recipes {
+            self.out.recipes.push(r);
+        }
     }
 
     fn arc_steps(&self, angle: f64) -> usize {
-        let h = self.style.half_width;
-        if h <= self.style.tolerance {
-            return 1;
-        }
-        let step = 2.0 * (1.0 - self.style.tolerance / h).clamp(-1.0, 1.0).acos();
-        ((angle.abs() / step.max(1e-3)).ceil() as usize).clamp(1, 256)
+        self.style.arc_steps(angle)
     }
 
     /// One side of a polyline (left of travel), joins included, from the start offset of
@@ -442,17 +471,18 @@ impl Builder<'_> {
     }
 
     fn ring_from(&mut self, start: usize) {
-        let len = self.out.pts.len() - start;
+        let len = self.count - start;
         if len >= 3 {
             self.out.rings.push((start, len));
         } else {
+            self.count = start;
             self.out.pts.truncate(start);
             self.out.recipes.truncate(start);
         }
     }
 
     fn dot_ring(&mut self, b: u32) {
-        let start = self.out.pts.len();
+        let start = self.count;
         match self.style.cap {
             LineCap::Butt => return,
             LineCap::Square => {
@@ -519,7 +549,7 @@ impl Builder<'_> {
                         vc.iter().rev().copied().collect(),
                     )
                 };
-                let start = self.out.pts.len();
+                let start = self.count;
                 for i in 0..m {
                     let prev = vv[(i + m - 1) % m];
                     let next = vv[(i + 1) % m];
@@ -528,7 +558,7 @@ impl Builder<'_> {
                 self.ring_from(start);
             }
         } else {
-            let start = self.out.pts.len();
+            let start = self.count;
             let m = v.len();
             self.side(&v, &vc);
             self.cap(v[m - 2], v[m - 1]);
@@ -545,6 +575,7 @@ impl Builder<'_> {
 /// `corner[i]` tells whether vertex `i` ends an original segment.
 pub fn outline(pts: &[Point], corner: &[bool], contours: &[Contour], style: Style) -> Outline {
     let mut b = Builder {
+        count: 0,
         pts,
         style,
         out: Outline::default(),
@@ -566,6 +597,8 @@ mod tests {
             cap,
             miter_limit: 4.0,
             tolerance: 0.01,
+            keep_recipes: true,
+            keep_points: true,
         }
     }
 

@@ -318,6 +318,7 @@ pub fn from_tree(tree: &usvg::Tree, name: &FsPath, sizing: Sizing) -> Result<Sce
 
     super::svg_out::check_numbers_with(&scene, super::svg_out::READ_SLACK)
         .map_err(|what| ctx.invalid(what))?;
+    scene.check_limits(name)?;
     Ok(scene)
 }
 

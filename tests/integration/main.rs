@@ -12,6 +12,7 @@ mod gradients;
 mod parity;
 mod regress_cli;
 mod regress_input;
+mod regress_raster;
 mod roundtrip;
 mod vectorize;
 mod volume;
