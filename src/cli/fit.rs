@@ -207,6 +207,7 @@ pub fn run(a: Args) -> Result<()> {
     let target = load_target(&a.target)?;
     let objective = a.optim.objective(&target)?;
     let scene = Scene::load(&a.init, Sizing::Exact(target.width, target.height))?;
+    super::util::warn_about(&scene, &a.init, &crate::raster::RenderOptions::default());
     let layout = ParamLayout::new(&scene);
     if scene.path_count() == 0 || layout.is_empty() {
         bail!(

@@ -83,6 +83,7 @@ fn load(c: &Common) -> Result<Job> {
         .map_err(|e: String| anyhow::anyhow!("--loss: {e}"))?;
     let background = c.background.as_deref().map(parse_color).transpose()?;
     let scene = Scene::load(&c.input, c.size.sizing()?)?;
+    super::util::warn_about(&scene, &c.input, &RenderOptions::default());
     let mut target = Image::load(&c.target)?;
     if (target.width, target.height) != (scene.width, scene.height) {
         if !c.resize {
@@ -137,15 +138,13 @@ pub fn run_grad(a: GradArgs) -> Result<GradOutcome> {
     } else {
         println!("loss {loss:?}");
         let layout = ParamLayout::new(&job.scene);
-        for (k, o) in layout.owners.iter().enumerate() {
-            let norm: f64 = layout
-                .slots
-                .iter()
-                .zip(&grad)
-                .filter(|(s, _)| s.owner == k)
-                .map(|(_, g)| g * g)
-                .sum::<f64>()
-                .sqrt();
+        // Squared norms per owner in one pass over the slots.
+        let mut sq = vec![0.0f64; layout.owners.len()];
+        for (s, g) in layout.slots.iter().zip(&grad) {
+            sq[s.owner] += g * g;
+        }
+        for (o, sq) in layout.owners.iter().zip(&sq) {
+            let norm = sq.sqrt();
             let kind = if o.is_group { "group" } else { "path" };
             let id = if o.id.is_empty() { "(no id)" } else { &o.id };
             println!("{kind} {id}: |gradient| {norm:.4e}");

@@ -43,12 +43,11 @@ pub fn run(a: Args) -> Result<()> {
     let data = read(&a.input)?;
     let tree = parse_tree(&data, &a.input)?;
     let scene = from_tree(&tree, &a.input, sizing)?;
-    let mut img = render(
-        &scene,
-        &RenderOptions {
-            tolerance: a.tolerance,
-        },
-    );
+    let opts = RenderOptions {
+        tolerance: a.tolerance,
+    };
+    super::util::warn_about(&scene, &a.input, &opts);
+    let mut img = render(&scene, &opts);
     if let Some(bg) = bg {
         img.over_background(bg);
     }

@@ -101,3 +101,11 @@ pub fn check_output(path: &Path, ext: &str) -> Result<()> {
     }
     Ok(())
 }
+
+/// Prints the renderer's warnings about `scene` (read from `path`) to stderr, one line
+/// each: strokes drawn other than the file says because a limit was reached.
+pub fn warn_about(scene: &crate::Scene, path: &Path, opts: &crate::raster::RenderOptions) {
+    for w in crate::raster::warnings(scene, opts) {
+        eprintln!("warning: {}: {w}", path.display());
+    }
+}
