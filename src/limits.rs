@@ -3,8 +3,8 @@
 //! diffsvg sizes its memory and time by the work asked for, never by what a file makes it
 //! allocate: each count or size below is checked **before** the allocation it bounds.
 //! Past a limit the input is refused with an error naming the file and the limit, except
-//! where a fallback is documented (dashes). `docs/limits.md` explains each one; a test
-//! beside each check feeds it the case that used to break.
+//! where a fallback is documented (dashes). `docs/limits.md` lists them with what each
+//! costs; a test beside each check feeds it the case that used to break.
 
 /// Largest canvas side, in pixels (rendered scenes and targets).
 pub const MAX_SIDE: u32 = 16384;
@@ -49,6 +49,8 @@ pub const MAX_SCENE_CHORDS: usize = 4_000_000;
 /// compositing time over that box per level, not canvas-wide.
 pub const MAX_GROUP_DEPTH: usize = 256;
 
-/// Largest coordinate magnitude accepted on input and written on output, in the file's
-/// own units (far beyond any drawing, well inside `f32`).
+/// Largest coordinate magnitude accepted on input and written on output, in device
+/// pixels after sizing (far beyond any drawing, well inside `f32`). The reader and the
+/// SVG writer apply the same check, and the optimizer's projection keeps every parameter
+/// inside it, so diffsvg never writes a file it would refuse to read.
 pub const MAX_COORDINATE: f64 = 1e30;
