@@ -121,12 +121,7 @@ pub fn flatten(
         out.corner.push(true);
         for k in 0..sp.segments() {
             let first = sp.start + 3 * k;
-            let p = [
-                path.points[first],
-                path.points[first + 1],
-                path.points[first + 2],
-                path.points[first + 3],
-            ];
+            let p = path.segment_points(sp, k);
             let n = match counts {
                 Some(c) => c.get(seg_ix).copied().unwrap_or(1).max(1),
                 None => chord_count(&p, tolerance, visible),

@@ -67,13 +67,7 @@ impl Scene {
             let mut corners = 0u64;
             for sp in &path.subpaths {
                 for k in 0..sp.segments() {
-                    let first = sp.start + 3 * k;
-                    let p = [
-                        path.points[first],
-                        path.points[first + 1],
-                        path.points[first + 2],
-                        path.points[first + 3],
-                    ];
+                    let p = path.segment_points(sp, k);
                     total += chord_count(&p, tolerance, visible) as u64;
                     corners += 1;
                 }

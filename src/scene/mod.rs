@@ -298,6 +298,17 @@ pub struct Path {
 }
 
 impl Path {
+    /// The four control points of segment `k` of `sub` (device pixels).
+    pub fn segment_points(&self, sub: &Subpath, k: usize) -> [Point; 4] {
+        let first = sub.start + 3 * k;
+        [
+            self.points[first],
+            self.points[first + 1],
+            self.points[first + 2],
+            self.points[first + 3],
+        ]
+    }
+
     /// An empty path with no paint.
     pub fn new(id: impl Into<String>) -> Self {
         Path {
