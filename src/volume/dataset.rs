@@ -922,23 +922,28 @@ mod tests {
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
-    /// `shared/data/scenes` beside the checkout, or under `$DIFFSVG_DATA`, when present.
-    fn scenes(test: &str) -> Option<PathBuf> {
-        let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
-        let candidates = [
-            std::env::var_os("DIFFSVG_DATA").map(PathBuf::from),
-            Some(root.join("../shared/data")),
-            Some(PathBuf::from("/work/shared/data")),
-        ];
-        let found = candidates
-            .into_iter()
-            .flatten()
-            .map(|d| d.join("scenes"))
-            .find(|d| d.is_dir());
-        if found.is_none() {
-            println!("SKIPPED {test}: ../shared/data/scenes not found (set DIFFSVG_DATA)");
+    /// Prints why a test is skipped, or panics when `DIFFSVG_REQUIRE_DATA=1` (CI has the
+    /// data, so a skip there would hide a missing check).
+    fn skip(test: &str, reason: &str) {
+        if std::env::var_os("DIFFSVG_REQUIRE_DATA").is_some_and(|v| v == "1") {
+            panic!("{test}: {reason}, and DIFFSVG_REQUIRE_DATA=1 forbids skipping");
         }
-        found
+        println!("SKIPPED {test}: {reason} (set DIFFSVG_DATA)");
+    }
+
+    /// `scenes/` under `$DIFFSVG_DATA`, or under `../shared/data` beside the checkout, when
+    /// present (see [`skip`]).
+    fn scenes(test: &str) -> Option<PathBuf> {
+        let data = std::env::var_os("DIFFSVG_DATA")
+            .map(PathBuf::from)
+            .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data"));
+        let dir = data.join("scenes");
+        if dir.is_dir() {
+            Some(dir)
+        } else {
+            skip(test, &format!("{} not found", dir.display()));
+            None
+        }
     }
 
     #[test]
@@ -966,7 +971,7 @@ mod tests {
                 assert!(r.at(t).length() < 0.5, "{}: misses the origin", v.name);
             }
         } else {
-            println!("SKIPPED lego: {} not found", lego.display());
+            skip("lego", &format!("{} not found", lego.display()));
         }
         let fox = scenes.join("fox");
         if fox.is_dir() {
@@ -981,7 +986,7 @@ mod tests {
             assert!((c.cx - 554.558 / 4.0).abs() < 1e-3);
             assert!(c.has_distortion());
         } else {
-            println!("SKIPPED fox: {} not found", fox.display());
+            skip("fox", &format!("{} not found", fox.display()));
         }
     }
 }
