@@ -6,6 +6,7 @@ mod common;
 mod digits;
 mod exactness;
 mod fit;
+mod fuzz;
 mod glyphs;
 mod gradients;
 mod parity;
