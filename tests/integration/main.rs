@@ -10,6 +10,7 @@ mod fuzz;
 mod glyphs;
 mod gradients;
 mod parity;
+mod regress_volume;
 mod roundtrip;
 mod vectorize;
 mod volume;
