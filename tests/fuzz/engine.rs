@@ -841,7 +841,12 @@ max_segments = 1
             outcome.peak_kib / 1024,
             case.mutations.join("; ")
         );
-        let tail: Vec<&str> = outcome.stderr.lines().rev().take(4).collect();
+        let head = outcome
+            .stderr
+            .split("stack backtrace:")
+            .next()
+            .unwrap_or("");
+        let tail: Vec<&str> = head.lines().rev().take(4).collect();
         if !tail.is_empty() {
             let tail: Vec<&str> = tail.into_iter().rev().collect();
             let _ = write!(detail, "\n  stderr: {}", tail.join("\n          "));
@@ -910,7 +915,10 @@ fn judge(case: &Case, dir: &Path, o: &Outcome, cfg: &Config) -> Option<String> {
         return Some("stack overflow".into());
     }
     if err.contains("memory allocation of") {
-        return Some("abort: memory allocation failed".into());
+        return Some(format!(
+            "abort: memory allocation failed{}",
+            first_frame(err)
+        ));
     }
     if o.timed_out {
         return Some(format!("timeout (over {} s)", cfg.timeout.as_secs()));
@@ -968,6 +976,20 @@ fn judge(case: &Case, dir: &Path, o: &Outcome, cfg: &Config) -> Option<String> {
     None
 }
 
+/// ` in <function>`: the innermost diffsvg frame of a backtrace on stderr, if any.
+fn first_frame(err: &str) -> String {
+    err.lines()
+        .skip_while(|l| !l.starts_with("stack backtrace:"))
+        .filter_map(|l| l.trim().split_once(": ").map(|(_, f)| f))
+        .find(|f| f.starts_with("diffsvg::"))
+        .map(|f| {
+            let f = f.replace("::{{closure}}", "");
+            let f = f.split("::h").next().unwrap_or(&f).to_string();
+            format!(" in {f}")
+        })
+        .unwrap_or_default()
+}
+
 /// Every regular file below `dir`.
 fn files_under(dir: &Path) -> Vec<PathBuf> {
     let mut out = Vec::new();
@@ -1003,7 +1025,8 @@ pub fn run_child(cfg: &Config, dir: &Path, args: &[String]) -> Outcome {
         // work rather than per-thread reservations.
         .env("RAYON_NUM_THREADS", "2")
         .env("MALLOC_ARENA_MAX", "2")
-        .env_remove("RUST_BACKTRACE")
+        // A backtrace tells distinct allocation failures apart.
+        .env("RUST_BACKTRACE", "1")
         .stdin(Stdio::null())
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
