@@ -338,14 +338,14 @@ fn check_bound(b: f32, center: Vec3, dist: f32) -> Result<()> {
         let (lo, hi) = (BOUND_RANGE.0 * dist, BOUND_RANGE.1 * dist);
         if !(lo..=hi).contains(&b) {
             bail!(
-                "--bound {b} must be between {lo} and {hi} ({:e} to {:e} times the cameras' \
+                "--bound {b:?} must be between {lo} and {hi} ({:e} to {:e} times the cameras' \
                  median distance {dist} from where they look)",
                 BOUND_RANGE.0,
                 BOUND_RANGE.1
             );
         }
     }
-    check_box(center, b).map_err(|e| anyhow::anyhow!("--bound {b}: {e}"))
+    check_box(center, b).map_err(|e| anyhow::anyhow!("--bound {b:?}: {e}"))
 }
 
 /// Errors unless `center ± half` is a finite box whose sides `f32` can tell apart from a
