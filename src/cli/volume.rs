@@ -162,13 +162,22 @@ fn run_voxel(a: VoxelArgs) -> Result<()> {
     let defaults = SceneDefaults::for_dataset(&data);
     let half = match a.bound {
         Some(b) if !(b.is_finite() && b > 0.0) => bail!("--bound {b} must be a positive number"),
-        Some(b) => b,
+        Some(b) => {
+            check_bound(b, center, dist)?;
+            b
+        }
         None => {
             let half = defaults.box_factor * dist;
             if !(half.is_finite() && half > 0.0 && center.is_finite()) {
                 bail!(
                     "{}: cannot size the box from the cameras (median distance {dist} from \
                      {center}); give --bound",
+                    a.scene.display()
+                );
+            }
+            if let Err(e) = check_box(center, half) {
+                bail!(
+                    "{}: cannot size the box from the cameras: {e}; give --bound",
                     a.scene.display()
                 );
             }
@@ -313,6 +322,44 @@ fn run_voxel(a: VoxelArgs) -> Result<()> {
     if outcome.stopped {
         eprintln!("interrupted: the model so far was written");
         std::process::exit(130);
+    }
+    Ok(())
+}
+
+/// Smallest and largest `--bound` as a multiple of the cameras' median distance from
+/// where they look: a box a thousandth of that distance is smaller than a pixel of any
+/// view, one a thousand times larger puts the scene in a single cell.
+const BOUND_RANGE: (f32, f32) = (1e-3, 1e3);
+
+/// Checks `--bound` against the cameras: within [`BOUND_RANGE`] times their distance
+/// `dist` (when that is known) and a box that `f32` can hold around `center`.
+fn check_bound(b: f32, center: Vec3, dist: f32) -> Result<()> {
+    if dist.is_finite() && dist > 0.0 {
+        let (lo, hi) = (BOUND_RANGE.0 * dist, BOUND_RANGE.1 * dist);
+        if !(lo..=hi).contains(&b) {
+            bail!(
+                "--bound {b:?} must be between {lo} and {hi} ({:e} to {:e} times the cameras' \
+                 median distance {dist} from where they look)",
+                BOUND_RANGE.0,
+                BOUND_RANGE.1
+            );
+        }
+    }
+    check_box(center, b).map_err(|e| anyhow::anyhow!("--bound {b:?}: {e}"))
+}
+
+/// Errors unless `center ± half` is a finite box whose sides `f32` can tell apart from a
+/// point (64 distinct values per axis at least).
+fn check_box(center: Vec3, half: f32) -> std::result::Result<(), String> {
+    let (min, max) = (center - Vec3::splat(half), center + Vec3::splat(half));
+    if !(min.is_finite() && max.is_finite()) {
+        return Err(format!("the box around {center} is not finite"));
+    }
+    let ulp = center.abs().max_element().max(f32::MIN_POSITIVE) * f32::EPSILON;
+    if 2.0 * half < 64.0 * ulp {
+        return Err(format!(
+            "a box of half side {half} around {center} is too small for f32"
+        ));
     }
     Ok(())
 }

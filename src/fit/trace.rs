@@ -862,7 +862,6 @@ mod tests {
             eprintln!(
                 "{n} paths 256²: tolerance {tolerance}: {k} removed in {secs:.3} s, MSE {before:.3e} → {after:.3e}"
             );
-            assert!(secs < 2.0, "{secs:.3} s");
             assert!(k > 0);
             if tolerance == 0.0 {
                 assert!(after <= before);
@@ -870,13 +869,22 @@ mod tests {
         }
     }
 
-    /// Loads a sample picture from `../shared/data/images`, or `None` (with a reason).
+    /// Loads a sample picture from `../shared/data/images` (or `$DIFFSVG_DATA/images`), or
+    /// `None` with a printed reason; with `DIFFSVG_REQUIRE_DATA=1` a missing picture fails
+    /// the test instead of skipping it.
     fn sample(name: &str) -> Option<Image> {
-        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../shared/data/images")
-            .join(name);
+        let data = std::env::var_os("DIFFSVG_DATA")
+            .map(std::path::PathBuf::from)
+            .unwrap_or_else(|| {
+                std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data")
+            });
+        let path = data.join("images").join(name);
         if !path.exists() {
-            eprintln!("skipping: {} is missing", path.display());
+            let why = format!("{} is missing", path.display());
+            if std::env::var_os("DIFFSVG_REQUIRE_DATA").is_some_and(|v| v == "1") {
+                panic!("{why}, and DIFFSVG_REQUIRE_DATA=1 forbids skipping");
+            }
+            println!("SKIPPED: {why} (set DIFFSVG_DATA)");
             return None;
         }
         Some(Image::load(&path).unwrap())
@@ -958,8 +966,7 @@ mod tests {
             let after = psnr_of(&pruned, &img);
             eprintln!("{n} paths ({last:.2} dB) → {budget}: {after:.2} dB in {secs:.3} s");
             assert_eq!(pruned.path_count(), budget);
-            // Generous: about 0.1 s on two cores.
-            assert!(secs < 2.0, "{secs:.3} s");
+            // About 0.1 s on two cores (printed, not asserted: timings vary by machine).
             assert!(after < last + 1.0, "{after:.2} dB");
             last = after;
         }

@@ -22,6 +22,31 @@ use super::Ray;
 /// Largest tolerated `max |RᵀR − I|` entry for a pose's rotation part.
 pub const ORTHONORMAL_TOLERANCE: f64 = 1e-2;
 
+/// Smallest focal length as a multiple of the image side it spans (`fx / width`,
+/// `fy / height`): a field of view of at most 2·atan(500) ≈ 179.8°.
+pub const MIN_FOCAL_RATIO: f64 = 1e-3;
+
+/// Largest focal length as a multiple of the image side it spans: a field of view of at
+/// least 2·atan(1/20000) = 10⁻⁴ rad (0.006°). Beyond it every ray of an image is the
+/// same ray in `f32`, and a model fitted to it is meaningless.
+pub const MAX_FOCAL_RATIO: f64 = 1e4;
+
+/// Largest magnitude of the radial distortion coefficients `k1`, `k2` (real lenses stay
+/// well below 1; fisheye models are not supported).
+pub const MAX_RADIAL_DISTORTION: f64 = 10.0;
+
+/// Largest magnitude of the tangential distortion coefficients `p1`, `p2`.
+pub const MAX_TANGENTIAL_DISTORTION: f64 = 1.0;
+
+/// The field-of-view range (radians) that [`MIN_FOCAL_RATIO`] and [`MAX_FOCAL_RATIO`]
+/// allow: `(smallest, largest)`.
+pub fn fov_range() -> (f64, f64) {
+    (
+        2.0 * (0.5 / MAX_FOCAL_RATIO).atan(),
+        2.0 * (0.5 / MIN_FOCAL_RATIO).atan(),
+    )
+}
+
 /// Why a camera or pose is unusable.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum CameraError {
@@ -154,8 +179,11 @@ impl Camera {
         self
     }
 
-    /// Checks the size (non-zero), focal lengths (finite, positive), principal point and
-    /// distortion (finite) and the pose ([`check_pose`]).
+    /// Checks the size (non-zero), focal lengths (finite, between [`MIN_FOCAL_RATIO`] and
+    /// [`MAX_FOCAL_RATIO`] times the image side), principal point (finite), distortion
+    /// (within [`MAX_RADIAL_DISTORTION`] and [`MAX_TANGENTIAL_DISTORTION`], and radially
+    /// one-to-one out to the image's corners, so that every pixel has one ray) and the
+    /// pose ([`check_pose`]).
     pub fn validate(&self) -> Result<(), CameraError> {
         if self.width == 0 || self.height == 0 {
             return Err(CameraError::Intrinsics(format!(
@@ -167,6 +195,18 @@ impl Camera {
             if !(f.is_finite() && f > 0.0) {
                 return Err(CameraError::Intrinsics(format!(
                     "focal length {name} = {f} must be finite and positive"
+                )));
+            }
+        }
+        for (name, f, side, what) in [
+            ("fx", self.fx, self.width, "width"),
+            ("fy", self.fy, self.height, "height"),
+        ] {
+            let (lo, hi) = (MIN_FOCAL_RATIO * side as f64, MAX_FOCAL_RATIO * side as f64);
+            if !(lo..=hi).contains(&(f as f64)) {
+                return Err(CameraError::Intrinsics(format!(
+                    "focal length {name} = {f:?} px must be between {lo} and {hi} px \
+                     ({MIN_FOCAL_RATIO:e} to {MAX_FOCAL_RATIO:e} times the image {what}, {side} px)"
                 )));
             }
         }
@@ -184,7 +224,59 @@ impl Camera {
                 )));
             }
         }
+        for (name, v, max) in [
+            ("k1", self.k1, MAX_RADIAL_DISTORTION),
+            ("k2", self.k2, MAX_RADIAL_DISTORTION),
+            ("p1", self.p1, MAX_TANGENTIAL_DISTORTION),
+            ("p2", self.p2, MAX_TANGENTIAL_DISTORTION),
+        ] {
+            if (v as f64).abs() > max {
+                return Err(CameraError::Intrinsics(format!(
+                    "{name} = {v:?} is outside [-{max}, {max}]"
+                )));
+            }
+        }
+        self.check_radial_one_to_one()?;
         check_pose(&self.c2w)
+    }
+
+    /// Errors unless the radial distortion `r ↦ r (1 + k1 r² + k2 r⁴)` increases until it
+    /// reaches the farthest image corner (normalized coordinates): otherwise pixels near
+    /// the border have no ray or two.
+    fn check_radial_one_to_one(&self) -> Result<(), CameraError> {
+        if self.k1 == 0.0 && self.k2 == 0.0 {
+            return Ok(());
+        }
+        let (k1, k2) = (self.k1 as f64, self.k2 as f64);
+        let corner = [0.0, self.width as f64]
+            .iter()
+            .flat_map(|&u| [0.0, self.height as f64].map(|v| (u, v)))
+            .map(|(u, v)| {
+                let x = (u - self.cx as f64) / self.fx as f64;
+                let y = (v - self.cy as f64) / self.fy as f64;
+                (x * x + y * y).sqrt()
+            })
+            .fold(0.0f64, f64::max);
+        let rd = |r: f64| r * (1.0 + r * r * (k1 + k2 * r * r));
+        let slope = |r: f64| 1.0 + r * r * (3.0 * k1 + 5.0 * k2 * r * r);
+        let step = (corner / 512.0).max(1e-6);
+        let mut r = 0.0;
+        // Walk out until the distorted radius passes the corner (at most 4096 steps: 8×
+        // the corner radius, far more than any lens compresses).
+        for _ in 0..4096 {
+            if rd(r) >= corner {
+                return Ok(());
+            }
+            if slope(r) <= 0.0 {
+                break;
+            }
+            r += step;
+        }
+        Err(CameraError::Intrinsics(format!(
+            "distortion k1 = {}, k2 = {} folds over before the image corners \
+             (normalized radius {corner:.3}): not one-to-one",
+            self.k1, self.k2
+        )))
     }
 
     /// A camera at `eye` looking at `target`, with `up` (world direction) pointing up in

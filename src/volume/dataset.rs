@@ -24,6 +24,16 @@
 //! [`Camera::downscaled`], so pixel geometry stays exact.
 //!
 //! Loading only reads files; on any error nothing is returned (and nothing written).
+//!
+//! **Limits**, checked before the work they bound: a transforms file is read only up to
+//! [`limits::MAX_FILE_BYTES`](crate::limits::MAX_FILE_BYTES) and lists at most
+//! [`MAX_FRAMES`] frames; every `file_path` must stay inside the dataset folder (after
+//! resolving `..` and symbolic links); each image's size is read from its header and must
+//! stay within [`limits::MAX_SIDE`](crate::limits::MAX_SIDE) and
+//! [`limits::MAX_IMAGE_PIXELS`](crate::limits::MAX_IMAGE_PIXELS), and all images together,
+//! after downscaling, within [`MAX_DATASET_PIXELS`], before any is decoded. Intrinsics must
+//! describe a usable camera ([`Camera::validate`]): a field of view within
+//! [`camera::fov_range`](super::camera::fov_range), bounded one-to-one distortion.
 
 use std::path::{Path, PathBuf};
 
@@ -31,8 +41,19 @@ use glam::Affine3A;
 use rayon::prelude::*;
 use serde_json::{Map, Value};
 
-use super::camera::{Camera, focal_from_fov, pose_from_rows};
+use super::camera::{
+    Camera, MAX_FOCAL_RATIO, MIN_FOCAL_RATIO, focal_from_fov, fov_range, pose_from_rows,
+};
 use crate::error::{Error, Result};
+use crate::limits::{MAX_FILE_BYTES, MAX_IMAGE_PIXELS, MAX_SIDE};
+
+/// Most frames in one transforms file.
+pub const MAX_FRAMES: usize = 10_000;
+
+/// Most pixels of all a dataset's images together, after downscaling: each costs about
+/// 50 bytes while fitting (color, ray, batch), so this bounds a fit near 1.6 GiB (lego's
+/// 125 views at 400² hold 2·10⁷).
+pub const MAX_DATASET_PIXELS: u64 = 1 << 25;
 
 /// One posed photo.
 #[derive(Clone, Debug, PartialEq)]
@@ -203,6 +224,24 @@ pub fn load(dir: &Path, downscale: u32) -> Result<Dataset> {
         return Err(not_found(dir, "no frames"));
     }
 
+    // Sizes from the headers, before anything is decoded.
+    let mut total: u64 = 0;
+    for (f, _) in &frames {
+        let path = f.image.as_deref().expect("present");
+        let (w, h) = header_size(path)?;
+        total += (w / downscale) as u64 * (h / downscale) as u64;
+    }
+    if total > MAX_DATASET_PIXELS {
+        return Err(Error::InvalidValue {
+            path: dir.to_path_buf(),
+            what: format!(
+                "the {} images hold {total} pixels at downscale {downscale}, more than the \
+                 limit of {MAX_DATASET_PIXELS}: give a larger --downscale",
+                frames.len()
+            ),
+        });
+    }
+
     // Decode in parallel; report the first failure in file order.
     let images: Vec<Result<Decoded>> = frames
         .par_iter()
@@ -319,30 +358,48 @@ impl Frame {
                 });
             }
         }
+        let (lo, hi) = fov_range();
         let angle = |a: Option<f64>, key: &str, size: u32| -> Result<Option<f64>> {
             match a {
                 None => Ok(None),
-                Some(a) if a > 0.0 && a < std::f64::consts::PI => {
+                Some(a) if a >= lo && a <= hi => {
                     Ok(Some(focal_from_fov(size as f32, a as f32) as f64))
                 }
-                Some(a) => Err(self.err(format!("{key} = {a} must be in (0, π) radians"))),
+                Some(a) => Err(self.err(format!(
+                    "{key} = {a:?} must be between {lo:.1e} and {hi:.4} radians"
+                ))),
             }
         };
-        let fx = match own.fl_x {
+        let focal = |f: Option<f64>, key: &str, size: u32, what: &str| -> Result<Option<f64>> {
+            match f {
+                Some(f) if !(MIN_FOCAL_RATIO * size as f64..=MAX_FOCAL_RATIO * size as f64)
+                    .contains(&f) =>
+                {
+                    Err(self.err(format!(
+                        "{key} = {f:?} px must be between {} and {} px \
+                         ({MIN_FOCAL_RATIO:e} to {MAX_FOCAL_RATIO:e} times the image {what}, {size} px)",
+                        MIN_FOCAL_RATIO * size as f64,
+                        MAX_FOCAL_RATIO * size as f64
+                    )))
+                }
+                f => Ok(f),
+            }
+        };
+        let fx = match focal(own.fl_x, "fl_x", iw, "width")? {
             Some(f) => Some(f),
             None => match angle(own.angle_x, "camera_angle_x", iw)? {
                 Some(f) => Some(f),
-                None => match top.fl_x {
+                None => match focal(top.fl_x, "fl_x", iw, "width")? {
                     Some(f) => Some(f),
                     None => angle(top.angle_x, "camera_angle_x", iw)?,
                 },
             },
         };
-        let fy = match own.fl_y {
+        let fy = match focal(own.fl_y, "fl_y", ih, "height")? {
             Some(f) => Some(f),
             None => match angle(own.angle_y, "camera_angle_y", ih)? {
                 Some(f) => Some(f),
-                None => match top.fl_y {
+                None => match focal(top.fl_y, "fl_y", ih, "height")? {
                     Some(f) => Some(f),
                     None => angle(top.angle_y, "camera_angle_y", ih)?,
                 },
@@ -393,7 +450,7 @@ fn require_images(json: &Path, frames: &[Frame]) -> Result<()> {
 
 /// Reads and checks a transforms file (both formats), resolving image paths.
 fn parse_transforms(path: &Path) -> Result<Vec<Frame>> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = read_bounded(path)?;
     let bad = |what: String| Error::InvalidValue {
         path: path.to_path_buf(),
         what,
@@ -413,7 +470,19 @@ fn parse_transforms(path: &Path) -> Result<Vec<Frame>> {
     if frames.is_empty() {
         return Err(bad("\"frames\" is empty".into()));
     }
+    if frames.len() > MAX_FRAMES {
+        return Err(bad(format!(
+            "{} frames, more than the limit of {MAX_FRAMES}",
+            frames.len()
+        )));
+    }
     let base = path.parent().unwrap_or(Path::new("."));
+    let base = if base.as_os_str().is_empty() {
+        Path::new(".")
+    } else {
+        base
+    };
+    let canonical_base = base.canonicalize().map_err(|e| Error::io(base, e))?;
     let mut out = Vec::with_capacity(frames.len());
     for (index, fv) in frames.iter().enumerate() {
         let fobj = fv
@@ -429,6 +498,12 @@ fn parse_transforms(path: &Path) -> Result<Vec<Frame>> {
         let own = intrinsics(fobj).map_err(at)?;
         let rows = matrix_rows(fobj.get("transform_matrix")).map_err(|w| at(w.into()))?;
         let c2w = pose_from_rows(&rows).map_err(|e| at(e.to_string()))?;
+        if escapes(&file_path) {
+            return Err(at(
+                "file_path leads outside the dataset folder (paths must be relative and stay inside it)"
+                    .into(),
+            ));
+        }
         let tried = base.join(file_path.trim_start_matches("./"));
         let image = if tried.is_file() {
             Some(tried.clone())
@@ -438,6 +513,16 @@ fn parse_transforms(path: &Path) -> Result<Vec<Frame>> {
             let png = PathBuf::from(png);
             png.is_file().then_some(png)
         };
+        if let Some(img) = &image {
+            // Symbolic links may not lead out either.
+            let real = img.canonicalize().map_err(|e| Error::io(img, e))?;
+            if !real.starts_with(&canonical_base) {
+                return Err(at(format!(
+                    "file_path resolves to {}, outside the dataset folder",
+                    real.display()
+                )));
+            }
+        }
         out.push(Frame {
             json: path.to_path_buf(),
             index,
@@ -450,6 +535,76 @@ fn parse_transforms(path: &Path) -> Result<Vec<Frame>> {
         });
     }
     Ok(out)
+}
+
+/// Whether a `file_path` is absolute or climbs above its folder with `..`.
+fn escapes(file_path: &str) -> bool {
+    use std::path::Component;
+    let mut depth = 0i64;
+    for c in Path::new(file_path).components() {
+        match c {
+            Component::Prefix(_) | Component::RootDir => return true,
+            Component::ParentDir => {
+                depth -= 1;
+                if depth < 0 {
+                    return true;
+                }
+            }
+            Component::Normal(_) => depth += 1,
+            Component::CurDir => {}
+        }
+    }
+    false
+}
+
+/// Reads a whole regular file of at most [`MAX_FILE_BYTES`] bytes; never more than that
+/// (a device or a growing file cannot make it read forever).
+fn read_bounded(path: &Path) -> Result<Vec<u8>> {
+    use std::io::Read;
+    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let too_big = |n: String| Error::InvalidValue {
+        path: path.to_path_buf(),
+        what: format!("{n} bytes, more than the limit of {MAX_FILE_BYTES}"),
+    };
+    let meta = file.metadata().map_err(|e| Error::io(path, e))?;
+    if !meta.is_file() {
+        return Err(Error::InvalidValue {
+            path: path.to_path_buf(),
+            what: "not a regular file".into(),
+        });
+    }
+    if meta.len() > MAX_FILE_BYTES {
+        return Err(too_big(meta.len().to_string()));
+    }
+    let mut bytes = Vec::with_capacity(meta.len() as usize);
+    file.take(MAX_FILE_BYTES + 1)
+        .read_to_end(&mut bytes)
+        .map_err(|e| Error::io(path, e))?;
+    if bytes.len() as u64 > MAX_FILE_BYTES {
+        return Err(too_big("over".into()));
+    }
+    Ok(bytes)
+}
+
+/// An image's size from its header, checked against the limits, before decoding.
+fn header_size(path: &Path) -> Result<(u32, u32)> {
+    let bad = |message: String| Error::Image {
+        path: path.to_path_buf(),
+        message,
+    };
+    let (w, h) = image::ImageReader::open(path)
+        .map_err(|e| Error::io(path, e))?
+        .with_guessed_format()
+        .map_err(|e| Error::io(path, e))?
+        .into_dimensions()
+        .map_err(|e| bad(format!("not a readable PNG or JPEG image: {e}")))?;
+    if w > MAX_SIDE || h > MAX_SIDE || w as u64 * h as u64 > MAX_IMAGE_PIXELS {
+        return Err(bad(format!(
+            "image is {w}×{h}, over the limit of {MAX_SIDE} px a side and \
+             {MAX_IMAGE_PIXELS} pixels"
+        )));
+    }
+    Ok((w, h))
 }
 
 /// `transform_matrix` as 3 or 4 rows of 4 numbers.
@@ -551,7 +706,7 @@ struct Decoded {
 
 /// Reads an image, composites alpha over white and averages `k × k` blocks.
 fn decode(path: &Path, k: u32) -> Result<Decoded> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = read_bounded(path)?;
     let img = image::load_from_memory(&bytes).map_err(|e| Error::Image {
         path: path.to_path_buf(),
         message: format!("not a readable PNG or JPEG image: {e}"),
@@ -922,23 +1077,28 @@ mod tests {
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
-    /// `shared/data/scenes` beside the checkout, or under `$DIFFSVG_DATA`, when present.
-    fn scenes(test: &str) -> Option<PathBuf> {
-        let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
-        let candidates = [
-            std::env::var_os("DIFFSVG_DATA").map(PathBuf::from),
-            Some(root.join("../shared/data")),
-            Some(PathBuf::from("/work/shared/data")),
-        ];
-        let found = candidates
-            .into_iter()
-            .flatten()
-            .map(|d| d.join("scenes"))
-            .find(|d| d.is_dir());
-        if found.is_none() {
-            println!("SKIPPED {test}: ../shared/data/scenes not found (set DIFFSVG_DATA)");
+    /// Prints why a test is skipped, or panics when `DIFFSVG_REQUIRE_DATA=1` (CI has the
+    /// data, so a skip there would hide a missing check).
+    fn skip(test: &str, reason: &str) {
+        if std::env::var_os("DIFFSVG_REQUIRE_DATA").is_some_and(|v| v == "1") {
+            panic!("{test}: {reason}, and DIFFSVG_REQUIRE_DATA=1 forbids skipping");
         }
-        found
+        println!("SKIPPED {test}: {reason} (set DIFFSVG_DATA)");
+    }
+
+    /// `scenes/` under `$DIFFSVG_DATA`, or under `../shared/data` beside the checkout, when
+    /// present (see [`skip`]).
+    fn scenes(test: &str) -> Option<PathBuf> {
+        let data = std::env::var_os("DIFFSVG_DATA")
+            .map(PathBuf::from)
+            .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data"));
+        let dir = data.join("scenes");
+        if dir.is_dir() {
+            Some(dir)
+        } else {
+            skip(test, &format!("{} not found", dir.display()));
+            None
+        }
     }
 
     #[test]
@@ -966,7 +1126,7 @@ mod tests {
                 assert!(r.at(t).length() < 0.5, "{}: misses the origin", v.name);
             }
         } else {
-            println!("SKIPPED lego: {} not found", lego.display());
+            skip("lego", &format!("{} not found", lego.display()));
         }
         let fox = scenes.join("fox");
         if fox.is_dir() {
@@ -981,7 +1141,7 @@ mod tests {
             assert!((c.cx - 554.558 / 4.0).abs() < 1e-3);
             assert!(c.has_distortion());
         } else {
-            println!("SKIPPED fox: {} not found", fox.display());
+            skip("fox", &format!("{} not found", fox.display()));
         }
     }
 }

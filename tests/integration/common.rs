@@ -8,8 +8,24 @@ pub fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
 
+/// Whether `DIFFSVG_REQUIRE_DATA=1` is set: then a test that needs `../shared/data` fails
+/// instead of skipping when the data is missing (`.ci/run` sets it; CI has the data).
+pub fn data_required() -> bool {
+    std::env::var_os("DIFFSVG_REQUIRE_DATA").is_some_and(|v| v == "1")
+}
+
+/// Skips a test that needs data which is not there: prints the reason, or panics when
+/// [`data_required`].
+pub fn skip(test: &str, reason: &str) {
+    if data_required() {
+        panic!("{test}: {reason}, and DIFFSVG_REQUIRE_DATA=1 forbids skipping");
+    }
+    println!("SKIPPED {test}: {reason} (set DIFFSVG_DATA)");
+}
+
 /// `../shared/data` beside the checkout (or `$DIFFSVG_DATA`), when present. Prints why a
-/// test is skipped when it is not.
+/// test is skipped when it is not; with `DIFFSVG_REQUIRE_DATA=1` a missing folder fails
+/// the test instead.
 pub fn shared_data(test: &str) -> Option<PathBuf> {
     let dir = std::env::var_os("DIFFSVG_DATA")
         .map(PathBuf::from)
@@ -17,10 +33,7 @@ pub fn shared_data(test: &str) -> Option<PathBuf> {
     if dir.is_dir() {
         Some(dir)
     } else {
-        println!(
-            "SKIPPED {test}: {} not found (set DIFFSVG_DATA)",
-            dir.display()
-        );
+        skip(test, &format!("{} not found", dir.display()));
         None
     }
 }
