@@ -49,6 +49,12 @@ pub const MAX_SCENE_CHORDS: usize = 4_000_000;
 /// compositing time over that box per level, not canvas-wide.
 pub const MAX_GROUP_DEPTH: usize = 256;
 
+/// Most steps a stylesheet's selectors may take to match, estimated before parsing as
+/// `elements × depth^(parts − 1)` for the selector with the most compound parts: usvg
+/// matches descendant combinators by backtracking over ancestors. Ordinary drawings are far
+/// below it (10,000 elements, depth 20, four parts: 8e7); past it the file is refused.
+pub const MAX_SELECTOR_WORK: f64 = 1e9;
+
 /// Largest coordinate magnitude accepted on input and written on output, in device
 /// pixels after sizing (far beyond any drawing, well inside `f32`). The reader and the
 /// SVG writer apply the same check, and the optimizer's projection keeps every parameter

@@ -106,7 +106,8 @@ pub fn refine(
     let mut best = scene.clone();
     let mut best_loss = f64::INFINITY;
     let mut best_psnr = f64::NEG_INFINITY;
-    let mut history = Vec::with_capacity(opts.iters + 1);
+    // Grown as steps are taken: `iters` is a request, not an allocation size.
+    let mut history = Vec::new();
     let (mut fwd_ms, mut bwd_ms) = (Vec::new(), Vec::new());
     let mut reason = StopReason::Finished;
     let mut steps = 0;

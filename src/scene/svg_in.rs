@@ -10,7 +10,7 @@ use crate::error::{Error, Result};
 
 use crate::image_io::{gunzip_bounded, is_gzip, read_bounded};
 pub use crate::limits::MAX_SIDE;
-use crate::limits::{MAX_DECOMPRESSED_BYTES, MAX_FILE_BYTES, MAX_PIXELS};
+use crate::limits::{MAX_DECOMPRESSED_BYTES, MAX_FILE_BYTES, MAX_PIXELS, MAX_SELECTOR_WORK};
 
 /// How to size the canvas when loading an SVG.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -78,6 +78,7 @@ fn reject_unsupported_xml(text: &str, name: &FsPath) -> Result<()> {
     ) else {
         return Ok(()); // usvg reports the parse error with more detail
     };
+    check_selector_work(&doc, name)?;
     for n in doc.descendants().filter(|n| n.is_element()) {
         let tag = n.tag_name().name();
         if matches!(tag, "text" | "foreignObject") {
@@ -127,6 +128,71 @@ fn reject_unsupported_xml(text: &str, name: &FsPath) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// Refuses a stylesheet whose selectors would take too long to match: usvg matches a
+/// selector of `k` compound parts joined by descendant combinators by backtracking over
+/// ancestors, up to `depth^(k−1)` steps per element. 300 nested groups under a rule like
+/// `g#a * g * * rect` ran for minutes; [`MAX_SELECTOR_WORK`] bounds that product before
+/// usvg sees the text.
+fn check_selector_work(doc: &usvg::roxmltree::Document, name: &FsPath) -> Result<()> {
+    // Depth of every node, in document order (a parent comes before its children).
+    let mut depth = vec![0u32; doc.descendants().count()];
+    let (mut max_depth, mut elements, mut sheets) = (0u64, 0u64, Vec::new());
+    for n in doc.descendants() {
+        let d = n.parent().map_or(0, |p| depth[p.id().get_usize()] + 1);
+        depth[n.id().get_usize()] = d;
+        if n.is_element() {
+            elements += 1;
+            max_depth = max_depth.max(d as u64);
+            if n.tag_name().name() == "style" {
+                sheets.push(n);
+            }
+        }
+    }
+    let parts = sheets
+        .iter()
+        .flat_map(|s| s.descendants().filter_map(|t| t.text()))
+        .map(most_selector_parts)
+        .max()
+        .unwrap_or(0);
+    if parts < 2 {
+        return Ok(());
+    }
+    let work = (elements as f64) * (max_depth as f64).powi(parts as i32 - 1);
+    if work > MAX_SELECTOR_WORK {
+        return Err(Error::Unsupported {
+            path: name.to_path_buf(),
+            what: format!(
+                "a stylesheet selector of {parts} parts over {elements} elements nested \
+                 {max_depth} deep (about {work:.1e} matching steps; the limit is \
+                 {MAX_SELECTOR_WORK:.0e})"
+            ),
+        });
+    }
+    Ok(())
+}
+
+/// The most compound parts (runs between combinators) of any selector in a CSS text.
+fn most_selector_parts(css: &str) -> u32 {
+    let mut most = 0;
+    let mut rest = css;
+    // Selectors are what precedes each `{`; declarations run to the matching `}`.
+    while let Some(open) = rest.find('{') {
+        let selectors = &rest[..open];
+        for sel in selectors.split(',') {
+            let n = sel
+                .split(|c: char| c.is_whitespace() || matches!(c, '>' | '+' | '~'))
+                .filter(|p| !p.is_empty())
+                .count() as u32;
+            most = most.max(n);
+        }
+        rest = match rest[open..].find('}') {
+            Some(close) => &rest[open + close + 1..],
+            None => "",
+        };
+    }
+    most
 }
 
 /// Attributes holding numbers that usvg would silently drop a shape (or a property) for
@@ -629,5 +695,28 @@ mod tests {
         assert!(Scene::from_svg_str(svg, "t.svg", Sizing::Scale(f64::NAN)).is_err());
         assert!(Scene::from_svg_str(svg, "t.svg", Sizing::Width(0)).is_err());
         assert!(Scene::from_svg_str(svg, "t.svg", Sizing::Width(100_000)).is_err());
+    }
+
+    #[test]
+    fn nested_groups_300_under_a_descendant_selector_are_refused_quickly() {
+        let mut svg = String::from(
+            r#"<svg xmlns="http://www.w3.org/2000/svg" width="10" height="10">
+               <style>g#g1 * g * * rect { fill: red }</style><g id="g1">"#,
+        );
+        svg += &"<g>".repeat(300);
+        svg += r#"<rect width="5" height="5"/>"#;
+        svg += &"</g>".repeat(301);
+        svg += "</svg>";
+        let e = load(&svg).unwrap_err().to_string();
+        assert!(
+            e.contains("t.svg") && e.contains("stylesheet selector"),
+            "{e}"
+        );
+        // The same rule over a shallow drawing is fine.
+        let shallow = r#"<svg xmlns="http://www.w3.org/2000/svg" width="10" height="10">
+               <style>g#g1 * g * * rect { fill: red }</style>
+               <g id="g1"><g><g><g><rect width="5" height="5"/></g></g></g></g></svg>"#;
+        assert!(load(shallow).is_ok());
+        assert_eq!(most_selector_parts("a b, c > d e { x: y } f{}"), 3);
     }
 }

@@ -9,8 +9,9 @@ use rayon::prelude::*;
 use crate::volume::sh;
 
 /// The largest supported resolution (cells per axis): the index grid has `(res + 1)³`
-/// entries of 4 bytes.
-pub const MAX_RES: u32 = 1024;
+/// entries of 4 bytes, 541 MB at 512, so a model file's header cannot ask for more
+/// (1024 would be 4.3 GB before a single voxel is read).
+pub const MAX_RES: u32 = 512;
 
 /// Cells per axis of one block of the empty-space skipping structure.
 pub(crate) const BLOCK: u32 = 4;

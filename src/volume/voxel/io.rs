@@ -195,6 +195,10 @@ mod tests {
         let mut v = good.clone();
         v[36..40].copy_from_slice(&0u32.to_le_bytes());
         assert!(err(&v).contains("resolution 0"), "{}", err(&v));
+        // A header claiming 1024 cells per axis would make the dense index 4.3 GB.
+        let mut v = good.clone();
+        v[36..40].copy_from_slice(&1024u32.to_le_bytes());
+        assert!(err(&v).contains("resolution 1024"), "{}", err(&v));
         let mut v = good.clone();
         v[12..16].copy_from_slice(&f32::NAN.to_le_bytes());
         assert!(err(&v).contains("box"), "{}", err(&v));
