@@ -13,8 +13,9 @@ use std::time::Duration;
 use super::common::{root, scratch};
 use engine::{Config, Fuzzer, campaign, distinct};
 
-/// The CI run's seed and size: about 200 cases, well under a minute in release.
-const SEED: u64 = 14;
+/// The CI run's seed and size: about 200 cases, well under a minute in release. Seed 13's
+/// cases include a `stroke-dasharray` that aborted on a 2 GiB allocation before issue 13.
+const SEED: u64 = 13;
 const CASES: u64 = 200;
 
 fn env_u64(name: &str, default: u64) -> u64 {
