@@ -10,7 +10,9 @@ use crate::error::{Error, Result};
 
 use crate::image_io::{gunzip_bounded, is_gzip, read_bounded};
 pub use crate::limits::MAX_SIDE;
-use crate::limits::{MAX_DECOMPRESSED_BYTES, MAX_FILE_BYTES, MAX_PIXELS, MAX_SELECTOR_WORK};
+use crate::limits::{
+    MAX_ARC_RADIUS, MAX_DECOMPRESSED_BYTES, MAX_FILE_BYTES, MAX_PIXELS, MAX_SELECTOR_WORK,
+};
 
 /// How to size the canvas when loading an SVG.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -101,7 +103,9 @@ fn reject_unsupported_xml(text: &str, name: &FsPath) -> Result<()> {
             let bad = if a.name() == "style" {
                 css_bad_number(a.value())
             } else if GEOMETRY_ATTRIBUTES.contains(&a.name()) {
-                bad_number(a.value()).map(|bad| (a.name().to_string(), bad))
+                bad_number(a.value())
+                    .or_else(|| (a.name() == "d").then(|| huge_arc(a.value())).flatten())
+                    .map(|bad| (a.name().to_string(), bad))
             } else {
                 None
             };
@@ -193,6 +197,31 @@ fn most_selector_parts(css: &str) -> u32 {
         };
     }
     most
+}
+
+/// Describes the first elliptical arc in path data whose radius exceeds [`MAX_ARC_RADIUS`].
+/// usvg turns an arc into cubics at a fixed tolerance, about `(radius / 0.1)^(1/6)` of
+/// them, and takes them one by one from the front of a list: quadratic in their number.
+/// An arc of radius 1e30 spent 12 s there.
+fn huge_arc(d: &str) -> Option<String> {
+    if !d.contains(['a', 'A']) {
+        return None;
+    }
+    for seg in svgtypes::PathParser::from(d) {
+        match seg {
+            Ok(svgtypes::PathSegment::EllipticalArc { rx, ry, .. })
+                if !(rx.abs().max(ry.abs()) <= MAX_ARC_RADIUS) =>
+            {
+                return Some(format!(
+                    "arc radius {:e} above the limit of {MAX_ARC_RADIUS:e}",
+                    rx.abs().max(ry.abs())
+                ));
+            }
+            Err(_) => break, // usvg reports (or drops) malformed data itself
+            _ => {}
+        }
+    }
+    None
 }
 
 /// Attributes holding numbers that usvg would silently drop a shape (or a property) for
@@ -718,5 +747,16 @@ mod tests {
                <g id="g1"><g><g><g><rect width="5" height="5"/></g></g></g></g></svg>"#;
         assert!(load(shallow).is_ok());
         assert_eq!(most_selector_parts("a b, c > d e { x: y } f{}"), 3);
+    }
+
+    #[test]
+    fn arc_of_radius_1e30_is_refused_before_usvg_converts_it() {
+        let svg = r#"<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 200 200">
+            <path id="p" d="M 100 100 h -25 a 25 -1e30 0 1 1 25 25 z" fill="red"/></svg>"#;
+        let e = load(svg).unwrap_err().to_string();
+        assert!(e.contains("t.svg") && e.contains("arc radius"), "{e}");
+        let ok = r#"<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 200 200">
+            <path d="M 100 100 h -25 a 25 25 0 1 1 25 25 z" fill="red"/></svg>"#;
+        assert!(load(ok).is_ok());
     }
 }
