@@ -32,23 +32,19 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-/// SplitMix64: a small, fast, deterministic generator.
+/// The fuzzer's choices, drawn from the library's deterministic generator.
 #[derive(Clone, Debug)]
-pub struct Rng(u64);
+pub struct Rng(diffsvg::scene::random::Rng);
 
 impl Rng {
     /// A generator from a seed.
     pub fn new(seed: u64) -> Rng {
-        Rng(seed)
+        Rng(diffsvg::scene::random::Rng::new(seed))
     }
 
-    /// The next 64 random bits.
+    /// The next 64 random bits (the library's SplitMix64, so cases stay reproducible).
     pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
+        self.0.next_u64()
     }
 
     /// Uniform in `0..n` (`n > 0`).
