@@ -14,7 +14,6 @@
 //! assert_eq!(img.get(10, 10), [1.0, 0.0, 0.0, 1.0]);
 //! ```
 
-pub mod cli;
 pub mod error;
 pub mod fit;
 pub mod gradcheck;

@@ -1,7 +1,5 @@
 //! Image losses over premultiplied RGBA in `[0, 1]`: the mean over pixels and channels.
 
-use std::str::FromStr;
-
 use crate::image_io::Image;
 
 /// Which loss.
@@ -12,17 +10,6 @@ pub enum Loss {
     Mse,
     /// Mean absolute error.
     L1,
-}
-
-impl FromStr for Loss {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        match s.to_ascii_lowercase().as_str() {
-            "mse" | "l2" => Ok(Loss::Mse),
-            "l1" | "mae" => Ok(Loss::L1),
-            _ => Err(format!("unknown loss {s:?} (expected mse or l1)")),
-        }
-    }
 }
 
 impl Loss {
@@ -86,7 +73,5 @@ mod tests {
         let (_, g) = Loss::Mse.grad(&a, &b);
         assert!((g.data[0][0] - 2.0 * 0.25 / 8.0).abs() < 1e-7);
         assert_eq!(g.data[0][1], 0.0);
-        assert_eq!("L1".parse::<Loss>().unwrap(), Loss::L1);
-        assert!("huber".parse::<Loss>().is_err());
     }
 }

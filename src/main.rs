@@ -1,5 +1,8 @@
-//! The `diffsvg` command-line tool; see `diffsvg --help`.
+//! The `diffsvg` command-line tool; see `diffsvg --help`. A thin layer over the `diffsvg`
+//! library: argument parsing, progress display, file naming and exit codes live here.
+
+mod cli;
 
 fn main() -> std::process::ExitCode {
-    diffsvg::cli::main()
+    cli::main()
 }

@@ -72,6 +72,16 @@ pub fn difference_image(a: &Image, b: &Image) -> Image {
     }
 }
 
+/// The median of `v` (sorted in place; the upper one of the two middle values for an
+/// even count); 0 when `v` is empty. Used for timings, where one slow run must not count.
+pub fn median(v: &mut [f64]) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    v.sort_by(|a, b| a.total_cmp(b));
+    v[v.len() / 2]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

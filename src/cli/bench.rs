@@ -6,11 +6,11 @@ use std::time::Instant;
 use anyhow::Result;
 
 use super::parity::collect_svgs;
-use crate::Sizing;
-use crate::raster::{RenderOptions, prepare, render_prepared};
-use crate::reference::render_resvg;
-use crate::scene::random::curved_paths;
-use crate::scene::svg_in::{from_tree, parse_tree};
+use diffsvg::Sizing;
+use diffsvg::raster::{RenderOptions, prepare, render_prepared};
+use diffsvg::reference::render_resvg;
+use diffsvg::scene::random::curved_paths;
+use diffsvg::scene::svg_in::{from_tree, parse_tree};
 
 /// Arguments of `diffsvg bench`.
 #[derive(clap::Args, Debug)]
@@ -42,8 +42,8 @@ pub struct Args {
 }
 
 fn run_backward(a: &Args) -> Result<()> {
-    use crate::loss::Loss;
-    use crate::raster::backward_with_stats;
+    use diffsvg::loss::Loss;
+    use diffsvg::raster::backward_with_stats;
     let threads = a.threads.iter().copied().max().unwrap_or(1);
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
@@ -54,7 +54,7 @@ fn run_backward(a: &Args) -> Result<()> {
     );
     for &n in &a.shapes {
         let scene = curved_paths(n, 256, 1);
-        let target = crate::raster::render(&curved_paths(n, 256, 2), &RenderOptions::default());
+        let target = diffsvg::raster::render(&curved_paths(n, 256, 2), &RenderOptions::default());
         let opts = RenderOptions::default();
         let (fwd, both, mem) = pool.install(|| {
             let fwd = median_ms(a.runs, || {
@@ -82,7 +82,7 @@ fn run_backward(a: &Args) -> Result<()> {
         table += "\n";
     }
     if let Some(r) = &a.report {
-        crate::image_io::write_atomic(r, table.as_bytes())?;
+        diffsvg::image_io::write_atomic(r, table.as_bytes())?;
     }
     Ok(())
 }
@@ -115,7 +115,7 @@ pub fn run(a: Args) -> Result<()> {
     };
     let mut cases: Vec<(String, usvg::Tree, Sizing)> = Vec::new();
     for f in collect_svgs(&inputs)? {
-        let data = crate::image_io::read_bounded(&f, crate::limits::MAX_FILE_BYTES)?;
+        let data = diffsvg::image_io::read_bounded(&f, diffsvg::limits::MAX_FILE_BYTES)?;
         let tree = parse_tree(&data, &f)?;
         let name = f
             .file_name()
@@ -176,7 +176,7 @@ pub fn run(a: Args) -> Result<()> {
     table += &summary;
     table += "\n";
     if let Some(r) = &a.report {
-        crate::image_io::write_atomic(r, table.as_bytes())?;
+        diffsvg::image_io::write_atomic(r, table.as_bytes())?;
     }
     Ok(())
 }

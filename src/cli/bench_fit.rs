@@ -6,10 +6,10 @@ use std::path::{Path, PathBuf};
 use anyhow::{Result, bail};
 
 use super::fit::load_target;
-use crate::fit::shapes::random_blobs;
-use crate::fit::{Control, FitOptions, refine};
-use crate::loss::Loss;
-use crate::optim::{LearningRates, Objective};
+use diffsvg::fit::shapes::random_blobs;
+use diffsvg::fit::{Control, FitOptions, refine};
+use diffsvg::loss::Loss;
+use diffsvg::optim::{LearningRates, Objective};
 
 /// Benchmarks of optimization.
 #[derive(clap::Subcommand, Debug)]
@@ -80,7 +80,7 @@ fn pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
 }
 
 /// Loads an image and resizes it to `w × h` (or `w` wide when `h` is 0).
-fn photo(path: &Path, w: u32, h: u32) -> Result<crate::Image> {
+fn photo(path: &Path, w: u32, h: u32) -> Result<diffsvg::Image> {
     let t = load_target(path)?;
     let h = if h == 0 {
         ((t.height as f64 * w as f64 / t.width as f64).round() as u32).max(1)
@@ -92,7 +92,7 @@ fn photo(path: &Path, w: u32, h: u32) -> Result<crate::Image> {
 
 /// One painterly run: (median forward ms, median backward ms, seconds, final MSE).
 pub fn painterly_run(
-    target: &crate::Image,
+    target: &diffsvg::Image,
     paths: usize,
     iters: usize,
     seed: u64,
@@ -155,7 +155,7 @@ fn run_painterly(a: PainterlyArgs) -> Result<()> {
     if let Some(r) = &a.report {
         let mut text = std::fs::read_to_string(r).unwrap_or_default();
         text += &table;
-        crate::image_io::write_atomic(r, text.as_bytes())?;
+        diffsvg::image_io::write_atomic(r, text.as_bytes())?;
     }
     Ok(())
 }
@@ -208,6 +208,6 @@ impl SuiteArgs {
 }
 
 /// Loads a photo for the suite.
-pub fn suite_photo(path: &Path, w: u32, h: u32) -> Result<crate::Image> {
+pub fn suite_photo(path: &Path, w: u32, h: u32) -> Result<diffsvg::Image> {
     photo(path, w, h)
 }

@@ -7,17 +7,17 @@ use std::time::Instant;
 use anyhow::{Result, bail};
 
 use super::bench_fit::{SuiteArgs, suite_photo};
-use crate::Sizing;
-use crate::fit::plot::{PlotSpec, Series, write_plot};
-use crate::fit::trace::trace;
-use crate::fit::vectorize::{Mode, VectorizeOptions, VectorizeOutcome, vectorize};
-use crate::fit::{Control, FitOptions, refine};
-use crate::image_io::write_atomic;
-use crate::loss::Loss;
-use crate::optim::Objective;
-use crate::raster::{RenderOptions, render};
-use crate::scene::Scene;
-use crate::scene::random::perturb;
+use diffsvg::Sizing;
+use diffsvg::fit::plot::{PlotSpec, Series, write_plot};
+use diffsvg::fit::trace::trace;
+use diffsvg::fit::vectorize::{Mode, VectorizeOptions, VectorizeOutcome, vectorize};
+use diffsvg::fit::{Control, FitOptions, refine};
+use diffsvg::image_io::write_atomic;
+use diffsvg::loss::Loss;
+use diffsvg::optim::Objective;
+use diffsvg::raster::{RenderOptions, render};
+use diffsvg::scene::Scene;
+use diffsvg::scene::random::perturb;
 
 /// Runs the suite and writes `<out>/speed-vs-error.md` and its plots.
 pub fn run(a: SuiteArgs) -> Result<()> {
@@ -125,7 +125,7 @@ fn refinement(md: &mut String, img_dir: &Path) -> Result<()> {
     Ok(())
 }
 
-fn objective_for(target: &crate::Image) -> Objective {
+fn objective_for(target: &diffsvg::Image) -> Objective {
     Objective::new(target, Loss::Mse, Some([1.0; 4]), 1)
 }
 
@@ -190,7 +190,7 @@ fn photo_section(md: &mut String, img_dir: &Path, path: &Path, a: &SuiteArgs) ->
             if n == 256 && mode == Mode::Adaptive {
                 let mut img = render(&r.scene, &RenderOptions::default());
                 img.over_background([1.0; 4]);
-                crate::image_io::side_by_side(&[obj.target(), &img])
+                diffsvg::image_io::side_by_side(&[obj.target(), &img])
                     .save_png(img_dir.join(format!("vectorize-{name}-256.png")))?;
             }
         }

@@ -8,10 +8,10 @@ use std::time::Instant;
 
 use anyhow::{Result, bail};
 
-use crate::fit::refine::median;
-use crate::volume::camera::orbit;
-use crate::volume::voxel::{self, Grid, RenderSettings, TrainOptions};
-use crate::volume::{Ray, Vec3};
+use diffsvg::metrics::median;
+use diffsvg::volume::camera::orbit;
+use diffsvg::volume::voxel::{self, Grid, RenderSettings, TrainOptions};
+use diffsvg::volume::{Ray, Vec3};
 
 /// Arguments of `diffsvg bench voxel`.
 #[derive(clap::Args, Debug)]

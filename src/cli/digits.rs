@@ -12,10 +12,10 @@ use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use serde_json::json;
 
-use crate::fit::digit::{DigitFit, DigitOptions, fit_digit, gray_image};
-use crate::image_io::{Image, contact_sheet, write_atomic};
-use crate::mnist::{parse_indices, read_images, read_labels};
-use crate::scene::{Fill, FillRule, Node, Paint, Path, Scene};
+use diffsvg::fit::digit::{DigitFit, DigitOptions, fit_digit, gray_image};
+use diffsvg::image_io::{Image, contact_sheet, write_atomic};
+use diffsvg::mnist::{parse_indices, read_images, read_labels};
+use diffsvg::scene::{Fill, FillRule, Node, Paint, Path, Scene};
 
 /// Arguments of `diffsvg digits`.
 #[derive(clap::Args, Debug)]
@@ -101,7 +101,7 @@ pub fn run(a: Args) -> Result<()> {
         (images.cols as u64 * a.scale as u64).min(u32::MAX as u64) as u32,
         (images.rows as u64 * a.scale as u64).min(u32::MAX as u64) as u32,
     );
-    crate::image_io::check_image_size(fw, fh, &a.images)
+    diffsvg::image_io::check_image_size(fw, fh, &a.images)
         .with_context(|| format!("--scale {}: fitting canvas too large", a.scale))?;
     std::fs::create_dir_all(&a.output)
         .with_context(|| format!("{}: cannot create the output folder", a.output.display()))?;
@@ -260,7 +260,7 @@ fn summary_csv(rows: &[Row]) -> String {
 
 /// Target above fit for every digit (the first [`CONTACT_SHEET_DIGITS`]), 2× enlarged when
 /// there are few.
-fn contact(rows: &[Row], images: &crate::mnist::Images, w: usize, h: usize) -> Image {
+fn contact(rows: &[Row], images: &diffsvg::mnist::Images, w: usize, h: usize) -> Image {
     let rows = &rows[..rows.len().min(CONTACT_SHEET_DIGITS)];
     let k = if rows.len() <= 200 { 2 } else { 1 };
     let up = |img: Image| {

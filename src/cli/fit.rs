@@ -6,15 +6,16 @@ use std::time::Instant;
 use anyhow::{Result, bail};
 use serde_json::json;
 
+use super::choices::{Background, GroupArg, LossArg, ScheduleArg, parse_background};
 use super::progress::{ReportArgs, Reporter};
-use super::util::{check_output, parse_color, sibling};
-use crate::Sizing;
-use crate::fit::{FitOptions, StopReason, refine};
-use crate::image_io::{Image, side_by_side};
-use crate::loss::Loss;
-use crate::optim::{LearningRates, Objective, Schedule};
-use crate::raster::{RenderOptions, render};
-use crate::scene::{ParamGroup, ParamLayout, Scene};
+use super::util::{check_output, sibling};
+use diffsvg::Sizing;
+use diffsvg::fit::{FitOptions, StopReason, refine};
+use diffsvg::image_io::{Image, side_by_side};
+use diffsvg::loss::Loss;
+use diffsvg::optim::{LearningRates, Objective, Schedule};
+use diffsvg::raster::{RenderOptions, render};
+use diffsvg::scene::{ParamGroup, ParamLayout, Scene};
 
 /// Optimizer flags shared by `fit` and `vectorize`.
 #[derive(clap::Args, Debug, Clone)]
@@ -37,28 +38,25 @@ pub struct OptimArgs {
     /// Learning rate of gradient stop offsets.
     #[arg(long, default_value_t = LearningRates::default().stops)]
     pub lr_stops: f64,
-    /// Learning-rate schedule: constant, cosine or linear (decay to 5%).
-    #[arg(long, default_value = "constant")]
-    pub schedule: String,
-    /// Loss: mse or l1.
-    #[arg(long, default_value = "mse")]
-    pub loss: String,
+    /// Learning-rate schedule.
+    #[arg(long, value_enum, ignore_case = true, default_value_t)]
+    pub schedule: ScheduleArg,
+    /// Loss, over the target's channels.
+    #[arg(long, value_enum, ignore_case = true, default_value_t)]
+    pub loss: LossArg,
     /// Image pyramid levels in the loss (1 = full resolution only).
     #[arg(long, default_value_t = 1)]
     pub pyramid: usize,
-    /// Parameter groups to hold fixed: points, colors, opacities, widths, paint, stops.
-    #[arg(long, value_delimiter = ',')]
-    pub freeze: Vec<String>,
+    /// Parameter groups to hold fixed (comma-separated).
+    #[arg(long, value_enum, ignore_case = true, value_delimiter = ',')]
+    pub freeze: Vec<GroupArg>,
     /// Stop as soon as the PSNR reaches this many dB.
     #[arg(long, value_name = "DB")]
     pub until_psnr: Option<f64>,
     /// Color under the drawing when comparing with the target (`auto`: white for an
     /// opaque target, transparent otherwise; `none`: transparent).
-    #[arg(long, default_value = "auto")]
-    pub background: String,
-    /// Random seed (initial shapes of `vectorize`; `fit` itself is deterministic).
-    #[arg(long, default_value_t = 0)]
-    pub seed: u64,
+    #[arg(long, default_value = "auto", value_parser = parse_background)]
+    pub background: Background,
 }
 
 impl OptimArgs {
@@ -82,45 +80,26 @@ impl OptimArgs {
             }
         }
         let mut r = r;
-        r.freeze(&self.frozen()?);
+        r.freeze(&self.frozen());
         Ok(r)
     }
 
     /// The groups named by `--freeze`.
-    pub fn frozen(&self) -> Result<Vec<ParamGroup>> {
-        self.freeze
-            .iter()
-            .map(|name| {
-                let n = name.trim().to_ascii_lowercase();
-                ParamGroup::ALL
-                    .into_iter()
-                    .find(|g| g.name() == n || g.name().trim_end_matches('s') == n)
-                    .ok_or_else(|| {
-                        anyhow::anyhow!(
-                            "--freeze {name:?}: unknown group (expected points, colors, opacities, widths, paint or stops)"
-                        )
-                    })
-            })
-            .collect()
+    pub fn frozen(&self) -> Vec<ParamGroup> {
+        self.freeze.iter().map(|&g| g.into()).collect()
     }
 
     /// The background for `target`.
     pub fn background(&self, target: &Image) -> Result<Option<[f32; 4]>> {
-        Ok(match self.background.to_ascii_lowercase().as_str() {
-            "auto" => target.data.iter().all(|p| p[3] >= 1.0).then_some([1.0; 4]),
-            _ => {
-                let c = parse_color(&self.background)?;
-                (c[3] > 0.0).then_some(c)
-            }
+        Ok(match self.background {
+            Background::Auto => target.data.iter().all(|p| p[3] >= 1.0).then_some([1.0; 4]),
+            Background::Color(c) => (c[3] > 0.0).then_some(c),
         })
     }
 
     /// The objective against `target`.
     pub fn objective(&self, target: &Image) -> Result<Objective> {
-        let loss: Loss = self
-            .loss
-            .parse()
-            .map_err(|e: String| anyhow::anyhow!("--loss: {e}"))?;
+        let loss = Loss::from(self.loss);
         if self.pyramid == 0 {
             bail!("--pyramid must be at least 1");
         }
@@ -134,10 +113,7 @@ impl OptimArgs {
 
     /// Fit options for `iters` steps.
     pub fn fit_options(&self, iters: usize) -> Result<FitOptions> {
-        let schedule: Schedule = self
-            .schedule
-            .parse()
-            .map_err(|e: String| anyhow::anyhow!("--schedule: {e}"))?;
+        let schedule = Schedule::from(self.schedule);
         if let Some(p) = self.until_psnr {
             if p.is_nan() {
                 bail!("--until-psnr must be a number");
@@ -207,7 +183,7 @@ pub fn run(a: Args) -> Result<()> {
     let target = load_target(&a.target)?;
     let objective = a.optim.objective(&target)?;
     let scene = Scene::load(&a.init, Sizing::Exact(target.width, target.height))?;
-    super::util::warn_about(&scene, &a.init, &crate::raster::RenderOptions::default());
+    super::util::warn_about(&scene, &a.init, &diffsvg::raster::RenderOptions::default());
     let layout = ParamLayout::new(&scene);
     if scene.path_count() == 0 || layout.is_empty() {
         bail!(
@@ -274,7 +250,6 @@ pub fn run(a: Args) -> Result<()> {
     }
     if out.reason == StopReason::Interrupted && super::progress::interrupted() {
         eprintln!("interrupted: the best result so far was written");
-        std::process::exit(130);
     }
     Ok(())
 }

@@ -9,11 +9,11 @@ use serde_json::json;
 
 use super::parity::collect_svgs;
 use super::util::check_output;
-use crate::Sizing;
-use crate::fit::glyph::{GlyphOptions, GlyphOutcome, count_ink_segments, fit_glyph};
-use crate::image_io::{Image, contact_sheet, write_atomic};
-use crate::raster::{RenderOptions, render};
-use crate::scene::{Fill, FillRule, Node, Paint, Scene};
+use diffsvg::Sizing;
+use diffsvg::fit::glyph::{GlyphOptions, GlyphOutcome, count_ink_segments, fit_glyph};
+use diffsvg::image_io::{Image, contact_sheet, write_atomic};
+use diffsvg::raster::{RenderOptions, render};
+use diffsvg::scene::{Fill, FillRule, Node, Paint, Scene};
 
 /// Arguments of `diffsvg glyphs`.
 #[derive(clap::Args, Debug)]
@@ -210,9 +210,9 @@ fn stem(p: &Path) -> String {
 }
 
 /// A white rectangle over the whole canvas.
-fn background(scene: &Scene) -> crate::scene::Path {
+fn background(scene: &Scene) -> diffsvg::scene::Path {
     let (w, h) = (scene.width as f64, scene.height as f64);
-    let mut p = crate::scene::Path::new("background");
+    let mut p = diffsvg::scene::Path::new("background");
     p.move_to([0.0, 0.0]);
     p.line_to([w, 0.0]);
     p.line_to([w, h]);

@@ -5,12 +5,13 @@ use std::path::PathBuf;
 use anyhow::{Result, bail};
 use serde_json::{Value, json};
 
+use super::choices::LossArg;
 use super::util::{SizeArgs, parse_color};
-use crate::gradcheck::{analytic, compare, numeric};
-use crate::image_io::Image;
-use crate::loss::Loss;
-use crate::raster::{RenderOptions, render};
-use crate::scene::{GradientKind, Node, ParamLayout, Path, Scene, SegmentKind};
+use diffsvg::gradcheck::{analytic, compare, numeric};
+use diffsvg::image_io::Image;
+use diffsvg::loss::Loss;
+use diffsvg::raster::{RenderOptions, render};
+use diffsvg::scene::{GradientKind, Node, ParamLayout, Path, Scene, SegmentKind};
 
 /// Arguments shared by `loss` and `grad`.
 #[derive(clap::Args, Debug)]
@@ -19,17 +20,17 @@ pub struct Common {
     input: PathBuf,
     /// Target image (PNG or JPEG; straight alpha in the file).
     target: PathBuf,
-    /// Loss: mse or l1 (mean over pixels and premultiplied RGBA channels).
-    #[arg(long, default_value = "mse")]
-    loss: String,
+    /// Loss (mean over pixels and premultiplied RGBA channels).
+    #[arg(long, value_enum, ignore_case = true, default_value_t)]
+    loss: LossArg,
     /// Resize the target to the render size instead of refusing a size mismatch.
     #[arg(long)]
     resize: bool,
     #[command(flatten)]
     size: SizeArgs,
     /// Composite the render over this color before comparing (default: transparent).
-    #[arg(long)]
-    background: Option<String>,
+    #[arg(long, value_parser = parse_color)]
+    background: Option<[f32; 4]>,
 }
 
 /// Arguments of `diffsvg loss`.
@@ -53,7 +54,7 @@ pub struct GradArgs {
     #[arg(long)]
     check: bool,
     /// Largest relative error `--check` accepts.
-    #[arg(long, default_value_t = crate::gradcheck::DEFAULT_TOLERANCE, requires = "check")]
+    #[arg(long, default_value_t = diffsvg::gradcheck::DEFAULT_TOLERANCE, requires = "check")]
     tolerance: f64,
     /// Testing the checker: negate the analytic gradient of this parameter slot before
     /// checking, which `--check` must catch.
@@ -77,11 +78,8 @@ struct Job {
 }
 
 fn load(c: &Common) -> Result<Job> {
-    let loss: Loss = c
-        .loss
-        .parse()
-        .map_err(|e: String| anyhow::anyhow!("--loss: {e}"))?;
-    let background = c.background.as_deref().map(parse_color).transpose()?;
+    let loss = Loss::from(c.loss);
+    let background = c.background;
     let scene = Scene::load(&c.input, c.size.sizing()?)?;
     super::util::warn_about(&scene, &c.input, &RenderOptions::default());
     let mut target = Image::load(&c.target)?;
@@ -243,7 +241,7 @@ fn scale(a: [f64; 2], w: f64) -> [f64; 2] {
     [a[0] * w, a[1] * w]
 }
 
-fn shape_json(p: &Path, off: &crate::scene::params::PathOffsets, grad: &[f64]) -> Value {
+fn shape_json(p: &Path, off: &diffsvg::scene::params::PathOffsets, grad: &[f64]) -> Value {
     let g = |k: usize| -> [f64; 2] { [grad[off.points + 2 * k], grad[off.points + 2 * k + 1]] };
     let mut points: Vec<[f64; 2]> = Vec::new();
     for sp in &p.subpaths {
@@ -288,13 +286,13 @@ fn shape_json(p: &Path, off: &crate::scene::params::PathOffsets, grad: &[f64]) -
         points.push(start);
         points.extend(seg_points);
     }
-    let paint = |po: Option<crate::scene::params::PaintOffsets>,
-                 paint: &crate::scene::Paint,
+    let paint = |po: Option<diffsvg::scene::params::PaintOffsets>,
+                 paint: &diffsvg::scene::Paint,
                  opacity: usize|
      -> Value {
         let Some(po) = po else { return Value::Null };
         match paint {
-            crate::scene::Paint::Solid(_) => {
+            diffsvg::scene::Paint::Solid(_) => {
                 json!([
                     grad[po.base],
                     grad[po.base + 1],
@@ -302,7 +300,7 @@ fn shape_json(p: &Path, off: &crate::scene::params::PathOffsets, grad: &[f64]) -
                     grad[opacity]
                 ])
             }
-            crate::scene::Paint::Gradient(gr) => {
+            diffsvg::scene::Paint::Gradient(gr) => {
                 let n = match gr.kind {
                     GradientKind::Linear { .. } => 4,
                     GradientKind::Radial { .. } => 6,

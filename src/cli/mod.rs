@@ -10,6 +10,7 @@ mod bench;
 mod bench_fit;
 mod bench_suite;
 mod bench_voxel;
+mod choices;
 mod digits;
 mod fit;
 mod glyphs;
@@ -63,7 +64,18 @@ enum Command {
 
 /// Runs the command line; returns the process exit code.
 pub fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) if e.use_stderr() => {
+            eprintln!("error: {}", one_line(&e));
+            return ExitCode::from(2);
+        }
+        // --help and --version: clap's own text on stdout.
+        Err(e) => {
+            let _ = e.print();
+            return ExitCode::SUCCESS;
+        }
+    };
     let result = match cli.command {
         Command::Render(a) => render::run(a),
         Command::Parity(a) => parity::run(a),
@@ -83,10 +95,27 @@ pub fn main() -> ExitCode {
         Command::View(a) => volume::run_view(a),
     };
     match result {
+        // A run stopped by Ctrl-C has written its best result; the status says it stopped.
+        Ok(()) if progress::interrupted() => ExitCode::from(130),
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");
             ExitCode::from(2)
         }
     }
+}
+
+/// A clap usage error as one line (every error of this tool is one line): the message
+/// and, where clap gives them, the possible values and a tip, without the usage block.
+pub(crate) fn one_line(e: &clap::Error) -> String {
+    let text = e.render().to_string();
+    let parts: Vec<&str> = text
+        .lines()
+        .map(str::trim)
+        .filter(|l| {
+            !l.is_empty() && !l.starts_with("Usage:") && !l.starts_with("For more information")
+        })
+        .collect();
+    let line = parts.join(" ");
+    line.strip_prefix("error: ").unwrap_or(&line).to_string()
 }

@@ -6,8 +6,8 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 
 use super::util::SizeArgs;
-use crate::raster::RenderOptions;
-use crate::reference::{PARITY_MAE, PARITY_PSNR, ParityError, parity, parity_checked};
+use diffsvg::raster::RenderOptions;
+use diffsvg::reference::{PARITY_MAE, PARITY_PSNR, ParityError, parity, parity_checked};
 
 /// Arguments of `diffsvg parity`.
 #[derive(clap::Args, Debug)]
@@ -70,7 +70,7 @@ fn walk(dir: &Path, out: &mut Vec<PathBuf>) -> std::io::Result<()> {
 
 /// Compares one file. A panic of either renderer is caught and reported as
 /// [`Outcome::Failed`], so that one file cannot stop a run over a folder.
-pub fn check(path: &Path, sizing: crate::Sizing) -> Outcome {
+pub fn check(path: &Path, sizing: diffsvg::Sizing) -> Outcome {
     let run = || parity_checked(path, sizing, &RenderOptions::default());
     match std::panic::catch_unwind(run) {
         Ok(Ok(p)) => Outcome::Compared {
@@ -135,10 +135,10 @@ pub fn run(a: Args) -> Result<()> {
                             continue;
                         };
                         let stem = f.file_stem().unwrap_or_default().to_string_lossy();
-                        let side = crate::image_io::side_by_side(&[
+                        let side = diffsvg::image_io::side_by_side(&[
                             &p.ours,
                             &p.reference,
-                            &crate::metrics::difference_image(&p.ours, &p.reference),
+                            &diffsvg::metrics::difference_image(&p.ours, &p.reference),
                         ]);
                         side.save_png(dir.join(format!("{stem}.png")))?;
                     }
@@ -187,7 +187,7 @@ pub fn run(a: Args) -> Result<()> {
     println!("{table}");
     println!("pass = MAE ≤ {PARITY_MAE}/255 and PSNR ≥ {PARITY_PSNR} dB");
     if let Some(r) = &a.report {
-        crate::image_io::write_atomic(r, table.as_bytes())?;
+        diffsvg::image_io::write_atomic(r, table.as_bytes())?;
     }
     Ok(())
 }

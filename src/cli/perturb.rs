@@ -5,9 +5,9 @@ use std::path::PathBuf;
 use anyhow::{Result, bail};
 
 use super::util::{SizeArgs, check_output};
-use crate::limits::MAX_COORDINATE;
-use crate::scene::Scene;
-use crate::scene::random::perturb;
+use diffsvg::limits::MAX_COORDINATE;
+use diffsvg::scene::Scene;
+use diffsvg::scene::random::perturb;
 
 /// Arguments of `diffsvg perturb`.
 #[derive(clap::Args, Debug)]

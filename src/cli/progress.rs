@@ -10,10 +10,10 @@ use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
 
-use crate::fit::{Control, Step};
-use crate::image_io::write_atomic;
-use crate::raster::{RenderOptions, render};
-use crate::scene::Scene;
+use diffsvg::fit::{Control, Step};
+use diffsvg::image_io::write_atomic;
+use diffsvg::raster::{RenderOptions, render};
+use diffsvg::scene::Scene;
 
 /// Output flags shared by `fit` and `vectorize`.
 #[derive(clap::Args, Debug, Clone, Default)]

@@ -5,10 +5,10 @@ use std::path::PathBuf;
 use anyhow::Result;
 
 use super::util::{SizeArgs, check_png, parse_color, read, sibling};
-use crate::metrics::{compare, difference_image};
-use crate::raster::{RenderOptions, render};
-use crate::reference::render_resvg;
-use crate::scene::svg_in::{from_tree, parse_tree};
+use diffsvg::metrics::{compare, difference_image};
+use diffsvg::raster::{RenderOptions, render};
+use diffsvg::reference::render_resvg;
+use diffsvg::scene::svg_in::{from_tree, parse_tree};
 
 /// Arguments of `diffsvg render`.
 #[derive(clap::Args, Debug)]
@@ -21,8 +21,8 @@ pub struct Args {
     #[command(flatten)]
     size: SizeArgs,
     /// Background color under the drawing (default: transparent).
-    #[arg(long)]
-    background: Option<String>,
+    #[arg(long, value_parser = parse_color)]
+    background: Option<[f32; 4]>,
     /// Also render with resvg, print MAE, max difference and PSNR, and write
     /// `<output>.diff.png`.
     #[arg(long)]
@@ -35,7 +35,7 @@ pub struct Args {
 /// Runs `diffsvg render`.
 pub fn run(a: Args) -> Result<()> {
     check_png(&a.output)?;
-    let bg = a.background.as_deref().map(parse_color).transpose()?;
+    let bg = a.background;
     let sizing = a.size.sizing()?;
     if !(a.tolerance.is_finite() && a.tolerance > 0.0) {
         anyhow::bail!("--tolerance {} must be a positive number", a.tolerance);

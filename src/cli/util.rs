@@ -3,17 +3,18 @@
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
-use anyhow::{Context, Result, anyhow, bail};
+use anyhow::{Context, Result, bail};
 
-use crate::Sizing;
+use diffsvg::Sizing;
 
-/// Parses a CSS/SVG color (`white`, `#fa0`, `rgb(…)`, `none`) into straight RGBA in `[0, 1]`.
-pub fn parse_color(s: &str) -> Result<[f32; 4]> {
+/// Parses a CSS/SVG color (`white`, `#fa0`, `rgb(…)`, `none`) into straight RGBA in
+/// `[0, 1]`; a clap value parser.
+pub fn parse_color(s: &str) -> std::result::Result<[f32; 4], String> {
     if s.eq_ignore_ascii_case("none") || s.eq_ignore_ascii_case("transparent") {
         return Ok([0.0; 4]);
     }
     let c = svgtypes::Color::from_str(s)
-        .map_err(|e| anyhow!("--background {s:?}: not a color ({e})"))?;
+        .map_err(|_| "not a color (a CSS color such as white, #fa0 or rgb(…), or none)")?;
     Ok([
         c.red as f32 / 255.0,
         c.green as f32 / 255.0,
@@ -62,12 +63,12 @@ pub fn sibling(path: &Path, suffix: &str) -> PathBuf {
     path.with_file_name(format!("{stem}.{suffix}.png"))
 }
 
-/// Reads a whole file of at most [`MAX_FILE_BYTES`](crate::limits::MAX_FILE_BYTES) bytes,
+/// Reads a whole file of at most [`MAX_FILE_BYTES`](diffsvg::limits::MAX_FILE_BYTES) bytes,
 /// naming it in the error.
 pub fn read(path: &Path) -> Result<Vec<u8>> {
-    Ok(crate::image_io::read_bounded(
+    Ok(diffsvg::image_io::read_bounded(
         path,
-        crate::limits::MAX_FILE_BYTES,
+        diffsvg::limits::MAX_FILE_BYTES,
     )?)
 }
 
@@ -104,8 +105,8 @@ pub fn check_output(path: &Path, ext: &str) -> Result<()> {
 
 /// Prints the renderer's warnings about `scene` (read from `path`) to stderr, one line
 /// each: strokes drawn other than the file says because a limit was reached.
-pub fn warn_about(scene: &crate::Scene, path: &Path, opts: &crate::raster::RenderOptions) {
-    for w in crate::raster::warnings(scene, opts) {
+pub fn warn_about(scene: &diffsvg::Scene, path: &Path, opts: &diffsvg::raster::RenderOptions) {
+    for w in diffsvg::raster::warnings(scene, opts) {
         eprintln!("warning: {}: {w}", path.display());
     }
 }

@@ -5,12 +5,13 @@ use std::path::PathBuf;
 use anyhow::{Result, bail};
 use serde_json::json;
 
+use super::choices::{InitArg, ModeArg};
 use super::fit::{OptimArgs, load_target};
 use super::progress::{ReportArgs, Reporter};
 use super::util::{check_output, sibling};
-use crate::fit::vectorize::{Event, Mode, VectorizeOptions, vectorize};
-use crate::image_io::side_by_side;
-use crate::raster::{RenderOptions, render};
+use diffsvg::fit::vectorize::{Event, Mode, VectorizeOptions, vectorize};
+use diffsvg::image_io::side_by_side;
+use diffsvg::raster::{RenderOptions, render};
 
 /// Arguments of `diffsvg vectorize`.
 #[derive(clap::Args, Debug)]
@@ -20,27 +21,28 @@ pub struct Args {
     /// Output SVG (written atomically).
     #[arg(short, long)]
     output: PathBuf,
-    /// How paths are found: adaptive (add where the error is largest, prune the useless),
-    /// fixed (DiffVG's random blobs), painterly (DiffVG's random strokes).
-    #[arg(long, default_value = "adaptive")]
-    mode: String,
-    /// Start from a classical tracing (`trace`: vtracer's photo preset, pruned to the
-    /// budget) instead of from nothing.
+    /// How paths are found [default: adaptive].
+    #[arg(long, value_enum, ignore_case = true)]
+    mode: Option<ModeArg>,
+    /// Start from a classical tracing instead of from nothing (not with `--mode`).
+    #[arg(long, value_enum, ignore_case = true)]
+    init: Option<InitArg>,
+    /// Path budget (fixed and painterly: the count) [default: 64; not with
+    /// `--target-psnr`, which takes `--max-paths`].
     #[arg(long)]
-    init: Option<String>,
-    /// Path budget (fixed and painterly: the count).
-    #[arg(long, default_value_t = 64)]
-    paths: usize,
-    /// Adaptive: stop adding paths once the PSNR reaches this (then `--max-paths` is the
-    /// budget).
+    paths: Option<usize>,
+    /// Stop adding paths (adaptive) or optimizing once the PSNR reaches this.
     #[arg(long, value_name = "DB")]
     target_psnr: Option<f64>,
-    /// Budget with `--target-psnr`.
-    #[arg(long, default_value_t = 512)]
-    max_paths: usize,
-    /// Cubic segments per new closed path.
-    #[arg(long, default_value_t = 4)]
-    segments: usize,
+    /// Budget with `--target-psnr` [default: 512].
+    #[arg(long, requires = "target_psnr")]
+    max_paths: Option<usize>,
+    /// Cubic segments per new closed path (adaptive only) [default: 4].
+    #[arg(long)]
+    segments: Option<usize>,
+    /// Seed of the random initial shapes (fixed and painterly only) [default: 0].
+    #[arg(long)]
+    seed: Option<u64>,
     /// Optimizer steps in all rounds together (0: place the paths, optimize nothing).
     #[arg(long, default_value_t = 1000)]
     iters: usize,
@@ -63,22 +65,35 @@ pub fn run(a: Args) -> Result<()> {
     if a.compare {
         check_output(&compare_path, "png")?;
     }
-    let mut mode: Mode = a
-        .mode
-        .parse()
-        .map_err(|e: String| anyhow::anyhow!("--mode: {e}"))?;
-    match a.init.as_deref() {
-        None => {}
-        Some("trace") => mode = Mode::Trace,
-        Some(other) => bail!("--init {other:?}: unknown (expected trace)"),
+    let mode = match (a.init, a.mode) {
+        (Some(_), Some(m)) => bail!(
+            "--init trace and --mode {} cannot be combined: tracing is a mode of its own",
+            format!("{m:?}").to_lowercase()
+        ),
+        (Some(InitArg::Trace), None) => Mode::Trace,
+        (None, m) => Mode::from(m.unwrap_or_default()),
+    };
+    if a.segments.is_some() && mode != Mode::Adaptive {
+        bail!("--segments applies to --mode adaptive only (the paths it adds)");
     }
-    if a.segments < 2 || a.segments > 64 {
-        bail!("--segments {} must be between 2 and 64", a.segments);
+    if a.seed.is_some() && !matches!(mode, Mode::Fixed | Mode::Painterly) {
+        bail!("--seed applies to --mode fixed and painterly only (their random shapes)");
     }
-    let paths = if a.target_psnr.is_some() {
-        a.max_paths
-    } else {
-        a.paths
+    let segments = a.segments.unwrap_or(4);
+    if !(2..=64).contains(&segments) {
+        bail!("--segments {segments} must be between 2 and 64");
+    }
+    if a.target_psnr.is_some() && a.optim.until_psnr.is_some() {
+        bail!(
+            "--target-psnr and --until-psnr cannot be combined (vectorize stops at --target-psnr)"
+        );
+    }
+    let paths = match (a.target_psnr, a.paths) {
+        (Some(_), Some(_)) => {
+            bail!("--paths and --target-psnr cannot be combined: the budget is --max-paths")
+        }
+        (Some(_), None) => a.max_paths.unwrap_or(512),
+        (None, p) => p.unwrap_or(64),
     };
     if paths == 0 {
         bail!("the path budget must be at least 1");
@@ -100,10 +115,10 @@ pub fn run(a: Args) -> Result<()> {
         mode,
         paths,
         target_psnr: a.target_psnr.or(a.optim.until_psnr),
-        segments: a.segments,
+        segments,
         iters: a.iters,
         fit,
-        seed: a.optim.seed,
+        seed: a.seed.unwrap_or(0),
     };
     // Last of the checks, as it creates the snapshots folder: inputs were good.
     a.report.check_outputs()?;
@@ -111,7 +126,7 @@ pub fn run(a: Args) -> Result<()> {
     let out = vectorize(&objective, &opts, &mut |e| match e {
         Event::Round { round, paths } => {
             reporter.set_phase(format!("round {round}, {paths} paths"));
-            crate::fit::Control::Continue
+            diffsvg::fit::Control::Continue
         }
         Event::Step(s, sc) => reporter.step(s, sc),
     });
@@ -152,7 +167,6 @@ pub fn run(a: Args) -> Result<()> {
     }
     if super::progress::interrupted() {
         eprintln!("interrupted: the best result so far was written");
-        std::process::exit(130);
     }
     Ok(())
 }

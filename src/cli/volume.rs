@@ -10,14 +10,15 @@ use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
 
+use super::choices::SplitArg;
 use super::progress::{install_interrupt_handler, interrupted};
-use crate::fit::plot::{PlotSpec, Series, write_plot};
-use crate::image_io::{Image, contact_sheet, write_atomic};
-use crate::volume::camera::{Camera, orbit};
-use crate::volume::dataset::{Dataset, View};
-use crate::volume::metrics::{psnr, ssim};
-use crate::volume::voxel::{self, Grid, RenderSettings, TrainOptions, TrainStep};
-use crate::volume::{Ray, Vec3};
+use diffsvg::fit::plot::{PlotSpec, Series, write_plot};
+use diffsvg::image_io::{Image, contact_sheet, write_atomic};
+use diffsvg::volume::camera::{Camera, orbit};
+use diffsvg::volume::dataset::{Dataset, View};
+use diffsvg::volume::metrics::{psnr, ssim};
+use diffsvg::volume::voxel::{self, Grid, RenderSettings, TrainOptions, TrainStep};
+use diffsvg::volume::{Ray, Vec3};
 
 /// Arguments of `diffsvg recon`.
 #[derive(clap::Args, Debug)]
@@ -100,9 +101,9 @@ pub struct ViewArgs {
     /// Dataset folder whose cameras to render from.
     #[arg(long)]
     scene: Option<PathBuf>,
-    /// Which views: test or train.
-    #[arg(long, default_value = "test")]
-    split: String,
+    /// Which views.
+    #[arg(long, value_enum, ignore_case = true, default_value_t)]
+    split: SplitArg,
     /// Output folder: one PNG per view (rendering | photo), metrics.csv, and orbit frames.
     #[arg(short, long)]
     output: PathBuf,
@@ -321,7 +322,6 @@ fn run_voxel(a: VoxelArgs) -> Result<()> {
     }
     if outcome.stopped {
         eprintln!("interrupted: the model so far was written");
-        std::process::exit(130);
     }
     Ok(())
 }
@@ -517,9 +517,6 @@ fn to_image(rgb: &[[f32; 3]], w: u32, h: u32) -> Image {
 /// Runs `diffsvg view`.
 pub fn run_view(a: ViewArgs) -> Result<()> {
     let grid = voxel::load(&a.model)?;
-    if a.split != "test" && a.split != "train" {
-        bail!("--split {}: must be test or train", a.split);
-    }
     if a.scene.is_none() && a.orbit == 0 {
         bail!("nothing to render: give --scene DIR and/or --orbit N");
     }
@@ -542,7 +539,7 @@ pub fn run_view(a: ViewArgs) -> Result<()> {
         .with_context(|| format!("{}: cannot create the output folder", a.output.display()))?;
     let mut summary = serde_json::Map::new();
     if let Some(data) = &data {
-        let views = if a.split == "test" {
+        let views = if a.split == SplitArg::Test {
             &data.test
         } else {
             &data.train
@@ -551,7 +548,7 @@ pub fn run_view(a: ViewArgs) -> Result<()> {
             bail!(
                 "{}: no {} views",
                 a.scene.as_ref().unwrap().display(),
-                a.split
+                a.split.name()
             );
         }
         let mut csv = String::from("view,psnr,ssim,ms\n");
@@ -565,7 +562,7 @@ pub fn run_view(a: ViewArgs) -> Result<()> {
             sp += p.min(99.0);
             ss += s;
             let _ = writeln!(csv, "{},{p:.3},{s:.4},{ms:.1}", v.name);
-            let pair = crate::image_io::side_by_side(&[
+            let pair = diffsvg::image_io::side_by_side(&[
                 &to_image(&out, v.width, v.height),
                 &to_image(&v.rgb, v.width, v.height),
             ]);
@@ -581,7 +578,7 @@ pub fn run_view(a: ViewArgs) -> Result<()> {
             println!(
                 "view: {} {} views, mean PSNR {:.2} dB, SSIM {:.4}; wrote {}",
                 views.len(),
-                a.split,
+                a.split.name(),
                 sp / n,
                 ss / n,
                 a.output.join("metrics.csv").display()
@@ -738,9 +735,9 @@ fn write_gif(frames: &[Image], path: &Path) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::{arc_cameras, levels};
-    use crate::volume::Vec3;
-    use crate::volume::camera::Camera;
-    use crate::volume::dataset::View;
+    use diffsvg::volume::Vec3;
+    use diffsvg::volume::camera::Camera;
+    use diffsvg::volume::dataset::View;
 
     #[test]
     fn real_photo_orbits_follow_the_cameras_arc() {

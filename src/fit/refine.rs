@@ -2,7 +2,7 @@
 
 use std::time::{Duration, Instant};
 
-use crate::metrics::psnr_from_mse;
+use crate::metrics::{median, psnr_from_mse};
 use crate::optim::{Adam, AdamConfig, LearningRates, Objective, Schedule, project};
 use crate::raster::{RenderOptions, backward_prepared, prepare, render_prepared};
 use crate::scene::Scene;
@@ -166,15 +166,6 @@ pub fn refine(
         reason,
         median_ms: (median(&mut fwd_ms), median(&mut bwd_ms)),
     }
-}
-
-/// Median of `v` (sorted in place); 0 when empty.
-pub(crate) fn median(v: &mut [f64]) -> f64 {
-    if v.is_empty() {
-        return 0.0;
-    }
-    v.sort_by(|a, b| a.total_cmp(b));
-    v[v.len() / 2]
 }
 
 #[cfg(test)]

@@ -34,7 +34,7 @@ use crate::raster::coverage::coverage;
 use crate::raster::prepare::{Op, Prepared, prepare};
 use crate::raster::render::{BAND_ROWS, BandRenderer, RenderOptions};
 use crate::scene::{Node, Scene};
-use crate::{Error, Image, Result, Sizing};
+use crate::{Error, Image, Result};
 
 /// Name used in errors about traced images.
 const TRACE: &str = "<trace>";
@@ -44,12 +44,25 @@ const TRACE: &str = "<trace>";
 /// vtracer's stacked order (large background shapes first, details on top). The image is
 /// handed to vtracer as straight 8-bit RGBA; vtracer leaves fully transparent pixels
 /// unpainted and ignores partial transparency. Errors when the image is empty or vtracer
-/// fails.
+/// fails, or when the library was built without its `trace` feature (vtracer, which
+/// brings its own command-line crates, so it is a feature of its own; the `cli` feature
+/// enables it).
+#[cfg(feature = "trace")]
 pub fn trace(target: &Image) -> Result<Scene> {
     trace_with(target, vtracer::Config::from_preset(vtracer::Preset::Photo))
 }
 
+/// [`trace`] without vtracer: always an error that says which feature is missing.
+#[cfg(not(feature = "trace"))]
+pub fn trace(_target: &Image) -> Result<Scene> {
+    Err(Error::Image {
+        path: TRACE.into(),
+        message: "tracing needs diffsvg built with its `trace` feature (vtracer)".into(),
+    })
+}
+
 /// [`trace`] with any vtracer configuration.
+#[cfg(feature = "trace")]
 fn trace_with(target: &Image, config: vtracer::Config) -> Result<Scene> {
     let (w, h) = (target.width, target.height);
     let fail = |message: String| Error::Image {
@@ -65,7 +78,7 @@ fn trace_with(target: &Image, config: vtracer::Config) -> Result<Scene> {
         height: h as usize,
     };
     let svg = vtracer::convert(img, config).map_err(|e| fail(format!("vtracer: {e}")))?;
-    let scene = Scene::from_svg_str(&svg.to_string(), TRACE, Sizing::Exact(w, h))?;
+    let scene = Scene::from_svg_str(&svg.to_string(), TRACE, crate::Sizing::Exact(w, h))?;
     debug_assert_eq!((scene.width, scene.height), (w, h));
     Ok(scene)
 }
@@ -891,6 +904,7 @@ mod tests {
     }
 
     #[test]
+    #[cfg(feature = "trace")]
     fn traces_real_pictures_like_vtracer_documents() {
         // (file, width, documented paths and PSNR with resvg, accepted path range)
         let cases = [
@@ -945,6 +959,7 @@ mod tests {
     }
 
     #[test]
+    #[cfg(feature = "trace")]
     fn prunes_a_thousand_paths_quickly() {
         let Some(img) = sample("astronaut.png") else {
             return;

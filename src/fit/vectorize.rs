@@ -14,11 +14,12 @@
 
 use std::time::{Duration, Instant};
 
-use super::refine::{Control, FitOptions, Step, median, refine};
+use super::refine::{Control, FitOptions, Step, refine};
 use super::shapes::{circle, random_blobs, random_strokes};
 use super::trace::{prune_to_budget, prune_unneeded, trace};
 use crate::Result;
 use crate::image_io::Image;
+use crate::metrics::median;
 use crate::optim::Objective;
 use crate::raster::render;
 use crate::scene::{Node, Scene};
@@ -35,21 +36,6 @@ pub enum Mode {
     Painterly,
     /// vtracer's tracing, pruned to the budget, then refined.
     Trace,
-}
-
-impl std::str::FromStr for Mode {
-    type Err = String;
-    fn from_str(s: &str) -> std::result::Result<Self, String> {
-        match s.to_ascii_lowercase().as_str() {
-            "adaptive" => Ok(Mode::Adaptive),
-            "fixed" | "blobs" => Ok(Mode::Fixed),
-            "painterly" | "strokes" => Ok(Mode::Painterly),
-            "trace" => Ok(Mode::Trace),
-            _ => Err(format!(
-                "unknown mode {s:?} (expected adaptive, fixed, painterly or trace)"
-            )),
-        }
-    }
 }
 
 /// Settings of a vectorization.

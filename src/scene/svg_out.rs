@@ -306,7 +306,7 @@ pub fn path_data(p: &Path, t: &Affine) -> String {
 /// Escapes text for XML or HTML content and quoted attribute values: `& < > " '` become
 /// entities, and control characters other than tab (not allowed in XML 1.0, or unwanted in
 /// one-line labels) become spaces. Shared by the SVG writer, the plots and the batch report.
-pub(crate) fn escape(s: &str) -> String {
+pub fn escape(s: &str) -> String {
     let mut out = String::with_capacity(s.len());
     for c in s.chars() {
         match c {

@@ -162,7 +162,7 @@ fn fit_bad_inputs_fail_cleanly() {
     ]);
     assert_fails(&o, "perturbed.svg", "frozen", &out);
     let o = diffsvg(&["fit", s(&svg), s(&png), "-o", s(&out), "--freeze", "wings"]);
-    assert_fails(&o, "wings", "unknown group", &out);
+    assert_fails(&o, "wings", "possible values: points, colors", &out);
     // Unwritable: the output's folder would have to be created inside a file.
     let blocker = write(&dir, "blocker", "");
     let inside = blocker.join("out.svg");

@@ -187,7 +187,12 @@ fn vectorize_bad_inputs_fail_cleanly() {
         .save_png(&png)
         .unwrap();
     let o = diffsvg(&["vectorize", s(&png), "-o", s(&out), "--mode", "cubist"]);
-    assert_fails(&o, "cubist", "unknown mode", &out);
+    assert_fails(
+        &o,
+        "cubist",
+        "possible values: adaptive, fixed, painterly",
+        &out,
+    );
     let o = diffsvg(&["vectorize", s(&png), "-o", s(&out), "--segments", "1"]);
     assert_fails(&o, "--segments", "between", &out);
     let o = diffsvg(&["vectorize", s(&png), "-o", s(&out), "--paths", "0"]);
@@ -195,5 +200,43 @@ fn vectorize_bad_inputs_fail_cleanly() {
     let o = diffsvg(&["vectorize", s(&png), "-o", s(&out), "--lr-color", "inf"]);
     assert_fails(&o, "colors", "learning rate", &out);
     let o = diffsvg(&["vectorize", s(&png), "-o", s(&out), "--init", "magic"]);
-    assert_fails(&o, "magic", "unknown", &out);
+    assert_fails(&o, "magic", "possible values: trace", &out);
+}
+
+/// Flags that another flag would make meaningless are refused, never silently ignored.
+#[test]
+fn conflicting_and_ignored_flags_are_refused() {
+    let dir = scratch("vectorize-conflicts");
+    let out = dir.join("out.svg");
+    let png = dir.join("t.png");
+    Image::filled(8, 8, [1.0, 0.0, 0.0, 1.0])
+        .save_png(&png)
+        .unwrap();
+    let v = |extra: &[&str]| {
+        let mut args = vec!["vectorize", s(&png), "-o", s(&out)];
+        args.extend_from_slice(extra);
+        diffsvg(&args)
+    };
+    let o = v(&["--init", "trace", "--mode", "fixed"]);
+    assert_fails(
+        &o,
+        "--init trace and --mode fixed",
+        "cannot be combined",
+        &out,
+    );
+    let o = v(&["--mode", "fixed", "--segments", "6"]);
+    assert_fails(&o, "--segments", "adaptive only", &out);
+    let o = v(&["--init", "trace", "--segments", "6"]);
+    assert_fails(&o, "--segments", "adaptive only", &out);
+    let o = v(&["--seed", "7"]);
+    assert_fails(&o, "--seed", "fixed and painterly only", &out);
+    let o = v(&["--target-psnr", "30", "--paths", "8"]);
+    assert_fails(&o, "--max-paths", "cannot be combined", &out);
+    let o = v(&["--target-psnr", "30", "--until-psnr", "20"]);
+    assert_fails(&o, "--until-psnr", "cannot be combined", &out);
+    let o = v(&["--max-paths", "8"]);
+    assert_fails(&o, "--target-psnr", "required", &out);
+    // `fit` is deterministic: it has no seed to take.
+    let o = diffsvg(&["fit", s(&png), s(&png), "-o", s(&out), "--seed", "3"]);
+    assert_fails(&o, "--seed", "unexpected argument", &out);
 }

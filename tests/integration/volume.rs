@@ -558,7 +558,7 @@ fn view_rejects_bad_models_and_flags_cleanly() {
     // Bad flags.
     assert_clean_failure(
         &view(&model, &["--split", "bogus"]),
-        &["--split bogus", "test or train"],
+        &["'bogus' for '--split", "possible values: test, train"],
         &out,
     );
     assert_clean_failure(

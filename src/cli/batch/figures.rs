@@ -5,10 +5,10 @@ use std::path::Path;
 use serde_json::Value;
 
 use super::jobfile::Job;
-use crate::image_io::Image;
-use crate::raster::{RenderOptions, render};
-use crate::scene::Scene;
-use crate::scene::svg_in::Sizing;
+use diffsvg::image_io::Image;
+use diffsvg::raster::{RenderOptions, render};
+use diffsvg::scene::Scene;
+use diffsvg::scene::svg_in::Sizing;
 
 /// The thumbnail's file name inside a job folder.
 pub const THUMB: &str = "thumb.png";

@@ -104,7 +104,7 @@ fn read_raw(path: &Path) -> Result<RawFile> {
             path.display()
         );
     }
-    let bytes = crate::image_io::read_bounded(path, crate::limits::MAX_FILE_BYTES)
+    let bytes = diffsvg::image_io::read_bounded(path, diffsvg::limits::MAX_FILE_BYTES)
         .map_err(|e| anyhow!("cannot read the job file: {e}"))?;
     let text = String::from_utf8(bytes)
         .map_err(|_| anyhow!("{}: the job file is not UTF-8 text", path.display()))?;
@@ -486,12 +486,7 @@ fn validate(job: &Job) -> Result<()> {
     let argv = std::iter::once("diffsvg".to_string()).chain(job.args.iter().cloned());
     match super::super::Cli::try_parse_from(argv) {
         Ok(_) => Ok(()),
-        Err(e) => {
-            let text = e.to_string();
-            let first = text.lines().next().unwrap_or("invalid arguments").trim();
-            let first = first.strip_prefix("error: ").unwrap_or(first);
-            bail!("{first}")
-        }
+        Err(e) => bail!("{}", super::super::one_line(&e)),
     }
 }
 

@@ -5,7 +5,7 @@
 use std::io::{IsTerminal, Write as _};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::mpsc;
 
 use anyhow::{Result, anyhow, bail};
@@ -79,8 +79,6 @@ fn parse_shard(s: &str) -> Result<Shard, String> {
     Ok(Shard { k, n })
 }
 
-static INTERRUPTED: AtomicBool = AtomicBool::new(false);
-
 /// Runs `diffsvg batch`; returns 0 when every job succeeded (or was complete already), 1
 /// when any failed, 2 for a bad job file or bad arguments, 130 when interrupted.
 pub fn main(a: Args) -> ExitCode {
@@ -114,7 +112,7 @@ fn run(a: Args) -> Result<ExitCode> {
         resume: a.resume,
         retry_failed: a.retry_failed,
     };
-    let _ = ctrlc::set_handler(|| INTERRUPTED.store(true, Ordering::SeqCst));
+    super::progress::install_interrupt_handler();
     let progress = Progress::new(a.quiet, todo.len());
     let outcomes = run_all(&todo, &ctx, a.jobs, &progress);
     let summary = report::write(&root, &a.jobs_file, a.shard, &outcomes)?;
@@ -138,7 +136,7 @@ fn output_root(a: &Args, file: &JobFile) -> PathBuf {
 }
 
 fn exit_code(outcomes: &[Outcome]) -> ExitCode {
-    if INTERRUPTED.load(Ordering::SeqCst) {
+    if super::progress::interrupted() {
         eprintln!("interrupted: jobs that did not finish run again with --resume");
         ExitCode::from(130)
     } else if outcomes.iter().any(Outcome::failed) {
@@ -158,7 +156,7 @@ fn run_all(todo: &[&Job], ctx: &Context, workers: usize, progress: &Progress) ->
             let tx = tx.clone();
             let next = &next;
             scope.spawn(move || {
-                while !INTERRUPTED.load(Ordering::SeqCst) {
+                while !super::progress::interrupted() {
                     let i = next.fetch_add(1, Ordering::SeqCst);
                     let Some(job) = todo.get(i) else { break };
                     if tx.send((i, runner::run(job, ctx))).is_err() {

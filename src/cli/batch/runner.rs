@@ -9,7 +9,7 @@ use sha2::{Digest, Sha256};
 
 use super::figures;
 use super::jobfile::Job;
-use crate::image_io::write_atomic;
+use diffsvg::image_io::write_atomic;
 
 /// The manifest's file name inside a job folder; written last, atomically.
 pub const MANIFEST: &str = "manifest.json";
@@ -259,7 +259,8 @@ fn cached(job: &Job, dir: &Path, inputs: &[InputHash], retry_failed: bool) -> Op
 
 fn read_manifest(dir: &Path) -> Option<Manifest> {
     let bytes =
-        crate::image_io::read_bounded(&dir.join(MANIFEST), crate::limits::MAX_FILE_BYTES).ok()?;
+        diffsvg::image_io::read_bounded(&dir.join(MANIFEST), diffsvg::limits::MAX_FILE_BYTES)
+            .ok()?;
     serde_json::from_slice(&bytes).ok()
 }
 
@@ -332,7 +333,7 @@ fn error_text(stderr: &str, code: i32) -> String {
 /// The SHA-256 of an input file, or why it cannot be read.
 fn hash_input(p: &Path) -> (InputHash, Option<String>) {
     let path = p.display().to_string();
-    match crate::image_io::read_bounded(p, crate::limits::MAX_FILE_BYTES) {
+    match diffsvg::image_io::read_bounded(p, diffsvg::limits::MAX_FILE_BYTES) {
         Ok(bytes) => (
             InputHash {
                 path,
