@@ -2,13 +2,11 @@
 //! contact sheet.
 
 use std::fmt::Write as _;
-use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::sync::Mutex;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
-use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use serde_json::json;
 
@@ -107,14 +105,7 @@ pub fn run(a: Args) -> Result<()> {
         .with_context(|| format!("{}: cannot create the output folder", a.output.display()))?;
 
     let (w, h) = (images.cols, images.rows);
-    let bar = (!a.json && !a.quiet && std::io::stdout().is_terminal()).then(|| {
-        let b = ProgressBar::new(indices.len() as u64);
-        b.set_style(
-            ProgressStyle::with_template("{bar:40} {pos}/{len} digits  {per_sec}  eta {eta}")
-                .expect("static template"),
-        );
-        b
-    });
+    let bar = super::progress::terminal_bar(a.json || a.quiet, indices.len(), "digits");
     let start = Instant::now();
     let error = Mutex::new(None);
     let mut rows: Vec<Row> = indices

@@ -7,7 +7,7 @@ use std::sync::OnceLock;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use anyhow::{Context, Result};
-use indicatif::{ProgressBar, ProgressStyle};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde_json::json;
 
 use diffsvg::fit::{Control, Step};
@@ -93,6 +93,20 @@ pub fn install_interrupt_handler() {
     });
 }
 
+/// The one progress bar style of every command: a bar on stdout when it is a terminal and
+/// neither `--json` nor `--quiet` asked for something else, `None` otherwise. `unit` names
+/// what is counted (iterations, digits, jobs; may be empty).
+pub fn terminal_bar(json_or_quiet: bool, total: usize, unit: &str) -> Option<ProgressBar> {
+    if json_or_quiet || !std::io::stdout().is_terminal() {
+        return None;
+    }
+    let b = ProgressBar::with_draw_target(Some(total as u64), ProgressDrawTarget::stdout());
+    let template =
+        format!("{{bar:30.cyan/blue}} {{pos}}/{{len}} {unit} {{msg}} {{per_sec}} ETA {{eta}}");
+    b.set_style(ProgressStyle::with_template(&template).expect("valid template"));
+    Some(b)
+}
+
 /// Follows a run: progress, log rows, snapshots, Ctrl-C.
 pub struct Reporter {
     args: ReportArgs,
@@ -110,17 +124,7 @@ impl Reporter {
     /// process): the first Ctrl-C asks the run to stop and write its best result.
     pub fn new(args: &ReportArgs, total: usize, background: Option<[f32; 4]>) -> Self {
         install_interrupt_handler();
-        let show_bar = !args.json && !args.quiet && std::io::stdout().is_terminal();
-        let bar = show_bar.then(|| {
-            let b = ProgressBar::new(total as u64);
-            b.set_style(
-                ProgressStyle::with_template(
-                    "{bar:30.cyan/blue} {pos}/{len} {msg} {per_sec} ETA {eta}",
-                )
-                .expect("valid template"),
-            );
-            b
-        });
+        let bar = terminal_bar(args.json || args.quiet, total, "");
         let log = match &args.log {
             Some(p) if !is_jsonl(p) => "iteration,phase,loss,psnr,elapsed_ms\n".to_string(),
             _ => String::new(),

@@ -2,12 +2,10 @@
 //! (render a fitted model from held-out cameras or an orbit, with PSNR and SSIM).
 
 use std::fmt::Write as _;
-use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
-use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
 
 use super::choices::SplitArg;
@@ -228,14 +226,7 @@ fn run_voxel(a: VoxelArgs) -> Result<()> {
     };
 
     install_interrupt_handler();
-    let bar = (!a.json && !a.quiet && std::io::stdout().is_terminal()).then(|| {
-        let b = ProgressBar::new(a.iters as u64);
-        b.set_style(
-            ProgressStyle::with_template("{bar:30} {pos}/{len} {msg}  eta {eta}")
-                .expect("static template"),
-        );
-        b
-    });
+    let bar = super::progress::terminal_bar(a.json || a.quiet, a.iters, "");
     // One row per 50 iterations and per evaluation: (step, test PSNR).
     let mut log: Vec<(TrainStep, Option<f64>)> = Vec::new();
     let mut last: Option<TrainStep> = None;

@@ -2,14 +2,14 @@
 //! each as a child process of this binary, in parallel, resumable and shardable; writes
 //! `summary.csv`, `summary.json` and `report.html`. See `docs/batch.md`.
 
-use std::io::{IsTerminal, Write as _};
+use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::mpsc;
 
 use anyhow::{Result, anyhow, bail};
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use indicatif::ProgressBar;
 use serde_json::json;
 
 mod figures;
@@ -185,13 +185,7 @@ impl Progress {
     fn new(quiet: bool, total: usize) -> Self {
         if quiet {
             Progress::Quiet
-        } else if std::io::stdout().is_terminal() {
-            let bar =
-                ProgressBar::with_draw_target(Some(total as u64), ProgressDrawTarget::stdout());
-            bar.set_style(
-                ProgressStyle::with_template("{bar:30.cyan/blue} {pos}/{len} jobs {msg} ETA {eta}")
-                    .expect("valid template"),
-            );
+        } else if let Some(bar) = super::progress::terminal_bar(false, total, "jobs") {
             Progress::Bar(bar)
         } else {
             Progress::Json
