@@ -369,7 +369,7 @@ pub fn gunzip_bounded(bytes: &[u8], limit: u64, path: &Path) -> Result<Vec<u8>> 
 
 /// `67108864` → `64 MiB`.
 pub fn describe_bytes(n: u64) -> String {
-    if n >= 1 << 20 && n % (1 << 20) == 0 {
+    if n >= 1 << 20 && n.is_multiple_of(1 << 20) {
         format!("{} MiB", n >> 20)
     } else {
         format!("{n} bytes")
@@ -427,7 +427,7 @@ mod tests {
         let sheet = contact_sheet(&pairs, 2, 1, [0.0, 0.0, 0.0, 1.0]);
         // 2 columns × 2 rows of 1×2 cells with 1 px gaps.
         assert_eq!((sheet.width, sheet.height), (5, 9));
-        assert_eq!(sheet.data[(1 * 5 + 1) as usize], [1.0; 4]);
+        assert_eq!(sheet.data[(5 + 1) as usize], [1.0; 4]);
         assert_eq!(sheet.data[(3 * 5 + 3) as usize], [1.0, 0.0, 0.0, 1.0]);
         assert_eq!(sheet.data[(5 * 5 + 1) as usize], [1.0; 4]);
         assert_eq!(sheet.data[(5 * 5 + 3) as usize], [0.0, 0.0, 0.0, 1.0]);

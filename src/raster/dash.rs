@@ -119,17 +119,15 @@ pub fn dash_count(
                     }
                 }
                 Some((u0, u1)) => {
-                    if u0 > 0.0 {
-                        if let Some(l) = run.take() {
+                    if u0 > 0.0
+                        && let Some(l) = run.take() {
                             total += (l / period + 1.0) * on;
                         }
-                    }
                     *run.get_or_insert(0.0) += (u1 - u0) * len;
-                    if u1 < 1.0 {
-                        if let Some(l) = run.take() {
+                    if u1 < 1.0
+                        && let Some(l) = run.take() {
                             total += (l / period + 1.0) * on;
                         }
-                    }
                 }
             }
         }
@@ -189,7 +187,7 @@ pub fn dash(
         }
         // `left`: length remaining in the current pattern entry; even `k` = dash on.
         let mut left = pattern[k] - phase;
-        let mut on = k % 2 == 0;
+        let mut on = k.is_multiple_of(2);
         let mut open: Option<usize> = None;
         let push = |out: &mut Dashed, s: DashSource, is_corner: bool| {
             let p0 = pts[s.a as usize];

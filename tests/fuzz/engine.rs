@@ -1050,8 +1050,8 @@ pub fn run_child(cfg: &Config, dir: &Path, args: &[String]) -> Outcome {
     let mut peak = 0u64;
     let mut timed_out = false;
     let status = loop {
-        if let Ok(s) = std::fs::read_to_string(&status_path) {
-            if let Some(kib) = s
+        if let Ok(s) = std::fs::read_to_string(&status_path)
+            && let Some(kib) = s
                 .lines()
                 .find(|l| l.starts_with("VmHWM:"))
                 .and_then(|l| l.split_whitespace().nth(1))
@@ -1059,7 +1059,6 @@ pub fn run_child(cfg: &Config, dir: &Path, args: &[String]) -> Outcome {
             {
                 peak = peak.max(kib);
             }
-        }
         match child.try_wait() {
             Ok(Some(st)) => break Some(st),
             Ok(None) => {}
@@ -1149,14 +1148,12 @@ fn collect_svgs(base: &Path, dir: &Path, out: &mut Vec<(String, Vec<u8>)>) {
     for p in entries {
         if p.is_dir() {
             collect_svgs(base, &p, out);
-        } else if p.extension().is_some_and(|e| e == "svg") {
-            if let Ok(b) = std::fs::read(&p) {
-                if b.len() <= 256 << 10 {
+        } else if p.extension().is_some_and(|e| e == "svg")
+            && let Ok(b) = std::fs::read(&p)
+                && b.len() <= 256 << 10 {
                     let name = p.strip_prefix(base).unwrap_or(&p).display().to_string();
                     out.push((name, b));
                 }
-            }
-        }
     }
 }
 
