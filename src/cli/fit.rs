@@ -115,9 +115,10 @@ impl OptimArgs {
     pub fn fit_options(&self, iters: usize) -> Result<FitOptions> {
         let schedule = Schedule::from(self.schedule);
         if let Some(p) = self.until_psnr
-            && p.is_nan() {
-                bail!("--until-psnr must be a number");
-            }
+            && p.is_nan()
+        {
+            bail!("--until-psnr must be a number");
+        }
         Ok(FitOptions {
             iters,
             rates: self.rates()?,

@@ -182,11 +182,13 @@ impl Reporter {
             b.set_message(format!("{phase}loss {:.3e}  PSNR {:.2} dB", s.loss, s.psnr));
         }
         if let Some(dir) = &self.args.snapshots
-            && self.args.every > 0 && self.iter.is_multiple_of(self.args.every)
-                && let Err(e) = snapshot(dir, self.iter, scene, self.background) {
-                    self.error = Some(e);
-                    return Control::Stop;
-                }
+            && self.args.every > 0
+            && self.iter.is_multiple_of(self.args.every)
+            && let Err(e) = snapshot(dir, self.iter, scene, self.background)
+        {
+            self.error = Some(e);
+            return Control::Stop;
+        }
         self.iter += 1;
         if interrupted() {
             Control::Stop

@@ -120,14 +120,16 @@ pub fn dash_count(
                 }
                 Some((u0, u1)) => {
                     if u0 > 0.0
-                        && let Some(l) = run.take() {
-                            total += (l / period + 1.0) * on;
-                        }
+                        && let Some(l) = run.take()
+                    {
+                        total += (l / period + 1.0) * on;
+                    }
                     *run.get_or_insert(0.0) += (u1 - u0) * len;
                     if u1 < 1.0
-                        && let Some(l) = run.take() {
-                            total += (l / period + 1.0) * on;
-                        }
+                        && let Some(l) = run.take()
+                    {
+                        total += (l / period + 1.0) * on;
+                    }
                 }
             }
         }

@@ -309,9 +309,10 @@ fn bad_number(value: &str) -> Option<String> {
             }
         }
         if let Ok(v) = value[start..i].parse::<f64>()
-            && !(v.abs() <= f32::MAX as f64) {
-                return Some(format!("number {} out of range", &value[start..i]));
-            }
+            && !(v.abs() <= f32::MAX as f64)
+        {
+            return Some(format!("number {} out of range", &value[start..i]));
+        }
     }
     None
 }

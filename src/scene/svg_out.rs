@@ -463,13 +463,14 @@ impl Checker {
         // As the writer: a stroke frame other than the identity puts the path in it.
         let mut to_local = None;
         if let Some(s) = &p.stroke
-            && s.frame != FRAME_IDENTITY {
-                for v in s.frame {
-                    self.value(&owner, "stroke frame entry", v)?;
-                }
-                let [a, b, c, d] = s.frame;
-                to_local = invert(&[a, b, c, d, 0.0, 0.0]);
+            && s.frame != FRAME_IDENTITY
+        {
+            for v in s.frame {
+                self.value(&owner, "stroke frame entry", v)?;
             }
+            let [a, b, c, d] = s.frame;
+            to_local = invert(&[a, b, c, d, 0.0, 0.0]);
+        }
         // End points first, so that the value reported is one the file shows (a line's
         // control points sit a third of the way along it).
         let ends = p

@@ -1056,9 +1056,9 @@ pub fn run_child(cfg: &Config, dir: &Path, args: &[String]) -> Outcome {
                 .find(|l| l.starts_with("VmHWM:"))
                 .and_then(|l| l.split_whitespace().nth(1))
                 .and_then(|v| v.parse::<u64>().ok())
-            {
-                peak = peak.max(kib);
-            }
+        {
+            peak = peak.max(kib);
+        }
         match child.try_wait() {
             Ok(Some(st)) => break Some(st),
             Ok(None) => {}
@@ -1150,10 +1150,11 @@ fn collect_svgs(base: &Path, dir: &Path, out: &mut Vec<(String, Vec<u8>)>) {
             collect_svgs(base, &p, out);
         } else if p.extension().is_some_and(|e| e == "svg")
             && let Ok(b) = std::fs::read(&p)
-                && b.len() <= 256 << 10 {
-                    let name = p.strip_prefix(base).unwrap_or(&p).display().to_string();
-                    out.push((name, b));
-                }
+            && b.len() <= 256 << 10
+        {
+            let name = p.strip_prefix(base).unwrap_or(&p).display().to_string();
+            out.push((name, b));
+        }
     }
 }
 

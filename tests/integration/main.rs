@@ -1,5 +1,6 @@
 //! Cross-cutting and command-line tests.
 
+mod architecture;
 mod batch;
 mod cli;
 mod common;
