@@ -23,6 +23,18 @@ pub(crate) fn dist(a: Point, b: Point) -> f64 {
     (a[0] - b[0]).hypot(a[1] - b[1])
 }
 
+/// `a + w·b`.
+#[inline]
+pub(crate) fn add_scaled(a: Point, b: Point, w: f64) -> Point {
+    [a[0] + w * b[0], a[1] + w * b[1]]
+}
+
+/// `w·a`.
+#[inline]
+pub(crate) fn scale(a: Point, w: f64) -> Point {
+    [a[0] * w, a[1] * w]
+}
+
 /// The point `a + t·(b − a)`.
 #[inline]
 pub(crate) fn lerp(a: Point, b: Point, t: f64) -> Point {
