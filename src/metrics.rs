@@ -43,12 +43,30 @@ pub fn compare(a: &Image, b: &Image) -> Comparison {
     }
 }
 
-/// PSNR in dB of a mean squared error for signals in `[0, 1]`.
+/// PSNR in dB (peak 1) of a mean squared error for signals in `[0, 1]`:
+/// `10 · log10(1 / MSE)`; infinite for an MSE of 0.
 pub fn psnr_from_mse(mse: f64) -> f64 {
     if mse <= 0.0 {
         f64::INFINITY
     } else {
         -10.0 * mse.log10()
+    }
+}
+
+/// Intersection over union of the pixels at or above `threshold` in `a` and in `b`
+/// (intensities or coverages, same length, e.g. ink masks at `threshold = 0.5`); 1 when
+/// neither has any.
+pub fn iou(a: &[f32], b: &[f32], threshold: f32) -> f64 {
+    let (mut inter, mut union) = (0usize, 0usize);
+    for (&x, &y) in a.iter().zip(b) {
+        let (p, q) = (x >= threshold, y >= threshold);
+        inter += (p && q) as usize;
+        union += (p || q) as usize;
+    }
+    if union == 0 {
+        1.0
+    } else {
+        inter as f64 / union as f64
     }
 }
 
@@ -103,5 +121,15 @@ mod tests {
         assert!((c.mae - 255.0 / 8.0).abs() < 1e-9);
         assert_eq!(c.max, 255.0);
         assert!((c.psnr - 10.0 * 8f64.log10()).abs() < 1e-9);
+    }
+
+    #[test]
+    fn iou_of_masks() {
+        let a = [0.0, 0.5, 0.9, 0.2];
+        let b = [0.6, 0.49, 1.0, 0.0];
+        // Inked: a at 1 and 2, b at 0 and 2: one shared of three.
+        assert_eq!(iou(&a, &b, 0.5), 1.0 / 3.0);
+        assert_eq!(iou(&a, &b, 0.3), 2.0 / 3.0);
+        assert_eq!(iou(&[0.1; 4], &[0.2; 4], 0.5), 1.0);
     }
 }

@@ -11,7 +11,7 @@ use diffsvg::gradcheck::{analytic, compare, numeric};
 use diffsvg::image_io::Image;
 use diffsvg::loss::Loss;
 use diffsvg::raster::{RenderOptions, render};
-use diffsvg::scene::{GradientKind, Node, ParamLayout, Path, Scene, SegmentKind};
+use diffsvg::scene::{GradientKind, Node, ParamLayout, Path, Scene};
 
 /// Arguments shared by `loss` and `grad`.
 #[derive(clap::Args, Debug)]
@@ -233,59 +233,9 @@ pub fn gradient_json(scene: &Scene, loss: f64, grad: &[f64]) -> Value {
     json!({"loss": loss, "shapes": shapes, "groups": groups})
 }
 
-fn add(a: [f64; 2], b: [f64; 2], w: f64) -> [f64; 2] {
-    [a[0] + w * b[0], a[1] + w * b[1]]
-}
-
-fn scale(a: [f64; 2], w: f64) -> [f64; 2] {
-    [a[0] * w, a[1] * w]
-}
-
 fn shape_json(p: &Path, off: &diffsvg::scene::params::PathOffsets, grad: &[f64]) -> Value {
-    let g = |k: usize| -> [f64; 2] { [grad[off.points + 2 * k], grad[off.points + 2 * k + 1]] };
-    let mut points: Vec<[f64; 2]> = Vec::new();
-    for sp in &p.subpaths {
-        // Accumulate into the written points: start, then per segment.
-        let mut start = g(sp.start);
-        let mut seg_points: Vec<[f64; 2]> = Vec::new();
-        for (k, kind) in sp.kinds.iter().enumerate() {
-            let i = sp.start + 3 * k;
-            let (c1, c2, end) = (g(i + 1), g(i + 2), g(i + 3));
-            // The previous written point (start or last end) receives the share of derived
-            // control points that depend on it.
-            let dprev = match kind {
-                SegmentKind::Line => {
-                    // c1 = p0 + (p3 − p0)/3, c2 = p0 + 2(p3 − p0)/3.
-                    seg_points.push(add(add(end, c1, 1.0 / 3.0), c2, 2.0 / 3.0));
-                    add(scale(c1, 2.0 / 3.0), c2, 1.0 / 3.0)
-                }
-                SegmentKind::Quad => {
-                    // c1 = p0 + 2(q − p0)/3, c2 = p3 + 2(q − p3)/3.
-                    seg_points.push(add(scale(c1, 2.0 / 3.0), c2, 2.0 / 3.0));
-                    seg_points.push(add(end, c2, 1.0 / 3.0));
-                    scale(c1, 1.0 / 3.0)
-                }
-                SegmentKind::Cubic => {
-                    seg_points.extend([c1, c2, end]);
-                    [0.0; 2]
-                }
-            };
-            let n = seg_points.len();
-            let written = match kind {
-                SegmentKind::Line => 1,
-                SegmentKind::Quad => 2,
-                SegmentKind::Cubic => 3,
-            };
-            let prev = if n > written {
-                &mut seg_points[n - written - 1]
-            } else {
-                &mut start
-            };
-            *prev = add(*prev, dprev, 1.0);
-        }
-        points.push(start);
-        points.extend(seg_points);
-    }
+    let point_grad = &grad[off.points..off.points + 2 * p.points.len()];
+    let points = diffsvg::scene::params::written_point_gradient(p, point_grad);
     let paint = |po: Option<diffsvg::scene::params::PaintOffsets>,
                  paint: &diffsvg::scene::Paint,
                  opacity: usize|

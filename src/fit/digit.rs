@@ -16,8 +16,10 @@
 use crate::fit::refine::{Control, FitOptions, refine};
 use crate::image_io::Image;
 use crate::loss::Loss;
+use crate::metrics::iou;
 use crate::optim::{LearningRates, Objective, Schedule};
 use crate::raster::{RenderOptions, render};
+use crate::scene::geom::{dist, split_half};
 use crate::scene::{LineCap, LineJoin, Node, Paint, Path, Point, Scene, Stroke};
 
 /// Settings of [`fit_digit`].
@@ -170,22 +172,6 @@ pub fn mse(a: &[f32], b: &[f32]) -> f64 {
     s / a.len().max(1) as f64
 }
 
-/// Intersection over union of the pixels at or above `threshold` in each; 1 when neither
-/// has any.
-pub fn iou(a: &[f32], b: &[f32], threshold: f32) -> f64 {
-    let (mut inter, mut union) = (0usize, 0usize);
-    for (&x, &y) in a.iter().zip(b) {
-        let (p, q) = (x >= threshold, y >= threshold);
-        inter += (p && q) as usize;
-        union += (p || q) as usize;
-    }
-    if union == 0 {
-        1.0
-    } else {
-        inter as f64 / union as f64
-    }
-}
-
 /// Intensities as an opaque gray image.
 pub fn gray_image(pixels: &[f32], w: usize, h: usize) -> Image {
     let mut img = Image::new(w as u32, h as u32);
@@ -276,32 +262,16 @@ fn grow(
 fn split_longest(p: &mut Path) {
     let sp = &p.subpaths[0];
     let n = sp.segments();
-    let seg = |k: usize| -> [Point; 4] {
-        let i = sp.start + 3 * k;
-        [
-            p.points[i],
-            p.points[i + 1],
-            p.points[i + 2],
-            p.points[i + 3],
-        ]
-    };
+    let seg = |k: usize| p.segment_points(sp, k);
     let polygon = |c: &[Point; 4]| (0..3).map(|j| dist(c[j], c[j + 1])).sum::<f64>();
     let k = (0..n)
         .max_by(|&a, &b| polygon(&seg(a)).total_cmp(&polygon(&seg(b))))
         .unwrap_or(0);
-    let c = seg(k);
-    let mid = |a: Point, b: Point| [(a[0] + b[0]) / 2.0, (a[1] + b[1]) / 2.0];
-    let (ab, bc, cd) = (mid(c[0], c[1]), mid(c[1], c[2]), mid(c[2], c[3]));
-    let (abc, bcd) = (mid(ab, bc), mid(bc, cd));
-    let m = mid(abc, bcd);
+    let ([_, ab, abc, m], [_, bcd, cd, _]) = split_half(&seg(k));
     let i = sp.start + 3 * k;
     p.points.splice(i + 1..i + 3, [ab, abc, m, bcd, cd]);
     let kind = p.subpaths[0].kinds[k];
     p.subpaths[0].kinds.insert(k, kind);
-}
-
-fn dist(a: Point, b: Point) -> f64 {
-    (a[0] - b[0]).hypot(a[1] - b[1])
 }
 
 fn polyline_length(pts: &[Point]) -> f64 {
@@ -498,6 +468,7 @@ fn longest_walk(skel: &[bool], w: usize, h: usize) -> Vec<Point> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::scene::geom::eval;
 
     /// Intensities of a scene rendered at its own size over black.
     fn draw(scene: &Scene) -> Vec<f32> {
@@ -542,25 +513,12 @@ mod tests {
     #[test]
     fn least_squares_cubic_recovers_its_curve() {
         let c = [[0.0, 0.0], [10.0, 20.0], [30.0, 20.0], [40.0, 0.0]];
-        let pts: Vec<Point> = (0..=50)
-            .map(|i| {
-                let t = i as f64 / 50.0;
-                let u = 1.0 - t;
-                let b = [u * u * u, 3.0 * u * u * t, 3.0 * u * t * t, t * t * t];
-                [0, 1].map(|d| (0..4).map(|j| b[j] * c[j][d]).sum())
-            })
-            .collect();
+        let pts: Vec<Point> = (0..=50).map(|i| eval(&c, i as f64 / 50.0)).collect();
         let ctrl = fit_cubics(&pts, 1);
         // Chord-length parameters differ from the curve's own, so the control points move
         // a little; the curve itself must pass close to every point.
-        let fitted: Vec<Point> = (0..=400)
-            .map(|i| {
-                let t = i as f64 / 400.0;
-                let u = 1.0 - t;
-                let b = [u * u * u, 3.0 * u * u * t, 3.0 * u * t * t, t * t * t];
-                [0, 1].map(|d| (0..4).map(|j| b[j] * ctrl[j][d]).sum())
-            })
-            .collect();
+        let ctrl = [ctrl[0], ctrl[1], ctrl[2], ctrl[3]];
+        let fitted: Vec<Point> = (0..=400).map(|i| eval(&ctrl, i as f64 / 400.0)).collect();
         for q in &pts {
             let near = fitted
                 .iter()

@@ -38,8 +38,10 @@ use std::time::{Duration, Instant};
 use super::refine::{Control, FitOptions, refine};
 use crate::image_io::Image;
 use crate::loss::Loss;
+use crate::metrics::iou;
 use crate::optim::{LearningRates, Objective, Schedule};
 use crate::raster::{RenderOptions, render};
+use crate::scene::geom::{Cubic, dist, eval, lerp, split, sub};
 use crate::scene::{Fill, FillRule, Node, Paint, Path, Point, Scene, SegmentKind};
 
 /// Settings of a glyph fit.
@@ -152,22 +154,6 @@ pub fn ink(img: &Image) -> Vec<f32> {
             (1.0 - light).clamp(0.0, 1.0)
         })
         .collect()
-}
-
-/// Intersection over union of the pixels where `a` and `b` (coverages, same length) are at
-/// least ½; 1 when neither has any.
-pub fn iou(a: &[f32], b: &[f32]) -> f64 {
-    let (mut inter, mut union) = (0usize, 0usize);
-    for (&x, &y) in a.iter().zip(b) {
-        let (x, y) = (x >= 0.5, y >= 0.5);
-        inter += (x && y) as usize;
-        union += (x || y) as usize;
-    }
-    if union == 0 {
-        1.0
-    } else {
-        inter as f64 / union as f64
-    }
 }
 
 /// Traces the boundaries where `values` (`width × height`, row-major, one per pixel
@@ -319,41 +305,6 @@ fn signed_area(pts: &[Point]) -> f64 {
         a += p[0] * q[1] - q[0] * p[1];
     }
     0.5 * a
-}
-
-fn sub(a: Point, b: Point) -> Point {
-    [a[0] - b[0], a[1] - b[1]]
-}
-
-fn dist(a: Point, b: Point) -> f64 {
-    (a[0] - b[0]).hypot(a[1] - b[1])
-}
-
-fn lerp(a: Point, b: Point, t: f64) -> Point {
-    [a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])]
-}
-
-/// A cubic segment: start, two controls, end.
-type Cubic = [Point; 4];
-
-fn eval(c: &Cubic, t: f64) -> Point {
-    let s = 1.0 - t;
-    let b = [s * s * s, 3.0 * s * s * t, 3.0 * s * t * t, t * t * t];
-    [
-        b[0] * c[0][0] + b[1] * c[1][0] + b[2] * c[2][0] + b[3] * c[3][0],
-        b[0] * c[0][1] + b[1] * c[1][1] + b[2] * c[2][1] + b[3] * c[3][1],
-    ]
-}
-
-/// de Casteljau split at `t`.
-fn split(c: &Cubic, t: f64) -> (Cubic, Cubic) {
-    let ab = lerp(c[0], c[1], t);
-    let bc = lerp(c[1], c[2], t);
-    let cd = lerp(c[2], c[3], t);
-    let abc = lerp(ab, bc, t);
-    let bcd = lerp(bc, cd, t);
-    let m = lerp(abc, bcd, t);
-    ([c[0], ab, abc, m], [m, bcd, cd, c[3]])
 }
 
 /// Cumulative arc length of a closed polyline: `s[k]` up to vertex `k`, `s[n]` the whole.
@@ -772,14 +723,9 @@ fn read_cubics(scene: &Scene) -> Vec<Vec<Cubic>> {
         return out;
     };
     for sp in &p.subpaths {
-        let mut cubics = Vec::with_capacity(sp.segments());
-        let mut prev = p.points[sp.start];
-        for k in 0..sp.segments() {
-            let i = sp.start + 1 + 3 * k;
-            let c = [prev, p.points[i], p.points[i + 1], p.points[i + 2]];
-            prev = c[3];
-            cubics.push(c);
-        }
+        let mut cubics: Vec<Cubic> = (0..sp.segments())
+            .map(|k| p.segment_points(sp, k))
+            .collect();
         if let (Some(first), true) = (cubics.first().map(|c| c[0]), sp.closed) {
             let last = cubics.last().expect("not empty")[3];
             let mid = lerp(first, last, 0.5);
@@ -933,7 +879,7 @@ pub fn fit_glyph(target: &Image, opts: &GlyphOptions) -> GlyphOutcome {
     let measure = |scene: &Scene| {
         let img = render(scene, &opts.render);
         let cov = coverage(&img);
-        (iou(&cov, &ink), img, cov)
+        (iou(&cov, &ink, 0.5), img, cov)
     };
     let mut rounds = 0;
     let mut steps = 0;

@@ -40,6 +40,15 @@ fn walk(rng: &mut Rng, segments: usize, w: f64, h: f64, closed: bool) -> Path {
     p
 }
 
+/// A uniformly random straight RGB color (three draws, red first).
+fn random_rgb(rng: &mut Rng) -> [f64; 3] {
+    [
+        rng.range(0.0, 1.0),
+        rng.range(0.0, 1.0),
+        rng.range(0.0, 1.0),
+    ]
+}
+
 /// DiffVG's painterly blob workload: `n` closed paths of 3–5 cubic segments from a random
 /// walk, random straight RGBA fills (RGB as the color, A as the fill opacity), even-odd
 /// rule, no stroke.
@@ -50,11 +59,7 @@ pub fn random_blobs(n: usize, width: u32, height: u32, seed: u64) -> Scene {
         let segments = 3 + (rng.next_u64() % 3) as usize;
         let mut p = walk(&mut rng, segments, width as f64, height as f64, true);
         p.id = format!("blob{i}");
-        let c = [
-            rng.range(0.0, 1.0),
-            rng.range(0.0, 1.0),
-            rng.range(0.0, 1.0),
-        ];
+        let c = random_rgb(&mut rng);
         p.fill = Some(Fill {
             paint: Paint::Solid(c),
             opacity: rng.range(0.0, 1.0),
@@ -74,11 +79,7 @@ pub fn random_strokes(n: usize, width: u32, height: u32, seed: u64) -> Scene {
         let segments = 1 + (rng.next_u64() % 3) as usize;
         let mut p = walk(&mut rng, segments, width as f64, height as f64, false);
         p.id = format!("stroke{i}");
-        let c = [
-            rng.range(0.0, 1.0),
-            rng.range(0.0, 1.0),
-            rng.range(0.0, 1.0),
-        ];
+        let c = random_rgb(&mut rng);
         let mut s = Stroke::new(Paint::Solid(c), 1.0);
         s.opacity = rng.range(0.0, 1.0);
         s.join = crate::scene::LineJoin::Round;

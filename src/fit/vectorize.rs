@@ -22,6 +22,7 @@ use crate::image_io::Image;
 use crate::metrics::median;
 use crate::optim::Objective;
 use crate::raster::render;
+use crate::scene::geom::lerp;
 use crate::scene::{Node, Scene};
 
 /// How the paths are found.
@@ -338,7 +339,7 @@ fn rectangle(id: String, b: [f64; 4], segments: usize, color: [f64; 3]) -> crate
     for side in 0..4 {
         let (a, b) = (corners[side], corners[side + 1]);
         let k = n / 4 + usize::from(side < n % 4);
-        let at = |t: f64| [a[0] + (b[0] - a[0]) * t, a[1] + (b[1] - a[1]) * t];
+        let at = |t: f64| lerp(a, b, t);
         for j in 0..k {
             let (t0, t1) = (j as f64 / k as f64, (j + 1) as f64 / k as f64);
             let end = if j + 1 == k { b } else { at(t1) };

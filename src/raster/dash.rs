@@ -7,6 +7,7 @@
 
 use super::flatten::Contour;
 use crate::scene::Point;
+use crate::scene::geom::{dist, lerp};
 
 /// Where a dashed vertex comes from: `(1 − u)·pts[a] + u·pts[b]` of the undashed polyline.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -107,7 +108,7 @@ pub fn dash_count(
         let mut run: Option<f64> = None;
         for (a, b) in order(c) {
             let (pa, pb) = (pts[a as usize], pts[b as usize]);
-            let len = (pb[0] - pa[0]).hypot(pb[1] - pa[1]);
+            let len = dist(pa, pb);
             let span = match visible {
                 Some(v) => visible_span(v.device[a as usize], v.device[b as usize], v.rect),
                 None => Some((0.0, 1.0)),
@@ -172,10 +173,7 @@ pub fn dash(
         }
         // Zero-length subpaths draw nothing when dashed (as in Skia).
         let length: f64 = order(c)
-            .map(|(a, b)| {
-                let (p, q) = (pts[a as usize], pts[b as usize]);
-                (q[0] - p[0]).hypot(q[1] - p[1])
-            })
+            .map(|(a, b)| dist(pts[a as usize], pts[b as usize]))
             .sum();
         if !(length > 0.0) {
             continue;
@@ -194,8 +192,7 @@ pub fn dash(
         let push = |out: &mut Dashed, s: DashSource, is_corner: bool| {
             let p0 = pts[s.a as usize];
             let p1 = pts[s.b as usize];
-            out.pts
-                .push([p0[0] + s.u * (p1[0] - p0[0]), p0[1] + s.u * (p1[1] - p0[1])]);
+            out.pts.push(lerp(p0, p1, s.u));
             out.corner.push(is_corner);
             out.src.push(s);
         };
@@ -236,7 +233,7 @@ pub fn dash(
         for (a, b) in order(c) {
             let pa = pts[a as usize];
             let pb = pts[b as usize];
-            let len = (pb[0] - pa[0]).hypot(pb[1] - pa[1]);
+            let len = dist(pa, pb);
             let span = match visible {
                 Some(v) => visible_span(v.device[a as usize], v.device[b as usize], v.rect),
                 None => Some((0.0, 1.0)),
@@ -371,10 +368,7 @@ mod tests {
             .iter()
             .map(|c| {
                 (c.start + 1..c.start + c.len)
-                    .map(|i| {
-                        let (p, q) = (d.pts[i - 1], d.pts[i]);
-                        (q[0] - p[0]).hypot(q[1] - p[1])
-                    })
+                    .map(|i| dist(d.pts[i - 1], d.pts[i]))
                     .sum()
             })
             .collect()

@@ -9,6 +9,7 @@
 //! combination of four control points, and the backward pass maps vertex gradients back
 //! to control points exactly ([`FlatSource`]).
 
+use crate::scene::geom::{bernstein, eval};
 use crate::scene::{Path, Point};
 
 /// Largest number of chords per cubic; bounds work on huge curves.
@@ -27,9 +28,7 @@ impl FlatSource {
     /// Bernstein weights of the four control points.
     #[inline]
     pub fn weights(&self) -> [f64; 4] {
-        let t = self.t;
-        let s = 1.0 - t;
-        [s * s * s, 3.0 * s * s * t, 3.0 * s * t * t, t * t * t]
+        bernstein(self.t)
     }
 }
 
@@ -90,16 +89,6 @@ pub fn chord_count(p: &[Point; 4], tolerance: f64, visible: [f64; 4]) -> u32 {
     }
 }
 
-/// Evaluates a cubic at `t`.
-#[inline]
-pub fn eval(p: &[Point; 4], t: f64) -> Point {
-    let w = FlatSource { first: 0, t }.weights();
-    [
-        w[0] * p[0][0] + w[1] * p[1][0] + w[2] * p[2][0] + w[3] * p[3][0],
-        w[0] * p[0][1] + w[1] * p[1][1] + w[2] * p[2][1] + w[3] * p[3][1],
-    ]
-}
-
 /// Flattens `path`. With `counts`, uses those chord counts (one per segment, as returned
 /// in the second value) instead of computing them.
 pub fn flatten(
@@ -151,6 +140,7 @@ pub fn flatten(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::scene::geom::{dist, lerp};
 
     const CANVAS: [f64; 4] = [0.0, 0.0, 100.0, 100.0];
 
@@ -168,8 +158,7 @@ mod tests {
                     let t = t0 + (t1 - t0) * s as f64 / 20.0;
                     let q = eval(&p, t);
                     let u = s as f64 / 20.0;
-                    let c = [a[0] + (b[0] - a[0]) * u, a[1] + (b[1] - a[1]) * u];
-                    worst = worst.max((q[0] - c[0]).hypot(q[1] - c[1]));
+                    worst = worst.max(dist(q, lerp(a, b, u)));
                 }
             }
             assert!(worst <= tol, "tol {tol}: n {n} error {worst}");

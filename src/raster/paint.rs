@@ -11,6 +11,7 @@
 //! circle exists the pixel is left unpainted.
 
 use super::jet::{Jet, Scalar};
+use crate::scene::geom::dist;
 use crate::scene::{Affine, Gradient, GradientKind, Paint, Point, Spread, Stop, apply, invert};
 
 /// A paint ready for per-pixel evaluation.
@@ -129,9 +130,7 @@ impl GradientEval {
             return None;
         }
         let degenerate = match g.kind {
-            GradientKind::Linear { p1, p2 } => {
-                (p2[0] - p1[0]).hypot(p2[1] - p1[1]) < DEGENERATE_LENGTH
-            }
+            GradientKind::Linear { p1, p2 } => dist(p1, p2) < DEGENERATE_LENGTH,
             GradientKind::Radial { .. } => false,
         };
         Some(GradientEval {

@@ -22,6 +22,7 @@
 
 use super::flatten::Contour;
 use super::jet::{Jet, Scalar};
+use crate::scene::geom::dist;
 use crate::scene::{LineCap, LineJoin, Point};
 
 /// "No vertex" in a recipe slot.
@@ -389,8 +390,8 @@ impl Builder<'_> {
         if turn > 0.0 {
             // Inner join: the offset lines meet this far back along each chord.
             let back = h * turn / (1.0 + cos).max(1e-300);
-            let la = (pb[0] - pa[0]).hypot(pb[1] - pa[1]);
-            let lc = (pc[0] - pb[0]).hypot(pc[1] - pb[1]);
+            let la = dist(pa, pb);
+            let lc = dist(pb, pc);
             if 1.0 + cos > 1e-9 && back <= la.min(lc) {
                 self.push(Recipe::Meet { a, b, c, side: 1.0 });
             } else {

@@ -19,6 +19,7 @@
 //! The flat parameter vector that the optimizer moves is described in [`params`].
 
 mod check;
+pub(crate) mod geom;
 pub mod params;
 pub mod random;
 pub mod svg_in;

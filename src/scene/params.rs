@@ -11,7 +11,8 @@
 //!
 //! Gradients returned by the backward pass use the same layout.
 
-use super::{GradientKind, Node, Paint, Path, Scene};
+use super::geom::{add_scaled, scale};
+use super::{GradientKind, Node, Paint, Path, Point, Scene, SegmentKind};
 
 /// What kind of quantity a parameter is; the optimizer gives each group its own learning
 /// rate and projection.
@@ -361,6 +362,67 @@ impl Scene {
     }
 }
 
+/// Chains the gradient of a path's control points to the points as written in its path
+/// data.
+///
+/// `point_grad` is the part of a gradient (in this module's layout) that belongs to the
+/// path's control points: `x, y` per entry of [`Path::points`], `2 · points.len()` values
+/// from [`PathOffsets::points`] on. Internally every segment is a cubic; a segment
+/// written as a line or a quadratic has derived control points (a line's at 1/3 and 2/3,
+/// a quadratic's elevated exactly: see [`Path::line_to`], [`Path::quad_to`]), whose
+/// gradients are passed on to the written points they depend on.
+///
+/// Returns one gradient per written point, subpath by subpath: its start, then per
+/// segment one for a line (its end point), two for a quadratic (its control and end
+/// point), three for a cubic. Panics if `point_grad` is shorter than `2 · points.len()`.
+pub fn written_point_gradient(path: &Path, point_grad: &[f64]) -> Vec<Point> {
+    let g = |k: usize| -> Point { [point_grad[2 * k], point_grad[2 * k + 1]] };
+    let mut points: Vec<Point> = Vec::new();
+    for sp in &path.subpaths {
+        // Accumulate into the written points: start, then per segment.
+        let mut start = g(sp.start);
+        let mut seg_points: Vec<Point> = Vec::new();
+        for (k, kind) in sp.kinds.iter().enumerate() {
+            let i = sp.start + 3 * k;
+            let (c1, c2, end) = (g(i + 1), g(i + 2), g(i + 3));
+            // The previous written point (start or last end) receives the share of derived
+            // control points that depend on it.
+            let dprev = match kind {
+                SegmentKind::Line => {
+                    // c1 = p0 + (p3 − p0)/3, c2 = p0 + 2(p3 − p0)/3.
+                    seg_points.push(add_scaled(add_scaled(end, c1, 1.0 / 3.0), c2, 2.0 / 3.0));
+                    add_scaled(scale(c1, 2.0 / 3.0), c2, 1.0 / 3.0)
+                }
+                SegmentKind::Quad => {
+                    // c1 = p0 + 2(q − p0)/3, c2 = p3 + 2(q − p3)/3.
+                    seg_points.push(add_scaled(scale(c1, 2.0 / 3.0), c2, 2.0 / 3.0));
+                    seg_points.push(add_scaled(end, c2, 1.0 / 3.0));
+                    scale(c1, 1.0 / 3.0)
+                }
+                SegmentKind::Cubic => {
+                    seg_points.extend([c1, c2, end]);
+                    [0.0; 2]
+                }
+            };
+            let n = seg_points.len();
+            let written = match kind {
+                SegmentKind::Line => 1,
+                SegmentKind::Quad => 2,
+                SegmentKind::Cubic => 3,
+            };
+            let prev = if n > written {
+                &mut seg_points[n - written - 1]
+            } else {
+                &mut start
+            };
+            *prev = add_scaled(*prev, dprev, 1.0);
+        }
+        points.push(start);
+        points.extend(seg_points);
+    }
+    points
+}
+
 /// `v` clamped to `[-bound, bound]`, NaN to 0.
 pub fn clamp_coordinate(v: &mut f64, bound: f64) {
     *v = if v.is_nan() {
@@ -460,6 +522,54 @@ mod tests {
         assert_eq!(v[po.fill_opacity], 0.8);
         assert_eq!(l.owners.len(), 2);
         assert!(l.owners[0].is_group);
+    }
+
+    /// The written points of a path with every kind of segment, in the order of
+    /// [`written_point_gradient`].
+    fn written_path(w: &[Point]) -> Path {
+        let mut p = Path::new("w");
+        p.move_to(w[0]);
+        p.line_to(w[1]);
+        p.quad_to(w[2], w[3]);
+        p.cubic_to(w[4], w[5], w[6]);
+        p.line_to(w[7]);
+        p.close();
+        p.move_to(w[8]);
+        p.quad_to(w[9], w[10]);
+        p.line_to(w[11]);
+        p
+    }
+
+    #[test]
+    fn written_point_gradient_matches_differences() {
+        let w: Vec<Point> = (0..12)
+            .map(|i| [(i * 7 % 11) as f64, (i * 5 % 13) as f64 * 0.5])
+            .collect();
+        let path = written_path(&w);
+        // A linear loss of the control points: its gradient is `a`.
+        let a: Vec<f64> = (0..2 * path.points.len())
+            .map(|i| ((i * 37 % 17) as f64 - 8.0) / 8.0)
+            .collect();
+        let loss = |p: &Path| -> f64 {
+            let flat = p.points.iter().flat_map(|q| [q[0], q[1]]);
+            flat.zip(&a).map(|(x, y)| x * y).sum()
+        };
+        let got = written_point_gradient(&path, &a);
+        assert_eq!(got.len(), w.len());
+        let h = 1e-3;
+        for (j, g) in got.iter().enumerate() {
+            for d in 0..2 {
+                let (mut up, mut down) = (w.clone(), w.clone());
+                up[j][d] += h;
+                down[j][d] -= h;
+                let num = (loss(&written_path(&up)) - loss(&written_path(&down))) / (2.0 * h);
+                assert!(
+                    (num - g[d]).abs() < 1e-9,
+                    "point {j}.{d}: {} vs {num}",
+                    g[d]
+                );
+            }
+        }
     }
 
     #[test]

@@ -10,6 +10,7 @@ use std::collections::HashSet;
 use std::fmt::Write as _;
 use std::path::Path as FsPath;
 
+use super::geom::lerp;
 use super::{
     Affine, FRAME_IDENTITY, FillRule, GradientKind, LineCap, LineJoin, Node, Paint, Path, Scene,
     SegmentKind, Spread, apply, concat, invert,
@@ -264,17 +265,8 @@ pub fn path_data(p: &Path, t: &Affine) -> String {
         }
         let _ = write!(d, "M{}", pt(p.points[sp.start]));
         for (k, kind) in sp.kinds.iter().enumerate() {
-            let i = sp.start + 3 * k;
-            let [a, c1, c2, b] = [
-                p.points[i],
-                p.points[i + 1],
-                p.points[i + 2],
-                p.points[i + 3],
-            ];
+            let [a, c1, c2, b] = p.segment_points(sp, k);
             let near = |u: [f64; 2], v: [f64; 2]| (u[0] - v[0]).abs() + (u[1] - v[1]).abs() < 1e-6;
-            let lerp = |u: [f64; 2], v: [f64; 2], s: f64| {
-                [u[0] + (v[0] - u[0]) * s, u[1] + (v[1] - u[1]) * s]
-            };
             match kind {
                 SegmentKind::Line
                     if near(c1, lerp(a, b, 1.0 / 3.0)) && near(c2, lerp(a, b, 2.0 / 3.0)) =>

@@ -6,6 +6,8 @@
 
 use rayon::prelude::*;
 
+use crate::metrics::psnr_from_mse;
+
 /// Side of the SSIM Gaussian window, pixels.
 pub const SSIM_WINDOW: usize = 11;
 /// Standard deviation of the SSIM Gaussian window, pixels.
@@ -43,15 +45,6 @@ pub fn mse(a: &[[f32; 3]], b: &[[f32; 3]]) -> f64 {
 /// if the lengths differ.
 pub fn psnr(a: &[[f32; 3]], b: &[[f32; 3]]) -> f64 {
     psnr_from_mse(mse(a, b))
-}
-
-/// PSNR in dB (peak 1) for a mean squared error in `[0, 1]²` units; infinite for 0.
-pub fn psnr_from_mse(mse: f64) -> f64 {
-    if mse <= 0.0 {
-        f64::INFINITY
-    } else {
-        -10.0 * mse.log10()
-    }
 }
 
 /// Structural similarity (Wang et al. 2004) of two `width × height` RGB images in

@@ -3,7 +3,8 @@
 
 use std::path::{Path, PathBuf};
 
-use diffsvg::fit::digit::{intensities, iou};
+use diffsvg::fit::digit::intensities;
+use diffsvg::metrics::iou;
 use diffsvg::scene::{LineCap, LineJoin, Node, Paint, Stroke};
 use diffsvg::{Scene, Sizing};
 

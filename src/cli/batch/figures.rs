@@ -85,7 +85,7 @@ fn compare_psnr(stdout: &str) -> Option<f64> {
 
 /// PSNR of images in `[0, 1]` from their mean squared error.
 fn mse_psnr(mse: f64) -> Option<f64> {
-    (mse > 0.0 && mse.is_finite()).then(|| -10.0 * mse.log10())
+    (mse > 0.0 && mse.is_finite()).then(|| diffsvg::metrics::psnr_from_mse(mse))
 }
 
 fn count_paths(svg: &Path) -> Option<u64> {

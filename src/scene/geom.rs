@@ -1,0 +1,117 @@
+//! Point and cubic Bézier helpers shared by the rasterizer, the SVG writer and the fitters:
+//! one copy of each, so that every caller gets the same floating-point operations.
+//!
+//! A cubic is the four points `[p0, c1, c2, p3]` of [`Path::segment_points`]
+//! (device pixels).
+//!
+//! [`Path::segment_points`]: super::Path::segment_points
+
+use super::Point;
+
+/// A cubic Bézier segment: start, two control points, end.
+pub(crate) type Cubic = [Point; 4];
+
+/// `a − b`.
+#[inline]
+pub(crate) fn sub(a: Point, b: Point) -> Point {
+    [a[0] - b[0], a[1] - b[1]]
+}
+
+/// Euclidean distance from `a` to `b` (symmetric to the bit: `hypot` ignores signs).
+#[inline]
+pub(crate) fn dist(a: Point, b: Point) -> f64 {
+    (a[0] - b[0]).hypot(a[1] - b[1])
+}
+
+/// `a + w·b`.
+#[inline]
+pub(crate) fn add_scaled(a: Point, b: Point, w: f64) -> Point {
+    [a[0] + w * b[0], a[1] + w * b[1]]
+}
+
+/// `w·a`.
+#[inline]
+pub(crate) fn scale(a: Point, w: f64) -> Point {
+    [a[0] * w, a[1] * w]
+}
+
+/// The point `a + t·(b − a)`.
+#[inline]
+pub(crate) fn lerp(a: Point, b: Point, t: f64) -> Point {
+    [a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])]
+}
+
+/// The midpoint `(a + b) / 2` (which may differ from `lerp(a, b, 0.5)` in the last bit).
+#[inline]
+pub(crate) fn midpoint(a: Point, b: Point) -> Point {
+    [(a[0] + b[0]) / 2.0, (a[1] + b[1]) / 2.0]
+}
+
+/// Bernstein weights of the four control points of a cubic at `t`.
+#[inline]
+pub(crate) fn bernstein(t: f64) -> [f64; 4] {
+    let s = 1.0 - t;
+    [s * s * s, 3.0 * s * s * t, 3.0 * s * t * t, t * t * t]
+}
+
+/// The point of the cubic `c` at `t`: `Σ B_k(t) · c[k]` ([`bernstein`]).
+#[inline]
+pub(crate) fn eval(c: &Cubic, t: f64) -> Point {
+    let w = bernstein(t);
+    [
+        w[0] * c[0][0] + w[1] * c[1][0] + w[2] * c[2][0] + w[3] * c[3][0],
+        w[0] * c[0][1] + w[1] * c[1][1] + w[2] * c[2][1] + w[3] * c[3][1],
+    ]
+}
+
+/// De Casteljau's construction with `between` as the interpolation of two points.
+fn de_casteljau(c: &Cubic, between: impl Fn(Point, Point) -> Point) -> (Cubic, Cubic) {
+    let ab = between(c[0], c[1]);
+    let bc = between(c[1], c[2]);
+    let cd = between(c[2], c[3]);
+    let abc = between(ab, bc);
+    let bcd = between(bc, cd);
+    let m = between(abc, bcd);
+    ([c[0], ab, abc, m], [m, bcd, cd, c[3]])
+}
+
+/// Splits `c` at `t` (de Casteljau with [`lerp`]); the two halves draw the same curve.
+pub(crate) fn split(c: &Cubic, t: f64) -> (Cubic, Cubic) {
+    de_casteljau(c, |a, b| lerp(a, b, t))
+}
+
+/// Splits `c` at `t = ½` (de Casteljau with [`midpoint`]).
+pub(crate) fn split_half(c: &Cubic) -> (Cubic, Cubic) {
+    de_casteljau(c, midpoint)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const C: Cubic = [[0.0, 0.0], [10.0, 20.0], [30.0, 20.0], [40.0, 0.0]];
+
+    #[test]
+    fn halves_meet_on_the_curve() {
+        for t in [0.25, 0.5, 0.8] {
+            let (a, b) = split(&C, t);
+            assert_eq!((a[0], b[3], a[3]), (C[0], C[3], b[0]));
+            assert!(dist(a[3], eval(&C, t)) < 1e-12);
+            assert!(dist(eval(&a, 0.5), eval(&C, 0.5 * t)) < 1e-12);
+            assert!(dist(eval(&b, 0.5), eval(&C, 0.5 + 0.5 * t)) < 1e-12);
+        }
+        let (a, b) = split_half(&C);
+        assert_eq!(a[3], [20.0, 15.0]);
+        assert_eq!(b[0], a[3]);
+        assert_eq!(midpoint(C[0], C[3]), lerp(C[0], C[3], 0.5));
+    }
+
+    #[test]
+    fn small_helpers() {
+        assert_eq!(dist([1.0, 2.0], [4.0, 6.0]), 5.0);
+        assert_eq!(dist([4.0, 6.0], [1.0, 2.0]), 5.0);
+        assert_eq!(sub([4.0, 6.0], [1.0, 2.0]), [3.0, 4.0]);
+        assert_eq!(bernstein(0.0), [1.0, 0.0, 0.0, 0.0]);
+        assert_eq!(eval(&C, 1.0), C[3]);
+    }
+}
