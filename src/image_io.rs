@@ -209,7 +209,7 @@ impl Image {
 
 /// `[0, 1]` → `0..=255`, rounded.
 #[inline]
-pub fn to_u8(v: f32) -> u8 {
+pub(crate) fn to_u8(v: f32) -> u8 {
     (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u8
 }
 
@@ -339,14 +339,14 @@ pub fn read_bounded(path: &Path, limit: u64) -> Result<Vec<u8>> {
 }
 
 /// Whether `bytes` start like a gzip stream.
-pub fn is_gzip(bytes: &[u8]) -> bool {
+pub(crate) fn is_gzip(bytes: &[u8]) -> bool {
     bytes.starts_with(&[0x1f, 0x8b])
 }
 
 /// Decompresses a gzip stream into at most `limit` bytes; a stream that inflates to more
 /// (a "gzip bomb") is refused once `limit + 1` bytes have come out. `path` names the file
 /// in errors.
-pub fn gunzip_bounded(bytes: &[u8], limit: u64, path: &Path) -> Result<Vec<u8>> {
+pub(crate) fn gunzip_bounded(bytes: &[u8], limit: u64, path: &Path) -> Result<Vec<u8>> {
     let mut out = Vec::new();
     flate2::read::GzDecoder::new(bytes)
         .take(limit + 1)
@@ -368,7 +368,7 @@ pub fn gunzip_bounded(bytes: &[u8], limit: u64, path: &Path) -> Result<Vec<u8>> 
 }
 
 /// `67108864` → `64 MiB`.
-pub fn describe_bytes(n: u64) -> String {
+pub(crate) fn describe_bytes(n: u64) -> String {
     if n >= 1 << 20 && n.is_multiple_of(1 << 20) {
         format!("{} MiB", n >> 20)
     } else {

@@ -58,7 +58,9 @@
 //! ([`volume::voxel`]) through its exact volume-rendering gradient, with the same
 //! [`optim`] module as the 2D fitter.
 
-pub mod error;
+#![warn(unreachable_pub)]
+
+mod error;
 pub mod fit;
 pub mod gradcheck;
 pub mod image_io;
@@ -74,5 +76,5 @@ pub mod volume;
 
 pub use error::{Error, Result};
 pub use image_io::Image;
-pub use scene::svg_in::Sizing;
+pub use scene::Sizing;
 pub use scene::{Node, Path, Scene};

@@ -12,7 +12,7 @@ use crate::scene::svg_in::{Sizing, canvas_size};
 /// converter indexes out of its buffers and panics (`alpha_runs.rs`, `pipeline`). A tree
 /// reaching past this bound (a thousand canvases of the largest size away) is not given
 /// to resvg at all; [`render_resvg`] reports it as a file resvg cannot render.
-pub const RESVG_MAX_DEVICE_COORDINATE: f64 = 1.6e7;
+pub(crate) const RESVG_MAX_DEVICE_COORDINATE: f64 = 1.6e7;
 
 /// Renders a parsed tree with resvg onto a transparent canvas sized exactly as
 /// [`Scene::load`](crate::Scene::load) would size it for `sizing`.

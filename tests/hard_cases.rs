@@ -437,9 +437,8 @@ fn linear_gradient_of_near_zero_length_with_repeat_and_reflect() {
               <stop offset="0.8" stop-color="#0000ff"/></linearGradient>
             <path d="M3.3 3.1 L20.6 4.2 L18.1 19.7 L4.4 17.3 Z" fill="url(#g)"/></svg>"##
         );
-        let tree = diffsvg::scene::svg_in::parse_tree(svg.as_bytes(), "g.svg".as_ref()).unwrap();
-        let scene =
-            diffsvg::scene::svg_in::from_tree(&tree, "g.svg".as_ref(), Sizing::Natural).unwrap();
+        let tree = diffsvg::scene::parse_tree(svg.as_bytes(), "g.svg".as_ref()).unwrap();
+        let scene = diffsvg::scene::from_tree(&tree, "g.svg".as_ref(), Sizing::Natural).unwrap();
         let ours = render(&scene, &RenderOptions::default());
         let theirs =
             diffsvg::reference::render_resvg(&tree, "g.svg".as_ref(), Sizing::Natural).unwrap();

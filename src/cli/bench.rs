@@ -7,10 +7,10 @@ use anyhow::Result;
 
 use super::parity::collect_svgs;
 use diffsvg::Sizing;
-use diffsvg::raster::{RenderOptions, prepare, render_prepared};
+use diffsvg::raster::{Prepared, RenderOptions, render_prepared};
 use diffsvg::reference::render_resvg;
 use diffsvg::scene::random::curved_paths;
-use diffsvg::scene::svg_in::{from_tree, parse_tree};
+use diffsvg::scene::{from_tree, parse_tree};
 
 /// Arguments of `diffsvg bench`.
 #[derive(clap::Args, Debug)]
@@ -58,11 +58,11 @@ fn run_backward(a: &Args) -> Result<()> {
         let opts = RenderOptions::default();
         let (fwd, both, mem) = pool.install(|| {
             let fwd = median_ms(a.runs, || {
-                let _ = render_prepared(&prepare(&scene, opts.tolerance, None));
+                let _ = render_prepared(&Prepared::new(&scene, &opts));
             });
             let mut peak = 0usize;
             let mut step = || {
-                let p = prepare(&scene, opts.tolerance, None);
+                let p = Prepared::new(&scene, &opts);
                 let img = render_prepared(&p);
                 let (_, d) = Loss::Mse.grad(&img, &target);
                 let (_, stats) = backward_with_stats(&scene, &p, &d);
@@ -155,7 +155,7 @@ pub fn run(a: Args) -> Result<()> {
         for (k, (_, pool)) in pools.iter().enumerate() {
             let t = pool.install(|| {
                 median_ms(a.runs, || {
-                    let _ = render_prepared(&prepare(&scene, opts.tolerance, None));
+                    let _ = render_prepared(&Prepared::new(&scene, &opts));
                 })
             });
             let ratio = reference / t;

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Result, bail};
 
 use super::fit::load_target;
-use diffsvg::fit::shapes::random_blobs;
+use diffsvg::fit::random_blobs;
 use diffsvg::fit::{Control, FitOptions, refine};
 use diffsvg::loss::Loss;
 use diffsvg::optim::{LearningRates, Objective};

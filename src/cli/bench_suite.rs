@@ -9,7 +9,7 @@ use anyhow::{Result, bail};
 use super::bench_fit::{SuiteArgs, suite_photo};
 use diffsvg::Sizing;
 use diffsvg::fit::plot::{PlotSpec, Series, write_plot};
-use diffsvg::fit::trace::trace;
+use diffsvg::fit::trace;
 use diffsvg::fit::vectorize::{Mode, VectorizeOptions, VectorizeOutcome, vectorize};
 use diffsvg::fit::{Control, FitOptions, refine};
 use diffsvg::image_io::write_atomic;

@@ -8,7 +8,7 @@ use super::util::{SizeArgs, check_png, parse_color, read, sibling};
 use diffsvg::metrics::{compare, difference_image};
 use diffsvg::raster::{RenderOptions, render};
 use diffsvg::reference::render_resvg;
-use diffsvg::scene::svg_in::{from_tree, parse_tree};
+use diffsvg::scene::{from_tree, parse_tree};
 
 /// Arguments of `diffsvg render`.
 #[derive(clap::Args, Debug)]

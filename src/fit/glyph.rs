@@ -122,23 +122,24 @@ pub struct GlyphOutcome {
 
 /// A closed polyline traced from a picture, device pixels, y down.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Contour {
+pub(crate) struct Contour {
     /// The vertices; the last connects back to the first.
-    pub points: Vec<Point>,
+    pub(crate) points: Vec<Point>,
     /// Whether the contour bounds a hole (it runs counter-clockwise on screen; outer
     /// boundaries run clockwise).
-    pub hole: bool,
+    pub(crate) hole: bool,
 }
 
+#[cfg(test)]
 impl Contour {
     /// Signed area (shoelace, y down): positive for outer boundaries, negative for holes.
-    pub fn area(&self) -> f64 {
+    pub(crate) fn area(&self) -> f64 {
         signed_area(&self.points)
     }
 }
 
 /// How far either side of a boundary point its turning angle is measured, pixels.
-pub const CORNER_REACH: f64 = 2.5;
+pub(crate) const CORNER_REACH: f64 = 2.5;
 
 /// Contours smaller than this many square pixels are dropped as specks.
 const MIN_AREA: f64 = 2.0;
@@ -164,7 +165,12 @@ pub fn ink(img: &Image) -> Vec<f32> {
 /// counter-clockwise. Saddles are resolved by the mean of the four corners. Contours
 /// enclosing less than 2 px² are dropped. Order: by the first crossing in row-major
 /// scan order, deterministic.
-pub fn trace_contours(values: &[f32], width: usize, height: usize, level: f32) -> Vec<Contour> {
+pub(crate) fn trace_contours(
+    values: &[f32],
+    width: usize,
+    height: usize,
+    level: f32,
+) -> Vec<Contour> {
     assert_eq!(
         values.len(),
         width * height,
@@ -1032,7 +1038,7 @@ fn cheapest_merge(
 const MERGE_SAMPLES: usize = 24;
 
 /// Steps between IoU checks during a round.
-pub const CHECK_EVERY: usize = 10;
+pub(crate) const CHECK_EVERY: usize = 10;
 
 /// A coordinate as an SVG file written by [`Scene::save_svg`] holds it and a reader
 /// gets it back (four decimals, then single precision).

@@ -4,9 +4,11 @@
 pub mod digit;
 pub mod glyph;
 pub mod plot;
-pub mod refine;
-pub mod shapes;
-pub mod trace;
+pub(crate) mod refine;
+pub(crate) mod shapes;
+pub(crate) mod trace;
 pub mod vectorize;
 
 pub use refine::{Control, FitOptions, FitOutcome, Step, StopReason, refine};
+pub use shapes::{random_blobs, random_strokes};
+pub use trace::trace;

@@ -92,7 +92,13 @@ pub fn random_strokes(n: usize, width: u32, height: u32, seed: u64) -> Scene {
 
 /// A closed path of `segments` cubics approximating the circle of center `c` and radius
 /// `r` (pixels), filled with an opaque straight RGB `color`, nonzero rule.
-pub fn circle(id: impl Into<String>, c: Point, r: f64, segments: usize, color: [f64; 3]) -> Path {
+pub(crate) fn circle(
+    id: impl Into<String>,
+    c: Point,
+    r: f64,
+    segments: usize,
+    color: [f64; 3],
+) -> Path {
     let k = segments.max(2);
     let step = std::f64::consts::TAU / k as f64;
     let kappa = 4.0 / 3.0 * (step / 4.0).tan() * r;

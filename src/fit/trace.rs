@@ -91,7 +91,12 @@ fn trace_with(target: &Image, config: vtracer::Config) -> Result<Scene> {
 /// removed. See the [module documentation](self) for the method.
 ///
 /// Panics if `target`'s size differs from the scene's.
-pub fn prune_to_budget(scene: &mut Scene, target: &Image, budget: usize, background: [f32; 4]) {
+pub(crate) fn prune_to_budget(
+    scene: &mut Scene,
+    target: &Image,
+    budget: usize,
+    background: [f32; 4],
+) {
     check_size(scene, target);
     let n = scene.path_count();
     if n <= budget {
@@ -131,7 +136,7 @@ pub fn prune_to_budget(scene: &mut Scene, target: &Image, budget: usize, backgro
 /// opacity is handled.
 ///
 /// Panics if `target`'s size differs from the scene's.
-pub fn prune_unneeded(
+pub(crate) fn prune_unneeded(
     scene: &mut Scene,
     target: &Image,
     background: [f32; 4],

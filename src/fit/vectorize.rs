@@ -227,7 +227,7 @@ pub fn vectorize(
 /// Paths added per adaptive round for a budget: 4, then half as many again as there are
 /// (4, 2, 3, 4, 7, 10, …), the last round topping up to the budget; a final 0 marks the
 /// closing optimization.
-pub fn round_sizes(budget: usize) -> Vec<usize> {
+pub(crate) fn round_sizes(budget: usize) -> Vec<usize> {
     let mut v = Vec::new();
     let mut have = 0usize;
     while have < budget {

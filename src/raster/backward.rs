@@ -55,7 +55,7 @@ pub fn render_backward(scene: &Scene, opts: &RenderOptions, d_image: &Image) -> 
 
 /// Replay records the bands computed at once may hold together, in bytes, by an upper
 /// estimate from the boxes of the items and layers in each band; one band always runs.
-pub const TAPE_BUDGET_BYTES: usize = 256 << 20;
+pub(crate) const TAPE_BUDGET_BYTES: usize = 256 << 20;
 
 /// Upper estimate of each band's replay record, in bytes: every cell of every item's box
 /// in the band, and two colors per pixel of every layer's box.
@@ -150,7 +150,7 @@ enum Rec {
 }
 
 /// Like [`render_backward`], reusing a prepared scene (which must come from `scene`).
-pub fn backward_prepared(scene: &Scene, p: &Prepared, d_image: &Image) -> Vec<f64> {
+pub(crate) fn backward_prepared(scene: &Scene, p: &Prepared, d_image: &Image) -> Vec<f64> {
     backward_with_stats(scene, p, d_image).0
 }
 

@@ -20,22 +20,22 @@ use crate::scene::Point;
 
 /// A rectangle of cells, `w × h`, whose first cell is device pixel `(x0, y0)`.
 #[derive(Clone, Debug, Default)]
-pub struct Cells<T> {
+pub(crate) struct Cells<T> {
     /// Device column of the first cell.
-    pub x0: i64,
+    pub(crate) x0: i64,
     /// Device row of the first cell.
-    pub y0: i64,
+    pub(crate) y0: i64,
     /// Columns.
-    pub w: usize,
+    pub(crate) w: usize,
     /// Rows.
-    pub h: usize,
+    pub(crate) h: usize,
     /// Row-major values.
-    pub data: Vec<T>,
+    pub(crate) data: Vec<T>,
 }
 
 impl<T: Copy + Default> Cells<T> {
     /// Resizes to `w × h` at `(x0, y0)` and zeroes.
-    pub fn reset(&mut self, x0: i64, y0: i64, w: usize, h: usize) {
+    pub(crate) fn reset(&mut self, x0: i64, y0: i64, w: usize, h: usize) {
         self.x0 = x0;
         self.y0 = y0;
         self.w = w;
@@ -49,7 +49,7 @@ impl<T: Copy + Default> Cells<T> {
 /// x range plus one guard column. Points are clamped to `0 ≤ x ≤ x_max` first (a segment
 /// left of the canvas still carries its cover into the row; right of it nothing shows),
 /// and rows outside `acc` are skipped.
-pub fn accumulate_line(acc: &mut Cells<f32>, p0: Point, p1: Point, x_max: f64) {
+pub(crate) fn accumulate_line(acc: &mut Cells<f32>, p0: Point, p1: Point, x_max: f64) {
     // Split at x = 0 and x = x_max so that the clamped pieces stay exact.
     let mut pieces = [(p0, p1); 3];
     let mut n = 0;
@@ -190,7 +190,13 @@ fn line_local(acc: &mut Cells<f32>, p0: Point, p1: Point) {
 /// low cell's `∂L/∂w⁺` and the high cell's `∂L/∂w⁻`, averaged. So at kinks the result is the
 /// mean of the one-sided derivatives, which is what a central difference measures, and a
 /// shape whose edges sit exactly on pixel boundaries still gets a useful gradient.
-pub fn backward_line(g: &Cells<[f32; 2]>, p0: Point, p1: Point, dp0: &mut Point, dp1: &mut Point) {
+pub(crate) fn backward_line(
+    g: &Cells<[f32; 2]>,
+    p0: Point,
+    p1: Point,
+    dp0: &mut Point,
+    dp1: &mut Point,
+) {
     let (dx, dy) = (p1[0] - p0[0], p1[1] - p0[1]);
     if (dx == 0.0 && dy == 0.0) || g.w == 0 || g.h == 0 {
         return;
@@ -303,7 +309,7 @@ pub fn backward_line(g: &Cells<[f32; 2]>, p0: Point, p1: Point, dp0: &mut Point,
 /// One-sided slopes `(d cov/dw⁺, d cov/dw⁻)` of the coverage rule at `w` (see
 /// [`coverage`]); equal except at kinks.
 #[inline]
-pub fn coverage_slopes(w: f32, evenodd: bool) -> (f32, f32) {
+pub(crate) fn coverage_slopes(w: f32, evenodd: bool) -> (f32, f32) {
     // A winding integral within rounding of an integer *is* that integer (a pixel wholly
     // inside or outside whose area was summed from fractions); its slopes are one-sided.
     const EPS: f32 = 4e-6;
@@ -392,7 +398,7 @@ fn round_f32(x: f32) -> f32 {
 /// Coverage from a winding integral under a fill rule, and its derivative.
 /// Nonzero: `min(|w|, 1)`; even-odd: `|w − 2·round(w/2)|`.
 #[inline]
-pub fn coverage(w: f32, evenodd: bool) -> (f32, f32) {
+pub(crate) fn coverage(w: f32, evenodd: bool) -> (f32, f32) {
     if evenodd {
         let f = w - 2.0 * round_f32(0.5 * w);
         (
@@ -425,7 +431,7 @@ pub fn coverage(w: f32, evenodd: bool) -> (f32, f32) {
 }
 
 /// Prefix-sums each row of `acc` into winding integrals, in place.
-pub fn integrate_rows(acc: &mut Cells<f32>) {
+pub(crate) fn integrate_rows(acc: &mut Cells<f32>) {
     let w = acc.w;
     if w == 0 {
         return;

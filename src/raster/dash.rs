@@ -11,41 +11,41 @@ use crate::scene::geom::{dist, lerp};
 
 /// Where a dashed vertex comes from: `(1 − u)·pts[a] + u·pts[b]` of the undashed polyline.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct DashSource {
+pub(crate) struct DashSource {
     /// First vertex.
-    pub a: u32,
+    pub(crate) a: u32,
     /// Second vertex.
-    pub b: u32,
+    pub(crate) b: u32,
     /// Blend factor in `[0, 1]`.
-    pub u: f64,
+    pub(crate) u: f64,
 }
 
 /// A dashed polyline: open contours, with provenance of every vertex.
 #[derive(Clone, Debug, Default)]
-pub struct Dashed {
+pub(crate) struct Dashed {
     /// Vertices.
-    pub pts: Vec<Point>,
+    pub(crate) pts: Vec<Point>,
     /// Whether each vertex is a corner of the original path (joins are drawn there).
-    pub corner: Vec<bool>,
+    pub(crate) corner: Vec<bool>,
     /// Provenance of each vertex.
-    pub src: Vec<DashSource>,
+    pub(crate) src: Vec<DashSource>,
     /// Open contours, one per dash.
-    pub contours: Vec<Contour>,
+    pub(crate) contours: Vec<Contour>,
 }
 
 /// Where dashes can be seen: device positions of the polyline's vertices and the visible
 /// rectangle `[xmin, ymin, xmax, ymax]` (the canvas grown by the stroke's reach, so that a
 /// cap or join drawn outside it cannot touch the canvas).
 #[derive(Clone, Copy, Debug)]
-pub struct Visible<'a> {
+pub(crate) struct Visible<'a> {
     /// Device position of every vertex (the polyline mapped out of the stroke frame).
-    pub device: &'a [Point],
+    pub(crate) device: &'a [Point],
     /// Visible rectangle in device pixels.
-    pub rect: [f64; 4],
+    pub(crate) rect: [f64; 4],
 }
 
 /// The part `[u0, u1]` of the chord `a → b` inside `rect` (Liang–Barsky), or `None`.
-pub fn visible_span(a: Point, b: Point, rect: [f64; 4]) -> Option<(f64, f64)> {
+pub(crate) fn visible_span(a: Point, b: Point, rect: [f64; 4]) -> Option<(f64, f64)> {
     let (mut u0, mut u1) = (0.0f64, 1.0f64);
     let d = [b[0] - a[0], b[1] - a[1]];
     for (p, q) in [
@@ -88,7 +88,7 @@ fn order(c: &Contour) -> impl Iterator<Item = (u32, u32)> {
 /// for each run of consecutive visible chords, `(length / period + 1)` times the number
 /// of dash entries of the pattern. Invisible chords cost nothing. Infinite when the
 /// lengths overflow.
-pub fn dash_count(
+pub(crate) fn dash_count(
     pts: &[Point],
     contours: &[Contour],
     pattern: &[f64],
@@ -154,7 +154,7 @@ pub fn dash_count(
 /// ends where its chord leaves it (such ends lie outside the rectangle, so their caps do
 /// not reach the canvas). The work and the output are then bounded by
 /// [`dash_count`] with the same arguments, which callers check first.
-pub fn dash(
+pub(crate) fn dash(
     pts: &[Point],
     corner: &[bool],
     contours: &[Contour],

@@ -13,60 +13,60 @@ use crate::scene::geom::{bernstein, eval};
 use crate::scene::{Path, Point};
 
 /// Largest number of chords per cubic; bounds work on huge curves.
-pub const MAX_CHORDS: u32 = 4096;
+pub(crate) const MAX_CHORDS: u32 = 4096;
 
 /// Where a flattened vertex comes from: `Σ B_k(t) · points[first + k]`, `k = 0..4`.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct FlatSource {
+pub(crate) struct FlatSource {
     /// Index of the segment's first control point in [`Path::points`].
-    pub first: u32,
+    pub(crate) first: u32,
     /// Curve parameter in `[0, 1]`.
-    pub t: f64,
+    pub(crate) t: f64,
 }
 
 impl FlatSource {
     /// Bernstein weights of the four control points.
     #[inline]
-    pub fn weights(&self) -> [f64; 4] {
+    pub(crate) fn weights(&self) -> [f64; 4] {
         bernstein(self.t)
     }
 }
 
 /// One flattened subpath: `len` vertices starting at `start` in [`Flattened::pts`].
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Contour {
+pub(crate) struct Contour {
     /// First vertex.
-    pub start: usize,
+    pub(crate) start: usize,
     /// Number of vertices (≥ 1).
-    pub len: usize,
+    pub(crate) len: usize,
     /// Whether the contour closes back to its first vertex.
-    pub closed: bool,
+    pub(crate) closed: bool,
     /// Whether the subpath has at least one segment or is closed (a lone `M` draws no cap).
-    pub drawn: bool,
+    pub(crate) drawn: bool,
 }
 
 /// A path flattened to polylines.
 #[derive(Clone, Debug, Default, PartialEq)]
-pub struct Flattened {
+pub(crate) struct Flattened {
     /// Vertices in device pixels.
-    pub pts: Vec<Point>,
+    pub(crate) pts: Vec<Point>,
     /// Provenance of each vertex.
-    pub src: Vec<FlatSource>,
+    pub(crate) src: Vec<FlatSource>,
     /// Whether vertex `i` ends an original segment (a corner where a join is drawn) rather
     /// than lying inside a flattened curve.
-    pub corner: Vec<bool>,
+    pub(crate) corner: Vec<bool>,
     /// Subpaths.
-    pub contours: Vec<Contour>,
+    pub(crate) contours: Vec<Contour>,
 }
 
 /// Chord counts of every segment of a path, in order; fixed counts make the rendering a
 /// smooth function of the control points (used by gradient checks).
-pub type ChordCounts = Vec<u32>;
+pub(crate) type ChordCounts = Vec<u32>;
 
 /// Chord count for one cubic under `tolerance` (pixels). `visible` is the canvas grown by
 /// any stroke margin, `[xmin, ymin, xmax, ymax]`: a cubic wholly to its left, right, top or
 /// bottom only needs one chord (its net crossing of each row is set by its end points).
-pub fn chord_count(p: &[Point; 4], tolerance: f64, visible: [f64; 4]) -> u32 {
+pub(crate) fn chord_count(p: &[Point; 4], tolerance: f64, visible: [f64; 4]) -> u32 {
     let all = |f: &dyn Fn(&Point) -> bool| p.iter().all(f);
     if all(&|q| q[0] <= visible[0])
         || all(&|q| q[0] >= visible[2])
@@ -91,7 +91,7 @@ pub fn chord_count(p: &[Point; 4], tolerance: f64, visible: [f64; 4]) -> u32 {
 
 /// Flattens `path`. With `counts`, uses those chord counts (one per segment, as returned
 /// in the second value) instead of computing them.
-pub fn flatten(
+pub(crate) fn flatten(
     path: &Path,
     tolerance: f64,
     visible: [f64; 4],

@@ -8,10 +8,10 @@
 use std::ops::{Add, Div, Mul, Neg, Sub};
 
 /// Number of seeded inputs of a [`Jet`]: three points (six numbers) and the half width.
-pub const N: usize = 7;
+pub(crate) const N: usize = 7;
 
 /// Arithmetic the stroker needs.
-pub trait Scalar:
+pub(crate) trait Scalar:
     Copy
     + Add<Output = Self>
     + Sub<Output = Self>
@@ -62,16 +62,16 @@ impl Scalar for f64 {
 
 /// A value with its derivatives with respect to [`N`] inputs.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Jet {
+pub(crate) struct Jet {
     /// Value.
-    pub v: f64,
+    pub(crate) v: f64,
     /// Partial derivatives.
-    pub d: [f64; N],
+    pub(crate) d: [f64; N],
 }
 
 impl Jet {
     /// The input number `i` with value `v`.
-    pub fn var(v: f64, i: usize) -> Jet {
+    pub(crate) fn var(v: f64, i: usize) -> Jet {
         let mut d = [0.0; N];
         d[i] = 1.0;
         Jet { v, d }

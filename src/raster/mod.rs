@@ -8,18 +8,18 @@
 //! Bands are independent and each is processed in a fixed order, so the result has the
 //! same bits for any number of threads.
 
-pub mod backward;
-pub mod coverage;
-pub mod dash;
-pub mod flatten;
-pub mod jet;
-pub mod paint;
-pub mod prepare;
-pub mod render;
-pub mod stroke;
+pub(crate) mod backward;
+pub(crate) mod coverage;
+pub(crate) mod dash;
+pub(crate) mod flatten;
+pub(crate) mod jet;
+pub(crate) mod paint;
+pub(crate) mod prepare;
+pub(crate) mod render;
+pub(crate) mod stroke;
 
-pub use backward::{
-    BackwardStats, backward_prepared, backward_with_stats, render_and_backward, render_backward,
-};
-pub use prepare::{Prepared, prepare, prepare_forward, warnings};
+pub(crate) use backward::backward_prepared;
+pub use backward::{BackwardStats, backward_with_stats, render_and_backward, render_backward};
+pub(crate) use prepare::prepare;
+pub use prepare::{Prepared, warnings};
 pub use render::{RenderOptions, render, render_prepared};

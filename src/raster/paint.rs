@@ -16,7 +16,7 @@ use crate::scene::{Affine, Gradient, GradientKind, Paint, Point, Spread, Stop, a
 
 /// A paint ready for per-pixel evaluation.
 #[derive(Clone, Debug)]
-pub enum PaintEval {
+pub(crate) enum PaintEval {
     /// A solid color.
     Solid(SolidEval),
     /// A gradient.
@@ -25,43 +25,43 @@ pub enum PaintEval {
 
 /// A solid color ready for compositing.
 #[derive(Clone, Copy, Debug)]
-pub struct SolidEval {
+pub(crate) struct SolidEval {
     /// Premultiplied color, opacity included.
-    pub premul: [f32; 4],
+    pub(crate) premul: [f32; 4],
     /// Straight color.
-    pub color: [f64; 3],
+    pub(crate) color: [f64; 3],
     /// Opacity as given (clamped to `[0, 1]` when drawn).
-    pub opacity: f64,
+    pub(crate) opacity: f64,
 }
 
 /// A gradient ready for evaluation.
 #[derive(Clone, Debug)]
-pub struct GradientEval {
+pub(crate) struct GradientEval {
     /// Device → gradient space.
-    pub inv: Affine,
+    pub(crate) inv: Affine,
     /// Geometry.
-    pub kind: GradientKind,
+    pub(crate) kind: GradientKind,
     /// Spread.
-    pub spread: Spread,
+    pub(crate) spread: Spread,
     /// Stops.
-    pub stops: Vec<Stop>,
+    pub(crate) stops: Vec<Stop>,
     /// Item opacity.
-    pub opacity: f64,
+    pub(crate) opacity: f64,
     /// A linear gradient whose end points (in gradient space) are closer than
     /// [`DEGENERATE_LENGTH`]: it paints one color, as resvg does.
-    pub degenerate: bool,
+    pub(crate) degenerate: bool,
 }
 
 /// Below this distance between its end points, in gradient space, a linear gradient is
 /// degenerate and paints one color: the last stop's with `pad`, the gradient's average
 /// with `repeat` and `reflect` (its stripes would be far thinner than a pixel). The value
 /// and the fallbacks are tiny-skia's, so diffsvg draws what resvg draws.
-pub const DEGENERATE_LENGTH: f64 = 1.0 / 32768.0;
+pub(crate) const DEGENERATE_LENGTH: f64 = 1.0 / 32768.0;
 
 impl PaintEval {
     /// Prepares `paint` drawn with `opacity`. `None` when nothing would be painted (a
     /// singular gradient transform, no stops).
-    pub fn new(paint: &Paint, opacity: f64) -> Option<PaintEval> {
+    pub(crate) fn new(paint: &Paint, opacity: f64) -> Option<PaintEval> {
         match paint {
             Paint::Solid(c) => {
                 let a = opacity.clamp(0.0, 1.0);
@@ -82,7 +82,7 @@ impl PaintEval {
 
     /// Premultiplied color at device point `p` (a pixel center).
     #[inline]
-    pub fn at(&self, p: Point) -> [f32; 4] {
+    pub(crate) fn at(&self, p: Point) -> [f32; 4] {
         match self {
             PaintEval::Solid(c) => c.premul,
             PaintEval::Gradient(g) => g.at(p),
@@ -90,14 +90,14 @@ impl PaintEval {
     }
 
     /// Whether the paint is one color everywhere.
-    pub fn is_solid(&self) -> bool {
+    pub(crate) fn is_solid(&self) -> bool {
         matches!(self, PaintEval::Solid(_))
     }
 
     /// Length of this paint's gradient vector in [`PaintEval::backward`]: a solid paint has
     /// `r, g, b, opacity`; a gradient its geometry (4 or 6), `offset, r, g, b, opacity`
     /// per stop, then the item opacity.
-    pub fn grad_len(&self) -> usize {
+    pub(crate) fn grad_len(&self) -> usize {
         match self {
             PaintEval::Solid(_) => 4,
             PaintEval::Gradient(g) => geometry(&g.kind).len() + 5 * g.stops.len() + 1,
@@ -107,7 +107,7 @@ impl PaintEval {
     /// Adds to `out` (length [`grad_len`](Self::grad_len)) the gradient of the loss with
     /// respect to this paint's parameters, given `gs = ∂L/∂(premultiplied color)` at the
     /// device point `p`.
-    pub fn backward(&self, p: Point, gs: [f64; 4], out: &mut [f64]) {
+    pub(crate) fn backward(&self, p: Point, gs: [f64; 4], out: &mut [f64]) {
         match self {
             PaintEval::Solid(c) => {
                 let a = c.opacity.clamp(0.0, 1.0);
@@ -125,7 +125,7 @@ impl PaintEval {
 
 impl GradientEval {
     /// Prepares a gradient; `None` when its transform is singular or it has no stops.
-    pub fn new(g: &Gradient, opacity: f64) -> Option<GradientEval> {
+    pub(crate) fn new(g: &Gradient, opacity: f64) -> Option<GradientEval> {
         if g.stops.is_empty() {
             return None;
         }
@@ -172,7 +172,7 @@ impl GradientEval {
     }
 
     /// Premultiplied color at device point `p`.
-    pub fn at(&self, p: Point) -> [f32; 4] {
+    pub(crate) fn at(&self, p: Point) -> [f32; 4] {
         let c = if self.degenerate {
             self.fallback().0
         } else {
@@ -289,7 +289,7 @@ impl GradientEval {
 }
 
 /// Geometry parameters as a flat array: linear `x1 y1 x2 y2`, radial `cx cy r fx fy fr`.
-pub fn geometry(kind: &GradientKind) -> Geometry<f64> {
+pub(crate) fn geometry(kind: &GradientKind) -> Geometry<f64> {
     match *kind {
         GradientKind::Linear { p1, p2 } => Geometry::Linear([p1[0], p1[1], p2[0], p2[1]]),
         GradientKind::Radial { c, r, f, fr } => Geometry::Radial([c[0], c[1], r, f[0], f[1], fr]),
@@ -298,7 +298,7 @@ pub fn geometry(kind: &GradientKind) -> Geometry<f64> {
 
 /// Gradient geometry over any scalar (so the backward pass can differentiate it).
 #[derive(Clone, Copy, Debug)]
-pub enum Geometry<S> {
+pub(crate) enum Geometry<S> {
     /// `x1 y1 x2 y2`.
     Linear([S; 4]),
     /// `cx cy r fx fy fr`.
@@ -307,20 +307,15 @@ pub enum Geometry<S> {
 
 impl Geometry<f64> {
     /// Number of parameters.
-    pub fn len(&self) -> usize {
+    pub(crate) fn len(&self) -> usize {
         match self {
             Geometry::Linear(_) => 4,
             Geometry::Radial(_) => 6,
         }
     }
 
-    /// Whether there are no parameters (never).
-    pub fn is_empty(&self) -> bool {
-        false
-    }
-
     /// The parameters as dual numbers, parameter `k` seeded in slot `k`.
-    pub fn to_jets(&self) -> Geometry<Jet> {
+    pub(crate) fn to_jets(&self) -> Geometry<Jet> {
         match self {
             Geometry::Linear(v) => Geometry::Linear(std::array::from_fn(|k| Jet::var(v[k], k))),
             Geometry::Radial(v) => Geometry::Radial(std::array::from_fn(|k| Jet::var(v[k], k))),
@@ -330,7 +325,7 @@ impl Geometry<f64> {
 
 /// The gradient parameter `t` at gradient-space point `q`, before spreading. `None` where
 /// a two-point conical gradient is undefined.
-pub fn gradient_t<S: Scalar>(g: &Geometry<S>, q: Point) -> Option<S> {
+pub(crate) fn gradient_t<S: Scalar>(g: &Geometry<S>, q: Point) -> Option<S> {
     match *g {
         Geometry::Linear([x1, y1, x2, y2]) => {
             let (dx, dy) = (x2 - x1, y2 - y1);
@@ -378,7 +373,7 @@ pub fn gradient_t<S: Scalar>(g: &Geometry<S>, q: Point) -> Option<S> {
 
 /// Applies the spread method; returns `t` in `[0, 1]` and `∂t'/∂t` (±1, or 0 where padded).
 #[inline]
-pub fn spread<S: Scalar>(mode: Spread, t: S) -> (f64, f64) {
+pub(crate) fn spread<S: Scalar>(mode: Spread, t: S) -> (f64, f64) {
     let v = t.v();
     match mode {
         Spread::Pad => {
@@ -401,7 +396,7 @@ pub fn spread<S: Scalar>(mode: Spread, t: S) -> (f64, f64) {
 /// Which stops bracket `t` and the interpolation weight: `(i, j, u)` with the color
 /// `stops[i] + u·(stops[j] − stops[i])`.
 #[inline]
-pub fn bracket(stops: &[Stop], t: f64) -> (usize, usize, f64) {
+pub(crate) fn bracket(stops: &[Stop], t: f64) -> (usize, usize, f64) {
     let n = stops.len();
     if t <= stops[0].offset {
         return (0, 0, 0.0);
@@ -422,7 +417,7 @@ pub fn bracket(stops: &[Stop], t: f64) -> (usize, usize, f64) {
 }
 
 /// Straight RGBA at `t` in `[0, 1]` (stop opacity in alpha).
-pub fn stop_color(stops: &[Stop], t: f64) -> [f64; 4] {
+pub(crate) fn stop_color(stops: &[Stop], t: f64) -> [f64; 4] {
     let (i, j, u) = bracket(stops, t);
     let a = &stops[i];
     let b = &stops[j];

@@ -9,7 +9,7 @@ use crate::scene::{FillRule, Node, Path, Point, Scene, Stroke};
 
 /// Whether an item is a path's fill or its stroke.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum ItemKind {
+pub(crate) enum ItemKind {
     /// The fill.
     Fill,
     /// The stroke outline.
@@ -18,33 +18,33 @@ pub enum ItemKind {
 
 /// One polygon set with one paint: a path's fill or its stroke.
 #[derive(Clone, Debug)]
-pub struct Item {
+pub(crate) struct Item {
     /// Index of the path in paint order ([`Scene::for_each_path`] order).
-    pub path: usize,
+    pub(crate) path: usize,
     /// Fill or stroke.
-    pub kind: ItemKind,
+    pub(crate) kind: ItemKind,
     /// Polygon vertices, device pixels.
-    pub pts: Vec<Point>,
+    pub(crate) pts: Vec<Point>,
     /// For a fill, the index in [`PathGeom::flat`] of each vertex (empty when prepared for
     /// a forward render only); for a stroke, empty: vertex `j` is outline vertex `j`.
-    pub src: Vec<u32>,
+    pub(crate) src: Vec<u32>,
     /// Closed rings as `(start, len)` into `pts`.
-    pub rings: Vec<(usize, usize)>,
+    pub(crate) rings: Vec<(usize, usize)>,
     /// Even-odd fill rule (strokes are always nonzero).
-    pub evenodd: bool,
+    pub(crate) evenodd: bool,
     /// The paint, opacity included.
-    pub paint: PaintEval,
+    pub(crate) paint: PaintEval,
     /// Bounds of `pts`: `[xmin, ymin, xmax, ymax]`.
-    pub bbox: [f64; 4],
+    pub(crate) bbox: [f64; 4],
     /// Whether some edge lies exactly on a pixel boundary (vertical at integer x or
     /// horizontal at integer y). Only then do pixels with a zero winding integral take
     /// part in the backward pass.
-    pub grid_aligned: bool,
+    pub(crate) grid_aligned: bool,
 }
 
 /// What the compositor does, in order.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Op {
+pub(crate) enum Op {
     /// Draw item `i` onto the current layer.
     Draw(usize),
     /// Start a transparent layer.
@@ -61,70 +61,84 @@ pub enum Op {
 
 /// The geometry of one path, kept for the backward pass.
 #[derive(Clone, Debug, Default)]
-pub struct PathGeom {
+pub(crate) struct PathGeom {
     /// The flattened centerline (device pixels).
-    pub flat: Flattened,
+    pub(crate) flat: Flattened,
     /// Chord counts used, one per segment.
-    pub counts: ChordCounts,
+    pub(crate) counts: ChordCounts,
     /// Device → stroke frame linear map `[a, b, c, d]`, when the path is stroked.
-    pub frame_inv: Option<[f64; 4]>,
+    pub(crate) frame_inv: Option<[f64; 4]>,
     /// The dashed centerline in the stroke frame, when the stroke is dashed (and the
     /// pattern was not dropped for a solid stroke).
-    pub dashed: Option<Dashed>,
+    pub(crate) dashed: Option<Dashed>,
 }
 
 /// Where a group's layer lies, so that a band it does not touch skips it and a band it
 /// touches allocates and composites only the group's box.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct GroupSpan {
+pub(crate) struct GroupSpan {
     /// Index in [`Prepared::ops`] of the group's [`Op::Pop`].
-    pub end: usize,
+    pub(crate) end: usize,
     /// Number of groups opened up to and including this group's descendants (the next
     /// group opened after it has this index).
-    pub groups_end: usize,
+    pub(crate) groups_end: usize,
     /// Pixels the group's content can touch, `[x0, y0, x1, y1]` (end exclusive, within
     /// the canvas): the union of the boxes of the items drawn inside. `None` when
     /// nothing inside reaches the canvas.
-    pub rect: Option<[usize; 4]>,
+    pub(crate) rect: Option<[usize; 4]>,
 }
 
 /// A scene ready to be rasterized.
 #[derive(Clone, Debug)]
 pub struct Prepared {
     /// Canvas width in pixels.
-    pub width: u32,
+    pub(crate) width: u32,
     /// Canvas height in pixels.
-    pub height: u32,
+    pub(crate) height: u32,
     /// Compositing program.
-    pub ops: Vec<Op>,
+    pub(crate) ops: Vec<Op>,
     /// Drawable items.
-    pub items: Vec<Item>,
+    pub(crate) items: Vec<Item>,
     /// Per path geometry, in paint order.
-    pub geoms: Vec<PathGeom>,
+    pub(crate) geoms: Vec<PathGeom>,
     /// Per group, in walk order (the order of the [`Op::Push`]es).
-    pub groups: Vec<GroupSpan>,
+    pub(crate) groups: Vec<GroupSpan>,
     /// Paths (paint order) whose dash pattern was dropped for a solid stroke because it
     /// would cut more than [`MAX_DASHES_PER_PATH`] dashes; see [`warnings`].
-    pub solid_dashes: Vec<usize>,
+    pub(crate) solid_dashes: Vec<usize>,
     /// Whether the geometry the backward pass needs was kept ([`prepare`]) or dropped
     /// ([`prepare_forward`]). Outline recipes are never kept: the backward pass rebuilds
     /// them one stroke at a time from the kept centerline ([`stroke_outline`]).
-    pub for_backward: bool,
+    pub(crate) for_backward: bool,
     /// The flattening tolerance used, in device pixels.
-    pub tolerance: f64,
+    pub(crate) tolerance: f64,
+}
+
+impl Prepared {
+    /// Prepares `scene` once for any number of [`render_prepared`](super::render_prepared)
+    /// and [`backward_with_stats`](super::backward_with_stats) calls, flattened at
+    /// `opts.tolerance` with chord counts chosen from the scene as it is now.
+    pub fn new(scene: &Scene, opts: &super::RenderOptions) -> Prepared {
+        prepare(scene, opts.tolerance, None)
+    }
+
+    /// Canvas size in pixels, `(width, height)`.
+    pub fn size(&self) -> (u32, u32) {
+        (self.width, self.height)
+    }
 }
 
 /// Prepares `scene` with flattening `tolerance` (device pixels). With `counts` (one list
 /// per path, as in [`PathGeom::counts`]) the chord counts are fixed instead of computed.
 /// Keeps everything the backward pass needs.
-pub fn prepare(scene: &Scene, tolerance: f64, counts: Option<&[ChordCounts]>) -> Prepared {
+pub(crate) fn prepare(scene: &Scene, tolerance: f64, counts: Option<&[ChordCounts]>) -> Prepared {
     prepare_with(scene, tolerance, counts, true)
 }
 
 /// Like [`prepare`] for a forward render only: the per-path geometry the backward pass
 /// reads (flattened points and their provenance, dashes, outline recipes) is not kept,
 /// which makes memory a fraction of [`prepare`]'s on scenes with many stroked curves.
-pub fn prepare_forward(scene: &Scene, tolerance: f64) -> Prepared {
+pub(crate) fn prepare_forward(scene: &Scene, tolerance: f64) -> Prepared {
     prepare_with(scene, tolerance, None, false)
 }
 
@@ -157,7 +171,7 @@ fn prepare_with(
 /// The pixels an item can touch, `[x0, y0, x1, y1]` (end exclusive, clipped to the
 /// canvas): its box grown as [`BandRenderer::winding`](super::render) grows it (one pixel
 /// each side, two guard columns on the right).
-pub fn item_rect(bbox: [f64; 4], width: u32, height: u32) -> Option<[usize; 4]> {
+pub(crate) fn item_rect(bbox: [f64; 4], width: u32, height: u32) -> Option<[usize; 4]> {
     let (w, h) = (width as f64, height as f64);
     if bbox[2] <= 0.0 || bbox[0] >= w {
         return None;

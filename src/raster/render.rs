@@ -21,7 +21,7 @@ impl Default for RenderOptions {
 }
 
 /// Rows per band: the unit of parallel work.
-pub const BAND_ROWS: usize = 16;
+pub(crate) const BAND_ROWS: usize = 16;
 
 /// Renders `scene` onto a transparent canvas. Pixel values are premultiplied `f32`; paints
 /// are evaluated at pixel centers and coverage is the exact area of each pixel square
@@ -50,14 +50,14 @@ pub fn render_prepared(p: &Prepared) -> Image {
 /// Renders the rows `y0 .. y0 + rows` of a prepared scene; shared with the backward pass,
 /// which replays a band to recover the intermediate layers.
 pub(crate) struct BandRenderer<'a> {
-    pub p: &'a Prepared,
-    pub y0: usize,
-    pub rows: usize,
-    pub acc: Cells<f32>,
+    pub(crate) p: &'a Prepared,
+    pub(crate) y0: usize,
+    pub(crate) rows: usize,
+    pub(crate) acc: Cells<f32>,
 }
 
 impl<'a> BandRenderer<'a> {
-    pub fn new(p: &'a Prepared, y0: usize, rows: usize) -> Self {
+    pub(crate) fn new(p: &'a Prepared, y0: usize, rows: usize) -> Self {
         BandRenderer {
             p,
             y0,
@@ -67,7 +67,7 @@ impl<'a> BandRenderer<'a> {
     }
 
     /// The whole band, as an [`Area`].
-    pub fn band_area(&self) -> Area {
+    pub(crate) fn band_area(&self) -> Area {
         Area {
             x0: 0,
             y0: self.y0,
@@ -78,7 +78,7 @@ impl<'a> BandRenderer<'a> {
 
     /// The part of this band a group's layer covers; `None` when the group draws nothing
     /// here (its ops can be skipped: compositing a transparent layer changes nothing).
-    pub fn layer_area(&self, span: &GroupSpan) -> Option<Area> {
+    pub(crate) fn layer_area(&self, span: &GroupSpan) -> Option<Area> {
         let r = span.rect?;
         let y0 = r[1].max(self.y0);
         let y1 = r[3].min(self.y0 + self.rows);
@@ -91,7 +91,7 @@ impl<'a> BandRenderer<'a> {
     }
 
     /// Runs the whole program onto `out` (`rows × width`, transparent or not).
-    pub fn run(&mut self, out: &mut [[f32; 4]]) {
+    pub(crate) fn run(&mut self, out: &mut [[f32; 4]]) {
         let base = self.band_area();
         // Open layers, each only as large as its group's content in this band.
         let mut layers: Vec<(Area, Vec<[f32; 4]>)> = Vec::new();
@@ -135,7 +135,7 @@ impl<'a> BandRenderer<'a> {
 
     /// Accumulates the winding integrals of `item` over the band into `self.acc`.
     /// Returns `false` when the item does not touch the band.
-    pub fn winding(&mut self, item: &Item) -> bool {
+    pub(crate) fn winding(&mut self, item: &Item) -> bool {
         let w = self.p.width as f64;
         let b = item.bbox;
         if b[2] <= 0.0 || b[0] >= w {
@@ -170,7 +170,7 @@ impl<'a> BandRenderer<'a> {
 
     /// Draws one item source-over onto `target`, a layer covering `area` (which holds
     /// every pixel the item touches in this band).
-    pub fn draw(&mut self, item: &Item, target: &mut [[f32; 4]], area: Area) {
+    pub(crate) fn draw(&mut self, item: &Item, target: &mut [[f32; 4]], area: Area) {
         if self.winding(item) {
             self.composite(item, target, area);
         }
@@ -178,7 +178,7 @@ impl<'a> BandRenderer<'a> {
 
     /// Composites `item` onto `target` (covering `area`) using the winding integrals in
     /// `self.acc`.
-    pub fn composite(&self, item: &Item, target: &mut [[f32; 4]], area: Area) {
+    pub(crate) fn composite(&self, item: &Item, target: &mut [[f32; 4]], area: Area) {
         let width = self.p.width as usize;
         let acc = &self.acc;
         let cols = acc.w.min(width - acc.x0 as usize);
@@ -203,22 +203,22 @@ impl<'a> BandRenderer<'a> {
 /// row-major: a band, or the part of a band a group's layer covers.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) struct Area {
-    pub x0: usize,
-    pub y0: usize,
-    pub w: usize,
-    pub h: usize,
+    pub(crate) x0: usize,
+    pub(crate) y0: usize,
+    pub(crate) w: usize,
+    pub(crate) h: usize,
 }
 
 impl Area {
     /// Index of pixel `(x, y)`, which must lie inside.
     #[inline]
-    pub fn index(&self, x: usize, y: usize) -> usize {
+    pub(crate) fn index(&self, x: usize, y: usize) -> usize {
         debug_assert!(x >= self.x0 && x < self.x0 + self.w && y >= self.y0 && y < self.y0 + self.h);
         (y - self.y0) * self.w + (x - self.x0)
     }
 
     /// Number of pixels.
-    pub fn len(&self) -> usize {
+    pub(crate) fn len(&self) -> usize {
         self.w * self.h
     }
 }

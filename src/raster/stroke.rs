@@ -26,13 +26,13 @@ use crate::scene::geom::dist;
 use crate::scene::{LineCap, LineJoin, Point};
 
 /// "No vertex" in a recipe slot.
-pub const NONE: u32 = u32::MAX;
+pub(crate) const NONE: u32 = u32::MAX;
 
 /// How an outline vertex is computed from centerline vertices `a`, `b`, `c` and the half
 /// width `h`. `side` is `+1` for the left of the direction of travel (normal
 /// `(−dy, dx)`), `−1` for the right.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Recipe {
+pub(crate) enum Recipe {
     /// Offset of chord `a → b` by `side·h·n`, at `b` when `end`, else at `a`.
     Offset {
         /// Chord start.
@@ -158,7 +158,7 @@ fn frame<S: Scalar>(a: V<S>, b: V<S>) -> (V<S>, V<S>) {
 
 impl Recipe {
     /// The vertices this recipe reads, `NONE` where unused: `(a, b, c)`.
-    pub fn inputs(&self) -> [u32; 3] {
+    pub(crate) fn inputs(&self) -> [u32; 3] {
         match *self {
             Recipe::Offset { a, b, .. } => [a, b, NONE],
             Recipe::Meet { a, b, c, .. }
@@ -171,7 +171,7 @@ impl Recipe {
 
     /// Evaluates the recipe on the points `pa`, `pb`, `pc` (unused ones are ignored) and
     /// half width `h`.
-    pub fn eval<S: Scalar>(&self, pa: V<S>, pb: V<S>, pc: V<S>, h: S) -> V<S> {
+    pub(crate) fn eval<S: Scalar>(&self, pa: V<S>, pb: V<S>, pc: V<S>, h: S) -> V<S> {
         match *self {
             Recipe::Offset { end, side, .. } => {
                 let (_, n) = frame(pa, pb);
@@ -244,7 +244,14 @@ impl Recipe {
 
     /// Vector-Jacobian product: given `g = ∂L/∂(outline vertex)`, returns `∂L/∂pa`,
     /// `∂L/∂pb`, `∂L/∂pc` and `∂L/∂h`.
-    pub fn vjp(&self, pa: Point, pb: Point, pc: Point, h: f64, g: Point) -> ([Point; 3], f64) {
+    pub(crate) fn vjp(
+        &self,
+        pa: Point,
+        pb: Point,
+        pc: Point,
+        h: f64,
+        g: Point,
+    ) -> ([Point; 3], f64) {
         let j = |p: Point, i: usize| [Jet::var(p[0], i), Jet::var(p[1], i + 1)];
         let out = self.eval(j(pa, 0), j(pb, 2), j(pc, 4), Jet::var(h, 6));
         let mut d = [0.0; 7];
@@ -257,28 +264,28 @@ impl Recipe {
 
 /// Stroke style in the stroke frame.
 #[derive(Clone, Copy, Debug)]
-pub struct Style {
+pub(crate) struct Style {
     /// Half the stroke width.
-    pub half_width: f64,
+    pub(crate) half_width: f64,
     /// Join.
-    pub join: LineJoin,
+    pub(crate) join: LineJoin,
     /// Cap.
-    pub cap: LineCap,
+    pub(crate) cap: LineCap,
     /// Miter limit.
-    pub miter_limit: f64,
+    pub(crate) miter_limit: f64,
     /// Chord tolerance for round joins and caps, in frame units.
-    pub tolerance: f64,
+    pub(crate) tolerance: f64,
     /// Whether to keep each vertex's [`Recipe`] (the backward pass needs them; a forward
     /// render does not, and they are most of an outline's memory).
-    pub keep_recipes: bool,
+    pub(crate) keep_recipes: bool,
     /// Whether to keep each vertex's position (the backward pass, which rebuilds an
     /// outline only for its recipes, does not need them).
-    pub keep_points: bool,
+    pub(crate) keep_points: bool,
 }
 
 impl Style {
     /// Chords of a round join or cap sweeping `angle` radians (1 to 256).
-    pub fn arc_steps(&self, angle: f64) -> usize {
+    pub(crate) fn arc_steps(&self, angle: f64) -> usize {
         let h = self.half_width;
         if h <= self.tolerance {
             return 1;
@@ -288,7 +295,7 @@ impl Style {
     }
 
     /// Vertices one end cap adds to an outline (0 for butt caps).
-    pub fn cap_vertices(&self) -> usize {
+    pub(crate) fn cap_vertices(&self) -> usize {
         match self.cap {
             LineCap::Butt => 0,
             LineCap::Square => 2,
@@ -299,13 +306,13 @@ impl Style {
 
 /// Outline rings: vertices with their recipes; ring `r` spans `rings[r]` as `(start, len)`.
 #[derive(Clone, Debug, Default)]
-pub struct Outline {
+pub(crate) struct Outline {
     /// Vertex positions (stroke frame); empty without [`Style::keep_points`].
-    pub pts: Vec<Point>,
+    pub(crate) pts: Vec<Point>,
     /// How each vertex was made; empty without [`Style::keep_recipes`].
-    pub recipes: Vec<Recipe>,
+    pub(crate) recipes: Vec<Recipe>,
     /// Closed rings as `(start, len)`.
-    pub rings: Vec<(usize, usize)>,
+    pub(crate) rings: Vec<(usize, usize)>,
 }
 
 struct Builder<'a> {
@@ -574,7 +581,12 @@ impl Builder<'_> {
 
 /// Builds the outline of the polylines `pts` (stroke frame) split into `contours`.
 /// `corner[i]` tells whether vertex `i` ends an original segment.
-pub fn outline(pts: &[Point], corner: &[bool], contours: &[Contour], style: Style) -> Outline {
+pub(crate) fn outline(
+    pts: &[Point],
+    corner: &[bool],
+    contours: &[Contour],
+    style: Style,
+) -> Outline {
     let mut b = Builder {
         count: 0,
         pts,

@@ -22,10 +22,12 @@ mod check;
 pub(crate) mod geom;
 pub mod params;
 pub mod random;
-pub mod svg_in;
-pub mod svg_out;
+pub(crate) mod svg_in;
+pub(crate) mod svg_out;
 
 pub use params::{ParamGroup, ParamLayout, ParamSlot};
+pub use svg_in::{Sizing, from_tree, parse_tree};
+pub use svg_out::escape;
 
 /// A 2D point or vector in device pixels.
 pub type Point = [f64; 2];
@@ -35,11 +37,11 @@ pub type Point = [f64; 2];
 pub type Affine = [f64; 6];
 
 /// The identity [`Affine`].
-pub const IDENTITY: Affine = [1.0, 0.0, 0.0, 1.0, 0.0, 0.0];
+pub(crate) const IDENTITY: Affine = [1.0, 0.0, 0.0, 1.0, 0.0, 0.0];
 
 /// Applies an affine transform to a point.
 #[inline]
-pub fn apply(t: &Affine, p: Point) -> Point {
+pub(crate) fn apply(t: &Affine, p: Point) -> Point {
     [
         t[0] * p[0] + t[2] * p[1] + t[4],
         t[1] * p[0] + t[3] * p[1] + t[5],
@@ -47,7 +49,7 @@ pub fn apply(t: &Affine, p: Point) -> Point {
 }
 
 /// Composes two transforms: the result applies `b` first, then `a`.
-pub fn concat(a: &Affine, b: &Affine) -> Affine {
+pub(crate) fn concat(a: &Affine, b: &Affine) -> Affine {
     [
         a[0] * b[0] + a[2] * b[1],
         a[1] * b[0] + a[3] * b[1],
@@ -59,7 +61,7 @@ pub fn concat(a: &Affine, b: &Affine) -> Affine {
 }
 
 /// Inverts an affine transform; `None` when it is singular or not finite.
-pub fn invert(t: &Affine) -> Option<Affine> {
+pub(crate) fn invert(t: &Affine) -> Option<Affine> {
     let det = t[0] * t[3] - t[1] * t[2];
     if !det.is_finite() || det.abs() < 1e-12 {
         return None;

@@ -424,7 +424,7 @@ pub fn written_point_gradient(path: &Path, point_grad: &[f64]) -> Vec<Point> {
 }
 
 /// `v` clamped to `[-bound, bound]`, NaN to 0.
-pub fn clamp_coordinate(v: &mut f64, bound: f64) {
+pub(crate) fn clamp_coordinate(v: &mut f64, bound: f64) {
     *v = if v.is_nan() {
         0.0
     } else {
@@ -434,7 +434,7 @@ pub fn clamp_coordinate(v: &mut f64, bound: f64) {
 
 /// Largest control-point magnitude for `p`, in device pixels: [`MAX_COORDINATE`](crate::limits::MAX_COORDINATE), divided
 /// by the row-sum norm of the inverse stroke frame when that frame magnifies.
-pub fn point_bound(p: &Path) -> f64 {
+pub(crate) fn point_bound(p: &Path) -> f64 {
     let frame = p
         .stroke
         .as_ref()
@@ -448,7 +448,7 @@ pub fn point_bound(p: &Path) -> f64 {
 }
 
 /// Clamps the control points of `p` into the readable range (see [`crate::optim::project`]).
-pub fn clamp_points(p: &mut Path) {
+pub(crate) fn clamp_points(p: &mut Path) {
     let bound = point_bound(p);
     for q in &mut p.points {
         clamp_coordinate(&mut q[0], bound);

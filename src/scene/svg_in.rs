@@ -1,6 +1,6 @@
 //! SVG in: usvg parses and simplifies, this module bakes transforms into device space.
 
-use std::path::{Path as FsPath, PathBuf};
+use std::path::Path as FsPath;
 
 use super::{
     Affine, FRAME_IDENTITY, Fill, FillRule, Gradient, GradientKind, Group, LineCap, LineJoin, Node,
@@ -9,7 +9,7 @@ use super::{
 use crate::error::{Error, Result};
 
 use crate::image_io::{gunzip_bounded, is_gzip, read_bounded};
-pub use crate::limits::MAX_SIDE;
+pub(crate) use crate::limits::MAX_SIDE;
 use crate::limits::{
     MAX_ARC_RADIUS, MAX_DECOMPRESSED_BYTES, MAX_FILE_BYTES, MAX_PIXELS, MAX_SELECTOR_WORK,
 };
@@ -356,7 +356,11 @@ impl Ctx<'_> {
 }
 
 /// Canvas size for `sizing` and the root transform from SVG user space to device pixels.
-pub fn canvas_size(tree: &usvg::Tree, sizing: Sizing, name: &FsPath) -> Result<(u32, u32, Affine)> {
+pub(crate) fn canvas_size(
+    tree: &usvg::Tree,
+    sizing: Sizing,
+    name: &FsPath,
+) -> Result<(u32, u32, Affine)> {
     let (w, h) = (tree.size().width() as f64, tree.size().height() as f64);
     let bad = |what: String| Error::InvalidValue {
         path: name.to_path_buf(),
@@ -624,11 +628,6 @@ fn convert_paint(paint: &usvg::Paint, t: &Affine, id: &str, ctx: &Ctx) -> Result
             return Err(ctx.unsupported(format!("pattern paint on path \"{id}\"")));
         }
     })
-}
-
-/// The file name used for SVG given as a string.
-pub fn string_name() -> PathBuf {
-    PathBuf::from("<string>")
 }
 
 #[cfg(test)]

@@ -19,7 +19,7 @@ use crate::error::{Error, Result};
 use crate::limits::MAX_COORDINATE;
 
 /// Formats a number with at most four decimals and no trailing zeros.
-pub fn num(v: f64) -> String {
+pub(crate) fn num(v: f64) -> String {
     let mut s = format!("{:.4}", v);
     if s.contains('.') {
         while s.ends_with('0') {
@@ -253,7 +253,7 @@ impl Writer {
 /// Absolute path data (`M`, `L`, `Q`, `C`, `Z`) for a path, after mapping by `t`.
 /// A segment is written as `L` (or `Q`) only when its control points still sit where an
 /// elevated line (or quadratic) puts them.
-pub fn path_data(p: &Path, t: &Affine) -> String {
+pub(crate) fn path_data(p: &Path, t: &Affine) -> String {
     let mut d = String::new();
     let pt = |q: [f64; 2]| {
         let q = apply(t, q);
@@ -382,7 +382,7 @@ pub(crate) const READ_SLACK: f64 = 1.0 + 1e-6;
 /// one accepts the other accepts. The error describes the first bad value and its element:
 /// `path "id": stroke width 1e38 is out of range (at most 1e30 in magnitude)`. Paths and
 /// groups without an id are named by their position (`path #3`, 1-based, document order).
-pub fn check_numbers(scene: &Scene) -> std::result::Result<(), String> {
+pub(crate) fn check_numbers(scene: &Scene) -> std::result::Result<(), String> {
     check_numbers_with(scene, 1.0)
 }
 

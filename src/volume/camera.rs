@@ -20,27 +20,27 @@ use rayon::prelude::*;
 use super::Ray;
 
 /// Largest tolerated `max |RᵀR − I|` entry for a pose's rotation part.
-pub const ORTHONORMAL_TOLERANCE: f64 = 1e-2;
+pub(crate) const ORTHONORMAL_TOLERANCE: f64 = 1e-2;
 
 /// Smallest focal length as a multiple of the image side it spans (`fx / width`,
 /// `fy / height`): a field of view of at most 2·atan(500) ≈ 179.8°.
-pub const MIN_FOCAL_RATIO: f64 = 1e-3;
+pub(crate) const MIN_FOCAL_RATIO: f64 = 1e-3;
 
 /// Largest focal length as a multiple of the image side it spans: a field of view of at
 /// least 2·atan(1/20000) = 10⁻⁴ rad (0.006°). Beyond it every ray of an image is the
 /// same ray in `f32`, and a model fitted to it is meaningless.
-pub const MAX_FOCAL_RATIO: f64 = 1e4;
+pub(crate) const MAX_FOCAL_RATIO: f64 = 1e4;
 
 /// Largest magnitude of the radial distortion coefficients `k1`, `k2` (real lenses stay
 /// well below 1; fisheye models are not supported).
-pub const MAX_RADIAL_DISTORTION: f64 = 10.0;
+pub(crate) const MAX_RADIAL_DISTORTION: f64 = 10.0;
 
 /// Largest magnitude of the tangential distortion coefficients `p1`, `p2`.
-pub const MAX_TANGENTIAL_DISTORTION: f64 = 1.0;
+pub(crate) const MAX_TANGENTIAL_DISTORTION: f64 = 1.0;
 
 /// The field-of-view range (radians) that [`MIN_FOCAL_RATIO`] and [`MAX_FOCAL_RATIO`]
 /// allow: `(smallest, largest)`.
-pub fn fov_range() -> (f64, f64) {
+pub(crate) fn fov_range() -> (f64, f64) {
     (
         2.0 * (0.5 / MAX_FOCAL_RATIO).atan(),
         2.0 * (0.5 / MIN_FOCAL_RATIO).atan(),
@@ -461,7 +461,7 @@ impl Camera {
 
 /// Focal length in pixels of a pinhole whose field of view across `size` pixels is `fov`
 /// radians: `size / (2 tan(fov / 2))`.
-pub fn focal_from_fov(size: f32, fov: f32) -> f32 {
+pub(crate) fn focal_from_fov(size: f32, fov: f32) -> f32 {
     (0.5 * size as f64 / (0.5 * fov as f64).tan()) as f32
 }
 
@@ -501,7 +501,7 @@ pub fn orbit(
 
 /// Checks that a camera-to-world pose is usable: finite entries, and a rotation part that
 /// is orthonormal (within [`ORTHONORMAL_TOLERANCE`]) with determinant +1.
-pub fn check_pose(c2w: &Affine3A) -> Result<(), CameraError> {
+pub(crate) fn check_pose(c2w: &Affine3A) -> Result<(), CameraError> {
     if !c2w.is_finite() {
         return Err(CameraError::NonFinite);
     }
@@ -527,7 +527,7 @@ pub fn check_pose(c2w: &Affine3A) -> Result<(), CameraError> {
 /// A camera-to-world pose from a row-major 3×4 or 4×4 matrix (as in `transforms.json`'s
 /// `transform_matrix`), validated with [`check_pose`]. The last row of a 4×4 matrix must
 /// be `0 0 0 1` (within 1e-4).
-pub fn pose_from_rows(rows: &[[f64; 4]]) -> Result<Affine3A, CameraError> {
+pub(crate) fn pose_from_rows(rows: &[[f64; 4]]) -> Result<Affine3A, CameraError> {
     if rows.len() != 3 && rows.len() != 4 {
         return Err(CameraError::Shape { rows: rows.len() });
     }

@@ -9,13 +9,13 @@ use rayon::prelude::*;
 use crate::metrics::psnr_from_mse;
 
 /// Side of the SSIM Gaussian window, pixels.
-pub const SSIM_WINDOW: usize = 11;
+pub(crate) const SSIM_WINDOW: usize = 11;
 /// Standard deviation of the SSIM Gaussian window, pixels.
-pub const SSIM_SIGMA: f64 = 1.5;
+pub(crate) const SSIM_SIGMA: f64 = 1.5;
 /// SSIM stabilizer `C1 = (0.01 · L)²` with dynamic range `L = 1`.
-pub const SSIM_C1: f64 = 0.01 * 0.01;
+pub(crate) const SSIM_C1: f64 = 0.01 * 0.01;
 /// SSIM stabilizer `C2 = (0.03 · L)²` with dynamic range `L = 1`.
-pub const SSIM_C2: f64 = 0.03 * 0.03;
+pub(crate) const SSIM_C2: f64 = 0.03 * 0.03;
 
 /// Mean squared error over all pixels and the three channels, in `[0, 1]²` units; `0` for
 /// empty images. Panics if the lengths differ.

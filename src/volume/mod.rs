@@ -13,7 +13,7 @@ pub mod metrics;
 
 pub use glam::Vec3;
 
-pub mod sh;
+pub(crate) mod sh;
 pub mod voxel;
 
 /// A ray `origin + t · dir`, `t ≥ 0`, with `dir` of unit length.

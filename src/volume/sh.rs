@@ -20,14 +20,14 @@
 use glam::Vec3;
 
 /// The highest supported degree.
-pub const MAX_DEGREE: u32 = 3;
+pub(crate) const MAX_DEGREE: u32 = 3;
 
 /// Number of basis functions (coefficients per color channel) of degree `degree`:
 /// `(degree + 1)²`, so 1, 4, 9 or 16.
 ///
 /// # Panics
 /// If `degree > MAX_DEGREE`.
-pub const fn coeff_count(degree: u32) -> usize {
+pub(crate) const fn coeff_count(degree: u32) -> usize {
     assert!(degree <= MAX_DEGREE, "spherical harmonics degree above 3");
     ((degree + 1) * (degree + 1)) as usize
 }
@@ -59,7 +59,7 @@ const C3: [f32; 7] = [
 ///
 /// # Panics
 /// If `degree > MAX_DEGREE`.
-pub fn basis(degree: u32, dir: Vec3) -> [f32; 16] {
+pub(crate) fn basis(degree: u32, dir: Vec3) -> [f32; 16] {
     assert!(degree <= MAX_DEGREE, "spherical harmonics degree above 3");
     let mut b = [0.0f32; 16];
     b[0] = C0;
@@ -98,7 +98,8 @@ pub fn basis(degree: u32, dir: Vec3) -> [f32; 16] {
 ///
 /// # Panics
 /// If `coeffs.len() != coeff_count(degree)`.
-pub fn eval(degree: u32, coeffs: &[f32], dir: Vec3) -> f32 {
+#[cfg(test)]
+pub(crate) fn eval(degree: u32, coeffs: &[f32], dir: Vec3) -> f32 {
     assert_eq!(coeffs.len(), coeff_count(degree), "coefficient count");
     let b = basis(degree, dir);
     coeffs.iter().zip(b.iter()).map(|(c, y)| c * y).sum()

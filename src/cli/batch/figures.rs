@@ -8,7 +8,7 @@ use super::jobfile::Job;
 use diffsvg::image_io::Image;
 use diffsvg::raster::{RenderOptions, render};
 use diffsvg::scene::Scene;
-use diffsvg::scene::svg_in::Sizing;
+use diffsvg::scene::Sizing;
 
 /// The thumbnail's file name inside a job folder.
 pub const THUMB: &str = "thumb.png";

@@ -8,7 +8,7 @@ use serde_json::json;
 use super::Shard;
 use super::runner::{Outcome, Status};
 use diffsvg::image_io::write_atomic;
-use diffsvg::scene::svg_out::escape as esc;
+use diffsvg::scene::escape as esc;
 
 /// Counts of a batch's outcomes.
 #[derive(Debug, Default, Clone, Copy)]

@@ -29,13 +29,13 @@ use crate::image_io::write_atomic;
 use crate::volume::sh;
 
 /// The first 8 bytes of a grid file.
-pub const MAGIC: [u8; 8] = *b"DSVOXGRD";
+pub(crate) const MAGIC: [u8; 8] = *b"DSVOXGRD";
 /// The format version written by [`save`] and the only one [`load`] reads.
-pub const VERSION: u32 = 1;
+pub(crate) const VERSION: u32 = 1;
 const HEADER: usize = 52;
 
 /// The file image of `grid` (see the module doc).
-pub fn to_bytes(grid: &Grid) -> Vec<u8> {
+pub(crate) fn to_bytes(grid: &Grid) -> Vec<u8> {
     let n = grid.allocated();
     let mut b = Vec::with_capacity(HEADER + 8 * n + 4 * grid.sh().len());
     b.extend_from_slice(&MAGIC);
@@ -71,7 +71,7 @@ pub fn load(path: impl AsRef<Path>) -> Result<Grid> {
 }
 
 /// Parses a file image; `path` only names the input in errors.
-pub fn from_bytes(b: &[u8], path: &Path) -> Result<Grid> {
+pub(crate) fn from_bytes(b: &[u8], path: &Path) -> Result<Grid> {
     let bad = |what: String| Error::InvalidValue {
         path: path.to_path_buf(),
         what,

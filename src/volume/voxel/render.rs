@@ -224,17 +224,17 @@ pub fn max_weights(grid: &Grid, rays: &[Ray], settings: &RenderSettings) -> Vec<
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct SampleRec {
     /// Corner slots (−1: unallocated).
-    pub slots: [i32; 8],
+    pub(crate) slots: [i32; 8],
     /// Trilinear weights of the corners.
-    pub w: [f32; 8],
+    pub(crate) w: [f32; 8],
     /// `T_k·α_k`.
-    pub weight: f32,
+    pub(crate) weight: f32,
     /// `T_{k+1}`.
-    pub t_after: f32,
+    pub(crate) t_after: f32,
     /// `σ_k`.
-    pub sigma: f32,
+    pub(crate) sigma: f32,
     /// The sample's color after the sigmoid.
-    pub c: [f32; 3],
+    pub(crate) c: [f32; 3],
 }
 
 /// A ray in grid space (vertex units) clipped to the box.
