@@ -7,8 +7,8 @@ use std::time::Instant;
 use anyhow::{Result, bail};
 
 use super::bench_fit::{SuiteArgs, suite_photo};
+use super::plot::{PlotSpec, Series, write_plot};
 use crate::Sizing;
-use crate::fit::plot::{PlotSpec, Series, write_plot};
 use crate::fit::trace::trace;
 use crate::fit::vectorize::{Mode, VectorizeOptions, VectorizeOutcome, vectorize};
 use crate::fit::{Control, FitOptions, refine};

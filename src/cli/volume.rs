@@ -10,8 +10,8 @@ use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
 
+use super::plot::{PlotSpec, Series, write_plot};
 use super::progress::{install_interrupt_handler, interrupted};
-use crate::fit::plot::{PlotSpec, Series, write_plot};
 use crate::image_io::{Image, contact_sheet, write_atomic};
 use crate::volume::camera::{Camera, orbit};
 use crate::volume::dataset::{Dataset, View};

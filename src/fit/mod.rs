@@ -3,7 +3,6 @@
 
 pub mod digit;
 pub mod glyph;
-pub mod plot;
 pub mod refine;
 pub mod shapes;
 pub mod trace;
