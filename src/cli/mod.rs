@@ -17,6 +17,7 @@ mod glyphs;
 mod grad;
 mod parity;
 mod perturb;
+mod plot;
 mod progress;
 mod render;
 mod util;

@@ -10,7 +10,7 @@ use serde_json::json;
 
 use super::choices::SplitArg;
 use super::progress::{install_interrupt_handler, interrupted};
-use diffsvg::fit::plot::{PlotSpec, Series, write_plot};
+use super::plot::{PlotSpec, Series, write_plot};
 use diffsvg::image_io::{Image, contact_sheet, write_atomic};
 use diffsvg::volume::camera::{Camera, orbit};
 use diffsvg::volume::dataset::{Dataset, View};

@@ -3,7 +3,6 @@
 
 pub mod digit;
 pub mod glyph;
-pub mod plot;
 pub(crate) mod refine;
 pub(crate) mod shapes;
 pub(crate) mod trace;
