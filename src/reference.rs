@@ -18,7 +18,7 @@ pub(crate) const RESVG_MAX_DEVICE_COORDINATE: f64 = 1.6e7;
 /// [`Scene::load`](crate::Scene::load) would size it for `sizing`.
 ///
 /// resvg is fed only what it accepts: a tree whose drawing reaches beyond
-/// [`RESVG_MAX_DEVICE_COORDINATE`] device pixels is refused before rendering, and a panic
+/// `RESVG_MAX_DEVICE_COORDINATE` device pixels is refused before rendering, and a panic
 /// inside resvg or tiny-skia is caught (its message silenced) and returned as an
 /// [`Error::Unsupported`] naming the file, "resvg cannot render this file: …".
 pub fn render_resvg(tree: &usvg::Tree, name: &Path, sizing: Sizing) -> Result<Image> {

@@ -7,8 +7,8 @@ use std::time::Instant;
 use anyhow::{Result, bail};
 
 use super::bench_fit::{SuiteArgs, suite_photo};
-use diffsvg::Sizing;
 use super::plot::{PlotSpec, Series, write_plot};
+use diffsvg::Sizing;
 use diffsvg::fit::trace;
 use diffsvg::fit::vectorize::{Mode, VectorizeOptions, VectorizeOutcome, vectorize};
 use diffsvg::fit::{Control, FitOptions, refine};

@@ -16,8 +16,8 @@ use plotters::coord::ranged1d::{AsRangedCoord, ValueFormatter};
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
-use diffsvg::{Error, Result};
 use diffsvg::image_io::{Image, write_atomic};
+use diffsvg::{Error, Result};
 
 /// One named curve: points `(x, y)` joined in the order given.
 #[derive(Clone, Debug, PartialEq)]
@@ -159,10 +159,7 @@ fn plot_svg(spec: &PlotSpec, series: &[Series]) -> Result<String, String> {
         root.present().map_err(|e| e.to_string())?;
     }
     if let Some(end) = out.find(">\n") {
-        let title = format!(
-            "<title>{}</title>\n",
-            diffsvg::scene::escape(&spec.title)
-        );
+        let title = format!("<title>{}</title>\n", diffsvg::scene::escape(&spec.title));
         out.insert_str(end + 2, &title);
     }
     Ok(out)

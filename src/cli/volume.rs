@@ -9,8 +9,8 @@ use anyhow::{Context, Result, bail};
 use serde_json::json;
 
 use super::choices::SplitArg;
-use super::progress::{install_interrupt_handler, interrupted};
 use super::plot::{PlotSpec, Series, write_plot};
+use super::progress::{install_interrupt_handler, interrupted};
 use diffsvg::image_io::{Image, contact_sheet, write_atomic};
 use diffsvg::volume::camera::{Camera, orbit};
 use diffsvg::volume::dataset::{Dataset, View};

@@ -9,7 +9,7 @@
 //!
 //! Each contour starts with few cubic segments: joints at the corners of the traced
 //! boundary (where it turns by more than [`GlyphOptions::corner_degrees`] within
-//! [`CORNER_REACH`] pixels either side), at least [`GlyphOptions::initial_segments`]
+//! `CORNER_REACH` pixels either side), at least [`GlyphOptions::initial_segments`]
 //! stretches spread evenly by arc length between them, and each stretch fitted by
 //! Schneider's method (handles along the boundary's tangents, lengths by least squares)
 //! and split at its worst point while it strays more than
@@ -18,7 +18,7 @@
 //!
 //! 1. **Refine.** [`refine`] moves every control point (Adam, cosine schedule, exact
 //!    gradients of the MSE between the path's coverage and the ink; the color stays
-//!    black). Every [`CHECK_EVERY`] steps the **IoU** of the inked areas (coverage ≥ ½ in
+//!    black). Every `CHECK_EVERY` steps the **IoU** of the inked areas (coverage ≥ ½ in
 //!    both) is measured, on the coordinates as the SVG file will hold them, and the round
 //!    stops as soon as it reaches the goal.
 //! 2. **Grow.** Short of the goal, each pixel's squared coverage error is charged to the
@@ -55,7 +55,7 @@ pub struct GlyphOptions {
     /// Fewest segments a contour starts with.
     pub initial_segments: usize,
     /// A boundary point is a corner when the boundary turns by more than this many
-    /// degrees within [`CORNER_REACH`] pixels on either side.
+    /// degrees within `CORNER_REACH` pixels on either side.
     pub corner_degrees: f64,
     /// Largest distance, pixels, of the initial cubics from the traced boundary: a
     /// stretch that does not fit within it is split at its worst point.

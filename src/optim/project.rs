@@ -12,7 +12,7 @@ use crate::scene::{GradientKind, Node, Paint, Scene};
 /// coordinates the SVG writer puts in that frame stay within it too. NaN values become 0.
 ///
 /// So however large a step the optimizer takes, the scene can be written and read back
-/// (see [`check_numbers`](crate::scene::svg_out::check_numbers)).
+/// (see `check_numbers`).
 pub fn project(scene: &mut Scene) {
     project_nodes(&mut scene.nodes);
 }

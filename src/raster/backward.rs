@@ -154,7 +154,7 @@ pub(crate) fn backward_prepared(scene: &Scene, p: &Prepared, d_image: &Image) ->
     backward_with_stats(scene, p, d_image).0
 }
 
-/// [`backward_prepared`], also reporting memory use.
+/// `backward_prepared`, also reporting memory use.
 pub fn backward_with_stats(
     scene: &Scene,
     p: &Prepared,

@@ -1,9 +1,9 @@
 //! The analytic-coverage rasterizer.
 //!
-//! A [`Scene`](crate::scene::Scene) is first [prepared](prepare::prepare): every path is
-//! flattened at a tolerance, strokes become filled outline rings ([`stroke`]), dashes are
-//! cut ([`dash`]) and paints are readied for evaluation ([`paint`]). [`render`] then
-//! accumulates exact-area coverage ([`coverage`]) row band by row band in parallel,
+//! A [`Scene`](crate::scene::Scene) is first prepared: every path is
+//! flattened at a tolerance, strokes become filled outline rings (`stroke`), dashes are
+//! cut (`dash`) and paints are readied for evaluation (`paint`). [`render`] then
+//! accumulates exact-area coverage (`coverage`) row band by row band in parallel,
 //! evaluates paints at pixel centers and composites source-over in premultiplied `f32`.
 //! Bands are independent and each is processed in a fixed order, so the result has the
 //! same bits for any number of threads.

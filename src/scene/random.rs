@@ -64,7 +64,7 @@ pub fn curved_paths(n: usize, size: u32, seed: u64) -> Scene {
 /// and y, and every color channel (solid and stop colors) shifted by up to `max_color`
 /// (then clamped to `[0, 1]`), uniformly at random. Used to test that refinement recovers.
 /// Moved points are kept within the readable range (±[`MAX_COORDINATE`] device pixels, see
-/// [`super::params::clamp_points`]), so the copy can always be written and read
+/// `super::params::clamp_points`), so the copy can always be written and read
 /// back.
 ///
 /// [`MAX_COORDINATE`]: crate::limits::MAX_COORDINATE

@@ -405,7 +405,7 @@ pub(crate) fn canvas_size(
 /// Converts a parsed usvg tree into a [`Scene`] of the requested size.
 ///
 /// Every converted number (resolved by usvg, so CSS and inheritance count) is checked
-/// once, in device pixels, by [`check_numbers`](super::svg_out::check_numbers): finite and
+/// once, in device pixels, by `check_numbers`: finite and
 /// within [`MAX_COORDINATE`](crate::limits::MAX_COORDINATE), the same rule the writer
 /// applies.
 pub fn from_tree(tree: &usvg::Tree, name: &FsPath, sizing: Sizing) -> Result<Scene> {

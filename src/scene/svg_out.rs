@@ -356,7 +356,7 @@ impl Scene {
     /// Writes the scene as an SVG file, atomically (temporary file, then rename).
     ///
     /// A scene holding a number that is not finite or beyond [`MAX_COORDINATE`] (see
-    /// [`check_numbers`]) is refused with an error naming `path` and the value, and nothing
+    /// `check_numbers`) is refused with an error naming `path` and the value, and nothing
     /// is written: diffsvg never writes an SVG that it refuses to read.
     pub fn save_svg(&self, path: impl AsRef<FsPath>) -> Result<()> {
         let path = path.as_ref();

@@ -5,7 +5,7 @@
 //!
 //! * **Pose**: `c2w` maps camera coordinates to world coordinates (world units of the
 //!   dataset). Camera axes follow OpenGL/Blender: +X right, +Y up, looking down −Z. The
-//!   rotation part must be orthonormal with determinant +1 ([`check_pose`]).
+//!   rotation part must be orthonormal with determinant +1 (`check_pose`).
 //! * **Pixels**: image x right, y down; pixel `(x, y)` covers `[x, x+1] × [y, y+1]` and
 //!   its center is `(u, v) = (x + 0.5, y + 0.5)`. Intrinsics `fx, fy, cx, cy` are in
 //!   pixels of this image.
@@ -179,11 +179,11 @@ impl Camera {
         self
     }
 
-    /// Checks the size (non-zero), focal lengths (finite, between [`MIN_FOCAL_RATIO`] and
-    /// [`MAX_FOCAL_RATIO`] times the image side), principal point (finite), distortion
-    /// (within [`MAX_RADIAL_DISTORTION`] and [`MAX_TANGENTIAL_DISTORTION`], and radially
+    /// Checks the size (non-zero), focal lengths (finite, between `MIN_FOCAL_RATIO` and
+    /// `MAX_FOCAL_RATIO` times the image side), principal point (finite), distortion
+    /// (within `MAX_RADIAL_DISTORTION` and `MAX_TANGENTIAL_DISTORTION`, and radially
     /// one-to-one out to the image's corners, so that every pixel has one ray) and the
-    /// pose ([`check_pose`]).
+    /// pose (`check_pose`).
     pub fn validate(&self) -> Result<(), CameraError> {
         if self.width == 0 || self.height == 0 {
             return Err(CameraError::Intrinsics(format!(

@@ -33,7 +33,7 @@
 //! [`limits::MAX_IMAGE_PIXELS`](crate::limits::MAX_IMAGE_PIXELS), and all images together,
 //! after downscaling, within [`MAX_DATASET_PIXELS`], before any is decoded. Intrinsics must
 //! describe a usable camera ([`Camera::validate`]): a field of view within
-//! [`camera::fov_range`](super::camera::fov_range), bounded one-to-one distortion.
+//! `camera::fov_range`, bounded one-to-one distortion.
 
 use std::path::{Path, PathBuf};
 

@@ -33,7 +33,7 @@ pub(crate) const BLOCK: u32 = 4;
 /// `σ = max(raw, 0)` (ReLU after interpolation) in units of 1 / world length, so a
 /// segment of length `δ` has opacity `1 − exp(−σ·δ)`. `sh()[slot·3K .. (slot + 1)·3K]`
 /// holds `K = coeff_count(degree)` coefficients for red, then green, then blue; a channel's
-/// color is `sigmoid(Σ_k c_k · Y_k(dir))` with `Y_k` from [`crate::volume::sh::basis`] and
+/// color is `sigmoid(Σ_k c_k · Y_k(dir))` with `Y_k` from `crate::volume::sh::basis` and
 /// `dir` the ray's unit direction (the direction of travel, from camera to scene).
 #[derive(Clone, Debug)]
 pub struct Grid {
