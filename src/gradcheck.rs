@@ -1,4 +1,16 @@
 //! Checking analytic gradients against central finite differences.
+//!
+//! ```
+//! use diffsvg::{Image, Scene, Sizing, gradcheck, loss::Loss, raster::RenderOptions};
+//! let svg = r#"<svg xmlns="http://www.w3.org/2000/svg" width="16" height="16">
+//!   <rect x="4" y="4" width="8" height="8" fill="crimson"/></svg>"#;
+//! let scene = Scene::from_svg_str(svg, "square.svg", Sizing::Natural)?;
+//! let target = Image::filled(16, 16, [0.0, 0.0, 1.0, 1.0]);
+//! let (_analytic, _numeric, groups) =
+//!     gradcheck::check(&scene, &target, Loss::Mse, &RenderOptions::default(), None, None);
+//! assert!(groups.iter().all(|g| g.passes(gradcheck::DEFAULT_TOLERANCE)));
+//! # Ok::<(), diffsvg::Error>(())
+//! ```
 
 use crate::image_io::Image;
 use crate::loss::Loss;

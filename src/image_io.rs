@@ -3,6 +3,17 @@
 //! In memory an [`Image`] holds **premultiplied** RGBA `f32` in `[0, 1]`, sRGB values (no
 //! linearization, as browsers and resvg composite), row-major, y down. Files hold straight
 //! (not premultiplied) 8-bit RGBA or RGB: PNG and JPEG are read, PNG is written.
+//!
+//! ```
+//! use diffsvg::Image;
+//! let red = Image::filled(4, 3, [0.5, 0.0, 0.0, 0.5]); // 50% red, premultiplied
+//! assert_eq!(red.to_rgba8()[..4], [255, 0, 0, 128]);   // straight in files
+//! let path = std::env::temp_dir().join("diffsvg-doc-image.png");
+//! red.save_png(&path)?;
+//! let back = Image::load(&path)?;
+//! assert_eq!((back.width, back.height), (4, 3));
+//! # Ok::<(), diffsvg::Error>(())
+//! ```
 
 use std::io::{Read as _, Write as _};
 use std::path::Path;

@@ -5,6 +5,16 @@
 //! Past a limit the input is refused with an error naming the file and the limit, except
 //! where a fallback is documented (dashes). `docs/limits.md` lists them with what each
 //! costs; a test beside each check feeds it the case that used to break.
+//!
+//! ```
+//! use diffsvg::{Scene, Sizing, limits};
+//! let huge = format!(
+//!     r#"<svg xmlns="http://www.w3.org/2000/svg" width="{0}" height="{0}"/>"#,
+//!     limits::MAX_SIDE + 1
+//! );
+//! let err = Scene::from_svg_str(&huge, "huge.svg", Sizing::Natural).unwrap_err();
+//! assert!(err.to_string().starts_with("huge.svg"));
+//! ```
 
 /// Largest canvas side, in pixels (rendered scenes and targets).
 pub const MAX_SIDE: u32 = 16384;

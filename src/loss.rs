@@ -1,4 +1,14 @@
 //! Image losses over premultiplied RGBA in `[0, 1]`: the mean over pixels and channels.
+//!
+//! ```
+//! use diffsvg::{Image, loss::Loss};
+//! let a = Image::filled(2, 2, [1.0, 0.0, 0.0, 1.0]);
+//! let b = Image::filled(2, 2, [0.5, 0.0, 0.0, 1.0]);
+//! // (0.5)² in one channel of four: 0.0625.
+//! assert_eq!(Loss::Mse.value(&a, &b), 0.0625);
+//! let (_, d) = Loss::Mse.grad(&a, &b); // ∂L/∂a, the image's layout
+//! assert_eq!(d.get(0, 0)[0], 2.0 * 0.5 / 16.0);
+//! ```
 
 use crate::image_io::Image;
 

@@ -1,4 +1,15 @@
 //! Image comparison metrics on premultiplied RGBA.
+//!
+//! ```
+//! use diffsvg::{Image, metrics};
+//! let a = Image::filled(8, 8, [1.0, 1.0, 1.0, 1.0]);
+//! let mut b = a.clone();
+//! b.data[0] = [0.0, 1.0, 1.0, 1.0];
+//! let c = metrics::compare(&a, &b);
+//! assert_eq!(c.max, 255.0);
+//! assert!((c.psnr - 10.0 * 256f64.log10()).abs() < 1e-9); // one channel of 256 off by 1
+//! assert!((metrics::psnr_from_mse(0.01) - 20.0).abs() < 1e-12);
+//! ```
 
 use crate::image_io::Image;
 

@@ -4,6 +4,18 @@
 //! byte), the number of dimensions, then one `u32` per dimension — followed by the data in
 //! row-major order. Image files have three dimensions (count, rows, columns; pixel 0 is
 //! background, 255 full ink), label files one (count; labels 0–9).
+//!
+//! ```
+//! // A file of two 2 × 3 images: magic, count, rows, columns, then the pixels.
+//! let mut idx = vec![0, 0, 0x08, 3, 0, 0, 0, 2, 0, 0, 0, 2, 0, 0, 0, 3];
+//! idx.extend([0, 255, 0, 0, 255, 0, 9, 9, 9, 9, 9, 9]);
+//! let path = std::env::temp_dir().join("diffsvg-doc.idx");
+//! std::fs::write(&path, &idx)?;
+//! let images = diffsvg::mnist::read_images(&path)?;
+//! assert_eq!((images.len(), images.rows, images.cols), (2, 2, 3));
+//! assert_eq!(images.get(0)[1], 1.0); // intensities in [0, 1]
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 
 use std::io::Read;
 use std::path::Path;

@@ -1,4 +1,16 @@
 //! resvg as the reference renderer: the forward pixels diffsvg is measured against.
+//!
+//! ```
+//! use diffsvg::{Scene, Sizing, metrics, raster, reference, scene};
+//! let svg = br#"<svg xmlns="http://www.w3.org/2000/svg" width="16" height="16">
+//!   <circle cx="8" cy="8" r="5" fill="teal"/></svg>"#;
+//! let name = std::path::Path::new("circle.svg");
+//! let tree = scene::parse_tree(svg, name)?;
+//! let theirs = reference::render_resvg(&tree, name, Sizing::Natural)?;
+//! let ours = raster::render(&scene::from_tree(&tree, name, Sizing::Natural)?, &Default::default());
+//! assert!(metrics::compare(&ours.quantized(), &theirs).mae < reference::PARITY_MAE);
+//! # Ok::<(), diffsvg::Error>(())
+//! ```
 
 use std::path::Path;
 

@@ -17,6 +17,20 @@
 //!   with opacity < 1 is composited as one layer, like resvg.
 //!
 //! The flat parameter vector that the optimizer moves is described in [`params`].
+//!
+//! ```
+//! use diffsvg::{Scene, Sizing};
+//! let svg = r#"<svg xmlns="http://www.w3.org/2000/svg" width="16" height="16">
+//!   <rect x="4" y="4" width="8" height="8" fill="crimson"/></svg>"#;
+//! let scene = Scene::from_svg_str(svg, "square.svg", Sizing::Natural)?;
+//! assert_eq!((scene.width, scene.height, scene.path_count()), (16, 16, 1));
+//! let mut params = scene.params(); // points, then fill color and opacity
+//! params[0] += 1.0;                // move the first control point right by a pixel
+//! let mut moved = scene.clone();
+//! moved.set_params(&params);
+//! assert!(moved.to_svg_string().contains("<path"));
+//! # Ok::<(), diffsvg::Error>(())
+//! ```
 
 mod check;
 pub(crate) mod geom;

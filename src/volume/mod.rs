@@ -6,6 +6,17 @@
 //! OpenGL/Blender (camera +X right, +Y up, looking down −Z); images are row-major with
 //! y down and pixel `(x, y)` centered at `(x + 0.5, y + 0.5)`; colors are linear-in-file
 //! RGB in `[0, 1]` (no gamma handling), already composited over the background.
+//!
+//! ```
+//! use diffsvg::volume::camera::Camera;
+//! use glam::{Affine3A, Vec3};
+//! // A 4 × 3 camera at z = 2 looking down −z, 90° across.
+//! let pose = Affine3A::from_translation(Vec3::new(0.0, 0.0, 2.0));
+//! let cam = Camera::from_fov_x(4, 3, std::f32::consts::FRAC_PI_2, pose).unwrap();
+//! let rays = cam.rays(); // one per pixel, row-major, through pixel centers
+//! assert_eq!(rays.len(), 12);
+//! assert!(rays.iter().all(|r| r.dir.z < 0.0 && (r.dir.length() - 1.0).abs() < 1e-6));
+//! ```
 
 pub mod camera;
 pub mod dataset;
