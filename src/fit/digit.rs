@@ -167,7 +167,7 @@ pub fn intensities(scene: &Scene, w: usize, h: usize) -> Vec<f32> {
 }
 
 /// Mean squared error of two intensity lists.
-pub fn mse(a: &[f32], b: &[f32]) -> f64 {
+pub(crate) fn mse(a: &[f32], b: &[f32]) -> f64 {
     let s: f64 = a.iter().zip(b).map(|(x, y)| ((x - y) as f64).powi(2)).sum();
     s / a.len().max(1) as f64
 }

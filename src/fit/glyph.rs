@@ -146,7 +146,7 @@ const MIN_AREA: f64 = 2.0;
 
 /// Ink coverage of every pixel of `img` (premultiplied, row-major): `1 − mean(R, G, B)` of
 /// the image composited over white, in `[0, 1]`.
-pub fn ink(img: &Image) -> Vec<f32> {
+pub(crate) fn ink(img: &Image) -> Vec<f32> {
     img.data
         .iter()
         .map(|p| {

@@ -1,7 +1,7 @@
 //! The flat parameter vector of a scene.
 //!
 //! Every number the optimizer may move is one `f64` slot. The order is fixed by a single
-//! walk over the scene ([`walk`]) so that parameters, gradients and learning rates line up:
+//! walk over the scene (`walk`) so that parameters, gradients and learning rates line up:
 //!
 //! * nodes in paint order, depth first; a [`Group`](super::Group) contributes its opacity;
 //! * per path: all control points (`x, y` per point, in [`Path::points`] order), then the
@@ -116,7 +116,7 @@ pub struct ParamLayout {
 
 /// What a slot visited by [`walk`] is.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Part {
+pub(crate) enum Part {
     /// Opacity of group number `.0` (walk order).
     GroupOpacity(usize),
     /// First coordinate of path `.0`'s control points.
@@ -141,7 +141,7 @@ pub enum Part {
 
 /// Visits every parameter of `scene` in the canonical order. `f` receives the owner index
 /// (into [`ParamLayout::owners`]), the group, what the slot is, and the value.
-pub fn walk(scene: &mut Scene, f: &mut dyn FnMut(usize, ParamGroup, Part, &mut f64)) {
+pub(crate) fn walk(scene: &mut Scene, f: &mut dyn FnMut(usize, ParamGroup, Part, &mut f64)) {
     let mut owner = 0usize;
     let mut path_ix = 0usize;
     let mut group_ix = 0usize;
@@ -342,7 +342,7 @@ fn collect_owners(nodes: &[Node], out: &mut Vec<Owner>) {
 }
 
 impl Scene {
-    /// The parameter vector, in the order of [`walk`].
+    /// The parameter vector, in the canonical order (module docs).
     pub fn params(&self) -> Vec<f64> {
         let mut out = Vec::new();
         let mut s = self.clone();

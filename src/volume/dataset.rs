@@ -132,7 +132,7 @@ impl Dataset {
 }
 
 /// Every `HOLDOUT`-th present frame of an instant-ngp dataset is a test view.
-pub const HOLDOUT: usize = 8;
+pub(crate) const HOLDOUT: usize = 8;
 
 /// Loads a NeRF-synthetic or instant-ngp folder (see the module documentation), with
 /// images and cameras downscaled by the integer `downscale ≥ 1`.
