@@ -369,6 +369,8 @@ fn thin(mask: &[bool], w: usize, h: usize) -> Vec<bool> {
                     let b = n.iter().filter(|&&v| v).count();
                     let a = (0..8).filter(|&i| !n[i] && n[(i + 1) % 8]).count();
                     let (p2, p4, p6, p8) = (n[0], n[2], n[4], n[6]);
+                    // Zhang and Suen's two sub-iteration conditions, as the paper writes them.
+                    #[allow(clippy::nonminimal_bool)]
                     let ok = if pass == 0 {
                         !(p2 && p4 && p6) && !(p4 && p6 && p8)
                     } else {

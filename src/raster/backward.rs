@@ -455,16 +455,18 @@ fn band_backward(p: &Prepared, y0: usize, rows: usize, d_out: &[[f32; 4]]) -> Ba
         i += 1;
     }
     // 2. Reverse walk with ∂L/∂(current layer).
-    let mut out = BandGrads::default();
-    out.tape_bytes = tape
-        .iter()
-        .map(|r| match r {
-            Rec::Draw { cells, .. } => cells.len() * std::mem::size_of::<TapeCell>(),
-            Rec::Push => 0,
-            Rec::Pop { top, below, .. } => (top.len() + below.len()) * 16,
-        })
-        .sum::<usize>()
-        + 2 * d_out.len() * 16;
+    let mut out = BandGrads {
+        tape_bytes: tape
+            .iter()
+            .map(|r| match r {
+                Rec::Draw { cells, .. } => cells.len() * std::mem::size_of::<TapeCell>(),
+                Rec::Push => 0,
+                Rec::Pop { top, below, .. } => (top.len() + below.len()) * 16,
+            })
+            .sum::<usize>()
+            + 2 * d_out.len() * 16,
+        ..BandGrads::default()
+    };
     drop(base);
     let mut g_stack: Vec<(Area, Vec<[f32; 4]>)> = vec![(base_area, d_out.to_vec())];
     let mut gw = Cells::<[f32; 2]>::default();

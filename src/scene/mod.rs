@@ -101,6 +101,8 @@ pub struct Scene {
 
 /// One node of the scene tree.
 #[derive(Clone, Debug, PartialEq)]
+// Paths are the common node and are walked in every hot loop: kept inline, not boxed.
+#[allow(clippy::large_enum_variant)]
 pub enum Node {
     /// A filled and/or stroked path.
     Path(Path),

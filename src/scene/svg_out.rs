@@ -555,7 +555,7 @@ mod tests {
         assert_eq!(num(1.0), "1");
         assert_eq!(num(-0.00001), "0");
         assert_eq!(num(2.50004), "2.5");
-        assert_eq!(num(-3.14159), "-3.1416");
+        assert_eq!(num(-1.23456), "-1.2346");
     }
 
     #[test]
@@ -583,7 +583,8 @@ mod tests {
             <path id="p" d="M1 1 L5 1 L5 5 Z" fill="#ff0000" stroke="#000000"/></svg>"##;
         let good = Scene::from_svg_str(svg, "t.svg", Sizing::Natural).unwrap();
         let f = dir.join("out.svg");
-        let cases: [(&str, fn(&mut Path)); 4] = [
+        type Break = fn(&mut Path);
+        let cases: [(&str, Break); 4] = [
             ("coordinate 1e306 px", |p| p.points[1][0] = 1e306),
             ("coordinate is NaN", |p| p.points[0][1] = f64::NAN),
             ("stroke width 1e31 px", |p| {
