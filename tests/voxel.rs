@@ -6,9 +6,10 @@
 
 use std::time::Instant;
 
+use diffsvg::optim::Rule;
 use diffsvg::volume::voxel::{
-    Grads, Grid, Optimizer, RenderSettings, TrainOptions, load, max_weights, ray_backward,
-    render_ray, render_rays, save, train,
+    Grads, Grid, RenderSettings, TrainOptions, load, max_weights, ray_backward, render_ray,
+    render_rays, save, train,
 };
 use diffsvg::volume::{Ray, Vec3};
 
@@ -555,7 +556,7 @@ fn training_rejects_bad_input_with_reasons() {
         .to_string();
     assert!(err.contains("color 0 is not finite"), "{err}");
     let bad = TrainOptions {
-        density_optimizer: Optimizer::Adam {
+        density_optimizer: Rule::Adam {
             beta1: 1.0,
             beta2: 0.99,
             eps: 1e-8,

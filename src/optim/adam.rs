@@ -1,5 +1,8 @@
-//! Adam with bias correction, one learning rate per parameter slot.
+//! The 2D fitter's optimizer: Adam with bias correction in `f64`, one learning rate per
+//! parameter slot from per-group rates.
 
+use super::moments::Moments;
+use super::rule::Rule;
 use crate::scene::{Paint, ParamGroup, ParamLayout, Scene};
 
 /// Adam's constants.
@@ -11,6 +14,16 @@ pub struct AdamConfig {
     pub beta2: f64,
     /// Added to `√v̂` to keep steps finite.
     pub eps: f64,
+}
+
+impl From<AdamConfig> for Rule<f64> {
+    fn from(c: AdamConfig) -> Self {
+        Rule::Adam {
+            beta1: c.beta1,
+            beta2: c.beta2,
+            eps: c.eps,
+        }
+    }
 }
 
 impl Default for AdamConfig {
@@ -123,59 +136,32 @@ impl LearningRates {
     }
 }
 
-/// Adam's state for a parameter vector of fixed length.
+/// Adam's state for a parameter vector of fixed length: [`Moments`] with the rule
+/// [`Rule::Adam`] in `f64`, stepped densely.
 #[derive(Clone, Debug)]
 pub struct Adam {
-    config: AdamConfig,
-    m: Vec<f64>,
-    v: Vec<f64>,
-    t: i32,
+    moments: Moments<f64>,
 }
 
 impl Adam {
     /// Fresh state (zero moments) for `len` parameters.
     pub fn new(len: usize, config: AdamConfig) -> Self {
         Adam {
-            config,
-            m: vec![0.0; len],
-            v: vec![0.0; len],
-            t: 0,
+            moments: Moments::new(config.into(), len),
         }
     }
 
     /// Steps taken so far.
     pub fn steps(&self) -> i32 {
-        self.t
+        self.moments.steps()
     }
 
     /// One bias-corrected step: `params[i] -= lr[i] · m̂ᵢ / (√v̂ᵢ + ε)`, every rate multiplied
     /// by `scale` (the schedule). A non-finite gradient entry counts as 0, so one bad pixel
     /// cannot poison the state; slots with rate 0 do not move. Returns how many gradient
-    /// entries were not finite.
+    /// entries were not finite. (See [`Moments::step`].)
     pub fn step(&mut self, params: &mut [f64], grads: &[f64], lr: &[f64], scale: f64) -> usize {
-        assert_eq!(params.len(), self.m.len(), "parameter count changed");
-        assert_eq!(grads.len(), params.len(), "gradient length mismatch");
-        assert_eq!(lr.len(), params.len(), "learning-rate length mismatch");
-        let AdamConfig { beta1, beta2, eps } = self.config;
-        self.t += 1;
-        let c1 = 1.0 - beta1.powi(self.t);
-        let c2 = 1.0 - beta2.powi(self.t);
-        let mut bad = 0;
-        for i in 0..params.len() {
-            let g = if grads[i].is_finite() {
-                grads[i]
-            } else {
-                bad += 1;
-                0.0
-            };
-            self.m[i] = beta1 * self.m[i] + (1.0 - beta1) * g;
-            self.v[i] = beta2 * self.v[i] + (1.0 - beta2) * g * g;
-            let rate = lr[i] * scale;
-            if rate != 0.0 {
-                params[i] -= rate * (self.m[i] / c1) / ((self.v[i] / c2).sqrt() + eps);
-            }
-        }
-        bad
+        self.moments.step(params, grads, lr, scale)
     }
 }
 

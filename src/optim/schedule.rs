@@ -1,6 +1,15 @@
-//! Learning-rate schedules: a factor in `[0, 1]` applied to every rate.
+//! Learning-rate schedules: how rates change over a run.
+//!
+//! * [`Schedule`]: a factor in `[0, 1]` applied to every rate (the 2D fitter's
+//!   `--schedule`).
+//! * [`exponential`]: a rate going from a start to an end value geometrically (the voxel
+//!   trainer's, one `[start, end]` pair per parameter group).
+//!
+//! Both take the run's progress, [`progress`]: 0 at the first step, 1 at the last.
 
 use std::str::FromStr;
+
+use num_traits::Float;
 
 /// How learning rates change over a run of `total` steps.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -20,11 +29,7 @@ const FLOOR: f64 = 0.05;
 impl Schedule {
     /// The factor for step `step` (0-based) of `total`.
     pub fn factor(self, step: usize, total: usize) -> f64 {
-        let t = if total <= 1 {
-            0.0
-        } else {
-            (step.min(total - 1)) as f64 / (total - 1) as f64
-        };
+        let t: f64 = progress(step, total);
         match self {
             Schedule::Constant => 1.0,
             Schedule::Cosine => {
@@ -32,6 +37,30 @@ impl Schedule {
             }
             Schedule::Linear => 1.0 - (1.0 - FLOOR) * t,
         }
+    }
+}
+
+/// The fraction of a run of `total` steps done at step `step` (0-based):
+/// `step / (total − 1)`, clamped to 1 past the last step, and 0 for runs of at most one
+/// step.
+pub fn progress<T: Float>(step: usize, total: usize) -> T {
+    if total <= 1 {
+        T::zero()
+    } else {
+        let at = T::from(step.min(total - 1)).expect("a count converts to a float");
+        at / T::from(total - 1).expect("a count converts to a float")
+    }
+}
+
+/// The rate at progress `frac` (in `[0, 1]`) of a run going from `start` to `end`
+/// geometrically: `start·(end / start)^frac`, so it falls by the same factor every step.
+/// When either end is not positive (a rate of 0 at the end, say) it goes in a straight line
+/// instead, `start + (end − start)·frac`. Rates are in whatever units the caller uses.
+pub fn exponential<T: Float>([start, end]: [T; 2], frac: T) -> T {
+    if start > T::zero() && end > T::zero() {
+        start * (end / start).powf(frac)
+    } else {
+        start + (end - start) * frac
     }
 }
 
@@ -65,5 +94,24 @@ mod tests {
         assert_eq!(Schedule::Cosine.factor(0, 1), 1.0);
         assert_eq!("cos".parse::<Schedule>(), Ok(Schedule::Cosine));
         assert!("step".parse::<Schedule>().is_err());
+    }
+
+    #[test]
+    fn learning_rates_decay_exponentially() {
+        assert_eq!(exponential([1.0f32, 0.01], 0.0), 1.0);
+        assert!((exponential([1.0f32, 0.01], 0.5) - 0.1).abs() < 1e-6);
+        assert!((exponential([1.0f32, 0.01], 1.0) - 0.01).abs() < 1e-7);
+        assert_eq!(exponential([0.0f32, 1.0], 0.25), 0.25);
+        assert!((exponential([2.0f64, 0.02], 0.5) - 0.2).abs() < 1e-12);
+    }
+
+    #[test]
+    fn progress_runs_from_0_to_1() {
+        assert_eq!(progress::<f32>(0, 1), 0.0);
+        assert_eq!(progress::<f32>(3, 0), 0.0);
+        assert_eq!(progress::<f64>(0, 5), 0.0);
+        assert_eq!(progress::<f64>(2, 5), 0.5);
+        assert_eq!(progress::<f32>(4, 5), 1.0);
+        assert_eq!(progress::<f32>(9, 5), 1.0);
     }
 }

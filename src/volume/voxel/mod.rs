@@ -9,7 +9,7 @@
 //!   [`max_weights`]: per-slot rendering weights for pruning. The sampling and compositing
 //!   conventions are in the [`render`] module doc.
 //! * [`train`]: mini-batch fitting to posed pixels (MSE, Adam or RMSProp per parameter
-//!   group, total variation, coarse-to-fine with pruning).
+//!   group from [`crate::optim`], total variation, coarse-to-fine with pruning).
 //! * [`save`], [`load`]: a versioned little-endian binary format ([`io`] module doc).
 //!
 //! Units: world units for the box and ray parameters, density in 1 / world units, colors
@@ -48,4 +48,4 @@ mod train;
 pub use grid::{Grid, MAX_RES};
 pub use io::{load, save};
 pub use render::{Grads, RenderSettings, max_weights, ray_backward, render_ray, render_rays};
-pub use train::{Optimizer, TrainOptions, TrainOutcome, TrainStep, train};
+pub use train::{TrainOptions, TrainOutcome, TrainStep, train};

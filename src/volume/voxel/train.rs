@@ -16,43 +16,8 @@ use rayon::prelude::*;
 use super::grid::{Grid, MAX_RES};
 use super::render::{RenderSettings, Sink, backward, forward, max_weights, scatter, with_k};
 use crate::error::{Error, Result};
+use crate::optim::{LazyStep, Moments, Rule, exponential, progress};
 use crate::volume::{Ray, sh};
-
-/// The per-slot update rule (the same for both parameter groups; rates differ per group).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Optimizer {
-    /// Adam with bias correction (the step count restarts at every resampling).
-    Adam {
-        /// Decay of the first moment.
-        beta1: f32,
-        /// Decay of the second moment.
-        beta2: f32,
-        /// Added to `√v̂`.
-        eps: f32,
-    },
-    /// RMSProp without momentum (Plenoxels' choice): `v ← β·v + (1 − β)·g²`,
-    /// `x ← x − lr·g / (√v + eps)`.
-    RmsProp {
-        /// Decay of the squared-gradient average.
-        beta: f32,
-        /// Added to `√v`.
-        eps: f32,
-    },
-}
-
-impl Optimizer {
-    /// Adam with β₁ = 0.9, β₂ = 0.99, ε = 1e-8.
-    pub const ADAM: Optimizer = Optimizer::Adam {
-        beta1: 0.9,
-        beta2: 0.99,
-        eps: 1e-8,
-    };
-    /// RMSProp with β = 0.95, ε = 1e-8 (Plenoxels' values).
-    pub const RMSPROP: Optimizer = Optimizer::RmsProp {
-        beta: 0.95,
-        eps: 1e-8,
-    };
-}
 
 /// Everything [`train`] needs besides the grid and the rays.
 #[derive(Clone, Debug, PartialEq)]
@@ -66,12 +31,13 @@ pub struct TrainOptions {
     /// How training rays are rendered (the background should be the one the photos were
     /// composited over).
     pub render: RenderSettings,
-    /// The update rule of the densities.
-    pub density_optimizer: Optimizer,
+    /// The update rule of the densities (Adam's step count restarts at every resampling).
+    pub density_optimizer: Rule<f32>,
     /// The update rule of the SH coefficients.
-    pub sh_optimizer: Optimizer,
+    pub sh_optimizer: Rule<f32>,
     /// Learning rate of the raw density (1 / world units per step) at the first and the
-    /// last iteration, decaying exponentially in between.
+    /// last iteration, decaying exponentially in between
+    /// ([`exponential`](crate::optim::exponential)).
     pub lr_density: [f32; 2],
     /// Learning rate of the SH coefficients (pre-sigmoid units per step), first and last.
     pub lr_sh: [f32; 2],
@@ -111,9 +77,10 @@ pub struct TrainOptions {
 
 impl Default for TrainOptions {
     /// The values measured best on NeRF-synthetic lego at 200×200 (see the module doc):
-    /// 3000 iterations of 8192 rays; Adam on densities with rate 1 → 0.1 (1 / world
-    /// units, for scenes a few units across), RMSProp on SH coefficients with rate
-    /// 0.3 → 0.03; no TV and no sparsity term; default rendering (half-voxel steps, white
+    /// 3000 iterations of 8192 rays; Adam (β₁ = 0.9, β₂ = 0.99, ε = 1e-8) on densities
+    /// with rate 1 → 0.1 (1 / world units, for scenes a few units across), RMSProp
+    /// (β = 0.95, ε = 1e-8, Plenoxels' values) on SH coefficients with rate 0.3 → 0.03;
+    /// no TV and no sparsity term; default rendering (half-voxel steps, white
     /// background); no resampling; pruning at resampling below weight 1e-3 with a 1-vertex
     /// margin, measured on 2²⁰ random training rays, and no pruning between resamplings.
     fn default() -> Self {
@@ -122,8 +89,15 @@ impl Default for TrainOptions {
             batch_size: 8192,
             seed: 0,
             render: RenderSettings::default(),
-            density_optimizer: Optimizer::ADAM,
-            sh_optimizer: Optimizer::RMSPROP,
+            density_optimizer: Rule::Adam {
+                beta1: 0.9,
+                beta2: 0.99,
+                eps: 1e-8,
+            },
+            sh_optimizer: Rule::RmsProp {
+                beta: 0.95,
+                eps: 1e-8,
+            },
             lr_density: [1.0, 0.1],
             lr_sh: [0.3, 0.03],
             tv_density: 0.0,
@@ -255,14 +229,12 @@ pub fn train(
             let slots: Vec<usize> = (0..count).map(|_| rng.below(n)).collect();
             add_tv(g, &mut state.accs[0], &slots, opts.tv_density, opts.tv_sh);
         }
-        let frac = if n_it > 1 {
-            it as f32 / (n_it - 1) as f32
-        } else {
-            0.0
-        };
-        let lr = [decay(opts.lr_density, frac), decay(opts.lr_sh, frac)];
-        state.step += 1;
-        state.update(grid, lr, opts);
+        let frac: f32 = progress(it, n_it);
+        let lr = [
+            exponential(opts.lr_density, frac),
+            exponential(opts.lr_sh, frac),
+        ];
+        state.update(grid, lr);
         let secs = t_step.elapsed().as_secs_f32();
         let step = TrainStep {
             iteration: it + 1,
@@ -324,28 +296,13 @@ fn validate(rays: &[Ray], colors: &[[f32; 3]], o: &TrainOptions) -> Result<(), S
         return Err(format!("upsample resolution {r} outside 1..={MAX_RES}"));
     }
     for (name, opt) in [("density", o.density_optimizer), ("SH", o.sh_optimizer)] {
-        let ok = match opt {
-            Optimizer::Adam { beta1, beta2, eps } => {
-                (0.0..1.0).contains(&beta1) && (0.0..1.0).contains(&beta2) && eps > 0.0
-            }
-            Optimizer::RmsProp { beta, eps } => (0.0..1.0).contains(&beta) && eps > 0.0,
-        };
-        if !ok {
+        if !opt.is_valid() {
             return Err(format!(
                 "{name} optimizer {opt:?}: betas must be in [0, 1), eps > 0"
             ));
         }
     }
     Ok(())
-}
-
-/// `a[0]·(a[1]/a[0])^frac`, or linear when an end is 0.
-fn decay(a: [f32; 2], frac: f32) -> f32 {
-    if a[0] > 0.0 && a[1] > 0.0 {
-        a[0] * (a[1] / a[0]).powf(frac)
-    } else {
-        a[0] + (a[1] - a[0]) * frac
-    }
 }
 
 /// Prune (by rendering weight over training rays) and resample to `res`.
@@ -417,14 +374,11 @@ impl Sink for Accum {
     }
 }
 
-/// Optimizer moments (first moments empty for RMSProp) and the gradient buffers.
+/// Optimizer state of the densities and of the SH coefficients, and the gradient buffers.
 struct State {
     accs: Vec<Accum>,
-    md: Vec<f32>,
-    vd: Vec<f32>,
-    msh: Vec<f32>,
-    vsh: Vec<f32>,
-    step: u32,
+    density: Moments<f32>,
+    sh: Moments<f32>,
 }
 
 /// Slots per parallel update job.
@@ -433,8 +387,6 @@ const UPDATE_CHUNK: usize = 2048;
 impl State {
     fn new(grid: &Grid, threads: usize, opts: &TrainOptions) -> State {
         let (n, m) = (grid.allocated(), grid.sh().len());
-        let adam_d = matches!(opts.density_optimizer, Optimizer::Adam { .. });
-        let adam_sh = matches!(opts.sh_optimizer, Optimizer::Adam { .. });
         State {
             accs: (0..threads)
                 .map(|_| Accum {
@@ -443,34 +395,16 @@ impl State {
                     flag: vec![false; n],
                 })
                 .collect(),
-            md: if adam_d { vec![0.0; n] } else { Vec::new() },
-            vd: vec![0.0; n],
-            msh: if adam_sh { vec![0.0; m] } else { Vec::new() },
-            vsh: vec![0.0; m],
-            step: 0,
+            density: Moments::new(opts.density_optimizer, n),
+            sh: Moments::new(opts.sh_optimizer, m),
         }
     }
 
     /// Keeps the moments of the slots flagged in `keep` (in order, as [`Grid::prune`]
     /// does) and resizes the gradient buffers to match. The step count carries on.
     fn retain(&mut self, keep: &[bool], stride: usize) {
-        fn compact(v: &mut Vec<f32>, keep: &[bool], stride: usize) {
-            if v.is_empty() {
-                return;
-            }
-            let mut out = 0;
-            for (s, &k) in keep.iter().enumerate() {
-                if k {
-                    v.copy_within(s * stride..(s + 1) * stride, out * stride);
-                    out += 1;
-                }
-            }
-            v.truncate(out * stride);
-        }
-        compact(&mut self.md, keep, 1);
-        compact(&mut self.vd, keep, 1);
-        compact(&mut self.msh, keep, stride);
-        compact(&mut self.vsh, keep, stride);
+        self.density.retain(keep, 1);
+        self.sh.retain(keep, stride);
         let n = keep.iter().filter(|&&k| k).count();
         for a in &mut self.accs {
             a.gd = vec![0.0; n];
@@ -479,9 +413,10 @@ impl State {
         }
     }
 
-    /// Sums the threads' gradients of every touched slot, applies the rule with rates
-    /// `lr = [density, sh]`, and clears the buffers. Parallel over blocks of slots.
-    fn update(&mut self, grid: &mut Grid, lr: [f32; 2], opts: &TrainOptions) {
+    /// One lazy optimizer step: sums the threads' gradients of every touched slot, applies
+    /// the rules with rates `lr = [density, sh]`, and clears the buffers. Parallel over
+    /// blocks of slots.
+    fn update(&mut self, grid: &mut Grid, lr: [f32; 2]) {
         let stride = grid.sh_stride();
         let ch = UPDATE_CHUNK;
         let (density, shv) = grid.data_mut();
@@ -496,13 +431,11 @@ impl State {
             })
             .collect();
         let mut jobs = Vec::new();
-        let mut md = chunks_or_empty(&mut self.md, ch);
-        let mut msh = chunks_or_empty(&mut self.msh, ch * stride);
-        for (((d, s), vd), vsh) in density
+        for (((d, s), md), msh) in density
             .chunks_mut(ch)
             .zip(shv.chunks_mut(ch * stride))
-            .zip(self.vd.chunks_mut(ch))
-            .zip(self.vsh.chunks_mut(ch * stride))
+            .zip(self.density.lazy_step().blocks(ch))
+            .zip(self.sh.lazy_step().blocks(ch * stride))
         {
             let grads: Vec<_> = accs
                 .iter_mut()
@@ -511,92 +444,46 @@ impl State {
                     (gd, gs, f)
                 })
                 .collect();
-            let (md, msh) = (
-                md.next().unwrap_or_default(),
-                msh.next().unwrap_or_default(),
-            );
-            jobs.push((d, s, md, vd, msh, vsh, grads));
+            jobs.push((d, s, md, msh, grads));
         }
-        let rule_d = Rule::new(&opts.density_optimizer, self.step);
-        let rule_sh = Rule::new(&opts.sh_optimizer, self.step);
         jobs.into_par_iter()
-            .for_each(|(d, s, md, vd, msh, vsh, mut grads)| {
-                for i in 0..d.len() {
-                    if !grads.iter().any(|g| g.2[i]) {
-                        continue;
-                    }
-                    let mut g = 0.0;
-                    for a in grads.iter_mut() {
-                        g += a.0[i];
-                        a.0[i] = 0.0;
-                        a.2[i] = false;
-                    }
-                    rule_d.apply(&mut d[i], md.get_mut(i), &mut vd[i], g, lr[0]);
-                    for j in i * stride..(i + 1) * stride {
-                        let mut g = 0.0;
-                        for a in grads.iter_mut() {
-                            g += a.1[j];
-                            a.1[j] = 0.0;
-                        }
-                        rule_sh.apply(&mut s[j], msh.get_mut(j), &mut vsh[j], g, lr[1]);
-                    }
-                }
+            .for_each(|(d, s, mut md, mut msh, mut grads)| {
+                update_block(d, s, &mut md, &mut msh, &mut grads, stride, lr)
             });
     }
 }
 
-/// Blocks of `len` of `v`, or empty slices forever when `v` is empty (RMSProp's absent
-/// first moments).
-fn chunks_or_empty(v: &mut [f32], len: usize) -> Box<dyn Iterator<Item = &mut [f32]> + '_> {
-    if v.is_empty() {
-        Box::new(std::iter::repeat_with(<&mut [f32]>::default))
-    } else {
-        Box::new(v.chunks_mut(len))
-    }
-}
-
-/// One optimizer step's constants.
-struct Rule {
-    adam: bool,
-    b1: f32,
-    b2: f32,
-    eps: f32,
-    /// Adam's bias corrections `1 − β₁ᵗ`, `1 − β₂ᵗ`.
-    c1: f32,
-    c2: f32,
-}
-
-impl Rule {
-    fn new(opt: &Optimizer, step: u32) -> Rule {
-        match *opt {
-            Optimizer::Adam { beta1, beta2, eps } => Rule {
-                adam: true,
-                b1: beta1,
-                b2: beta2,
-                eps,
-                c1: 1.0 - beta1.powi(step as i32),
-                c2: 1.0 - beta2.powi(step as i32),
-            },
-            Optimizer::RmsProp { beta, eps } => Rule {
-                adam: false,
-                b1: 0.0,
-                b2: beta,
-                eps,
-                c1: 1.0,
-                c2: 1.0,
-            },
+/// The update of one block of slots (see [`State::update`]).
+#[inline(always)]
+fn update_block(
+    d: &mut [f32],
+    s: &mut [f32],
+    md: &mut LazyStep<'_, f32>,
+    msh: &mut LazyStep<'_, f32>,
+    grads: &mut [(&mut [f32], &mut [f32], &mut [bool])],
+    stride: usize,
+    lr: [f32; 2],
+) {
+    for (i, x) in d.iter_mut().enumerate() {
+        if !grads.iter().any(|g| g.2[i]) {
+            continue;
         }
-    }
-
-    #[inline(always)]
-    fn apply(&self, x: &mut f32, m: Option<&mut f32>, v: &mut f32, g: f32, lr: f32) {
-        *v = self.b2 * *v + (1.0 - self.b2) * g * g;
-        if self.adam {
-            let m = m.expect("Adam keeps first moments");
-            *m = self.b1 * *m + (1.0 - self.b1) * g;
-            *x -= lr * (*m / self.c1) / ((*v / self.c2).sqrt() + self.eps);
-        } else {
-            *x -= lr * g / (v.sqrt() + self.eps);
+        let mut g = 0.0;
+        for a in grads.iter_mut() {
+            g += a.0[i];
+            a.0[i] = 0.0;
+            a.2[i] = false;
+        }
+        md.apply(i, x, g, lr[0]);
+        let base = i * stride;
+        for (k, x) in s[base..base + stride].iter_mut().enumerate() {
+            let j = base + k;
+            let mut g = 0.0;
+            for a in grads.iter_mut() {
+                g += a.1[j];
+                a.1[j] = 0.0;
+            }
+            msh.apply(j, x, g, lr[1]);
         }
     }
 }
@@ -766,13 +653,5 @@ mod tests {
             let has = tv_neighbours(&g, s).iter().any(Option::is_some);
             assert!(acc.flag[s] || !has, "slot {s} is marked for the update");
         }
-    }
-
-    #[test]
-    fn learning_rates_decay_exponentially() {
-        assert_eq!(decay([1.0, 0.01], 0.0), 1.0);
-        assert!((decay([1.0, 0.01], 0.5) - 0.1).abs() < 1e-6);
-        assert!((decay([1.0, 0.01], 1.0) - 0.01).abs() < 1e-7);
-        assert_eq!(decay([0.0, 1.0], 0.25), 0.25);
     }
 }
