@@ -75,6 +75,12 @@ pub mod scene;
 pub mod volume;
 
 pub use error::{Error, Result};
+/// The vector math of the 3D API (`Vec3`, `Affine3A` in cameras and rays), re-exported so
+/// callers use the same version.
+pub use glam;
 pub use image_io::Image;
 pub use scene::Sizing;
 pub use scene::{Node, Path, Scene};
+/// The SVG tree of [`scene::parse_tree`] and [`scene::from_tree`], re-exported so callers
+/// use the same version.
+pub use usvg;

@@ -6,12 +6,13 @@
 
 use std::time::Instant;
 
+use diffsvg::glam::Vec3;
 use diffsvg::optim::Rule;
+use diffsvg::volume::Ray;
 use diffsvg::volume::voxel::{
     Grads, Grid, RenderSettings, TrainOptions, load, max_weights, ray_backward, render_ray,
     render_rays, save, train,
 };
-use diffsvg::volume::{Ray, Vec3};
 
 // ---------------------------------------------------------------------------------------
 // Hard cases

@@ -8,10 +8,11 @@ use std::time::Instant;
 
 use anyhow::{Result, bail};
 
+use diffsvg::glam::Vec3;
 use diffsvg::metrics::median;
+use diffsvg::volume::Ray;
 use diffsvg::volume::camera::orbit;
 use diffsvg::volume::voxel::{self, Grid, RenderSettings, TrainOptions};
-use diffsvg::volume::{Ray, Vec3};
 
 /// Arguments of `diffsvg bench voxel`.
 #[derive(clap::Args, Debug)]

@@ -11,12 +11,13 @@ use serde_json::json;
 use super::choices::SplitArg;
 use super::plot::{PlotSpec, Series, write_plot};
 use super::progress::{install_interrupt_handler, interrupted};
+use diffsvg::glam::Vec3;
 use diffsvg::image_io::{Image, contact_sheet, write_atomic};
+use diffsvg::volume::Ray;
 use diffsvg::volume::camera::{Camera, orbit};
 use diffsvg::volume::dataset::{Dataset, View};
 use diffsvg::volume::metrics::{psnr, ssim};
 use diffsvg::volume::voxel::{self, Grid, RenderSettings, TrainOptions, TrainStep};
-use diffsvg::volume::{Ray, Vec3};
 
 /// Arguments of `diffsvg recon`.
 #[derive(clap::Args, Debug)]
@@ -726,7 +727,7 @@ fn write_gif(frames: &[Image], path: &Path) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::{arc_cameras, levels};
-    use diffsvg::volume::Vec3;
+    use diffsvg::glam::Vec3;
     use diffsvg::volume::camera::Camera;
     use diffsvg::volume::dataset::View;
 

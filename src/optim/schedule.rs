@@ -7,8 +7,6 @@
 //!
 //! Both take the run's progress, [`progress`]: 0 at the first step, 1 at the last.
 
-use std::str::FromStr;
-
 use num_traits::Float;
 
 /// How learning rates change over a run of `total` steps.
@@ -64,20 +62,6 @@ pub fn exponential<T: Float>([start, end]: [T; 2], frac: T) -> T {
     }
 }
 
-impl FromStr for Schedule {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        match s.to_ascii_lowercase().as_str() {
-            "constant" | "const" => Ok(Schedule::Constant),
-            "cosine" | "cos" => Ok(Schedule::Cosine),
-            "linear" => Ok(Schedule::Linear),
-            _ => Err(format!(
-                "unknown schedule {s:?} (expected constant, cosine or linear)"
-            )),
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -92,8 +76,6 @@ mod tests {
         }
         assert_eq!(Schedule::Constant.factor(50, 100), 1.0);
         assert_eq!(Schedule::Cosine.factor(0, 1), 1.0);
-        assert_eq!("cos".parse::<Schedule>(), Ok(Schedule::Cosine));
-        assert!("step".parse::<Schedule>().is_err());
     }
 
     #[test]

@@ -9,7 +9,7 @@
 //!
 //! ```
 //! use diffsvg::volume::camera::Camera;
-//! use glam::{Affine3A, Vec3};
+//! use diffsvg::glam::{Affine3A, Vec3};
 //! // A 4 × 3 camera at z = 2 looking down −z, 90° across.
 //! let pose = Affine3A::from_translation(Vec3::new(0.0, 0.0, 2.0));
 //! let cam = Camera::from_fov_x(4, 3, std::f32::consts::FRAC_PI_2, pose).unwrap();
@@ -22,7 +22,7 @@ pub mod camera;
 pub mod dataset;
 pub mod metrics;
 
-pub use glam::Vec3;
+use glam::Vec3;
 
 pub(crate) mod sh;
 pub mod voxel;

@@ -6,8 +6,9 @@
 use std::path::{Path, PathBuf};
 use std::process::Output;
 
+use diffsvg::glam::Vec3;
+use diffsvg::volume::Ray;
 use diffsvg::volume::camera::Camera;
-use diffsvg::volume::{Ray, Vec3};
 use serde_json::{Value, json};
 
 use super::common::{diffsvg, s, scratch};

@@ -31,7 +31,8 @@
 //! stronger pruning rule or regularizer than the defaults.
 //!
 //! ```
-//! use diffsvg::volume::{Ray, Vec3};
+//! use diffsvg::glam::Vec3;
+//! use diffsvg::volume::Ray;
 //! use diffsvg::volume::voxel::{Grid, RenderSettings, render_ray};
 //! let mut grid = Grid::dense(Vec3::splat(-1.0), Vec3::splat(1.0), 16, 1, 0.0);
 //! grid.density_mut().fill(50.0); // an opaque gray cube
