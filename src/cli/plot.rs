@@ -134,7 +134,7 @@ fn plot_image(spec: &PlotSpec, series: &[Series]) -> Result<Image, String> {
             height: h * s,
             ..spec.clone()
         };
-        draw(&root, &big, series)?;
+        draw(&root, &big, series, true)?;
         root.present().map_err(|e| e.to_string())?;
     }
     // Each output pixel is the mean of its s × s block.
@@ -155,7 +155,7 @@ fn plot_svg(spec: &PlotSpec, series: &[Series]) -> Result<String, String> {
     let mut out = String::new();
     {
         let root = SVGBackend::with_string(&mut out, (spec.width, spec.height)).into_drawing_area();
-        draw(&root, spec, series)?;
+        draw(&root, spec, series, false)?;
         root.present().map_err(|e| e.to_string())?;
     }
     if let Some(end) = out.find(">\n") {
@@ -168,6 +168,8 @@ fn plot_svg(spec: &PlotSpec, series: &[Series]) -> Result<String, String> {
 /// The drawable points of each series and the axis ranges that cover them.
 struct Data {
     curves: Vec<(String, Vec<(f64, f64)>)>,
+    /// Draw segments one by one (see [`draw`]).
+    joinless: bool,
     x: Range<f64>,
     y: Range<f64>,
 }
@@ -187,6 +189,7 @@ fn prepare(spec: &PlotSpec, series: &[Series]) -> Data {
         x: nice_range(all().map(|p| p.0), spec.log_x),
         y: nice_range(all().map(|p| p.1), spec.log_y),
         curves,
+        joinless: false,
     }
 }
 
@@ -245,14 +248,19 @@ fn register_font() -> Result<(), String> {
         .ok_or_else(|| "the bundled font does not load".into())
 }
 
-/// Draws the chart, choosing linear or logarithmic coordinates for each axis.
+/// Draws the chart, choosing linear or logarithmic coordinates for each axis. With
+/// `joinless`, each segment of a curve is drawn on its own: plotters' bitmap backend joins
+/// thick lines with unlimited miters, which shoot out of the chart where a curve turns
+/// back sharply (an SVG viewer limits miters itself, so the SVG keeps one polyline).
 fn draw<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
     spec: &PlotSpec,
     series: &[Series],
+    joinless: bool,
 ) -> Result<(), String> {
     register_font()?;
-    let data = prepare(spec, series);
+    let mut data = prepare(spec, series);
+    data.joinless = joinless;
     let (x, y) = (data.x.clone(), data.y.clone());
     match (spec.log_x, spec.log_y) {
         (false, false) => chart(root, spec, &data, x, y),
@@ -320,10 +328,29 @@ where
     let dot = size(4.0).round().max(2.0) as i32;
     for (i, (_, pts)) in data.curves.iter().enumerate() {
         let color = PALETTE[i % PALETTE.len()];
-        chart.draw_series(LineSeries::new(
-            pts.iter().copied(),
-            color.stroke_width(stroke),
-        ))?;
+        // One point per device pixel: thousands of steps share each pixel of a log-time
+        // axis, and what cannot be seen need not be drawn or written.
+        let mut last_px = None;
+        let kept: Vec<(f64, f64)> = pts
+            .iter()
+            .enumerate()
+            .filter(|&(k, p)| {
+                let px = chart.backend_coord(p);
+                let keep = last_px != Some(px) || k + 1 == pts.len();
+                last_px = Some(px);
+                keep
+            })
+            .map(|(_, &p)| p)
+            .collect();
+        let style = color.stroke_width(stroke);
+        if data.joinless {
+            let segments = kept
+                .windows(2)
+                .map(|w| PathElement::new(vec![w[0], w[1]], style));
+            chart.draw_series(segments)?;
+        } else {
+            chart.draw_series(LineSeries::new(kept, style))?;
+        }
         // A dot on the last point, where the eye looks for the final value.
         let last = pts.last().map(|&p| Circle::new(p, dot, color.filled()));
         chart.draw_series(last)?;
@@ -399,6 +426,31 @@ mod tests {
                 Series::new(*n, pts)
             })
             .collect()
+    }
+
+    /// Regression: a run of thousands of steps packs many points into each pixel column of
+    /// a log-time axis, and plotters' thick bitmap lines drew spikes out of the chart (to
+    /// the top of the image) at the zero-length segments between them.
+    #[test]
+    fn dense_oscillating_series_stay_inside_the_chart() {
+        let pts: Vec<(f64, f64)> = (0..4000)
+            .map(|i| {
+                let t = 1.0 + 4.0 * i as f64 / 4000.0;
+                let y = 20.0 + 8.0 * ((i % 7) as f64 / 6.0) - if i % 50 == 0 { 9.0 } else { 0.0 };
+                (t, y.min(30.0))
+            })
+            .collect();
+        let spec = PlotSpec {
+            log_x: true,
+            ..PlotSpec::new("dense", "time (s)", "PSNR (dB)")
+        };
+        let img = plot_image(&spec, &[Series::new("a", pts)]).unwrap();
+        // Rows above the chart's top edge (the title's band) hold no series color.
+        for y in 0..30 {
+            for x in 0..img.width {
+                assert!(!is(&img, x, y, PALETTE[0]), "series color at ({x}, {y})");
+            }
+        }
     }
 
     #[test]
