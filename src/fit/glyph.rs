@@ -32,6 +32,18 @@
 //!
 //! The count found is the fewest this greedy search reaches, not a proven minimum.
 //! Everything is deterministic: the same target and options give the same bits.
+//!
+//! ```
+//! use diffsvg::fit::glyph::{GlyphOptions, fit_glyph};
+//! use diffsvg::{Scene, Sizing, raster};
+//! let svg = r#"<svg xmlns="http://www.w3.org/2000/svg" width="40" height="40">
+//!   <rect width="40" height="40" fill="white"/><circle cx="20" cy="20" r="12"/></svg>"#;
+//! let img = raster::render(&Scene::from_svg_str(svg, "o.svg", Sizing::Natural)?, &Default::default());
+//! let out = fit_glyph(&img, &GlyphOptions::default());
+//! assert!(out.reached && out.iou >= 0.99);
+//! assert!(out.segments <= 8, "{} segments for a disc", out.segments);
+//! # Ok::<(), diffsvg::Error>(())
+//! ```
 
 use std::time::{Duration, Instant};
 

@@ -11,6 +11,21 @@
 //! the optimizer steps of all rounds together (0: paths are placed, not optimized). **Fixed** places all paths at once (DiffVG's random blobs), **painterly**
 //! uses DiffVG's random open strokes, and **trace** starts from vtracer's tracing pruned
 //! to the budget; these three are then optimized in one run.
+//!
+//! ```
+//! use diffsvg::fit::Control;
+//! use diffsvg::fit::vectorize::{Event, Mode, VectorizeOptions, vectorize};
+//! use diffsvg::{Scene, Sizing, loss::Loss, optim::Objective, raster};
+//! let svg = r#"<svg xmlns="http://www.w3.org/2000/svg" width="32" height="32">
+//!   <rect width="32" height="32" fill="white"/>
+//!   <circle cx="12" cy="14" r="7" fill="teal"/><rect x="18" y="18" width="10" height="9" fill="orange"/></svg>"#;
+//! let target = raster::render(&Scene::from_svg_str(svg, "t.svg", Sizing::Natural)?, &Default::default());
+//! let objective = Objective::new(&target, Loss::Mse, Some([1.0; 4]), 1);
+//! let opts = VectorizeOptions { mode: Mode::Adaptive, paths: 4, iters: 150, ..Default::default() };
+//! let out = vectorize(&objective, &opts, &mut |_: Event| Control::Continue)?;
+//! assert!(out.scene.path_count() <= 4 && out.psnr > 20.0);
+//! # Ok::<(), diffsvg::Error>(())
+//! ```
 
 use std::time::{Duration, Instant};
 

@@ -10,6 +10,22 @@
 //!   `cx, cy, r, fx, fy, fr`, each followed by its stops as `offset, r, g, b, opacity`.
 //!
 //! Gradients returned by the backward pass use the same layout.
+//!
+//! ```
+//! use diffsvg::scene::{ParamGroup, ParamLayout};
+//! use diffsvg::{Scene, Sizing};
+//! let svg = r#"<svg xmlns="http://www.w3.org/2000/svg" width="10" height="10">
+//!   <path d="M1 1 L9 1 L5 8 Z" fill="red" stroke="blue" stroke-width="2"/></svg>"#;
+//! let scene = Scene::from_svg_str(svg, "t.svg", Sizing::Natural)?;
+//! let layout = ParamLayout::new(&scene);
+//! let p = layout.paths[0];
+//! // Two lines are two cubics (the close adds no segment): 7 points in 14 slots, then
+//! // fill r, g, b and opacity, then stroke r, g, b, opacity and width.
+//! assert_eq!((p.points, p.fill_opacity, p.stroke_opacity, p.stroke_width), (0, 17, 21, 22));
+//! assert_eq!(layout.slots[22].group, ParamGroup::StrokeWidth);
+//! assert_eq!(scene.params()[22], 2.0);
+//! # Ok::<(), diffsvg::Error>(())
+//! ```
 
 use super::geom::{add_scaled, scale};
 use super::{GradientKind, Node, Paint, Path, Point, Scene, SegmentKind};

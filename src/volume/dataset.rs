@@ -34,6 +34,24 @@
 //! after downscaling, within [`MAX_DATASET_PIXELS`], before any is decoded. Intrinsics must
 //! describe a usable camera ([`Camera::validate`]): a field of view within
 //! `camera::fov_range`, bounded one-to-one distortion.
+//!
+//! ```
+//! use diffsvg::Image;
+//! use diffsvg::volume::dataset::Dataset;
+//! // A NeRF-synthetic folder with one training view: a pose and a 4 × 2 photo.
+//! let dir = std::env::temp_dir().join(format!("diffsvg-doc-dataset-{}", std::process::id()));
+//! std::fs::create_dir_all(dir.join("train"))?;
+//! Image::filled(4, 2, [0.0, 0.0, 1.0, 1.0]).save_png(dir.join("train/r_0.png"))?;
+//! std::fs::write(dir.join("transforms_train.json"), r#"{"camera_angle_x": 0.69,
+//!   "frames": [{"file_path": "./train/r_0", "transform_matrix":
+//!     [[1,0,0,0],[0,1,0,0],[0,0,1,4],[0,0,0,1]]}]}"#)?;
+//! let ds = Dataset::load(&dir, 1)?;
+//! assert_eq!((ds.train.len(), ds.test.len()), (1, 0));
+//! let view = &ds.train[0];
+//! assert_eq!((view.width, view.height, view.rgb[0]), (4, 2, [0.0, 0.0, 1.0]));
+//! assert_eq!(view.camera.position().z, 4.0);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 
 use std::path::{Path, PathBuf};
 

@@ -3,6 +3,16 @@
 //!
 //! Both follow the usual NeRF evaluation code (e.g. mip-NeRF's `compute_ssim`): values are
 //! not clamped, sums are in `f64`.
+//!
+//! ```
+//! use diffsvg::volume::metrics::{psnr, ssim};
+//! let a = vec![[0.5f32; 3]; 16 * 16];
+//! let mut b = a.clone();
+//! b[0] = [0.6; 3];
+//! assert!((psnr(&a, &b) - 10.0 * (256.0 / 0.01f64).log10()).abs() < 1e-3);
+//! assert_eq!(ssim(&a, &a, 16, 16), 1.0);
+//! assert!(ssim(&a, &b, 16, 16) < 1.0);
+//! ```
 
 use rayon::prelude::*;
 
