@@ -56,7 +56,8 @@
 //! [`volume`] reads posed photos (NeRF-synthetic and instant-ngp folders) into cameras
 //! and rays, and fits a sparse voxel grid of density and spherical-harmonic color
 //! ([`volume::voxel`]) through its exact volume-rendering gradient, with the same
-//! [`optim`] module as the 2D fitter.
+//! [`optim`] module as the 2D fitter. [`volume::splat`] holds 3D Gaussians and reads and
+//! writes them as the PLY files of Gaussian-splatting viewers (no renderer yet).
 
 #![warn(unreachable_pub)]
 

@@ -27,12 +27,23 @@ pub const MAX_PIXELS: u64 = 1 << 25;
 /// the file's header before anything is decoded.
 pub const MAX_IMAGE_PIXELS: u64 = MAX_PIXELS;
 
-/// Largest input file read whole (SVG, job file, camera file, PLY header), in bytes.
+/// Largest input file read whole (SVG, job file, camera file), in bytes.
 pub const MAX_FILE_BYTES: u64 = 64 << 20;
 
 /// Largest model file read (a voxel grid), in bytes; its header's counts are checked
 /// against its length before anything else is allocated.
 pub const MAX_MODEL_BYTES: u64 = 4 << 30;
+
+/// Most Gaussians in a Gaussian-splatting PLY file, checked from its header's vertex
+/// count before anything is allocated.
+pub const MAX_GAUSSIANS: usize = 10_000_000;
+
+/// Largest header of a PLY file, in bytes (its `end_header` line must end within it).
+pub const MAX_PLY_HEADER_BYTES: usize = 64 << 10;
+
+/// Largest Gaussian-splatting PLY file read, in bytes: [`MAX_GAUSSIANS`] records of the
+/// 62 floats of SH degree 3 (248 bytes each, 2.48 GB in all) plus the largest header.
+pub const MAX_SPLAT_BYTES: u64 = MAX_GAUSSIANS as u64 * 248 + MAX_PLY_HEADER_BYTES as u64;
 
 /// Largest decompressed size of a gzip stream (`.svgz`, `.gz` IDX files), in bytes.
 pub const MAX_DECOMPRESSED_BYTES: u64 = 256 << 20;

@@ -1,6 +1,6 @@
 //! 3D reconstruction by differentiable volume rendering: cameras and posed-photo datasets,
-//! spherical harmonics, image metrics, and a sparse voxel grid (Plenoxels) fitted to
-//! photos.
+//! spherical harmonics, image metrics, a sparse voxel grid (Plenoxels) fitted to
+//! photos, and 3D Gaussians (splatting) with their PLY file.
 //!
 //! Conventions: world units are those of the dataset's poses; camera-to-world poses follow
 //! OpenGL/Blender (camera +X right, +Y up, looking down −Z); images are row-major with
@@ -25,6 +25,7 @@ pub mod metrics;
 use glam::Vec3;
 
 pub(crate) mod sh;
+pub mod splat;
 pub mod voxel;
 
 /// A ray `origin + t · dir`, `t ≥ 0`, with `dir` of unit length.
