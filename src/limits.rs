@@ -45,6 +45,12 @@ pub const MAX_PLY_HEADER_BYTES: usize = 64 << 10;
 /// 62 floats of SH degree 3 (248 bytes each, 2.48 GB in all) plus the largest header.
 pub const MAX_SPLAT_BYTES: u64 = MAX_GAUSSIANS as u64 * 248 + MAX_PLY_HEADER_BYTES as u64;
 
+/// Most (tile, Gaussian) pairs of one splatting render: each Gaussian counts the
+/// 16 × 16 pixel tiles its 3σ screen box overlaps, and the sum is taken before the
+/// per-tile lists (4 bytes a pair) are allocated; past it the render is refused.
+/// 2²⁷ pairs take 512 MiB (a million splats covering 128 tiles each).
+pub const MAX_SPLAT_TILE_PAIRS: u64 = 1 << 27;
+
 /// Largest decompressed size of a gzip stream (`.svgz`, `.gz` IDX files), in bytes.
 pub const MAX_DECOMPRESSED_BYTES: u64 = 256 << 20;
 

@@ -1,4 +1,5 @@
-//! 3D Gaussian splatting (Kerbl et al. 2023): the model and its PLY file.
+//! 3D Gaussian splatting (Kerbl et al. 2023): the model, its PLY file and the forward
+//! renderer ([`render()`], the [`render`](mod@render) module).
 //!
 //! [`Gaussians`] holds a cloud of anisotropic 3D Gaussians as parallel arrays, with every
 //! parameter stored **before** its activation, as the reference implementation trains
@@ -24,8 +25,10 @@
 //! ```
 
 pub mod ply;
+pub mod render;
 
 pub use ply::{load, save};
+pub use render::{RenderSettings, Rendered, render};
 
 use glam::{Quat, Vec3};
 

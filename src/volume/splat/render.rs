@@ -1,0 +1,702 @@
+//! The forward renderer of 3D Gaussian splatting on the CPU: EWA projection, 16 × 16
+//! tiles, front-to-back alpha blending (Kerbl et al. 2023, as the reference CUDA code
+//! and gsplat do it).
+//!
+//! [`render`] projects every Gaussian to the image ([`RenderSettings::near`] culls
+//! those too close or behind the camera), bins the projected ellipses into
+//! [`TILE`] × [`TILE`] pixel tiles, sorts each tile's list by depth (ties by Gaussian
+//! index, so the result never depends on scheduling) and blends each pixel front to
+//! back. Tiles run in parallel; each pixel is computed by exactly one job, so the image
+//! is the same bits for any number of threads.
+//!
+//! Conventions are those of [`crate::volume`]: the camera looks down its −Z axis (depth
+//! is `−z` in camera coordinates, world units), pixel `(x, y)` is centered at
+//! `(x + 0.5, y + 0.5)` with y down, images are row-major. **Lens distortion is not
+//! modeled**: the projection is a pinhole's, so [`render`] refuses a camera with
+//! distortion; undistort such photos first.
+//!
+//! ```
+//! use diffsvg::glam::{Affine3A, Vec3};
+//! use diffsvg::volume::camera::Camera;
+//! use diffsvg::volume::splat::{Gaussians, RenderSettings, render};
+//! // One grey Gaussian 4 units in front of a 32 × 24 camera at the origin.
+//! let mut g = Gaussians::new(0);
+//! g.push([0.0, 0.0, -4.0], [-0.7; 3], [1.0, 0.0, 0.0, 0.0], 4.0, &[0.0; 3]);
+//! let cam = Camera::from_fov_x(32, 24, 1.0, Affine3A::IDENTITY).unwrap();
+//! let settings = RenderSettings { background: [0.0, 0.0, 1.0], ..Default::default() };
+//! let out = render(&g, &cam, &settings).unwrap();
+//! assert_eq!(out.rgb.len(), 32 * 24);
+//! let center = out.rgb[12 * 32 + 16];
+//! // Nearly opaque grey (SH 0 gives 0.5) over the blue background.
+//! assert!(center[1] > 0.45 && center[2] < 0.55, "{center:?}");
+//! assert_eq!(out.rgb[0], [0.0, 0.0, 1.0]); // the corner shows the background
+//! assert_eq!(out.transmittance[0], 1.0);
+//! ```
+
+use glam::{Mat3, Vec2, Vec3};
+use rayon::prelude::*;
+
+use super::Gaussians;
+use crate::limits::MAX_SPLAT_TILE_PAIRS;
+use crate::volume::camera::Camera;
+
+/// Side of a screen tile, pixels.
+pub const TILE: u32 = 16;
+
+/// Largest opacity of one Gaussian at one pixel (the reference code's 0.99), so that
+/// transmittance never reaches zero through a single splat.
+const MAX_ALPHA: f32 = 0.99;
+
+/// Contributions below this opacity (1/255) are skipped, as in the reference code.
+const MIN_ALPHA: f32 = 1.0 / 255.0;
+
+/// Projected x and y are clamped to this many times the half-frustum when computing the
+/// perspective Jacobian (the reference code's 1.3), keeping it bounded near the border.
+const FRUSTUM_CLAMP: f32 = 1.3;
+
+/// Settings of [`render`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RenderSettings {
+    /// Linear RGB seen where the Gaussians leave the pixel transparent.
+    pub background: [f32; 3],
+    /// Gaussians whose center has depth (distance along the viewing axis, world units)
+    /// at most this are culled. Default 0.01.
+    pub near: f32,
+    /// A pixel stops blending once its transmittance would fall below this; the Gaussian
+    /// that would take it there is not blended (as in the reference code). Default 1e-4.
+    pub early_stop: f32,
+    /// Variance added to both diagonal entries of every projected 2D covariance,
+    /// pixels² (a low-pass filter so a splat covers at least about a pixel). Default 0.3.
+    pub dilation: f32,
+}
+
+impl Default for RenderSettings {
+    fn default() -> Self {
+        RenderSettings {
+            background: [0.0; 3],
+            near: 0.01,
+            early_stop: 1e-4,
+            dilation: 0.3,
+        }
+    }
+}
+
+impl RenderSettings {
+    fn validate(&self) -> Result<(), String> {
+        if !self.background.iter().all(|v| v.is_finite()) {
+            return Err("render settings: background is not finite".into());
+        }
+        if !(self.near.is_finite() && self.near > 0.0) {
+            return Err(format!("render settings: near {} is not > 0", self.near));
+        }
+        if !(0.0..1.0).contains(&self.early_stop) {
+            return Err(format!(
+                "render settings: early_stop {} is not in [0, 1)",
+                self.early_stop
+            ));
+        }
+        if !(self.dilation.is_finite() && self.dilation >= 0.0) {
+            return Err(format!(
+                "render settings: dilation {} is not ≥ 0",
+                self.dilation
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// One Gaussian as projected to the image (what the blending and, later, the backward
+/// pass need).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Projected {
+    /// Index of the Gaussian in the model.
+    pub index: u32,
+    /// Center, continuous pixel coordinates (pixel `(x, y)` spans `[x, x + 1)`).
+    pub mean2d: Vec2,
+    /// Inverse of the dilated 2D covariance `[[a, b], [b, c]]`, stored `[a, b, c]`, 1/px².
+    pub conic: [f32; 3],
+    /// Depth of the center along the viewing axis, world units (> `near`).
+    pub depth: f32,
+    /// Screen radius, pixels: `ceil(3·sqrt(larger eigenvalue))` of the 2D covariance.
+    pub radius: f32,
+    /// Linear RGB seen along the direction from the camera center to the mean.
+    pub color: Vec3,
+    /// Peak opacity, `sigmoid(logit)`.
+    pub opacity: f32,
+}
+
+/// The result of [`render`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct Rendered {
+    /// Image width, pixels.
+    pub width: u32,
+    /// Image height, pixels.
+    pub height: u32,
+    /// Linear RGB per pixel, row-major with y down (`index = y · width + x`), composited
+    /// over the background (the layout of `dataset::View::rgb`).
+    pub rgb: Vec<[f32; 3]>,
+    /// Final transmittance per pixel (same layout): the fraction of the background that
+    /// shows through, in `[0, 1]`.
+    pub transmittance: Vec<f32>,
+    /// The Gaussians that survived culling, in model order (for the backward pass).
+    #[allow(dead_code)] // read by the tests; the backward pass is still to come
+    pub(crate) projected: Vec<Projected>,
+}
+
+/// Renders `gaussians` seen by `camera` (see the module documentation).
+///
+/// # Errors
+/// If the model or the settings are invalid ([`Gaussians::validate`]), the camera has
+/// lens distortion, there are more than `u32::MAX` Gaussians, or the projected splats
+/// would cover more than [`MAX_SPLAT_TILE_PAIRS`] (tile, Gaussian) pairs.
+pub fn render(
+    gaussians: &Gaussians,
+    camera: &Camera,
+    settings: &RenderSettings,
+) -> Result<Rendered, String> {
+    render_limited(gaussians, camera, settings, MAX_SPLAT_TILE_PAIRS)
+}
+
+fn render_limited(
+    gaussians: &Gaussians,
+    camera: &Camera,
+    settings: &RenderSettings,
+    max_pairs: u64,
+) -> Result<Rendered, String> {
+    gaussians.validate()?;
+    settings.validate()?;
+    if camera.has_distortion() {
+        return Err(
+            "splat rendering models a pinhole camera: undistort the photos and use a camera \
+             without distortion"
+                .into(),
+        );
+    }
+    if gaussians.len() > u32::MAX as usize {
+        return Err(format!("{} Gaussians: more than 2³² − 1", gaussians.len()));
+    }
+    let projected = project(gaussians, camera, settings);
+    let bins = bin(&projected, camera.width, camera.height, max_pairs)?;
+    let (rgb, transmittance) = rasterize(&projected, &bins, camera, settings);
+    Ok(Rendered {
+        width: camera.width,
+        height: camera.height,
+        rgb,
+        transmittance,
+        projected,
+    })
+}
+
+/// Projects every Gaussian, dropping those culled (behind `near`, degenerate, not
+/// finite, or wholly off screen); the result is in model order.
+pub(crate) fn project(
+    gaussians: &Gaussians,
+    camera: &Camera,
+    settings: &RenderSettings,
+) -> Vec<Projected> {
+    let w2c = camera.c2w.inverse();
+    // World to OpenCV camera axes (x right, y down, z forward): flip y and z of OpenGL's.
+    let flip = Mat3::from_diagonal(Vec3::new(1.0, -1.0, -1.0));
+    let rot = flip * Mat3::from(w2c.matrix3);
+    let trans = flip * Vec3::from(w2c.translation);
+    let origin = camera.position();
+    let (w, h) = (camera.width as f32, camera.height as f32);
+    let (fx, fy, cx, cy) = (camera.fx, camera.fy, camera.cx, camera.cy);
+    // Frustum bounds on x/z and y/z, widened by 0.3 half-fields as in gsplat (the
+    // reference's ±1.3·tan(fov/2) when the principal point is centered).
+    let margin = FRUSTUM_CLAMP - 1.0;
+    let (tan_x, tan_y) = (0.5 * w / fx, 0.5 * h / fy);
+    let (lx_lo, lx_hi) = (-cx / fx - margin * tan_x, (w - cx) / fx + margin * tan_x);
+    let (ly_lo, ly_hi) = (-cy / fy - margin * tan_y, (h - cy) / fy + margin * tan_y);
+    (0..gaussians.len())
+        .into_par_iter()
+        .filter_map(|i| {
+            let mean = Vec3::from_array(gaussians.means[i]);
+            let p = rot * mean + trans;
+            let z = p.z;
+            if !(z > settings.near && z.is_finite()) {
+                return None;
+            }
+            let mean2d = Vec2::new(fx * p.x / z + cx, fy * p.y / z + cy);
+            let tx = (p.x / z).clamp(lx_lo, lx_hi) * z;
+            let ty = (p.y / z).clamp(ly_lo, ly_hi) * z;
+            // Rows of the perspective Jacobian at the (clamped) center.
+            let j0 = Vec3::new(fx / z, 0.0, -fx * tx / (z * z));
+            let j1 = Vec3::new(0.0, fy / z, -fy * ty / (z * z));
+            // Σ = R S Sᵀ Rᵀ in world axes, then W Σ Wᵀ in camera axes.
+            let m =
+                Mat3::from_quat(gaussians.rotation(i)) * Mat3::from_diagonal(gaussians.scale(i));
+            let cov = rot * (m * m.transpose()) * rot.transpose();
+            let a = j0.dot(cov * j0) + settings.dilation;
+            let b = j0.dot(cov * j1);
+            let c = j1.dot(cov * j1) + settings.dilation;
+            let det = a * c - b * b;
+            if !(det > 0.0 && det.is_finite()) {
+                return None;
+            }
+            let mid = 0.5 * (a + c);
+            let lambda = mid + (mid * mid - det).max(0.1).sqrt();
+            let radius = (3.0 * lambda.sqrt()).ceil();
+            if !(radius > 0.0 && radius.is_finite() && mean2d.is_finite()) {
+                return None;
+            }
+            if mean2d.x + radius <= 0.0
+                || mean2d.x - radius >= w
+                || mean2d.y + radius <= 0.0
+                || mean2d.y - radius >= h
+            {
+                return None;
+            }
+            let conic = [c / det, -b / det, a / det];
+            if !conic.iter().all(|v| v.is_finite()) {
+                return None;
+            }
+            Some(Projected {
+                index: i as u32,
+                mean2d,
+                conic,
+                depth: z,
+                radius,
+                color: gaussians.color(i, (mean - origin).normalize()),
+                opacity: gaussians.opacity(i),
+            })
+        })
+        .collect()
+}
+
+/// Per-tile lists of projected Gaussians (indices into the projected array), each
+/// sorted front to back.
+pub(crate) struct Bins {
+    /// Tiles across and down.
+    pub tiles_x: u32,
+    pub tiles_y: u32,
+    /// Tile `t`'s list is `ids[offsets[t]..offsets[t + 1]]`, tiles row-major.
+    pub offsets: Vec<usize>,
+    pub ids: Vec<u32>,
+}
+
+/// The tiles `[x0, x1) × [y0, y1)` that a splat's screen box overlaps.
+fn tile_box(p: &Projected, tiles_x: u32, tiles_y: u32) -> (u32, u32, u32, u32) {
+    let t = TILE as f32;
+    let span = |lo: f32, hi: f32, n: u32| {
+        let a = (lo / t).floor().clamp(0.0, n as f32) as u32;
+        let b = (hi / t).ceil().clamp(0.0, n as f32) as u32;
+        (a, b.max(a))
+    };
+    let (x0, x1) = span(p.mean2d.x - p.radius, p.mean2d.x + p.radius, tiles_x);
+    let (y0, y1) = span(p.mean2d.y - p.radius, p.mean2d.y + p.radius, tiles_y);
+    (x0, x1, y0, y1)
+}
+
+/// Bins the splats into tiles and sorts each tile by depth, ties by Gaussian index;
+/// refuses more than `max_pairs` (tile, Gaussian) pairs before allocating them.
+pub(crate) fn bin(
+    projected: &[Projected],
+    width: u32,
+    height: u32,
+    max_pairs: u64,
+) -> Result<Bins, String> {
+    let tiles_x = width.div_ceil(TILE);
+    let tiles_y = height.div_ceil(TILE);
+    let n_tiles = tiles_x as usize * tiles_y as usize;
+    let mut counts = vec![0usize; n_tiles + 1];
+    let mut pairs = 0u64;
+    for p in projected {
+        let (x0, x1, y0, y1) = tile_box(p, tiles_x, tiles_y);
+        pairs += (x1 - x0) as u64 * (y1 - y0) as u64;
+    }
+    if pairs > max_pairs {
+        return Err(format!(
+            "the splats cover {pairs} (tile, Gaussian) pairs, above the limit of {max_pairs} \
+             (limits::MAX_SPLAT_TILE_PAIRS): render smaller or with fewer or smaller Gaussians"
+        ));
+    }
+    for p in projected {
+        let (x0, x1, y0, y1) = tile_box(p, tiles_x, tiles_y);
+        for ty in y0..y1 {
+            for tx in x0..x1 {
+                counts[ty as usize * tiles_x as usize + tx as usize + 1] += 1;
+            }
+        }
+    }
+    for t in 0..n_tiles {
+        counts[t + 1] += counts[t];
+    }
+    let offsets = counts;
+    let mut cursor = offsets.clone();
+    let mut ids = vec![0u32; pairs as usize];
+    for (k, p) in projected.iter().enumerate() {
+        let (x0, x1, y0, y1) = tile_box(p, tiles_x, tiles_y);
+        for ty in y0..y1 {
+            for tx in x0..x1 {
+                let t = ty as usize * tiles_x as usize + tx as usize;
+                ids[cursor[t]] = k as u32;
+                cursor[t] += 1;
+            }
+        }
+    }
+    // Split into the tiles' slices, then sort each in parallel. Ids are unique within a
+    // tile and in model order, so (depth, id) is a total order: deterministic.
+    let mut slices = Vec::with_capacity(n_tiles);
+    let mut rest = ids.as_mut_slice();
+    for t in 0..n_tiles {
+        let (head, tail) = rest.split_at_mut(offsets[t + 1] - offsets[t]);
+        slices.push(head);
+        rest = tail;
+    }
+    slices.par_iter_mut().for_each(|s| {
+        s.sort_unstable_by(|&a, &b| {
+            let (pa, pb) = (&projected[a as usize], &projected[b as usize]);
+            pa.depth.total_cmp(&pb.depth).then(a.cmp(&b))
+        })
+    });
+    Ok(Bins {
+        tiles_x,
+        tiles_y,
+        offsets,
+        ids,
+    })
+}
+
+/// Blends every pixel front to back; returns the image and the final transmittance.
+fn rasterize(
+    projected: &[Projected],
+    bins: &Bins,
+    camera: &Camera,
+    settings: &RenderSettings,
+) -> (Vec<[f32; 3]>, Vec<f32>) {
+    let (w, h) = (camera.width as usize, camera.height as usize);
+    let bg = Vec3::from_array(settings.background);
+    let n_tiles = bins.tiles_x as usize * bins.tiles_y as usize;
+    // One job per tile, each writing only its own buffer; scattered afterwards.
+    let tiles: Vec<Vec<(Vec3, f32)>> = (0..n_tiles)
+        .into_par_iter()
+        .map(|t| {
+            let list = &bins.ids[bins.offsets[t]..bins.offsets[t + 1]];
+            let tx = (t % bins.tiles_x as usize) * TILE as usize;
+            let ty = (t / bins.tiles_x as usize) * TILE as usize;
+            let (x1, y1) = ((tx + TILE as usize).min(w), (ty + TILE as usize).min(h));
+            let mut out = Vec::with_capacity((x1 - tx) * (y1 - ty));
+            for y in ty..y1 {
+                for x in tx..x1 {
+                    let px = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+                    let (c, t) = blend(projected, list, px, settings.early_stop);
+                    out.push((c + t * bg, t));
+                }
+            }
+            out
+        })
+        .collect();
+    let mut rgb = vec![[0.0; 3]; w * h];
+    let mut trans = vec![0.0; w * h];
+    for (t, tile) in tiles.iter().enumerate() {
+        let tx = (t % bins.tiles_x as usize) * TILE as usize;
+        let ty = (t / bins.tiles_x as usize) * TILE as usize;
+        let tw = (tx + TILE as usize).min(w) - tx;
+        for (k, &(c, tr)) in tile.iter().enumerate() {
+            let i = (ty + k / tw) * w + tx + k % tw;
+            rgb[i] = c.to_array();
+            trans[i] = tr;
+        }
+    }
+    (rgb, trans)
+}
+
+/// Front-to-back blending of one pixel at continuous position `px`: the accumulated
+/// color (without background) and the final transmittance.
+fn blend(projected: &[Projected], list: &[u32], px: Vec2, early_stop: f32) -> (Vec3, f32) {
+    let mut color = Vec3::ZERO;
+    let mut t = 1.0f32;
+    for &id in list {
+        let p = &projected[id as usize];
+        let d = px - p.mean2d;
+        let [ca, cb, cc] = p.conic;
+        let power = -0.5 * (ca * d.x * d.x + cc * d.y * d.y) - cb * d.x * d.y;
+        if power > 0.0 {
+            continue;
+        }
+        let alpha = (p.opacity * power.exp()).min(MAX_ALPHA);
+        if alpha < MIN_ALPHA {
+            continue;
+        }
+        let next = t * (1.0 - alpha);
+        if next < early_stop {
+            break;
+        }
+        color += p.color * (alpha * t);
+        t = next;
+    }
+    (color, t)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Affine3A;
+
+    /// A 64 × 48 camera at the origin looking down −Z, 60° across.
+    fn camera() -> Camera {
+        Camera::from_fov_x(64, 48, 60f32.to_radians(), Affine3A::IDENTITY).unwrap()
+    }
+
+    /// SH DC giving linear color `c` (degree 0).
+    fn dc(c: [f32; 3]) -> [f32; 3] {
+        c.map(|v| (v - 0.5) / 0.282_094_8)
+    }
+
+    fn settings(bg: [f32; 3]) -> RenderSettings {
+        RenderSettings {
+            background: bg,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn one_gaussian_matches_direct_evaluation() {
+        let cam = camera();
+        let (mean, s, logit) = ([0.3f32, -0.2, -4.0], 0.15f32, -1.0f32);
+        let mut g = Gaussians::new(0);
+        // Opacity 0.27: below 1/255 at 3σ, so the 3σ cutoff changes nothing.
+        g.push(mean, [s.ln(); 3], [0.3, 0.1, -0.7, 0.2], logit, &[0.0; 3]);
+        let bg = [0.1f32, 0.2, 0.3];
+        let out = render(&g, &cam, &settings(bg)).unwrap();
+        // Independent evaluation in f64: camera axes = world axes; OpenCV y and z flip.
+        let (x, y, z) = (mean[0] as f64, -mean[1] as f64, -mean[2] as f64);
+        let (fx, fy) = (cam.fx as f64, cam.fy as f64);
+        let u = fx * x / z + cam.cx as f64;
+        let v = fy * y / z + cam.cy as f64;
+        let j = [
+            [fx / z, 0.0, -fx * x / (z * z)],
+            [0.0, fy / z, -fy * y / (z * z)],
+        ];
+        let s2 = (s as f64).powi(2);
+        let dot = |r: [f64; 3], q: [f64; 3]| r[0] * q[0] + r[1] * q[1] + r[2] * q[2];
+        let a = s2 * dot(j[0], j[0]) + 0.3;
+        let b = s2 * dot(j[0], j[1]);
+        let c = s2 * dot(j[1], j[1]) + 0.3;
+        let det = a * c - b * b;
+        let o = 1.0 / (1.0 + (-logit as f64).exp());
+        let mut worst = 0.0f64;
+        let mut brightest = (0, 0.0f32);
+        for py in 0..48 {
+            for px in 0..64 {
+                let (dx, dy) = (px as f64 + 0.5 - u, py as f64 + 0.5 - v);
+                let q = (c * dx * dx - 2.0 * b * dx * dy + a * dy * dy) / det;
+                let alpha = (o * (-0.5 * q).exp()).min(0.99);
+                let alpha = if alpha < 1.0 / 255.0 { 0.0 } else { alpha };
+                let i = py * 64 + px;
+                for ch in 0..3 {
+                    let want = 0.5 * alpha + (1.0 - alpha) * bg[ch] as f64;
+                    worst = worst.max((out.rgb[i][ch] as f64 - want).abs());
+                }
+                worst = worst.max((out.transmittance[i] as f64 - (1.0 - alpha)).abs());
+                if out.rgb[i][0] > brightest.1 {
+                    brightest = (i, out.rgb[i][0]);
+                }
+            }
+        }
+        assert!(worst < 1e-5, "largest difference {worst}");
+        // Its center is where the camera projects the mean.
+        let at = cam.project(Vec3::from_array(mean)).unwrap();
+        assert!((out.projected[0].mean2d - at).length() < 1e-3);
+        let want = at.y.floor() as usize * 64 + at.x.floor() as usize;
+        assert_eq!(brightest.0, want, "brightest pixel vs. projection {at}");
+        assert!(brightest.1 > bg[0] + 0.05);
+    }
+
+    #[test]
+    fn behind_near_and_off_screen_are_culled() {
+        let cam = camera();
+        let bg = [0.2, 0.4, 0.6];
+        let mut g = Gaussians::new(0);
+        g.push(
+            [0.0, 0.0, 2.0],
+            [0.0; 3],
+            [1.0, 0.0, 0.0, 0.0],
+            5.0,
+            &[0.0; 3],
+        ); // behind
+        g.push(
+            [0.0, 0.0, -0.005],
+            [0.0; 3],
+            [1.0, 0.0, 0.0, 0.0],
+            5.0,
+            &[0.0; 3],
+        ); // straddles near
+        g.push(
+            [100.0, 0.0, -5.0],
+            [-2.0; 3],
+            [1.0, 0.0, 0.0, 0.0],
+            5.0,
+            &[0.0; 3],
+        ); // off screen
+        g.push(
+            [0.0, 0.0, 0.0],
+            [0.0; 3],
+            [1.0, 0.0, 0.0, 0.0],
+            5.0,
+            &[0.0; 3],
+        ); // at the eye
+        let s = settings(bg);
+        assert!(project(&g, &cam, &s).is_empty());
+        let out = render(&g, &cam, &s).unwrap();
+        assert!(out.rgb.iter().all(|&c| c == bg));
+        assert!(out.transmittance.iter().all(|&t| t == 1.0));
+        // The same off-screen Gaussian moved into view is kept: the cull is real.
+        g.means[2] = [0.0, 0.0, -5.0];
+        assert_eq!(project(&g, &cam, &s).len(), 1);
+    }
+
+    #[test]
+    fn nearer_wins_and_ties_go_to_the_lower_index() {
+        let cam = camera();
+        let red = dc([1.0, 0.0, 0.0]);
+        let blue = dc([0.0, 0.0, 1.0]);
+        let center = 24 * 64 + 32;
+        let build = |first: (f32, [f32; 3]), second: (f32, [f32; 3])| {
+            let mut g = Gaussians::new(0);
+            for (z, col) in [first, second] {
+                g.push([0.0, 0.0, z], [-1.0; 3], [1.0, 0.0, 0.0, 0.0], 8.0, &col);
+            }
+            render(&g, &cam, &settings([0.0; 3])).unwrap()
+        };
+        let a = build((-3.0, red), (-5.0, blue));
+        let b = build((-5.0, blue), (-3.0, red));
+        let c = a.rgb[center];
+        assert!(c[0] > 0.98 && c[2] < 0.02, "{c:?}");
+        assert_eq!(a.rgb, b.rgb);
+        assert_eq!(a.transmittance, b.transmittance);
+        // Same depth: index 0 is in front.
+        let c = build((-4.0, red), (-4.0, blue)).rgb[center];
+        assert!(c[0] > 0.98 && c[2] < 0.02, "{c:?}");
+        let c = build((-4.0, blue), (-4.0, red)).rgb[center];
+        assert!(c[2] > 0.98 && c[0] < 0.02, "{c:?}");
+    }
+
+    #[test]
+    fn huge_and_degenerate_gaussians_stay_finite() {
+        let cam = camera();
+        let bg = [0.5; 3];
+        let mut g = Gaussians::new(0);
+        g.push(
+            [0.0, 0.0, -5.0],
+            [5.0; 3],
+            [1.0, 0.0, 0.0, 0.0],
+            0.0,
+            &dc([1.0, 0.0, 0.0]),
+        );
+        let out = render(&g, &cam, &settings(bg)).unwrap();
+        assert!(out.rgb.iter().flatten().all(|v| v.is_finite()));
+        // Covers every pixel, corners included.
+        assert!(
+            out.rgb.iter().all(|c| c[0] > 0.6 && c[1] < 0.4),
+            "{:?}",
+            out.rgb[0]
+        );
+        let mut g = Gaussians::new(0);
+        for (k, rot) in [
+            [1.0, 0.0, 0.0, 0.0],
+            [0.6, 0.0, 0.8, 0.0],
+            [0.5, 0.5, 0.5, 0.5],
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            let mean = [k as f32 * 0.3 - 0.3, 0.1, -3.0];
+            g.push(
+                mean,
+                [1e-6f32.ln(), -1.0, -1.5],
+                rot,
+                3.0,
+                &dc([0.0, 1.0, 0.0]),
+            );
+        }
+        let out = render(&g, &cam, &settings(bg)).unwrap();
+        assert!(out.rgb.iter().flatten().all(|v| v.is_finite()));
+        assert!(out.transmittance.iter().all(|t| t.is_finite()));
+        assert!(
+            out.rgb.iter().any(|c| c[1] > 0.6),
+            "the flat splats are drawn"
+        );
+    }
+
+    /// A reproducible scene of `n` Gaussians in front of [`camera`].
+    fn random_scene(n: usize) -> Gaussians {
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let mut g = Gaussians::new(1);
+        for _ in 0..n {
+            let mean = [next() * 4.0 - 2.0, next() * 3.0 - 1.5, -2.0 - next() * 4.0];
+            let ls = [0.0; 3].map(|_: f32| -3.5 + 2.0 * next());
+            let rot = [next() - 0.5, next() - 0.5, next() - 0.5, next() + 0.1];
+            let sh: Vec<f32> = (0..12).map(|_| next() - 0.5).collect();
+            g.push(mean, ls, rot, next() * 6.0 - 2.0, &sh);
+        }
+        g
+    }
+
+    #[test]
+    fn same_bits_for_any_thread_count() {
+        let g = random_scene(500);
+        let cam = camera();
+        let s = settings([0.1, 0.2, 0.3]);
+        let run = |threads| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| render(&g, &cam, &s).unwrap())
+        };
+        let (one, three) = (run(1), run(3));
+        let bits = |r: &Rendered| -> Vec<u32> {
+            r.rgb
+                .iter()
+                .flatten()
+                .chain(&r.transmittance)
+                .map(|v| v.to_bits())
+                .collect()
+        };
+        assert_eq!(bits(&one), bits(&three));
+        assert!(
+            one.projected.len() > 400,
+            "{} projected",
+            one.projected.len()
+        );
+        assert!(
+            one.transmittance.iter().any(|&t| t < 0.5),
+            "the scene covers pixels"
+        );
+    }
+
+    #[test]
+    fn no_gaussians_give_the_background() {
+        let bg = [0.25, 0.5, 0.75];
+        let out = render(&Gaussians::new(2), &camera(), &settings(bg)).unwrap();
+        assert_eq!((out.width, out.height), (64, 48));
+        assert_eq!(out.rgb, vec![bg; 64 * 48]);
+        assert_eq!(out.transmittance, vec![1.0; 64 * 48]);
+    }
+
+    #[test]
+    fn tile_pairs_are_limited_and_bad_input_refused() {
+        let g = random_scene(50);
+        let cam = camera();
+        let s = settings([0.0; 3]);
+        let err = render_limited(&g, &cam, &s, 10).unwrap_err();
+        assert!(err.contains("MAX_SPLAT_TILE_PAIRS"), "{err}");
+        assert!(render_limited(&g, &cam, &s, u64::MAX).is_ok());
+        let distorted = cam.with_distortion(0.1, 0.0, 0.0, 0.0);
+        assert!(
+            render(&g, &distorted, &s)
+                .unwrap_err()
+                .contains("undistort")
+        );
+        let bad = RenderSettings { near: 0.0, ..s };
+        assert!(render(&g, &cam, &bad).unwrap_err().contains("near"));
+    }
+}
