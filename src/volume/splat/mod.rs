@@ -24,9 +24,11 @@
 //! assert!((back.opacity(1) - 0.952_574).abs() < 1e-6); // sigmoid(3)
 //! ```
 
+pub mod backward;
 pub mod ply;
 pub mod render;
 
+pub use backward::{Gradients, backward, backward_into};
 pub use ply::{load, save};
 pub use render::{RenderSettings, Rendered, render};
 
