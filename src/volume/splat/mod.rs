@@ -25,6 +25,7 @@
 //! ```
 
 pub mod ply;
+pub(crate) mod points;
 pub mod render;
 
 pub use ply::{load, save};
