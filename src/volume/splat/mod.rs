@@ -26,6 +26,7 @@
 
 pub mod backward;
 pub mod ply;
+pub(crate) mod points;
 pub mod render;
 
 pub use backward::{Gradients, backward, backward_into};
