@@ -29,7 +29,8 @@ use rayon::prelude::*;
 
 use super::Gaussians;
 use super::render::{
-    MAX_ALPHA, Pinhole, Projected, RenderSettings, Rendered, splat_alpha, tile_pixels,
+    MAX_ALPHA, Pinhole, Projected, RenderSettings, Rendered, TILE, TILE_PIXELS, alpha_at,
+    splat_rows, tile_pixels,
 };
 use crate::volume::camera::Camera;
 use crate::volume::sh;
@@ -214,7 +215,10 @@ fn pixel_backward(
 }
 
 /// The back-to-front pass over one tile's pixels: per entry of `list`, the sum over the
-/// tile's pixels of that splat's [`PairGrad`].
+/// tile's pixels of that splat's [`PairGrad`]. Splat by splat, like the forward
+/// ([`blend_tile`](super::render)), with per-pixel state and branch-free loops over rows of
+/// [`TILE`] pixels; sums over a splat's pixels are taken lane by lane and then in lane
+/// order, so they do not depend on the thread count.
 fn tile_backward(
     rendered: &Rendered,
     d_rgb: &[[f32; 3]],
@@ -223,48 +227,75 @@ fn tile_backward(
     (x0, x1, y0, y1): (usize, usize, usize, usize),
     w: usize,
 ) -> Vec<PairGrad> {
+    const T: usize = TILE as usize;
     let mut acc = vec![[0.0f32; 9]; list.len()];
+    // Per pixel: ∂L/∂rgb, the transmittance in front of the current splat's successor,
+    // the color that successor and everything behind it add (background included), and
+    // one past the last blended splat. Pixels past the image's edge have end 0.
+    let mut dpix = [[0.0f32; TILE_PIXELS]; 3];
+    let mut trans = [0.0f32; TILE_PIXELS];
+    let mut behind = [[0.0f32; TILE_PIXELS]; 3];
+    let mut ends = [0u32; TILE_PIXELS];
+    let mut last = 0usize;
     for y in y0..y1 {
         for x in x0..x1 {
-            let i = y * w + x;
-            let dpix = Vec3::from_array(d_rgb[i]);
-            let end = rendered.ends[i] as usize;
-            if dpix == Vec3::ZERO || end == 0 {
-                continue;
+            let (i, j) = (y * w + x, (y - y0) * T + (x - x0));
+            let t = rendered.transmittance[i];
+            trans[j] = t;
+            for c in 0..3 {
+                dpix[c][j] = d_rgb[i][c];
+                behind[c][j] = t * bg[c];
             }
-            let px = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
-            // Transmittance in front of the current splat's successor, and the color
-            // that successor and everything behind it add (background included).
-            let mut t = rendered.transmittance[i];
-            let mut behind = t * bg;
-            for k in (0..end).rev() {
-                let p: &Projected = &rendered.projected[list[k] as usize];
-                let Some((alpha, raw, g, d)) = splat_alpha(p, px) else {
-                    continue;
-                };
+            ends[j] = rendered.ends[i];
+            last = last.max(ends[j] as usize);
+        }
+    }
+    let rows = y1 - y0;
+    for k in (0..last).rev() {
+        let p: &Projected = &rendered.projected[list[k] as usize];
+        let (r0, r1) = splat_rows(p, y0, rows);
+        let (o, conic, color) = (p.opacity, p.conic, p.color);
+        let [ca, cb, cc] = conic;
+        // Lane sums of the nine gradients.
+        let mut lanes = [[0.0f32; T]; 9];
+        for r in r0..r1 {
+            let dy = (y0 + r) as f32 + 0.5 - p.mean2d.y;
+            for x in 0..T {
+                let j = r * T + x;
+                let dx = (x0 + x) as f32 + 0.5 - p.mean2d.x;
+                let (alpha, raw, g, counts) = alpha_at(o, conic, dx, dy);
+                let on = counts && (k as u32) < ends[j];
                 let keep = 1.0 - alpha;
-                let t_here = t / keep;
-                let weight = alpha * t_here;
-                let a = &mut acc[k];
-                a[6] += dpix.x * weight;
-                a[7] += dpix.y * weight;
-                a[8] += dpix.z * weight;
-                let d_alpha = dpix.dot(p.color * t_here - behind / keep);
-                behind += p.color * weight;
-                t = t_here;
-                if raw >= MAX_ALPHA {
-                    continue; // clamped: no gradient to opacity or shape here
-                }
-                a[5] += d_alpha * g;
+                let t = trans[j];
+                let t_here = if on { t / keep } else { t };
+                let weight = if on { alpha * t_here } else { 0.0 };
+                let (d0, d1, d2) = (dpix[0][j], dpix[1][j], dpix[2][j]);
+                lanes[6][x] += d0 * weight;
+                lanes[7][x] += d1 * weight;
+                lanes[8][x] += d2 * weight;
+                let d_alpha = d0 * (color.x * t_here - behind[0][j] / keep)
+                    + d1 * (color.y * t_here - behind[1][j] / keep)
+                    + d2 * (color.z * t_here - behind[2][j] / keep);
+                behind[0][j] += color.x * weight;
+                behind[1][j] += color.y * weight;
+                behind[2][j] += color.z * weight;
+                trans[j] = t_here;
+                // A clamped opacity passes no gradient to the opacity or the shape.
+                let free = on && raw < MAX_ALPHA;
+                let d_alpha = if free { d_alpha } else { 0.0 };
+                lanes[5][x] += d_alpha * g;
                 // ∂L/∂power, with power = −½(a·dx² + c·dy²) − b·dx·dy, dx = px − center.
                 let gp = d_alpha * raw;
-                let [ca, cb, cc] = p.conic;
-                a[0] += gp * (ca * d.x + cb * d.y);
-                a[1] += gp * (cc * d.y + cb * d.x);
-                a[2] += -0.5 * gp * d.x * d.x;
-                a[3] += -gp * d.x * d.y;
-                a[4] += -0.5 * gp * d.y * d.y;
+                lanes[0][x] += gp * (ca * dx + cb * dy);
+                lanes[1][x] += gp * (cc * dy + cb * dx);
+                lanes[2][x] += -0.5 * gp * dx * dx;
+                lanes[3][x] += -gp * dx * dy;
+                lanes[4][x] += -0.5 * gp * dy * dy;
             }
+        }
+        let a = &mut acc[k];
+        for q in 0..9 {
+            a[q] = lanes[q].iter().sum();
         }
     }
     acc

@@ -23,7 +23,6 @@
 //! [`MAX_GAUSSIANS`]: crate::limits::MAX_GAUSSIANS
 
 // Used by the Gaussian trainer's initialization; until it lands, only the tests call in.
-#![cfg_attr(not(test), allow(dead_code))]
 
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};

@@ -117,7 +117,8 @@ pub(crate) struct Projected {
     pub conic: [f32; 3],
     /// Depth of the center along the viewing axis, world units (> `near`).
     pub depth: f32,
-    /// Screen radius, pixels: `ceil(3·sqrt(larger eigenvalue))` of the 2D covariance.
+    /// Screen radius, pixels: `ceil(√(2·ln(255·opacity)·λ))` with `λ` the larger
+    /// eigenvalue of the 2D covariance, beyond which the splat's opacity is below 1/255.
     pub radius: f32,
     /// Linear RGB seen along the direction from the camera center to the mean.
     pub color: Vec3,
@@ -327,7 +328,14 @@ pub(crate) fn project(
             }
             let mid = 0.5 * (a + c);
             let lambda = mid + (mid * mid - det).max(0.1).sqrt();
-            let radius = (3.0 * lambda.sqrt()).ceil();
+            // Opacity-aware bound: beyond √(2·ln(255·o)·λ) pixels from the center the
+            // opacity is below 1/255 in every direction, so nothing there is blended.
+            let opacity = gaussians.opacity(i);
+            if !(opacity >= MIN_ALPHA) {
+                return None;
+            }
+            let reach = 2.0 * (opacity / MIN_ALPHA).ln();
+            let radius = (reach * lambda).sqrt().ceil();
             let mean2d = cam.center(geo.p);
             if !(radius > 0.0 && radius.is_finite() && mean2d.is_finite()) {
                 return None;
@@ -351,7 +359,7 @@ pub(crate) fn project(
                 depth: geo.p.z,
                 radius,
                 color: gaussians.color(i, (mean - cam.origin).normalize()),
-                opacity: gaussians.opacity(i),
+                opacity,
             })
         })
         .collect()
@@ -477,7 +485,10 @@ pub(crate) fn tile_pixels(
     )
 }
 
-/// Blends every pixel front to back.
+/// Pixels in a tile.
+pub(crate) const TILE_PIXELS: usize = (TILE * TILE) as usize;
+
+/// Blends every pixel front to back, tile by tile ([`blend_tile`]).
 fn rasterize(
     projected: &[Projected],
     bins: &Bins,
@@ -485,23 +496,13 @@ fn rasterize(
     settings: &RenderSettings,
 ) -> Blended {
     let (w, h) = (camera.width as usize, camera.height as usize);
-    let bg = Vec3::from_array(settings.background);
     let n_tiles = bins.tiles_x as usize * bins.tiles_y as usize;
     // One job per tile, each writing only its own buffer; scattered afterwards.
-    let tiles: Vec<Vec<(Vec3, f32, u32)>> = (0..n_tiles)
+    let tiles: Vec<TileOut> = (0..n_tiles)
         .into_par_iter()
         .map(|t| {
             let list = &bins.ids[bins.offsets[t]..bins.offsets[t + 1]];
-            let (x0, x1, y0, y1) = tile_pixels(t, bins, w, h);
-            let mut out = Vec::with_capacity((x1 - x0) * (y1 - y0));
-            for y in y0..y1 {
-                for x in x0..x1 {
-                    let px = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
-                    let (c, t, end) = blend(projected, list, px, settings.early_stop);
-                    out.push((c + t * bg, t, end));
-                }
-            }
-            out
+            blend_tile(projected, list, tile_pixels(t, bins, w, h), settings)
         })
         .collect();
     let mut out = Blended {
@@ -510,13 +511,140 @@ fn rasterize(
         ends: vec![0; w * h],
     };
     for (t, tile) in tiles.iter().enumerate() {
-        let (x0, x1, y0, _) = tile_pixels(t, bins, w, h);
-        let tw = x1 - x0;
-        for (k, &(c, tr, end)) in tile.iter().enumerate() {
-            let i = (y0 + k / tw) * w + x0 + k % tw;
-            out.rgb[i] = c.to_array();
-            out.transmittance[i] = tr;
-            out.ends[i] = end;
+        let (x0, x1, y0, y1) = tile_pixels(t, bins, w, h);
+        for y in y0..y1 {
+            for x in x0..x1 {
+                let j = (y - y0) * TILE as usize + (x - x0);
+                let i = y * w + x;
+                out.rgb[i] = [tile.rgb[0][j], tile.rgb[1][j], tile.rgb[2][j]];
+                out.transmittance[i] = tile.t[j];
+                out.ends[i] = tile.end[j];
+            }
+        }
+    }
+    out
+}
+
+/// One tile's pixels, row-major over the full [`TILE`] × [`TILE`] square (pixels past
+/// the image's edge are computed as done from the start and dropped).
+struct TileOut {
+    rgb: [[f32; TILE_PIXELS]; 3],
+    t: [f32; TILE_PIXELS],
+    end: [u32; TILE_PIXELS],
+}
+
+/// `exp(x)` for `x ≤ 0`, in arithmetic the compiler vectorizes (no library call): Cody–Waite
+/// reduction `x = n·ln 2 + r`, `|r| ≤ ln 2 / 2`, a degree-6 Taylor polynomial of `exp(r)`
+/// (relative error below 2·10⁻⁷, about 1 ulp) and `2ⁿ` built from its bits. Inputs below
+/// −87 give `exp(−87)` (≈ 1.6·10⁻³⁸), where every use here is already negligible.
+#[inline(always)]
+pub(crate) fn exp_neg(x: f32) -> f32 {
+    const LOG2E: f32 = std::f32::consts::LOG2_E;
+    const LN2_HI: f32 = 0.693_359_4;
+    const LN2_LO: f32 = -2.121_944_4e-4;
+    let x = x.clamp(-87.0, 0.0);
+    // Round to nearest for x ≤ 0 (truncation of t − 0.5).
+    let n = (x * LOG2E - 0.5) as i32;
+    let nf = n as f32;
+    let r = x - nf * LN2_HI - nf * LN2_LO;
+    let p = 1.0
+        + r * (1.0
+            + r * (0.5
+                + r * (1.0 / 6.0 + r * (1.0 / 24.0 + r * (1.0 / 120.0 + r * (1.0 / 720.0))))));
+    p * f32::from_bits(((n + 127) as u32) << 23)
+}
+
+/// The opacity of a splat with peak `opacity` and conic `[a, b, c]` at offset `(dx, dy)`
+/// from its center: `(alpha, raw, exp(power))` with `raw = opacity·exp(power)` and
+/// `alpha = min(raw, MAX_ALPHA)`, and whether it counts (`power ≤ 0` and
+/// `alpha ≥ MIN_ALPHA`). Branch-free, for the tile loops.
+#[inline(always)]
+pub(crate) fn alpha_at(
+    opacity: f32,
+    [a, b, c]: [f32; 3],
+    dx: f32,
+    dy: f32,
+) -> (f32, f32, f32, bool) {
+    let power = -0.5 * (a * dx * dx + c * dy * dy) - b * dx * dy;
+    let g = exp_neg(power);
+    let raw = opacity * g;
+    let alpha = raw.min(MAX_ALPHA);
+    (alpha, raw, g, power <= 0.0 && alpha >= MIN_ALPHA)
+}
+
+/// The rows of a tile starting at pixel row `y0` (at most `rows`) that splat `p` can
+/// reach: its screen box `center.y ± radius`, as `[r0, r1)` tile rows.
+#[inline]
+pub(crate) fn splat_rows(p: &Projected, y0: usize, rows: usize) -> (usize, usize) {
+    let lo = (p.mean2d.y - p.radius - 0.5 - y0 as f32).floor().max(0.0) as usize;
+    let hi = (p.mean2d.y + p.radius - 0.5 - y0 as f32).ceil() + 1.0;
+    (lo.min(rows), (hi.max(0.0) as usize).min(rows))
+}
+
+/// Front-to-back blending of one tile, splat by splat over the tile's pixels (the inner
+/// loop over a row of [`TILE`] pixels is branch-free, so the compiler vectorizes it).
+/// Per pixel: the accumulated color over the background, the final transmittance, and
+/// one past the last splat of `list` that was blended (0 if none).
+fn blend_tile(
+    projected: &[Projected],
+    list: &[u32],
+    (x0, x1, y0, y1): (usize, usize, usize, usize),
+    settings: &RenderSettings,
+) -> TileOut {
+    const T: usize = TILE as usize;
+    let mut out = TileOut {
+        rgb: [[0.0; TILE_PIXELS]; 3],
+        t: [1.0; TILE_PIXELS],
+        end: [0; TILE_PIXELS],
+    };
+    // A pixel is live until its transmittance would fall below the early stop; pixels
+    // past the image's edge are never live.
+    let mut live = [false; TILE_PIXELS];
+    for y in 0..(y1 - y0) {
+        for x in 0..(x1 - x0) {
+            live[y * T + x] = true;
+        }
+    }
+    let mut n_live = (x1 - x0) * (y1 - y0);
+    let rows = y1 - y0;
+    let eps = settings.early_stop;
+    for (k, &id) in list.iter().enumerate() {
+        if n_live == 0 {
+            break;
+        }
+        let p = &projected[id as usize];
+        let (r0, r1) = splat_rows(p, y0, rows);
+        let (o, conic, color) = (p.opacity, p.conic, p.color);
+        let end = k as u32 + 1;
+        for r in r0..r1 {
+            let dy = (y0 + r) as f32 + 0.5 - p.mean2d.y;
+            let row = r * T;
+            let mut stopped = 0;
+            for x in 0..T {
+                let j = row + x;
+                let dx = (x0 + x) as f32 + 0.5 - p.mean2d.x;
+                let (alpha, _, _, counts) = alpha_at(o, conic, dx, dy);
+                let t = out.t[j];
+                let next = t * (1.0 - alpha);
+                let counts = counts && live[j];
+                let stop = counts && next < eps;
+                let blend = counts && !stop;
+                let wgt = if blend { alpha * t } else { 0.0 };
+                out.rgb[0][j] += color.x * wgt;
+                out.rgb[1][j] += color.y * wgt;
+                out.rgb[2][j] += color.z * wgt;
+                out.t[j] = if blend { next } else { t };
+                out.end[j] = if blend { end } else { out.end[j] };
+                live[j] = live[j] && !stop;
+                stopped += stop as usize;
+            }
+            n_live -= stopped;
+        }
+    }
+    let bg = settings.background;
+    for j in 0..TILE_PIXELS {
+        for c in 0..3 {
+            out.rgb[c][j] += out.t[j] * bg[c];
         }
     }
     out
@@ -531,47 +659,6 @@ pub(crate) fn rasterize_for_tests(
     settings: &RenderSettings,
 ) -> Vec<[f32; 3]> {
     rasterize(projected, bins, camera, settings).rgb
-}
-
-/// The opacity of splat `p` at the continuous pixel position `px`, before and after the
-/// [`MAX_ALPHA`] clamp, with `exp(power)`; `None` where it is skipped (the exponent is
-/// positive, which only rounding can make it, or the opacity is below [`MIN_ALPHA`]).
-#[inline]
-pub(crate) fn splat_alpha(p: &Projected, px: Vec2) -> Option<(f32, f32, f32, Vec2)> {
-    let d = px - p.mean2d;
-    let [ca, cb, cc] = p.conic;
-    let power = -0.5 * (ca * d.x * d.x + cc * d.y * d.y) - cb * d.x * d.y;
-    if power > 0.0 {
-        return None;
-    }
-    let g = power.exp();
-    let raw = p.opacity * g;
-    let alpha = raw.min(MAX_ALPHA);
-    if alpha < MIN_ALPHA {
-        return None;
-    }
-    Some((alpha, raw, g, d))
-}
-
-/// Front-to-back blending of one pixel at continuous position `px`: the accumulated
-/// color (without background), the final transmittance and how many entries of `list`
-/// were visited (the blended ones are among them).
-fn blend(projected: &[Projected], list: &[u32], px: Vec2, early_stop: f32) -> (Vec3, f32, u32) {
-    let mut color = Vec3::ZERO;
-    let mut t = 1.0f32;
-    for (k, &id) in list.iter().enumerate() {
-        let p = &projected[id as usize];
-        let Some((alpha, ..)) = splat_alpha(p, px) else {
-            continue;
-        };
-        let next = t * (1.0 - alpha);
-        if next < early_stop {
-            return (color, t, k as u32);
-        }
-        color += p.color * (alpha * t);
-        t = next;
-    }
-    (color, t, list.len() as u32)
 }
 
 #[cfg(test)]
