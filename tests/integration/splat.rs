@@ -3,6 +3,8 @@
 //! where the rendering is a smooth function of a parameter the gradient agrees with
 //! central finite differences.
 
+use std::f32::consts::FRAC_1_SQRT_2;
+
 use diffsvg::glam::Affine3A;
 use diffsvg::volume::camera::Camera;
 use diffsvg::volume::splat::{Gaussians, Gradients, RenderSettings, backward, render};
@@ -187,9 +189,10 @@ fn a_gaussian_on_the_image_border() {
         -0.3,
         &dc([0.2, 0.7, 0.4]),
     );
-    // And one centered just outside the top-right corner.
+    // And one centered just outside the top-right corner, a little further away (at the
+    // same depth a finite difference of the depth would swap their order).
     g.push(
-        [2.2, 1.6, -5.0],
+        [2.42, 1.76, -5.5],
         [0.9; 3],
         [1.0, 0.0, 0.0, 0.0],
         -0.8,
@@ -204,17 +207,19 @@ fn a_gaussian_on_the_image_border() {
 #[test]
 fn a_nearly_flat_gaussian() {
     let mut g = Gaussians::new(0);
-    // A disk of radius ~1 and thickness 1e-6, seen at an angle.
+    // A disk of radius ~1.8 and thickness 1e-6, seen at an angle. Its 1/255 contour,
+    // where the renderer stops drawing it (a true discontinuity that finite differences
+    // would see), lies outside the image.
     g.push(
         [0.0, 0.0, -5.0],
-        [1e-6f32.ln(), 0.1, 0.0],
+        [1e-6f32.ln(), 0.6, 0.5],
         [0.9, 0.3, 0.2, 0.0],
-        0.0,
-        &dc([0.6, 0.2, 0.8]),
+        2.0,
+        &dc([0.6, 0.2, 0.5]),
     );
     let (rgb, gr) = run(&g);
     assert!(gr.visible[0]);
-    assert!(rgb[12 * 32 + 16][2] < 0.85, "the disk is drawn");
+    assert!(rgb[12 * 32 + 16][2] < 0.6, "the disk is drawn");
     // The thin axis barely matters; the others are smooth.
     check(
         &g,
@@ -237,7 +242,7 @@ fn a_nearly_flat_gaussian() {
         2.0,
         &dc([0.0; 3]),
     );
-    edge.rotations[0] = [0.707_106_8, 0.707_106_8, 0.0, 0.0]; // thin axis along the view
+    edge.rotations[0] = [FRAC_1_SQRT_2, FRAC_1_SQRT_2, 0.0, 0.0]; // thin axis along the view
     run(&edge);
 }
 
@@ -270,7 +275,8 @@ fn a_fully_opaque_stack() {
     // clamp at 0.99, blending stops early, and those behind get no gradient at the center.
     let mut g = Gaussians::new(0);
     for k in 0..20 {
-        let c = [k as f32 / 20.0, 0.5, 1.0 - k as f32 / 20.0];
+        // Colors stay clear of 0 and 1, where the color clamp has a kink.
+        let c = [0.03 + 0.9 * k as f32 / 20.0, 0.5, 0.97 - 0.9 * k as f32 / 20.0];
         g.push(
             [0.0, 0.0, -3.0 - 0.1 * k as f32],
             [0.5; 3],

@@ -498,9 +498,8 @@ fn validate(
         opts.lr_sh_dc,
         opts.lr_sh_rest,
     ];
-    if !rates.iter().all(|r| r.is_finite() && *r >= 0.0)
-        || !(opts.extent > 0.0 && opts.extent.is_finite())
-    {
+    let rates_ok = rates.iter().all(|r| r.is_finite() && *r >= 0.0);
+    if !(rates_ok && opts.extent > 0.0 && opts.extent.is_finite()) {
         return Err("learning rates must be finite and ≥ 0, the extent > 0".into());
     }
     if !(0.0..=1.0).contains(&opts.ssim_weight) {
