@@ -276,7 +276,11 @@ fn a_fully_opaque_stack() {
     let mut g = Gaussians::new(0);
     for k in 0..20 {
         // Colors stay clear of 0 and 1, where the color clamp has a kink.
-        let c = [0.03 + 0.9 * k as f32 / 20.0, 0.5, 0.97 - 0.9 * k as f32 / 20.0];
+        let c = [
+            0.03 + 0.9 * k as f32 / 20.0,
+            0.5,
+            0.97 - 0.9 * k as f32 / 20.0,
+        ];
         g.push(
             [0.0, 0.0, -3.0 - 0.1 * k as f32],
             [0.5; 3],

@@ -27,11 +27,11 @@
 use glam::{Mat2, Mat3, Vec2, Vec3};
 use rayon::prelude::*;
 
+use wide::{f32x8, i32x8};
+
 use super::Gaussians;
-use super::render::{
-    MAX_ALPHA, Pinhole, Projected, RenderSettings, Rendered, TILE, TILE_PIXELS, alpha_at,
-    splat_rows, tile_pixels,
-};
+use super::kernel::{GradRow, HALVES, grad_row, lane_sum, set_lane};
+use super::render::{Pinhole, Projected, RenderSettings, Rendered, TILE, splat_rows, tile_pixels};
 use crate::volume::camera::Camera;
 use crate::volume::sh;
 
@@ -229,74 +229,41 @@ fn tile_backward(
 ) -> Vec<PairGrad> {
     const T: usize = TILE as usize;
     let mut acc = vec![[0.0f32; 9]; list.len()];
-    // Per pixel: ∂L/∂rgb, the transmittance in front of the current splat's successor,
-    // the color that successor and everything behind it add (background included), and
-    // one past the last blended splat. Pixels past the image's edge have end 0.
-    let mut dpix = [[0.0f32; TILE_PIXELS]; 3];
-    let mut trans = [0.0f32; TILE_PIXELS];
-    let mut behind = [[0.0f32; TILE_PIXELS]; 3];
-    let mut ends = [0u32; TILE_PIXELS];
+    let blank = GradRow {
+        d: [[f32x8::ZERO; HALVES]; 3],
+        t: [f32x8::ZERO; HALVES],
+        behind: [[f32x8::ZERO; HALVES]; 3],
+        end: [i32x8::ZERO; HALVES],
+    };
+    let mut state = [blank; T];
     let mut last = 0usize;
     for y in y0..y1 {
+        let row = &mut state[y - y0];
+        let mut end = [0i32; T];
         for x in x0..x1 {
-            let (i, j) = (y * w + x, (y - y0) * T + (x - x0));
+            let (i, c) = (y * w + x, x - x0);
             let t = rendered.transmittance[i];
-            trans[j] = t;
-            for c in 0..3 {
-                dpix[c][j] = d_rgb[i][c];
-                behind[c][j] = t * bg[c];
+            set_lane(&mut row.t, c, t);
+            for ch in 0..3 {
+                set_lane(&mut row.d[ch], c, d_rgb[i][ch]);
+                set_lane(&mut row.behind[ch], c, t * bg[ch]);
             }
-            ends[j] = rendered.ends[i];
-            last = last.max(ends[j] as usize);
+            end[c] = rendered.ends[i] as i32;
+            last = last.max(rendered.ends[i] as usize);
         }
+        row.end = [0, 1].map(|h| i32x8::new(end[8 * h..8 * h + 8].try_into().unwrap()));
     }
     let rows = y1 - y0;
     for k in (0..last).rev() {
         let p: &Projected = &rendered.projected[list[k] as usize];
         let (r0, r1) = splat_rows(p, y0, rows);
-        let (o, conic, color) = (p.opacity, p.conic, p.color);
-        let [ca, cb, cc] = conic;
-        // Lane sums of the nine gradients.
-        let mut lanes = [[0.0f32; T]; 9];
-        for r in r0..r1 {
+        let left = p.mean2d.x - x0 as f32;
+        let mut lanes = [[f32x8::ZERO; HALVES]; 9];
+        for (r, row) in state.iter_mut().enumerate().take(r1).skip(r0) {
             let dy = (y0 + r) as f32 + 0.5 - p.mean2d.y;
-            for x in 0..T {
-                let j = r * T + x;
-                let dx = (x0 + x) as f32 + 0.5 - p.mean2d.x;
-                let (alpha, raw, g, counts) = alpha_at(o, conic, dx, dy);
-                let on = counts && (k as u32) < ends[j];
-                let keep = 1.0 - alpha;
-                let t = trans[j];
-                let t_here = if on { t / keep } else { t };
-                let weight = if on { alpha * t_here } else { 0.0 };
-                let (d0, d1, d2) = (dpix[0][j], dpix[1][j], dpix[2][j]);
-                lanes[6][x] += d0 * weight;
-                lanes[7][x] += d1 * weight;
-                lanes[8][x] += d2 * weight;
-                let d_alpha = d0 * (color.x * t_here - behind[0][j] / keep)
-                    + d1 * (color.y * t_here - behind[1][j] / keep)
-                    + d2 * (color.z * t_here - behind[2][j] / keep);
-                behind[0][j] += color.x * weight;
-                behind[1][j] += color.y * weight;
-                behind[2][j] += color.z * weight;
-                trans[j] = t_here;
-                // A clamped opacity passes no gradient to the opacity or the shape.
-                let free = on && raw < MAX_ALPHA;
-                let d_alpha = if free { d_alpha } else { 0.0 };
-                lanes[5][x] += d_alpha * g;
-                // ∂L/∂power, with power = −½(a·dx² + c·dy²) − b·dx·dy, dx = px − center.
-                let gp = d_alpha * raw;
-                lanes[0][x] += gp * (ca * dx + cb * dy);
-                lanes[1][x] += gp * (cc * dy + cb * dx);
-                lanes[2][x] += -0.5 * gp * dx * dx;
-                lanes[3][x] += -gp * dx * dy;
-                lanes[4][x] += -0.5 * gp * dy * dy;
-            }
+            grad_row(row, &mut lanes, p, left, dy, k as i32);
         }
-        let a = &mut acc[k];
-        for q in 0..9 {
-            a[q] = lanes[q].iter().sum();
-        }
+        acc[k] = lanes.map(|l| lane_sum(&l));
     }
     acc
 }

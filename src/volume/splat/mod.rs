@@ -25,6 +25,7 @@
 //! ```
 
 pub mod backward;
+mod kernel;
 pub(crate) mod loss;
 pub mod ply;
 pub(crate) mod points;

@@ -36,7 +36,10 @@
 use glam::{Mat3, Vec2, Vec3};
 use rayon::prelude::*;
 
+use wide::f32x8;
+
 use super::Gaussians;
+use super::kernel::{BlendRow, blend_row, lane};
 use crate::limits::MAX_SPLAT_TILE_PAIRS;
 use crate::volume::camera::Camera;
 
@@ -48,7 +51,7 @@ pub const TILE: u32 = 16;
 pub(crate) const MAX_ALPHA: f32 = 0.99;
 
 /// Contributions below this opacity (1/255) are skipped, as in the reference code.
-const MIN_ALPHA: f32 = 1.0 / 255.0;
+pub(crate) const MIN_ALPHA: f32 = 1.0 / 255.0;
 
 /// Projected x and y are clamped to this many times the half-frustum when computing the
 /// perspective Jacobian (the reference code's 1.3), keeping it bounded near the border.
@@ -485,9 +488,6 @@ pub(crate) fn tile_pixels(
     )
 }
 
-/// Pixels in a tile.
-pub(crate) const TILE_PIXELS: usize = (TILE * TILE) as usize;
-
 /// Blends every pixel front to back, tile by tile ([`blend_tile`]).
 fn rasterize(
     projected: &[Projected],
@@ -513,63 +513,23 @@ fn rasterize(
     for (t, tile) in tiles.iter().enumerate() {
         let (x0, x1, y0, y1) = tile_pixels(t, bins, w, h);
         for y in y0..y1 {
+            let r = y - y0;
             for x in x0..x1 {
-                let j = (y - y0) * TILE as usize + (x - x0);
-                let i = y * w + x;
-                out.rgb[i] = [tile.rgb[0][j], tile.rgb[1][j], tile.rgb[2][j]];
-                out.transmittance[i] = tile.t[j];
-                out.ends[i] = tile.end[j];
+                let (c, i) = (x - x0, y * w + x);
+                let row = &tile.rows[r];
+                out.rgb[i] = row.rgb.map(|ch| lane(&ch, c));
+                out.transmittance[i] = lane(&row.t, c);
+                out.ends[i] = row.end[c / 8].as_array()[c % 8] as u32;
             }
         }
     }
     out
 }
 
-/// One tile's pixels, row-major over the full [`TILE`] × [`TILE`] square (pixels past
-/// the image's edge are computed as done from the start and dropped).
+/// One tile's pixels over the full [`TILE`] × [`TILE`] square, by row (pixels past the
+/// image's edge are computed as done from the start and dropped).
 struct TileOut {
-    rgb: [[f32; TILE_PIXELS]; 3],
-    t: [f32; TILE_PIXELS],
-    end: [u32; TILE_PIXELS],
-}
-
-/// `exp(x)` for `x ≤ 0`, in arithmetic the compiler vectorizes (no library call): Cody–Waite
-/// reduction `x = n·ln 2 + r`, `|r| ≤ ln 2 / 2`, a degree-6 Taylor polynomial of `exp(r)`
-/// (relative error below 2·10⁻⁷, about 1 ulp) and `2ⁿ` built from its bits. Inputs below
-/// −87 give `exp(−87)` (≈ 1.6·10⁻³⁸), where every use here is already negligible.
-#[inline(always)]
-pub(crate) fn exp_neg(x: f32) -> f32 {
-    const LOG2E: f32 = std::f32::consts::LOG2_E;
-    const LN2_HI: f32 = 0.693_359_4;
-    const LN2_LO: f32 = -2.121_944_4e-4;
-    let x = x.clamp(-87.0, 0.0);
-    // Round to nearest for x ≤ 0 (truncation of t − 0.5).
-    let n = (x * LOG2E - 0.5) as i32;
-    let nf = n as f32;
-    let r = x - nf * LN2_HI - nf * LN2_LO;
-    let p = 1.0
-        + r * (1.0
-            + r * (0.5
-                + r * (1.0 / 6.0 + r * (1.0 / 24.0 + r * (1.0 / 120.0 + r * (1.0 / 720.0))))));
-    p * f32::from_bits(((n + 127) as u32) << 23)
-}
-
-/// The opacity of a splat with peak `opacity` and conic `[a, b, c]` at offset `(dx, dy)`
-/// from its center: `(alpha, raw, exp(power))` with `raw = opacity·exp(power)` and
-/// `alpha = min(raw, MAX_ALPHA)`, and whether it counts (`power ≤ 0` and
-/// `alpha ≥ MIN_ALPHA`). Branch-free, for the tile loops.
-#[inline(always)]
-pub(crate) fn alpha_at(
-    opacity: f32,
-    [a, b, c]: [f32; 3],
-    dx: f32,
-    dy: f32,
-) -> (f32, f32, f32, bool) {
-    let power = -0.5 * (a * dx * dx + c * dy * dy) - b * dx * dy;
-    let g = exp_neg(power);
-    let raw = opacity * g;
-    let alpha = raw.min(MAX_ALPHA);
-    (alpha, raw, g, power <= 0.0 && alpha >= MIN_ALPHA)
+    rows: [BlendRow; TILE as usize],
 }
 
 /// The rows of a tile starting at pixel row `y0` (at most `rows`) that splat `p` can
@@ -591,60 +551,39 @@ fn blend_tile(
     (x0, x1, y0, y1): (usize, usize, usize, usize),
     settings: &RenderSettings,
 ) -> TileOut {
-    const T: usize = TILE as usize;
     let mut out = TileOut {
-        rgb: [[0.0; TILE_PIXELS]; 3],
-        t: [1.0; TILE_PIXELS],
-        end: [0; TILE_PIXELS],
+        rows: [BlendRow::new(x1 - x0); TILE as usize],
     };
-    // A pixel is live until its transmittance would fall below the early stop; pixels
-    // past the image's edge are never live.
-    let mut live = [false; TILE_PIXELS];
-    for y in 0..(y1 - y0) {
-        for x in 0..(x1 - x0) {
-            live[y * T + x] = true;
-        }
+    for row in out.rows.iter_mut().skip(y1 - y0) {
+        *row = BlendRow::new(0);
     }
-    let mut n_live = (x1 - x0) * (y1 - y0);
+    let mut n_live = ((x1 - x0) * (y1 - y0)) as u32;
     let rows = y1 - y0;
-    let eps = settings.early_stop;
     for (k, &id) in list.iter().enumerate() {
         if n_live == 0 {
             break;
         }
         let p = &projected[id as usize];
         let (r0, r1) = splat_rows(p, y0, rows);
-        let (o, conic, color) = (p.opacity, p.conic, p.color);
-        let end = k as u32 + 1;
+        let left = p.mean2d.x - x0 as f32;
         for r in r0..r1 {
             let dy = (y0 + r) as f32 + 0.5 - p.mean2d.y;
-            let row = r * T;
-            let mut stopped = 0;
-            for x in 0..T {
-                let j = row + x;
-                let dx = (x0 + x) as f32 + 0.5 - p.mean2d.x;
-                let (alpha, _, _, counts) = alpha_at(o, conic, dx, dy);
-                let t = out.t[j];
-                let next = t * (1.0 - alpha);
-                let counts = counts && live[j];
-                let stop = counts && next < eps;
-                let blend = counts && !stop;
-                let wgt = if blend { alpha * t } else { 0.0 };
-                out.rgb[0][j] += color.x * wgt;
-                out.rgb[1][j] += color.y * wgt;
-                out.rgb[2][j] += color.z * wgt;
-                out.t[j] = if blend { next } else { t };
-                out.end[j] = if blend { end } else { out.end[j] };
-                live[j] = live[j] && !stop;
-                stopped += stop as usize;
-            }
-            n_live -= stopped;
+            n_live -= blend_row(
+                &mut out.rows[r],
+                p,
+                left,
+                dy,
+                k as i32 + 1,
+                settings.early_stop,
+            );
         }
     }
     let bg = settings.background;
-    for j in 0..TILE_PIXELS {
-        for c in 0..3 {
-            out.rgb[c][j] += out.t[j] * bg[c];
+    for row in &mut out.rows {
+        for (c, channel) in row.rgb.iter_mut().enumerate() {
+            for (v, t) in channel.iter_mut().zip(&row.t) {
+                *v += *t * f32x8::splat(bg[c]);
+            }
         }
     }
     out
