@@ -123,6 +123,12 @@ pub(crate) struct Projected {
     /// Screen radius, pixels: `ceil(√(2·ln(255·opacity)·λ))` with `λ` the larger
     /// eigenvalue of the 2D covariance, beyond which the splat's opacity is below 1/255.
     pub radius: f32,
+    /// Half-width and half-height of the bounding box of that contour, pixels (rounded
+    /// up): the screen box used for binning.
+    pub extent: Vec2,
+    /// `2·ln(255·opacity)`: the contour where the opacity falls to 1/255 is the conic's
+    /// quadratic form `a·dx² + 2b·dx·dy + c·dy²` equal to this.
+    pub reach: f32,
     /// Linear RGB seen along the direction from the camera center to the mean.
     pub color: Vec3,
     /// Peak opacity, `sigmoid(logit)`.
@@ -339,14 +345,17 @@ pub(crate) fn project(
             }
             let reach = 2.0 * (opacity / MIN_ALPHA).ln();
             let radius = (reach * lambda).sqrt().ceil();
+            // The same contour's bounding box, per axis: √(reach·Σxx) and √(reach·Σyy)
+            // (tighter than the radius for elongated splats).
+            let extent = Vec2::new((reach * a).sqrt().ceil(), (reach * c).sqrt().ceil());
             let mean2d = cam.center(geo.p);
             if !(radius > 0.0 && radius.is_finite() && mean2d.is_finite()) {
                 return None;
             }
-            if mean2d.x + radius <= 0.0
-                || mean2d.x - radius >= cam.w
-                || mean2d.y + radius <= 0.0
-                || mean2d.y - radius >= cam.h
+            if mean2d.x + extent.x <= 0.0
+                || mean2d.x - extent.x >= cam.w
+                || mean2d.y + extent.y <= 0.0
+                || mean2d.y - extent.y >= cam.h
             {
                 return None;
             }
@@ -361,6 +370,8 @@ pub(crate) fn project(
                 conic,
                 depth: geo.p.z,
                 radius,
+                extent,
+                reach,
                 color: gaussians.color(i, (mean - cam.origin).normalize()),
                 opacity,
             })
@@ -388,8 +399,8 @@ fn tile_box(p: &Projected, tiles_x: u32, tiles_y: u32) -> (u32, u32, u32, u32) {
         let b = (hi / t).ceil().clamp(0.0, n as f32) as u32;
         (a, b.max(a))
     };
-    let (x0, x1) = span(p.mean2d.x - p.radius, p.mean2d.x + p.radius, tiles_x);
-    let (y0, y1) = span(p.mean2d.y - p.radius, p.mean2d.y + p.radius, tiles_y);
+    let (x0, x1) = span(p.mean2d.x - p.extent.x, p.mean2d.x + p.extent.x, tiles_x);
+    let (y0, y1) = span(p.mean2d.y - p.extent.y, p.mean2d.y + p.extent.y, tiles_y);
     (x0, x1, y0, y1)
 }
 
@@ -533,11 +544,11 @@ struct TileOut {
 }
 
 /// The rows of a tile starting at pixel row `y0` (at most `rows`) that splat `p` can
-/// reach: its screen box `center.y ± radius`, as `[r0, r1)` tile rows.
+/// reach: its screen box `center.y ± extent.y`, as `[r0, r1)` tile rows.
 #[inline]
 pub(crate) fn splat_rows(p: &Projected, y0: usize, rows: usize) -> (usize, usize) {
-    let lo = (p.mean2d.y - p.radius - 0.5 - y0 as f32).floor().max(0.0) as usize;
-    let hi = (p.mean2d.y + p.radius - 0.5 - y0 as f32).ceil() + 1.0;
+    let lo = (p.mean2d.y - p.extent.y - 0.5 - y0 as f32).floor().max(0.0) as usize;
+    let hi = (p.mean2d.y + p.extent.y - 0.5 - y0 as f32).ceil() + 1.0;
     (lo.min(rows), (hi.max(0.0) as usize).min(rows))
 }
 
