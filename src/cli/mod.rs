@@ -11,6 +11,7 @@ mod bench_fit;
 mod bench_suite;
 mod bench_voxel;
 mod choices;
+mod compare;
 mod digits;
 mod fit;
 mod glyphs;
@@ -62,6 +63,8 @@ enum Command {
     Recon(volume::ReconArgs),
     /// Render a reconstructed model from held-out cameras (PSNR, SSIM) or an orbit.
     View(volume::ViewArgs),
+    /// Plot several `recon` runs' test PSNR against training time in one chart.
+    Compare(compare::Args),
 }
 
 /// Runs the command line; returns the process exit code.
@@ -95,6 +98,7 @@ pub fn main() -> ExitCode {
         Command::Digits(a) => digits::run(a),
         Command::Recon(a) => volume::run_recon(a),
         Command::View(a) => volume::run_view(a),
+        Command::Compare(a) => compare::run(a),
     };
     match result {
         // A run stopped by Ctrl-C has written its best result; the status says it stopped.

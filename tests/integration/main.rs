@@ -4,6 +4,7 @@ mod architecture;
 mod batch;
 mod cli;
 mod common;
+mod compare;
 mod digits;
 mod exactness;
 mod fit;
