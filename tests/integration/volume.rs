@@ -11,7 +11,7 @@ use diffsvg::volume::Ray;
 use diffsvg::volume::camera::Camera;
 use serde_json::{Value, json};
 
-use super::common::{diffsvg, s, scratch};
+use super::common::{diffsvg, s, scratch, shared_data, skip};
 
 // ---------------------------------------------------------------------------------------
 // A tiny synthetic scene
@@ -657,4 +657,73 @@ fn bench_voxel_reports_sparse_and_dense_grids() {
         }
     }
     assert!(out.contains("sparse/dense speed"), "{out}");
+}
+
+/// `bench splat` on gsplat's garden fixture: one workload of 3 views at 648×420, each with
+/// Gaussians in view and a positive forward time (never compared with anything).
+#[test]
+fn bench_splat_times_the_garden_views() {
+    let Some(data) = shared_data("bench_splat_times_the_garden_views") else {
+        return;
+    };
+    let garden = data.join("scenes/gsplat_test_garden/test_garden.npz");
+    if !garden.is_file() {
+        skip(
+            "bench_splat_times_the_garden_views",
+            &format!("{} not found", garden.display()),
+        );
+        return;
+    }
+    let r = diffsvg(&[
+        "bench",
+        "splat",
+        "--garden",
+        s(&garden),
+        "--runs",
+        "1",
+        "--threads",
+        "1",
+        "--json",
+    ]);
+    assert!(r.status.success(), "{}", stderr(&r));
+    let out = stdout(&r);
+    let j: Value = serde_json::from_str(&out).unwrap_or_else(|e| panic!("{e}: {out}"));
+    assert_eq!(j["runs"], 1);
+    let workloads = j["workloads"].as_array().unwrap();
+    assert_eq!(workloads.len(), 1, "{out}");
+    let w = &workloads[0];
+    assert_eq!(w["name"], "garden");
+    let n = w["gaussians"].as_u64().unwrap();
+    assert!(n > 100_000, "{out}");
+    let views = w["views"].as_array().unwrap();
+    assert_eq!(views.len(), 3, "{out}");
+    for v in views {
+        assert_eq!(
+            (v["width"].as_u64(), v["height"].as_u64()),
+            (Some(648), Some(420))
+        );
+        let visible = v["visible"].as_u64().unwrap();
+        assert!(visible > 0 && visible <= n, "{out}");
+        let timings = v["timings"].as_array().unwrap();
+        assert_eq!(timings.len(), 1, "{out}");
+        assert_eq!(timings[0]["threads"], 1);
+        let ms = timings[0]["forward_ms"].as_f64().unwrap();
+        assert!(ms.is_finite() && ms > 0.0, "{out}");
+    }
+}
+
+/// Without the garden file (and no `--model`), `bench splat` fails with one line naming it.
+#[test]
+fn bench_splat_names_a_missing_garden() {
+    let dir = scratch("bench-splat-missing");
+    let missing = dir.join("no-such-garden.npz");
+    let r = diffsvg(&["bench", "splat", "--garden", s(&missing), "--runs", "1"]);
+    let err = stderr(&r);
+    assert_eq!(r.status.code(), Some(2), "{err}");
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(
+        err.contains("no-such-garden.npz") && err.contains("not found"),
+        "{err}"
+    );
+    assert!(stdout(&r).is_empty());
 }

@@ -143,6 +143,14 @@ pub struct Rendered {
     pub(crate) projected: Vec<Projected>,
 }
 
+impl Rendered {
+    /// Number of Gaussians that survived culling: in front of the camera (beyond
+    /// [`RenderSettings::near`]), not degenerate, and overlapping the image.
+    pub fn visible(&self) -> usize {
+        self.projected.len()
+    }
+}
+
 /// Renders `gaussians` seen by `camera` (see the module documentation).
 ///
 /// # Errors
