@@ -34,8 +34,9 @@ pub const MAX_FILE_BYTES: u64 = 64 << 20;
 /// against its length before anything else is allocated.
 pub const MAX_MODEL_BYTES: u64 = 4 << 30;
 
-/// Most Gaussians in a Gaussian-splatting PLY file, checked from its header's vertex
-/// count before anything is allocated.
+/// Most Gaussians in a Gaussian-splatting PLY file, and most points in a point-cloud PLY
+/// file that initializes them, checked from the header's vertex count before anything is
+/// allocated.
 pub const MAX_GAUSSIANS: usize = 10_000_000;
 
 /// Largest header of a PLY file, in bytes (its `end_header` line must end within it).

@@ -21,6 +21,7 @@ mod perturb;
 mod plot;
 mod progress;
 mod render;
+mod splat;
 mod util;
 mod vectorize;
 mod volume;
@@ -58,7 +59,7 @@ enum Command {
     Batch(batch::Args),
     /// Fit strokes to handwritten digits (MNIST IDX files): SVGs, summary.csv, contact.png.
     Digits(digits::Args),
-    /// Reconstruct a 3D scene from posed photos (a sparse voxel grid).
+    /// Reconstruct a 3D scene from posed photos (a sparse voxel grid or 3D Gaussians).
     Recon(volume::ReconArgs),
     /// Render a reconstructed model from held-out cameras (PSNR, SSIM) or an orbit.
     View(volume::ViewArgs),

@@ -17,6 +17,7 @@ use diffsvg::volume::Ray;
 use diffsvg::volume::camera::{Camera, orbit};
 use diffsvg::volume::dataset::{Dataset, View};
 use diffsvg::volume::metrics::{psnr, ssim};
+use diffsvg::volume::splat;
 use diffsvg::volume::voxel::{self, Grid, RenderSettings, TrainOptions, TrainStep};
 
 /// Arguments of `diffsvg recon`.
@@ -30,6 +31,8 @@ pub struct ReconArgs {
 enum ReconModel {
     /// A sparse grid of density and spherical-harmonic color (Plenoxels).
     Voxel(VoxelArgs),
+    /// 3D Gaussians rasterized by splatting (Kerbl et al. 2023), written as a PLY.
+    Splat(super::splat::SplatArgs),
 }
 
 /// Arguments of `diffsvg recon voxel`.
@@ -95,7 +98,8 @@ pub struct VoxelArgs {
 /// Arguments of `diffsvg view`.
 #[derive(clap::Args, Debug)]
 pub struct ViewArgs {
-    /// Model file written by `diffsvg recon voxel`.
+    /// Model file written by `diffsvg recon voxel` (.vox) or `diffsvg recon splat` (a
+    /// Gaussian-splatting PLY); the kind is read from the file's header.
     model: PathBuf,
     /// Dataset folder whose cameras to render from.
     #[arg(long)]
@@ -119,7 +123,7 @@ pub struct ViewArgs {
     /// far side was never seen).
     #[arg(long, default_value_t = 30.0)]
     elevation: f32,
-    /// Sample spacing along rays, in voxels.
+    /// Sample spacing along rays, in voxels (voxel models).
     #[arg(long, default_value_t = 0.5)]
     step: f32,
     /// Print a JSON summary instead of a table.
@@ -131,6 +135,7 @@ pub struct ViewArgs {
 pub fn run_recon(a: ReconArgs) -> Result<()> {
     match a.model {
         ReconModel::Voxel(v) => run_voxel(v),
+        ReconModel::Splat(v) => super::splat::run(v),
     }
 }
 
@@ -427,36 +432,55 @@ fn write_log(model: &Path, rows: &[(TrainStep, Option<f64>)]) -> Result<()> {
             test.map(|p| format!("{p:.3}")).unwrap_or_default()
         );
     }
-    let stem = model.with_extension("");
-    let path = |suffix: &str| {
-        let mut p = stem.clone().into_os_string();
-        p.push(suffix);
-        PathBuf::from(p)
-    };
-    write_atomic(&path(".log.csv"), csv.as_bytes())?;
+    write_atomic(&sibling(model, ".log.csv"), csv.as_bytes())?;
     let tests: Vec<(f64, f64)> = rows
         .iter()
         .filter_map(|(s, t)| t.map(|p| (s.elapsed as f64, p)))
         .collect();
-    if tests.len() >= 2 {
-        let batches = rows
-            .iter()
-            .map(|(s, _)| (s.elapsed as f64, s.psnr as f64))
-            .collect();
-        let spec = PlotSpec::new(
-            format!(
-                "{}: PSNR against training time",
-                file_stem(&model.to_string_lossy())
-            ),
-            "training seconds",
-            "PSNR (dB)",
-        );
-        let series = [
-            Series::new("test views", tests),
-            Series::new("training batches", batches),
-        ];
-        write_plot(&spec, &series, path(".psnr.png"), path(".psnr.svg"))?;
+    let batches = rows
+        .iter()
+        .map(|(s, _)| (s.elapsed as f64, s.psnr as f64))
+        .collect();
+    write_psnr_plot(model, tests, batches, "training batches")
+}
+
+/// `model` with its extension replaced by `suffix` (`lego.vox` → `lego.log.csv`).
+pub(super) fn sibling(model: &Path, suffix: &str) -> PathBuf {
+    let mut p = model.with_extension("").into_os_string();
+    p.push(suffix);
+    PathBuf::from(p)
+}
+
+/// When the test views were evaluated more than once, writes `<model>.psnr.png` and
+/// `.psnr.svg`: test PSNR (and the training batches' or views', labelled `train_label`)
+/// against training seconds.
+pub(super) fn write_psnr_plot(
+    model: &Path,
+    tests: Vec<(f64, f64)>,
+    train: Vec<(f64, f64)>,
+    train_label: &str,
+) -> Result<()> {
+    if tests.len() < 2 {
+        return Ok(());
     }
+    let spec = PlotSpec::new(
+        format!(
+            "{}: PSNR against training time",
+            file_stem(&model.to_string_lossy())
+        ),
+        "training seconds",
+        "PSNR (dB)",
+    );
+    let series = [
+        Series::new("test views", tests),
+        Series::new(train_label, train),
+    ];
+    write_plot(
+        &spec,
+        &series,
+        sibling(model, ".psnr.png"),
+        sibling(model, ".psnr.svg"),
+    )?;
     Ok(())
 }
 
@@ -506,24 +530,84 @@ fn to_image(rgb: &[[f32; 3]], w: u32, h: u32) -> Image {
     img
 }
 
+/// A fitted model of either kind, with what rendering it needs.
+enum Model {
+    Voxel(Grid, RenderSettings),
+    Splat(splat::Gaussians, splat::RenderSettings),
+}
+
+impl Model {
+    /// Reads a model file, choosing the kind by its first bytes (`ply` for Gaussians).
+    fn load(path: &Path, step: f32) -> Result<Model> {
+        use std::io::Read as _;
+        let mut head = [0u8; 4];
+        let n = std::fs::File::open(path)
+            .and_then(|mut f| f.read(&mut head))
+            .with_context(|| format!("{}: cannot read the model", path.display()))?;
+        if n >= 4 && &head == b"ply\n" {
+            let g = splat::load(path)?;
+            Ok(Model::Splat(g, splat::RenderSettings::default()))
+        } else {
+            Ok(Model::Voxel(voxel::load(path)?, render_settings(step)?))
+        }
+    }
+
+    /// Renders the view of `camera`.
+    fn render(&self, camera: &Camera) -> Result<Vec<[f32; 3]>> {
+        match self {
+            Model::Voxel(g, s) => Ok(voxel::render_rays(g, &camera.rays(), s)),
+            Model::Splat(g, s) => Ok(splat::render(g, camera, s)
+                .map_err(|e| anyhow::anyhow!("rendering: {e}"))?
+                .rgb),
+        }
+    }
+
+    /// The center and half-size of the model's box, world units.
+    fn bounds(&self) -> (Vec3, f32) {
+        match self {
+            Model::Voxel(g, _) => (
+                (g.min() + g.max()) * 0.5,
+                (g.max() - g.min()).max_element() * 0.5,
+            ),
+            Model::Splat(g, _) => {
+                if g.is_empty() {
+                    return (Vec3::ZERO, 1.0);
+                }
+                // The middle 98% of the means on each axis (a few far floaters aside).
+                let mut lo = Vec3::ZERO;
+                let mut hi = Vec3::ZERO;
+                for axis in 0..3 {
+                    let mut v: Vec<f32> = g.means.iter().map(|m| m[axis]).collect();
+                    v.sort_by(|a, b| a.total_cmp(b));
+                    lo[axis] = v[v.len() / 100];
+                    hi[axis] = v[v.len() - 1 - v.len() / 100];
+                }
+                ((lo + hi) * 0.5, ((hi - lo).max_element() * 0.5).max(1e-3))
+            }
+        }
+    }
+}
+
 /// Runs `diffsvg view`.
 pub fn run_view(a: ViewArgs) -> Result<()> {
-    let grid = voxel::load(&a.model)?;
+    let mut model = Model::load(&a.model, a.step)?;
     if a.scene.is_none() && a.orbit == 0 {
         bail!("nothing to render: give --scene DIR and/or --orbit N");
     }
     if a.downscale == 0 {
         bail!("--downscale must be at least 1");
     }
-    let render = render_settings(a.step)?;
-    let data = a
-        .scene
-        .as_ref()
-        .map(|d| Dataset::load(d, a.downscale))
-        .transpose()?;
+    let data = match (&a.scene, &model) {
+        (Some(d), Model::Splat(..)) => Some(super::splat::load_dataset(d, a.downscale)?),
+        (Some(d), Model::Voxel(..)) => Some(Dataset::load(d, a.downscale)?),
+        (None, _) => None,
+    };
+    if let (Model::Splat(_, s), Some(d)) = (&mut model, &data) {
+        s.background = super::splat::background(d);
+    }
     // Cameras first, so that a bad orbit fails before anything is written.
     let orbit_cams = if a.orbit > 0 {
-        orbit_cameras(&grid, data.as_ref(), a.orbit, a.elevation)?
+        orbit_cameras(model.bounds(), data.as_ref(), a.orbit, a.elevation)?
     } else {
         Vec::new()
     };
@@ -547,7 +631,7 @@ pub fn run_view(a: ViewArgs) -> Result<()> {
         let (mut sp, mut ss) = (0.0, 0.0);
         for v in views {
             let t0 = Instant::now();
-            let out = voxel::render_rays(&grid, &v.camera.rays(), &render);
+            let out = model.render(&v.camera)?;
             let ms = t0.elapsed().as_secs_f64() * 1e3;
             let p = psnr(&out, &v.rgb);
             let s = ssim(&out, &v.rgb, v.width as usize, v.height as usize);
@@ -580,7 +664,7 @@ pub fn run_view(a: ViewArgs) -> Result<()> {
     if !orbit_cams.is_empty() {
         let mut frames = Vec::new();
         for (i, cam) in orbit_cams.iter().enumerate() {
-            let out = voxel::render_rays(&grid, &cam.rays(), &render);
+            let out = model.render(cam)?;
             let img = to_image(&out, cam.width, cam.height);
             img.save_png(a.output.join(format!("orbit-{i:03}.png")))?;
             frames.push(img);
@@ -622,13 +706,11 @@ fn file_stem(name: &str) -> String {
 /// cameras' up vectors, or +Z), at the dataset's camera distance and field of view; for
 /// real photos, along the arc their cameras span instead ([`arc_cameras`]).
 fn orbit_cameras(
-    grid: &Grid,
+    (center, half): (Vec3, f32),
     data: Option<&Dataset>,
     n: usize,
     elevation_deg: f32,
 ) -> Result<Vec<Camera>> {
-    let center = (grid.min() + grid.max()) * 0.5;
-    let half = (grid.max() - grid.min()).max_element() * 0.5;
     let (radius, up, fov, w, h) =
         match data.and_then(|d| d.train.first().or(d.test.first()).map(|v| (d, v))) {
             Some((d, v)) => {

@@ -116,6 +116,13 @@ impl<T: Float> Moments<T> {
         compact(&mut self.v, keep, stride);
     }
 
+    /// Sets every moment to zero (as after a reset of the parameters); the step count
+    /// carries on.
+    pub fn clear(&mut self) {
+        self.m.fill(T::zero());
+        self.v.fill(T::zero());
+    }
+
     /// Appends `n` slots with zero moments (new or cloned parameters start afresh); the
     /// step count carries on.
     pub fn extend(&mut self, n: usize) {

@@ -109,7 +109,7 @@ pub fn ssim(a: &[[f32; 3]], b: &[[f32; 3]], width: usize, height: usize) -> f64 
 
 /// The normalized 1D Gaussian of odd length `size` and standard deviation `sigma`,
 /// centered on the middle tap.
-fn gaussian_kernel(size: usize, sigma: f64) -> Vec<f64> {
+pub(crate) fn gaussian_kernel(size: usize, sigma: f64) -> Vec<f64> {
     let half = (size / 2) as f64;
     let k: Vec<f64> = (0..size)
         .map(|i| {

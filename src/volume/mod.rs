@@ -1,6 +1,7 @@
 //! 3D reconstruction by differentiable volume rendering: cameras and posed-photo datasets,
-//! spherical harmonics, image metrics, a sparse voxel grid (Plenoxels) fitted to
-//! photos, and 3D Gaussians (splatting) with their PLY file.
+//! undistortion of photos into pinhole photos, spherical harmonics, image metrics, a
+//! sparse voxel grid (Plenoxels) fitted to photos, and 3D Gaussians (splatting) with their
+//! PLY file.
 //!
 //! Conventions: world units are those of the dataset's poses; camera-to-world poses follow
 //! OpenGL/Blender (camera +X right, +Y up, looking down −Z); images are row-major with
@@ -24,8 +25,10 @@ pub mod metrics;
 
 use glam::Vec3;
 
+pub(crate) mod rng;
 pub(crate) mod sh;
 pub mod splat;
+pub mod undistort;
 pub mod voxel;
 
 /// A ray `origin + t · dir`, `t ≥ 0`, with `dir` of unit length.

@@ -93,6 +93,44 @@ pub(crate) fn basis(degree: u32, dir: Vec3) -> [f32; 16] {
     b
 }
 
+/// The partial derivatives `∂Y_i/∂(x, y, z)` of the basis of degree `degree` (0 to 3),
+/// with `x, y, z` treated as independent (the caller applies the chain rule through its
+/// normalization of the direction). Entries past `coeff_count(degree)` are zero.
+///
+/// # Panics
+/// If `degree > MAX_DEGREE`.
+pub(crate) fn basis_gradient(degree: u32, dir: Vec3) -> [Vec3; 16] {
+    assert!(degree <= MAX_DEGREE, "spherical harmonics degree above 3");
+    let mut g = [Vec3::ZERO; 16];
+    if degree == 0 {
+        return g;
+    }
+    let (x, y, z) = (dir.x, dir.y, dir.z);
+    g[1] = Vec3::new(0.0, -C1, 0.0);
+    g[2] = Vec3::new(0.0, 0.0, C1);
+    g[3] = Vec3::new(-C1, 0.0, 0.0);
+    if degree == 1 {
+        return g;
+    }
+    let (xx, yy, zz) = (x * x, y * y, z * z);
+    g[4] = C2[0] * Vec3::new(y, x, 0.0);
+    g[5] = C2[1] * Vec3::new(0.0, z, y);
+    g[6] = C2[2] * Vec3::new(-2.0 * x, -2.0 * y, 4.0 * z);
+    g[7] = C2[3] * Vec3::new(z, 0.0, x);
+    g[8] = C2[4] * Vec3::new(2.0 * x, -2.0 * y, 0.0);
+    if degree == 2 {
+        return g;
+    }
+    g[9] = C3[0] * Vec3::new(6.0 * x * y, 3.0 * xx - 3.0 * yy, 0.0);
+    g[10] = C3[1] * Vec3::new(y * z, x * z, x * y);
+    g[11] = C3[2] * Vec3::new(-2.0 * x * y, 4.0 * zz - xx - 3.0 * yy, 8.0 * y * z);
+    g[12] = C3[3] * Vec3::new(-6.0 * x * z, -6.0 * y * z, 6.0 * zz - 3.0 * xx - 3.0 * yy);
+    g[13] = C3[4] * Vec3::new(4.0 * zz - 3.0 * xx - yy, -2.0 * x * y, 8.0 * x * z);
+    g[14] = C3[5] * Vec3::new(2.0 * x * z, -2.0 * y * z, xx - yy);
+    g[15] = C3[6] * Vec3::new(3.0 * xx - 3.0 * yy, -6.0 * x * y, 0.0);
+    g
+}
+
 /// `Σ_i coeffs[i] · Y_i(dir)` for the first `coeffs.len()` basis functions of degree
 /// `degree` (one color channel before any activation).
 ///
@@ -207,5 +245,30 @@ mod tests {
                 b[i]
             );
         }
+    }
+
+    /// Central differences of every basis function in x, y and z (off the unit sphere:
+    /// the functions are polynomials) match [`basis_gradient`].
+    #[test]
+    fn basis_gradient_matches_central_differences() {
+        let p = Vec3::new(0.3, -0.55, 0.7);
+        let g = basis_gradient(3, p);
+        let h = 1e-2f32;
+        for axis in 0..3 {
+            let mut e = Vec3::ZERO;
+            e[axis] = h;
+            let (bp, bm) = (basis(3, p + e), basis(3, p - e));
+            for i in 0..16 {
+                let fd = (bp[i] - bm[i]) / (2.0 * h);
+                assert!(
+                    (fd - g[i][axis]).abs() < 2e-4,
+                    "∂Y{i}/∂axis {axis}: {fd} vs {}",
+                    g[i][axis]
+                );
+            }
+        }
+        assert!(basis_gradient(0, p).iter().all(|v| *v == Vec3::ZERO));
+        assert_eq!(basis_gradient(1, p)[..4], g[..4]);
+        assert!(basis_gradient(2, p)[9..].iter().all(|v| *v == Vec3::ZERO));
     }
 }

@@ -17,5 +17,6 @@ mod regress_input;
 mod regress_raster;
 mod regress_volume;
 mod roundtrip;
+mod splat;
 mod vectorize;
 mod volume;

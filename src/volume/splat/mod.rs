@@ -24,11 +24,21 @@
 //! assert!((back.opacity(1) - 0.952_574).abs() < 1e-6); // sigmoid(3)
 //! ```
 
+pub mod backward;
+mod kernel;
+pub(crate) mod loss;
 pub mod ply;
+pub(crate) mod points;
 pub mod render;
+pub mod train;
 
+pub use backward::{Gradients, backward, backward_into};
 pub use ply::{load, save};
 pub use render::{RenderSettings, Rendered, render};
+pub use train::{
+    Densify, TrainOptions, TrainOutcome, TrainStep, find_point_cloud, from_point_cloud,
+    random_init, train,
+};
 
 use glam::{Quat, Vec3};
 

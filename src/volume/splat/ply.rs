@@ -52,7 +52,7 @@ use crate::image_io::{read_bounded, write_atomic};
 use crate::limits::{MAX_GAUSSIANS, MAX_PLY_HEADER_BYTES, MAX_SPLAT_BYTES};
 use crate::volume::sh;
 
-const END_HEADER: &[u8] = b"end_header\n";
+const END_HEADER: &[u8] = b"end_header";
 
 /// The header written for `n` Gaussians of SH degree `degree`.
 fn header(n: usize, degree: u32) -> String {
@@ -136,24 +136,8 @@ pub(crate) fn from_bytes(b: &[u8], path: &Path) -> Result<Gaussians> {
         path: path.to_path_buf(),
         what,
     };
-    if !b.starts_with(b"ply\n") && !b.starts_with(b"ply\r\n") {
-        return Err(bad(
-            "not a PLY file (missing \"ply\" on the first line)".into()
-        ));
-    }
-    let search = &b[..b.len().min(MAX_PLY_HEADER_BYTES)];
-    let end = search
-        .windows(END_HEADER.len())
-        .enumerate()
-        .position(|(i, w)| w == END_HEADER && i > 0 && search[i - 1] == b'\n')
-        .ok_or_else(|| {
-            bad(format!(
-                "PLY header has no \"end_header\" line within its first {MAX_PLY_HEADER_BYTES} bytes"
-            ))
-        })?
-        + END_HEADER.len();
-    let text = std::str::from_utf8(&b[..end]).map_err(|_| bad("PLY header is not text".into()))?;
-    let (n, props) = parse_header(text).map_err(bad)?;
+    let (text, end) = header_text(b).map_err(bad)?;
+    let (n, props) = gaussian_header(text).map_err(bad)?;
     let cols = columns(&props).map_err(bad)?;
     let stride = 4 * props.len();
     let data = &b[end..];
@@ -216,71 +200,293 @@ pub(crate) fn from_bytes(b: &[u8], path: &Path) -> Result<Gaussians> {
     Ok(g)
 }
 
-/// The vertex count and the property names of a header ending with `end_header\n`.
-fn parse_header(text: &str) -> Result<(u64, Vec<String>), String> {
-    let mut lines = text.lines().map(str::trim_end).skip(1); // "ply", checked by the caller
-    let mut format = false;
-    let mut count: Option<u64> = None;
-    let mut props: Vec<String> = Vec::new();
-    for line in &mut lines {
+/// The text of a PLY file's header and the offset of the data after it: the file must
+/// start with a `ply` line, and a line `end_header` (ending in `\n` or `\r\n`) must end
+/// within its first [`MAX_PLY_HEADER_BYTES`] bytes. The header must be UTF-8.
+pub(crate) fn header_text(b: &[u8]) -> Result<(&str, usize), String> {
+    if !b.starts_with(b"ply\n") && !b.starts_with(b"ply\r\n") {
+        return Err("not a PLY file (missing \"ply\" on the first line)".into());
+    }
+    let search = &b[..b.len().min(MAX_PLY_HEADER_BYTES)];
+    let end = (1..search.len())
+        .filter(|&i| search[i - 1] == b'\n' && search[i..].starts_with(END_HEADER))
+        .find_map(|i| {
+            let after = &search[i + END_HEADER.len()..];
+            if after.starts_with(b"\n") {
+                Some(i + END_HEADER.len() + 1)
+            } else if after.starts_with(b"\r\n") {
+                Some(i + END_HEADER.len() + 2)
+            } else {
+                None
+            }
+        })
+        .ok_or_else(|| {
+            format!(
+                "PLY header has no \"end_header\" line within its first {MAX_PLY_HEADER_BYTES} bytes"
+            )
+        })?;
+    let text = std::str::from_utf8(&b[..end]).map_err(|_| "PLY header is not text")?;
+    Ok((text, end))
+}
+
+/// Encoding of the data after a PLY header.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Format {
+    /// Whitespace-separated decimal numbers.
+    Ascii,
+    /// Packed little-endian values.
+    BinaryLittleEndian,
+    /// Packed big-endian values.
+    BinaryBigEndian,
+}
+
+impl Format {
+    /// The name in the header's `format` line.
+    pub(crate) fn name(self) -> &'static str {
+        match self {
+            Format::Ascii => "ascii",
+            Format::BinaryLittleEndian => "binary_little_endian",
+            Format::BinaryBigEndian => "binary_big_endian",
+        }
+    }
+}
+
+/// Scalar type of a PLY property (the names of PLY 1.0 and their sized aliases).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Scalar {
+    /// `char`, `int8`.
+    I8,
+    /// `uchar`, `uint8`.
+    U8,
+    /// `short`, `int16`.
+    I16,
+    /// `ushort`, `uint16`.
+    U16,
+    /// `int`, `int32`.
+    I32,
+    /// `uint`, `uint32`.
+    U32,
+    /// `float`, `float32`.
+    F32,
+    /// `double`, `float64`.
+    F64,
+}
+
+impl Scalar {
+    /// The type named `name` in a header, if it is one.
+    pub(crate) fn parse(name: &str) -> Option<Scalar> {
+        Some(match name {
+            "char" | "int8" => Scalar::I8,
+            "uchar" | "uint8" => Scalar::U8,
+            "short" | "int16" => Scalar::I16,
+            "ushort" | "uint16" => Scalar::U16,
+            "int" | "int32" => Scalar::I32,
+            "uint" | "uint32" => Scalar::U32,
+            "float" | "float32" => Scalar::F32,
+            "double" | "float64" => Scalar::F64,
+            _ => return None,
+        })
+    }
+
+    /// The PLY 1.0 name (`char`, `uchar`, … `double`).
+    pub(crate) fn name(self) -> &'static str {
+        match self {
+            Scalar::I8 => "char",
+            Scalar::U8 => "uchar",
+            Scalar::I16 => "short",
+            Scalar::U16 => "ushort",
+            Scalar::I32 => "int",
+            Scalar::U32 => "uint",
+            Scalar::F32 => "float",
+            Scalar::F64 => "double",
+        }
+    }
+
+    /// Size in bytes in a binary file.
+    pub(crate) fn size(self) -> usize {
+        match self {
+            Scalar::I8 | Scalar::U8 => 1,
+            Scalar::I16 | Scalar::U16 => 2,
+            Scalar::I32 | Scalar::U32 | Scalar::F32 => 4,
+            Scalar::F64 => 8,
+        }
+    }
+}
+
+/// Type of a PLY property.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum PropertyType {
+    /// One value.
+    Scalar(Scalar),
+    /// A count of type `count`, then that many values of type `item`.
+    List {
+        /// Type of the count.
+        count: Scalar,
+        /// Type of each item.
+        item: Scalar,
+    },
+}
+
+impl PropertyType {
+    /// The type as a header writes it with PLY 1.0 names (`float`, `list uchar int`).
+    pub(crate) fn name(self) -> String {
+        match self {
+            PropertyType::Scalar(t) => t.name().to_string(),
+            PropertyType::List { count, item } => {
+                format!("list {} {}", count.name(), item.name())
+            }
+        }
+    }
+}
+
+/// One property of a PLY element, as declared.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub(crate) struct Property {
+    /// Its name.
+    pub name: String,
+    /// Its type.
+    pub ty: PropertyType,
+}
+
+/// One element of a PLY header: its name, count and properties in file order.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub(crate) struct Element {
+    /// Its name (`vertex`, `face`, …).
+    pub name: String,
+    /// How many entries the data holds.
+    pub count: u64,
+    /// Properties in the order of the data, names distinct.
+    pub properties: Vec<Property>,
+}
+
+/// A parsed PLY header.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub(crate) struct Header {
+    /// Encoding of the data.
+    pub format: Format,
+    /// Elements in the order of the data.
+    pub elements: Vec<Element>,
+}
+
+/// Parses a PLY header as returned by [`header_text`] (first line `ply`, last line
+/// `end_header`): version 1.0 of any format; `comment` and `obj_info` lines skipped;
+/// every property of a known scalar type or a list of them, within an element, named
+/// once per element. Counts are not limited here: the caller checks them.
+pub(crate) fn parse_header(text: &str) -> Result<Header, String> {
+    let mut format: Option<Format> = None;
+    let mut elements: Vec<Element> = Vec::new();
+    for line in text.lines().map(str::trim_end).skip(1) {
         let words: Vec<&str> = line.split_whitespace().collect();
         match words.as_slice() {
             [] | ["comment", ..] | ["obj_info", ..] => {}
-            ["format", fmt, ver] => {
-                if *fmt != "binary_little_endian" {
-                    return Err(format!(
-                        "PLY format {fmt}: only binary_little_endian is read"
-                    ));
-                }
+            ["format", fmt, ver] if format.is_none() => {
+                format = Some(match *fmt {
+                    "ascii" => Format::Ascii,
+                    "binary_little_endian" => Format::BinaryLittleEndian,
+                    "binary_big_endian" => Format::BinaryBigEndian,
+                    _ => return Err(format!("unknown PLY format {fmt}")),
+                });
                 if *ver != "1.0" {
                     return Err(format!("PLY version {ver}: only 1.0 is read"));
                 }
-                format = true;
             }
-            ["format", ..] => return Err(format!("malformed PLY format line \"{line}\"")),
-            _ if !format => {
+            ["format", ..] => {
+                return Err(format!("malformed or repeated PLY format line \"{line}\""));
+            }
+            _ if format.is_none() => {
                 return Err(format!("PLY header line \"{line}\" before the format line"));
             }
-            ["element", "vertex", n] if count.is_none() => {
-                let n: u64 = n
+            ["element", name, n] => {
+                let count: u64 = n
                     .parse()
-                    .map_err(|_| format!("vertex count \"{n}\" is not a number"))?;
-                if n > MAX_GAUSSIANS as u64 {
-                    return Err(format!(
-                        "{n} vertices (Gaussians), above the limit of {MAX_GAUSSIANS}"
-                    ));
-                }
-                count = Some(n);
+                    .map_err(|_| format!("{name} count \"{n}\" is not a number"))?;
+                elements.push(Element {
+                    name: name.to_string(),
+                    count,
+                    properties: Vec::new(),
+                });
             }
-            ["element", name, ..] => {
-                return Err(format!(
-                    "PLY element \"{name}\": only one element, vertex, is read"
-                ));
-            }
-            ["property", ty, name] if count.is_some() => {
-                if *ty != "float" && *ty != "float32" {
-                    return Err(format!(
-                        "property {name} is of type {ty}; only float properties are read"
-                    ));
-                }
-                if props.iter().any(|p| p == name) {
+            ["property", rest @ ..] if rest.len() >= 2 => {
+                let name = rest[rest.len() - 1];
+                let types = &rest[..rest.len() - 1];
+                let scalar = |t: &str| {
+                    Scalar::parse(t).ok_or_else(|| format!("property {name} has unknown type {t}"))
+                };
+                let ty = match types {
+                    [t] => PropertyType::Scalar(scalar(t)?),
+                    ["list", count, item] => PropertyType::List {
+                        count: scalar(count)?,
+                        item: scalar(item)?,
+                    },
+                    _ => return Err(format!("malformed PLY property line \"{line}\"")),
+                };
+                let element = elements
+                    .last_mut()
+                    .ok_or_else(|| format!("PLY property line \"{line}\" before any element"))?;
+                if element.properties.iter().any(|p| p.name == name) {
                     return Err(format!("property {name} appears twice"));
                 }
-                props.push(name.to_string());
-            }
-            ["property", "list", .., name] => {
-                return Err(format!(
-                    "property {name} is a list; only float properties are read"
-                ));
+                element.properties.push(Property {
+                    name: name.to_string(),
+                    ty,
+                });
             }
             ["end_header"] => break,
             _ => return Err(format!("unexpected PLY header line \"{line}\"")),
         }
     }
-    if !format {
-        return Err("PLY header has no format line".into());
+    let format = format.ok_or("PLY header has no format line")?;
+    Ok(Header { format, elements })
+}
+
+/// The vertex count and the property names of a Gaussian-splatting header (module doc):
+/// binary little-endian, one element `vertex` of at most [`MAX_GAUSSIANS`] entries,
+/// float properties only.
+fn gaussian_header(text: &str) -> Result<(u64, Vec<String>), String> {
+    let header = parse_header(text)?;
+    if header.format != Format::BinaryLittleEndian {
+        return Err(format!(
+            "PLY format {}: only binary_little_endian is read",
+            header.format.name()
+        ));
     }
-    let n = count.ok_or("PLY header has no vertex element")?;
+    let vertex = header
+        .elements
+        .first()
+        .ok_or("PLY header has no vertex element")?;
+    if let Some((_, e)) =
+        (header.elements.iter().enumerate()).find(|(i, e)| *i > 0 || e.name != "vertex")
+    {
+        return Err(format!(
+            "PLY element \"{}\": only one element, vertex, is read",
+            e.name
+        ));
+    }
+    let n = vertex.count;
+    if n > MAX_GAUSSIANS as u64 {
+        return Err(format!(
+            "{n} vertices (Gaussians), above the limit of {MAX_GAUSSIANS}"
+        ));
+    }
+    let mut props = Vec::with_capacity(vertex.properties.len());
+    for p in &vertex.properties {
+        match p.ty {
+            PropertyType::Scalar(Scalar::F32) => props.push(p.name.clone()),
+            PropertyType::List { .. } => {
+                return Err(format!(
+                    "property {} is a list; only float properties are read",
+                    p.name
+                ));
+            }
+            PropertyType::Scalar(_) => {
+                return Err(format!(
+                    "property {} is of type {}; only float properties are read",
+                    p.name,
+                    p.ty.name()
+                ));
+            }
+        }
+    }
     Ok((n, props))
 }
 

@@ -36,7 +36,10 @@
 use glam::{Mat3, Vec2, Vec3};
 use rayon::prelude::*;
 
+use wide::f32x8;
+
 use super::Gaussians;
+use super::kernel::{BlendRow, blend_row, lane};
 use crate::limits::MAX_SPLAT_TILE_PAIRS;
 use crate::volume::camera::Camera;
 
@@ -45,10 +48,10 @@ pub const TILE: u32 = 16;
 
 /// Largest opacity of one Gaussian at one pixel (the reference code's 0.99), so that
 /// transmittance never reaches zero through a single splat.
-const MAX_ALPHA: f32 = 0.99;
+pub(crate) const MAX_ALPHA: f32 = 0.99;
 
 /// Contributions below this opacity (1/255) are skipped, as in the reference code.
-const MIN_ALPHA: f32 = 1.0 / 255.0;
+pub(crate) const MIN_ALPHA: f32 = 1.0 / 255.0;
 
 /// Projected x and y are clamped to this many times the half-frustum when computing the
 /// perspective Jacobian (the reference code's 1.3), keeping it bounded near the border.
@@ -117,7 +120,8 @@ pub(crate) struct Projected {
     pub conic: [f32; 3],
     /// Depth of the center along the viewing axis, world units (> `near`).
     pub depth: f32,
-    /// Screen radius, pixels: `ceil(3·sqrt(larger eigenvalue))` of the 2D covariance.
+    /// Screen radius, pixels: `ceil(√(2·ln(255·opacity)·λ))` with `λ` the larger
+    /// eigenvalue of the 2D covariance, beyond which the splat's opacity is below 1/255.
     pub radius: f32,
     /// Linear RGB seen along the direction from the camera center to the mean.
     pub color: Vec3,
@@ -126,7 +130,7 @@ pub(crate) struct Projected {
 }
 
 /// The result of [`render`].
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug)]
 pub struct Rendered {
     /// Image width, pixels.
     pub width: u32,
@@ -139,8 +143,11 @@ pub struct Rendered {
     /// shows through, in `[0, 1]`.
     pub transmittance: Vec<f32>,
     /// The Gaussians that survived culling, in model order (for the backward pass).
-    #[allow(dead_code)] // read by the tests; the backward pass is still to come
     pub(crate) projected: Vec<Projected>,
+    /// Their tile lists.
+    pub(crate) bins: Bins,
+    /// Per pixel, how many entries of its tile's list blending visited.
+    pub(crate) ends: Vec<u32>,
 }
 
 impl Rendered {
@@ -185,14 +192,132 @@ fn render_limited(
     }
     let projected = project(gaussians, camera, settings);
     let bins = bin(&projected, camera.width, camera.height, max_pairs)?;
-    let (rgb, transmittance) = rasterize(&projected, &bins, camera, settings);
+    let blended = rasterize(&projected, &bins, camera, settings);
     Ok(Rendered {
         width: camera.width,
         height: camera.height,
-        rgb,
-        transmittance,
+        rgb: blended.rgb,
+        transmittance: blended.transmittance,
         projected,
+        bins,
+        ends: blended.ends,
     })
+}
+
+/// The pinhole camera of one view in the form projection needs: world to OpenCV camera
+/// axes (x right, y down, z forward) and intrinsics. Shared by the forward and backward
+/// passes, so both see the same numbers.
+pub(crate) struct Pinhole {
+    /// World to OpenCV camera rotation.
+    pub rot: Mat3,
+    /// World to OpenCV camera translation.
+    pub trans: Vec3,
+    /// Camera center, world units.
+    pub origin: Vec3,
+    pub fx: f32,
+    pub fy: f32,
+    pub cx: f32,
+    pub cy: f32,
+    /// Image size, pixels.
+    pub w: f32,
+    pub h: f32,
+    /// Clamp bounds of x/z and y/z for the Jacobian.
+    lx: (f32, f32),
+    ly: (f32, f32),
+    near: f32,
+    dilation: f32,
+}
+
+/// What projecting one Gaussian computes (before culling by screen bounds), kept for the
+/// backward pass.
+pub(crate) struct Geometry {
+    /// Mean in OpenCV camera axes.
+    pub p: Vec3,
+    /// Whether x/z and y/z were inside the clamp bounds (the Jacobian depends on x and y
+    /// only then).
+    pub inside: (bool, bool),
+    /// `x/z` and `y/z`, clamped.
+    pub u: Vec2,
+    /// Rows of the perspective Jacobian.
+    pub j0: Vec3,
+    pub j1: Vec3,
+    /// `R·S` (world axes): the covariance is `M·Mᵀ`.
+    pub m: Mat3,
+    /// The covariance in camera axes.
+    pub cov: Mat3,
+    /// The dilated 2D covariance `[[a, b], [b, c]]`.
+    pub abc: [f32; 3],
+}
+
+impl Pinhole {
+    pub(crate) fn new(camera: &Camera, settings: &RenderSettings) -> Pinhole {
+        let w2c = camera.c2w.inverse();
+        // World to OpenCV camera axes: flip y and z of OpenGL's.
+        let flip = Mat3::from_diagonal(Vec3::new(1.0, -1.0, -1.0));
+        let (w, h) = (camera.width as f32, camera.height as f32);
+        let (fx, fy, cx, cy) = (camera.fx, camera.fy, camera.cx, camera.cy);
+        // Frustum bounds on x/z and y/z, widened by 0.3 half-fields as in gsplat (the
+        // reference's ±1.3·tan(fov/2) when the principal point is centered).
+        let margin = FRUSTUM_CLAMP - 1.0;
+        let (tan_x, tan_y) = (0.5 * w / fx, 0.5 * h / fy);
+        Pinhole {
+            rot: flip * Mat3::from(w2c.matrix3),
+            trans: flip * Vec3::from(w2c.translation),
+            origin: camera.position(),
+            fx,
+            fy,
+            cx,
+            cy,
+            w,
+            h,
+            lx: (-cx / fx - margin * tan_x, (w - cx) / fx + margin * tan_x),
+            ly: (-cy / fy - margin * tan_y, (h - cy) / fy + margin * tan_y),
+            near: settings.near,
+            dilation: settings.dilation,
+        }
+    }
+
+    /// The projection of Gaussian `i`, or `None` when its center is not beyond the near
+    /// plane.
+    pub(crate) fn geometry(&self, gaussians: &Gaussians, i: usize) -> Option<Geometry> {
+        let mean = Vec3::from_array(gaussians.means[i]);
+        let p = self.rot * mean + self.trans;
+        let z = p.z;
+        if !(z > self.near && z.is_finite()) {
+            return None;
+        }
+        let (ux, uy) = (p.x / z, p.y / z);
+        let u = Vec2::new(
+            ux.clamp(self.lx.0, self.lx.1),
+            uy.clamp(self.ly.0, self.ly.1),
+        );
+        let inside = (u.x == ux, u.y == uy);
+        let (fx, fy) = (self.fx, self.fy);
+        // Rows of the perspective Jacobian at the (clamped) center.
+        let j0 = Vec3::new(fx / z, 0.0, -fx * u.x / z);
+        let j1 = Vec3::new(0.0, fy / z, -fy * u.y / z);
+        // Σ = R S Sᵀ Rᵀ in world axes, then W Σ Wᵀ in camera axes.
+        let m = Mat3::from_quat(gaussians.rotation(i)) * Mat3::from_diagonal(gaussians.scale(i));
+        let cov = self.rot * (m * m.transpose()) * self.rot.transpose();
+        let a = j0.dot(cov * j0) + self.dilation;
+        let b = j0.dot(cov * j1);
+        let c = j1.dot(cov * j1) + self.dilation;
+        Some(Geometry {
+            p,
+            inside,
+            u,
+            j0,
+            j1,
+            m,
+            cov,
+            abc: [a, b, c],
+        })
+    }
+
+    /// The projected center of a Gaussian at camera-axes point `p`, pixels.
+    pub(crate) fn center(&self, p: Vec3) -> Vec2 {
+        Vec2::new(self.fx * p.x / p.z + self.cx, self.fy * p.y / p.z + self.cy)
+    }
 }
 
 /// Projects every Gaussian, dropping those culled (behind `near`, degenerate, not
@@ -202,56 +327,34 @@ pub(crate) fn project(
     camera: &Camera,
     settings: &RenderSettings,
 ) -> Vec<Projected> {
-    let w2c = camera.c2w.inverse();
-    // World to OpenCV camera axes (x right, y down, z forward): flip y and z of OpenGL's.
-    let flip = Mat3::from_diagonal(Vec3::new(1.0, -1.0, -1.0));
-    let rot = flip * Mat3::from(w2c.matrix3);
-    let trans = flip * Vec3::from(w2c.translation);
-    let origin = camera.position();
-    let (w, h) = (camera.width as f32, camera.height as f32);
-    let (fx, fy, cx, cy) = (camera.fx, camera.fy, camera.cx, camera.cy);
-    // Frustum bounds on x/z and y/z, widened by 0.3 half-fields as in gsplat (the
-    // reference's ±1.3·tan(fov/2) when the principal point is centered).
-    let margin = FRUSTUM_CLAMP - 1.0;
-    let (tan_x, tan_y) = (0.5 * w / fx, 0.5 * h / fy);
-    let (lx_lo, lx_hi) = (-cx / fx - margin * tan_x, (w - cx) / fx + margin * tan_x);
-    let (ly_lo, ly_hi) = (-cy / fy - margin * tan_y, (h - cy) / fy + margin * tan_y);
+    let cam = Pinhole::new(camera, settings);
     (0..gaussians.len())
         .into_par_iter()
         .filter_map(|i| {
-            let mean = Vec3::from_array(gaussians.means[i]);
-            let p = rot * mean + trans;
-            let z = p.z;
-            if !(z > settings.near && z.is_finite()) {
-                return None;
-            }
-            let mean2d = Vec2::new(fx * p.x / z + cx, fy * p.y / z + cy);
-            let tx = (p.x / z).clamp(lx_lo, lx_hi) * z;
-            let ty = (p.y / z).clamp(ly_lo, ly_hi) * z;
-            // Rows of the perspective Jacobian at the (clamped) center.
-            let j0 = Vec3::new(fx / z, 0.0, -fx * tx / (z * z));
-            let j1 = Vec3::new(0.0, fy / z, -fy * ty / (z * z));
-            // Σ = R S Sᵀ Rᵀ in world axes, then W Σ Wᵀ in camera axes.
-            let m =
-                Mat3::from_quat(gaussians.rotation(i)) * Mat3::from_diagonal(gaussians.scale(i));
-            let cov = rot * (m * m.transpose()) * rot.transpose();
-            let a = j0.dot(cov * j0) + settings.dilation;
-            let b = j0.dot(cov * j1);
-            let c = j1.dot(cov * j1) + settings.dilation;
+            let geo = cam.geometry(gaussians, i)?;
+            let [a, b, c] = geo.abc;
             let det = a * c - b * b;
             if !(det > 0.0 && det.is_finite()) {
                 return None;
             }
             let mid = 0.5 * (a + c);
             let lambda = mid + (mid * mid - det).max(0.1).sqrt();
-            let radius = (3.0 * lambda.sqrt()).ceil();
+            // Opacity-aware bound: beyond √(2·ln(255·o)·λ) pixels from the center the
+            // opacity is below 1/255 in every direction, so nothing there is blended.
+            let opacity = gaussians.opacity(i);
+            if !(opacity >= MIN_ALPHA) {
+                return None;
+            }
+            let reach = 2.0 * (opacity / MIN_ALPHA).ln();
+            let radius = (reach * lambda).sqrt().ceil();
+            let mean2d = cam.center(geo.p);
             if !(radius > 0.0 && radius.is_finite() && mean2d.is_finite()) {
                 return None;
             }
             if mean2d.x + radius <= 0.0
-                || mean2d.x - radius >= w
+                || mean2d.x - radius >= cam.w
                 || mean2d.y + radius <= 0.0
-                || mean2d.y - radius >= h
+                || mean2d.y - radius >= cam.h
             {
                 return None;
             }
@@ -259,14 +362,15 @@ pub(crate) fn project(
             if !conic.iter().all(|v| v.is_finite()) {
                 return None;
             }
+            let mean = Vec3::from_array(gaussians.means[i]);
             Some(Projected {
                 index: i as u32,
                 mean2d,
                 conic,
-                depth: z,
+                depth: geo.p.z,
                 radius,
-                color: gaussians.color(i, (mean - origin).normalize()),
-                opacity: gaussians.opacity(i),
+                color: gaussians.color(i, (mean - cam.origin).normalize()),
+                opacity,
             })
         })
         .collect()
@@ -274,6 +378,7 @@ pub(crate) fn project(
 
 /// Per-tile lists of projected Gaussians (indices into the projected array), each
 /// sorted front to back.
+#[derive(Clone, Debug)]
 pub(crate) struct Bins {
     /// Tiles across and down.
     pub tiles_x: u32,
@@ -366,75 +471,141 @@ pub(crate) fn bin(
     })
 }
 
-/// Blends every pixel front to back; returns the image and the final transmittance.
+/// What blending leaves for the backward pass: the image, the final transmittance and,
+/// per pixel, how many entries of its tile's list were visited.
+pub(crate) struct Blended {
+    pub rgb: Vec<[f32; 3]>,
+    pub transmittance: Vec<f32>,
+    pub ends: Vec<u32>,
+}
+
+/// The pixels `[x0, x1) × [y0, y1)` of tile `t`.
+pub(crate) fn tile_pixels(
+    t: usize,
+    bins: &Bins,
+    w: usize,
+    h: usize,
+) -> (usize, usize, usize, usize) {
+    let tx = (t % bins.tiles_x as usize) * TILE as usize;
+    let ty = (t / bins.tiles_x as usize) * TILE as usize;
+    (
+        tx,
+        (tx + TILE as usize).min(w),
+        ty,
+        (ty + TILE as usize).min(h),
+    )
+}
+
+/// Blends every pixel front to back, tile by tile ([`blend_tile`]).
 fn rasterize(
     projected: &[Projected],
     bins: &Bins,
     camera: &Camera,
     settings: &RenderSettings,
-) -> (Vec<[f32; 3]>, Vec<f32>) {
+) -> Blended {
     let (w, h) = (camera.width as usize, camera.height as usize);
-    let bg = Vec3::from_array(settings.background);
     let n_tiles = bins.tiles_x as usize * bins.tiles_y as usize;
     // One job per tile, each writing only its own buffer; scattered afterwards.
-    let tiles: Vec<Vec<(Vec3, f32)>> = (0..n_tiles)
+    let tiles: Vec<TileOut> = (0..n_tiles)
         .into_par_iter()
         .map(|t| {
             let list = &bins.ids[bins.offsets[t]..bins.offsets[t + 1]];
-            let tx = (t % bins.tiles_x as usize) * TILE as usize;
-            let ty = (t / bins.tiles_x as usize) * TILE as usize;
-            let (x1, y1) = ((tx + TILE as usize).min(w), (ty + TILE as usize).min(h));
-            let mut out = Vec::with_capacity((x1 - tx) * (y1 - ty));
-            for y in ty..y1 {
-                for x in tx..x1 {
-                    let px = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
-                    let (c, t) = blend(projected, list, px, settings.early_stop);
-                    out.push((c + t * bg, t));
-                }
-            }
-            out
+            blend_tile(projected, list, tile_pixels(t, bins, w, h), settings)
         })
         .collect();
-    let mut rgb = vec![[0.0; 3]; w * h];
-    let mut trans = vec![0.0; w * h];
+    let mut out = Blended {
+        rgb: vec![[0.0; 3]; w * h],
+        transmittance: vec![0.0; w * h],
+        ends: vec![0; w * h],
+    };
     for (t, tile) in tiles.iter().enumerate() {
-        let tx = (t % bins.tiles_x as usize) * TILE as usize;
-        let ty = (t / bins.tiles_x as usize) * TILE as usize;
-        let tw = (tx + TILE as usize).min(w) - tx;
-        for (k, &(c, tr)) in tile.iter().enumerate() {
-            let i = (ty + k / tw) * w + tx + k % tw;
-            rgb[i] = c.to_array();
-            trans[i] = tr;
+        let (x0, x1, y0, y1) = tile_pixels(t, bins, w, h);
+        for y in y0..y1 {
+            let r = y - y0;
+            for x in x0..x1 {
+                let (c, i) = (x - x0, y * w + x);
+                let row = &tile.rows[r];
+                out.rgb[i] = row.rgb.map(|ch| lane(&ch, c));
+                out.transmittance[i] = lane(&row.t, c);
+                out.ends[i] = row.end[c / 8].as_array()[c % 8] as u32;
+            }
         }
     }
-    (rgb, trans)
+    out
 }
 
-/// Front-to-back blending of one pixel at continuous position `px`: the accumulated
-/// color (without background) and the final transmittance.
-fn blend(projected: &[Projected], list: &[u32], px: Vec2, early_stop: f32) -> (Vec3, f32) {
-    let mut color = Vec3::ZERO;
-    let mut t = 1.0f32;
-    for &id in list {
-        let p = &projected[id as usize];
-        let d = px - p.mean2d;
-        let [ca, cb, cc] = p.conic;
-        let power = -0.5 * (ca * d.x * d.x + cc * d.y * d.y) - cb * d.x * d.y;
-        if power > 0.0 {
-            continue;
-        }
-        let alpha = (p.opacity * power.exp()).min(MAX_ALPHA);
-        if alpha < MIN_ALPHA {
-            continue;
-        }
-        let next = t * (1.0 - alpha);
-        if next < early_stop {
+/// One tile's pixels over the full [`TILE`] × [`TILE`] square, by row (pixels past the
+/// image's edge are computed as done from the start and dropped).
+struct TileOut {
+    rows: [BlendRow; TILE as usize],
+}
+
+/// The rows of a tile starting at pixel row `y0` (at most `rows`) that splat `p` can
+/// reach: its screen box `center.y ± radius`, as `[r0, r1)` tile rows.
+#[inline]
+pub(crate) fn splat_rows(p: &Projected, y0: usize, rows: usize) -> (usize, usize) {
+    let lo = (p.mean2d.y - p.radius - 0.5 - y0 as f32).floor().max(0.0) as usize;
+    let hi = (p.mean2d.y + p.radius - 0.5 - y0 as f32).ceil() + 1.0;
+    (lo.min(rows), (hi.max(0.0) as usize).min(rows))
+}
+
+/// Front-to-back blending of one tile, splat by splat over the tile's pixels (the inner
+/// loop over a row of [`TILE`] pixels is branch-free, so the compiler vectorizes it).
+/// Per pixel: the accumulated color over the background, the final transmittance, and
+/// one past the last splat of `list` that was blended (0 if none).
+fn blend_tile(
+    projected: &[Projected],
+    list: &[u32],
+    (x0, x1, y0, y1): (usize, usize, usize, usize),
+    settings: &RenderSettings,
+) -> TileOut {
+    let mut out = TileOut {
+        rows: [BlendRow::new(x1 - x0); TILE as usize],
+    };
+    for row in out.rows.iter_mut().skip(y1 - y0) {
+        *row = BlendRow::new(0);
+    }
+    let mut n_live = ((x1 - x0) * (y1 - y0)) as u32;
+    let rows = y1 - y0;
+    for (k, &id) in list.iter().enumerate() {
+        if n_live == 0 {
             break;
         }
-        color += p.color * (alpha * t);
-        t = next;
+        let p = &projected[id as usize];
+        let (r0, r1) = splat_rows(p, y0, rows);
+        let left = p.mean2d.x - x0 as f32;
+        for r in r0..r1 {
+            let dy = (y0 + r) as f32 + 0.5 - p.mean2d.y;
+            n_live -= blend_row(
+                &mut out.rows[r],
+                p,
+                left,
+                dy,
+                k as i32 + 1,
+                settings.early_stop,
+            );
+        }
     }
-    (color, t)
+    let bg = settings.background;
+    for row in &mut out.rows {
+        for (c, channel) in row.rgb.iter_mut().enumerate() {
+            for (v, t) in channel.iter_mut().zip(&row.t) {
+                *v += *t * f32x8::splat(bg[c]);
+            }
+        }
+    }
+    out
+}
+
+/// [`rasterize`]'s image, for the backward pass's tests.
+#[cfg(test)]
+pub(crate) fn rasterize_for_tests(
+    projected: &[Projected],
+    bins: &Bins,
+    camera: &Camera,
+    settings: &RenderSettings,
+) -> Vec<[f32; 3]> {
+    rasterize(projected, bins, camera, settings).rgb
 }
 
 #[cfg(test)]

@@ -17,6 +17,7 @@ use super::grid::{Grid, MAX_RES};
 use super::render::{RenderSettings, Sink, backward, forward, max_weights, scatter, with_k};
 use crate::error::{Error, Result};
 use crate::optim::{LazyStep, Moments, Rule, exponential, progress};
+use crate::volume::rng::Rng;
 use crate::volume::{Ray, sh};
 
 /// Everything [`train`] needs besides the grid and the rays.
@@ -554,24 +555,6 @@ fn add_tv(grid: &Grid, acc: &mut Accum, slots: &[usize], tv_density: f32, tv_sh:
                 tv(shv, &mut acc.gsh, j, stride, tv_sh);
             }
         }
-    }
-}
-
-/// SplitMix64.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in `0 .. n` (`n > 0`).
-    fn below(&mut self, n: usize) -> usize {
-        ((self.next() as u128 * n as u128) >> 64) as usize
     }
 }
 
