@@ -26,8 +26,9 @@ pub enum Which {
     /// Rays per second of the voxel renderer and of its training, on a synthetic scene
     /// held as a sparse and as a dense grid (see docs/3d.md).
     Voxel(super::bench_voxel::VoxelBenchArgs),
-    /// Forward time per view of the 3D Gaussian splatting renderer, on gsplat's test
-    /// fixture (the garden) and on trained models from a dataset's cameras.
+    /// Forward and backward time per view of the 3D Gaussian splatting renderer, on
+    /// gsplat's test fixture (the garden) and on trained models (from a dataset's test
+    /// cameras or an orbit).
     Splat(super::bench_splat::SplatBenchArgs),
 }
 

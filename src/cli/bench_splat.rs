@@ -1,7 +1,8 @@
-//! `diffsvg bench splat`: time of the 3D Gaussian splatting renderer
-//! ([`diffsvg::volume::splat::render`]) per view, on gsplat's test fixture (the garden
-//! points with random Gaussians around them, 3 cameras) and on trained models seen from
-//! a dataset's cameras.
+//! `diffsvg bench splat`: time of the 3D Gaussian splatting renderer per view, forward
+//! ([`diffsvg::volume::splat::render`]) and backward ([`diffsvg::volume::splat::backward_into`],
+//! from one forward rendering and a fixed pseudo-random image gradient), on gsplat's test
+//! fixture (the garden points with random Gaussians around them, 3 cameras) and on trained
+//! models seen from a dataset's test cameras or from an orbit around them.
 //!
 //! **The garden.** gsplat's `assets/test_garden.npz` holds COLMAP points of the
 //! Mip-NeRF 360 garden (`means3d`, `colors`), three world-to-camera matrices in OpenCV
@@ -26,17 +27,23 @@ use diffsvg::limits::MAX_GAUSSIANS;
 use diffsvg::metrics::median;
 use diffsvg::scene::random::Rng;
 use diffsvg::volume::camera::Camera;
-use diffsvg::volume::dataset::Dataset;
-use diffsvg::volume::splat::{self, Gaussians, RenderSettings};
+use diffsvg::volume::splat::{self, Gaussians, Gradients, RenderSettings};
 
 /// Seed of the garden's random scales, orientations and opacities.
 pub const GARDEN_SEED: u64 = 42;
 
+/// Seed of the image gradient fed to the backward pass.
+const D_RGB_SEED: u64 = 7;
+
 /// The garden's points are kept inside `[-CROP, CROP]³` (as gsplat's tests do).
 const CROP: f32 = 2.0;
 
-/// Cameras of a trained model: the first this many test views of `--scene`.
+/// Cameras of a trained model: the first this many test views of `--scene`, or this
+/// many views on an orbit around it.
 const MODEL_VIEWS: usize = 3;
+
+/// Elevation of the orbit around a model without `--scene`, degrees (`view`'s default).
+const ORBIT_ELEVATION: f32 = 30.0;
 
 /// `C₀ = 1 / (2√π)`, the degree-0 SH basis constant.
 const SH_C0: f32 = 0.282_094_8;
@@ -49,11 +56,16 @@ pub struct SplatBenchArgs {
     /// --garden, skipped when absent).
     #[arg(long)]
     garden: Option<PathBuf>,
-    /// Trained models (PLY) to time as well, from the cameras of --scene.
-    #[arg(long, num_args = 1.., requires = "scene")]
+    /// Time only the --model workloads, not the garden.
+    #[arg(long, conflicts_with = "garden", requires = "model")]
+    no_garden: bool,
+    /// Trained models (PLY) to time as well, from the cameras of --scene, or without it
+    /// from 3 views of 200×200 on an orbit around the model's bounding box (those of
+    /// `diffsvg view --orbit` without a scene).
+    #[arg(long, num_args = 1..)]
     model: Vec<PathBuf>,
     /// Dataset folder whose first 3 test views (train views when it has no test split)
-    /// are the cameras of every --model.
+    /// are the cameras of every --model (photos with lens distortion are undistorted).
     #[arg(long, requires = "model")]
     scene: Option<PathBuf>,
     /// Divide the dataset's image sizes by this integer (as in training).
@@ -110,9 +122,8 @@ struct Timing {
     threads: usize,
     /// Median forward time, milliseconds.
     forward_ms: f64,
-    /// Median backward time, milliseconds: not measured until the backward pass exists.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    backward_ms: Option<f64>,
+    /// Median backward time, milliseconds (from one forward rendering, not counted).
+    backward_ms: f64,
 }
 
 /// The garden's default location, beside the checkout.
@@ -128,10 +139,13 @@ pub fn run(a: SplatBenchArgs) -> Result<()> {
     }
     let mut workloads = Vec::new();
     let garden_path = a.garden.clone().unwrap_or_else(default_garden);
-    if a.garden.is_some() || a.model.is_empty() || garden_path.is_file() {
+    let wanted = a.garden.is_some() || a.model.is_empty() || garden_path.is_file();
+    if a.no_garden {
+        // Only the models.
+    } else if wanted {
         if !garden_path.exists() {
             bail!(
-                "{}: garden file not found (give --garden PATH, or --model with --scene)",
+                "{}: garden file not found (give --garden PATH, or --model)",
                 garden_path.display()
             );
         }
@@ -148,33 +162,55 @@ pub fn run(a: SplatBenchArgs) -> Result<()> {
                 .collect(),
         });
     } else {
-        eprintln!("{}: not found, garden skipped", garden_path.display());
+        eprintln!("note: {}: not found, garden skipped", garden_path.display());
     }
-    if let Some(scene) = &a.scene {
-        let data = Dataset::load(scene, a.downscale)?;
-        let (views, note) = if data.test.is_empty() {
-            (&data.train, " (train)")
-        } else {
-            (&data.test, "")
-        };
-        let views: Vec<(String, Camera)> = views
-            .iter()
-            .take(MODEL_VIEWS)
-            .map(|v| (format!("{}{note}", v.name), v.camera))
-            .collect();
-        let background = if data.white_background { 1.0 } else { 0.0 };
-        for m in &a.model {
-            let gaussians = splat::load(m)?;
-            workloads.push(Workload {
-                name: m.display().to_string(),
-                gaussians,
-                settings: RenderSettings {
-                    background: [background; 3],
-                    ..RenderSettings::default()
-                },
-                views: views.clone(),
-            });
+    // The scene's cameras and background, shared by every model.
+    let scene = match &a.scene {
+        Some(dir) => {
+            let data = super::splat::load_dataset(dir, a.downscale)?;
+            let (views, note) = if data.test.is_empty() {
+                (&data.train, " (train)")
+            } else {
+                (&data.test, "")
+            };
+            let views: Vec<(String, Camera)> = views
+                .iter()
+                .take(MODEL_VIEWS)
+                .map(|v| (format!("{}{note}", v.name), v.camera))
+                .collect();
+            Some((views, super::splat::background(&data)))
         }
+        None => None,
+    };
+    for m in &a.model {
+        let gaussians = splat::load(m)?;
+        let (views, background) = match &scene {
+            Some((views, background)) => (views.clone(), *background),
+            None => {
+                let cams = super::volume::orbit_cameras(
+                    super::volume::splat_bounds(&gaussians),
+                    None,
+                    MODEL_VIEWS,
+                    ORBIT_ELEVATION,
+                )
+                .with_context(|| m.display().to_string())?;
+                let views = cams
+                    .into_iter()
+                    .enumerate()
+                    .map(|(i, c)| (format!("orbit {i}"), c))
+                    .collect();
+                (views, RenderSettings::default().background)
+            }
+        };
+        workloads.push(Workload {
+            name: m.display().to_string(),
+            gaussians,
+            settings: RenderSettings {
+                background,
+                ..RenderSettings::default()
+            },
+            views,
+        });
     }
     let report = Report {
         runs: a.runs,
@@ -212,24 +248,33 @@ fn time_all(workloads: &[Workload], threads: &[usize], runs: usize) -> Result<Ve
     let mut out = Vec::new();
     for w in workloads {
         let mut views = Vec::new();
+        let mut grads = Gradients::zeros(&w.gaussians);
         for (name, cam) in &w.views {
+            let d_rgb = image_gradient(cam.width as usize * cam.height as usize);
             let mut timings = Vec::new();
             for (n, pool) in &pools {
-                let forward_ms = pool.install(|| {
-                    median_ms(runs, || {
+                let times = pool.install(|| {
+                    let forward_ms = median_ms(runs, || {
                         std::hint::black_box(splat::render(&w.gaussians, cam, &w.settings))
                             .map(|_| ())
-                    })
+                    })?;
+                    let rendered = splat::render(&w.gaussians, cam, &w.settings)?;
+                    let backward_ms = median_ms(runs, || {
+                        splat::backward_into(
+                            &w.gaussians,
+                            cam,
+                            &w.settings,
+                            &rendered,
+                            &d_rgb,
+                            &mut grads,
+                        )
+                    })?;
+                    std::hint::black_box(&grads);
+                    Ok::<_, String>((forward_ms, backward_ms))
                 });
-                let forward_ms = forward_ms
+                let (forward_ms, backward_ms) = times
                     .map_err(anyhow::Error::msg)
                     .with_context(|| context(w, name))?;
-                // TODO(backward): time backward here. Once
-                // `diffsvg::volume::splat::backward(...)` lands, take the median of it over
-                // the same `runs` (on this `pool`, from one forward `Rendered` and a fixed
-                // image gradient) and store it in `backward_ms`; the "backward (ms)" column
-                // of the table and the JSON field appear as soon as it is `Some`.
-                let backward_ms = None;
                 timings.push(Timing {
                     threads: *n,
                     forward_ms,
@@ -254,6 +299,17 @@ fn time_all(workloads: &[Workload], threads: &[usize], runs: usize) -> Result<Ve
     Ok(out)
 }
 
+/// The image gradient fed to the backward pass for `pixels` pixels: each channel uniform
+/// in `±1 / (3·pixels)`, the size of a mean L1 loss's gradient, from [`D_RGB_SEED`] (the
+/// same for every view of that size and every thread count).
+fn image_gradient(pixels: usize) -> Vec<[f32; 3]> {
+    let mut rng = Rng::new(D_RGB_SEED);
+    let scale = 1.0 / (3 * pixels.max(1)) as f64;
+    (0..pixels)
+        .map(|_| [0; 3].map(|_| rng.range(-scale, scale) as f32))
+        .collect()
+}
+
 /// Median wall time of `f` over `runs` calls after one warm-up call, milliseconds; the
 /// first error stops the timing.
 fn median_ms(runs: usize, mut f: impl FnMut() -> Result<(), String>) -> Result<f64, String> {
@@ -275,12 +331,6 @@ fn load_average() -> Option<f64> {
 
 /// The report as a Markdown table, one row per view and thread count.
 fn table(r: &Report) -> String {
-    let backward = r
-        .workloads
-        .iter()
-        .flat_map(|w| &w.views)
-        .flat_map(|v| &v.timings)
-        .any(|t| t.backward_ms.is_some());
     let mut s = format!(
         "3D Gaussian splatting on the CPU, medians of {} runs",
         r.runs
@@ -288,16 +338,14 @@ fn table(r: &Report) -> String {
     if let Some(l) = r.load_before {
         let _ = write!(s, " (load average {l:.2} before the first)");
     }
-    s += ".\n\n| model | view | size | Gaussians | visible | threads | forward (ms) |";
-    s += if backward { " backward (ms) |\n" } else { "\n" };
-    s += "|---|---|---|---:|---:|---:|---:|";
-    s += if backward { "---:|\n" } else { "\n" };
+    s += ".\n\n| model | view | size | Gaussians | visible | threads | forward (ms) \
+          | backward (ms) |\n|---|---|---|---:|---:|---:|---:|---:|\n";
     for w in &r.workloads {
         for v in &w.views {
             for t in &v.timings {
-                let _ = write!(
+                let _ = writeln!(
                     s,
-                    "| {} | {} | {}×{} | {} | {} | {} | {:.1} |",
+                    "| {} | {} | {}×{} | {} | {} | {} | {:.1} | {:.1} |",
                     w.name,
                     v.name,
                     v.width,
@@ -305,17 +353,9 @@ fn table(r: &Report) -> String {
                     w.gaussians,
                     v.visible,
                     t.threads,
-                    t.forward_ms
+                    t.forward_ms,
+                    t.backward_ms
                 );
-                if backward {
-                    match t.backward_ms {
-                        Some(b) => {
-                            let _ = write!(s, " {b:.1} |");
-                        }
-                        None => s += " – |",
-                    }
-                }
-                s += "\n";
             }
         }
     }
