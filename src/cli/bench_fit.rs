@@ -26,6 +26,10 @@ pub enum Which {
     /// Rays per second of the voxel renderer and of its training, on a synthetic scene
     /// held as a sparse and as a dense grid (see docs/3d.md).
     Voxel(super::bench_voxel::VoxelBenchArgs),
+    /// Forward and backward time per view of the 3D Gaussian splatting renderer, on
+    /// gsplat's test fixture (the garden) and on trained models (from a dataset's test
+    /// cameras or an orbit).
+    Splat(super::bench_splat::SplatBenchArgs),
 }
 
 /// Arguments of `diffsvg bench painterly`.
@@ -183,6 +187,7 @@ pub fn run(w: Which) -> Result<()> {
         Which::Painterly(a) => run_painterly(a),
         Which::Fit(a) => super::bench_suite::run(a),
         Which::Voxel(a) => super::bench_voxel::run(a),
+        Which::Splat(a) => super::bench_splat::run(a),
     }
 }
 

@@ -8,6 +8,7 @@ use clap::{Parser, Subcommand};
 mod batch;
 mod bench;
 mod bench_fit;
+mod bench_splat;
 mod bench_suite;
 mod bench_voxel;
 mod choices;

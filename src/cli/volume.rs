@@ -569,23 +569,26 @@ impl Model {
                 (g.min() + g.max()) * 0.5,
                 (g.max() - g.min()).max_element() * 0.5,
             ),
-            Model::Splat(g, _) => {
-                if g.is_empty() {
-                    return (Vec3::ZERO, 1.0);
-                }
-                // The middle 98% of the means on each axis (a few far floaters aside).
-                let mut lo = Vec3::ZERO;
-                let mut hi = Vec3::ZERO;
-                for axis in 0..3 {
-                    let mut v: Vec<f32> = g.means.iter().map(|m| m[axis]).collect();
-                    v.sort_by(|a, b| a.total_cmp(b));
-                    lo[axis] = v[v.len() / 100];
-                    hi[axis] = v[v.len() - 1 - v.len() / 100];
-                }
-                ((lo + hi) * 0.5, ((hi - lo).max_element() * 0.5).max(1e-3))
-            }
+            Model::Splat(g, _) => splat_bounds(g),
         }
     }
+}
+
+/// The center and half-size of the box of the middle 98% of a Gaussian model's means on
+/// each axis (a few far floaters aside); the unit box when there are none.
+pub(super) fn splat_bounds(g: &splat::Gaussians) -> (Vec3, f32) {
+    if g.is_empty() {
+        return (Vec3::ZERO, 1.0);
+    }
+    let mut lo = Vec3::ZERO;
+    let mut hi = Vec3::ZERO;
+    for axis in 0..3 {
+        let mut v: Vec<f32> = g.means.iter().map(|m| m[axis]).collect();
+        v.sort_by(|a, b| a.total_cmp(b));
+        lo[axis] = v[v.len() / 100];
+        hi[axis] = v[v.len() - 1 - v.len() / 100];
+    }
+    ((lo + hi) * 0.5, ((hi - lo).max_element() * 0.5).max(1e-3))
 }
 
 /// Runs `diffsvg view`.
@@ -704,8 +707,9 @@ fn file_stem(name: &str) -> String {
 
 /// Cameras on a circle around the model, level with the dataset's "up" (the mean of its
 /// cameras' up vectors, or +Z), at the dataset's camera distance and field of view; for
-/// real photos, along the arc their cameras span instead ([`arc_cameras`]).
-fn orbit_cameras(
+/// real photos, along the arc their cameras span instead ([`arc_cameras`]). Without a
+/// dataset: 200×200 views at 3 half-sizes from the center, +Z up.
+pub(super) fn orbit_cameras(
     (center, half): (Vec3, f32),
     data: Option<&Dataset>,
     n: usize,

@@ -11,7 +11,7 @@ use diffsvg::volume::Ray;
 use diffsvg::volume::camera::Camera;
 use serde_json::{Value, json};
 
-use super::common::{diffsvg, s, scratch};
+use super::common::{diffsvg, s, scratch, shared_data, skip};
 
 // ---------------------------------------------------------------------------------------
 // A tiny synthetic scene
@@ -657,4 +657,160 @@ fn bench_voxel_reports_sparse_and_dense_grids() {
         }
     }
     assert!(out.contains("sparse/dense speed"), "{out}");
+}
+
+/// `bench splat` on gsplat's garden fixture: one workload of 3 views at 648×420, each with
+/// Gaussians in view and positive forward and backward times (never compared with
+/// anything).
+#[test]
+fn bench_splat_times_the_garden_views() {
+    let Some(data) = shared_data("bench_splat_times_the_garden_views") else {
+        return;
+    };
+    let garden = data.join("scenes/gsplat_test_garden/test_garden.npz");
+    if !garden.is_file() {
+        skip(
+            "bench_splat_times_the_garden_views",
+            &format!("{} not found", garden.display()),
+        );
+        return;
+    }
+    let r = diffsvg(&[
+        "bench",
+        "splat",
+        "--garden",
+        s(&garden),
+        "--runs",
+        "1",
+        "--threads",
+        "1",
+        "--json",
+    ]);
+    assert!(r.status.success(), "{}", stderr(&r));
+    let out = stdout(&r);
+    let j: Value = serde_json::from_str(&out).unwrap_or_else(|e| panic!("{e}: {out}"));
+    assert_eq!(j["runs"], 1);
+    let workloads = j["workloads"].as_array().unwrap();
+    assert_eq!(workloads.len(), 1, "{out}");
+    let w = &workloads[0];
+    assert_eq!(w["name"], "garden");
+    let n = w["gaussians"].as_u64().unwrap();
+    assert!(n > 100_000, "{out}");
+    let views = w["views"].as_array().unwrap();
+    assert_eq!(views.len(), 3, "{out}");
+    for v in views {
+        assert_eq!(
+            (v["width"].as_u64(), v["height"].as_u64()),
+            (Some(648), Some(420))
+        );
+        let visible = v["visible"].as_u64().unwrap();
+        assert!(visible > 0 && visible <= n, "{out}");
+        let timings = v["timings"].as_array().unwrap();
+        assert_eq!(timings.len(), 1, "{out}");
+        assert_eq!(timings[0]["threads"], 1);
+        for key in ["forward_ms", "backward_ms"] {
+            let ms = timings[0][key].as_f64().unwrap();
+            assert!(ms.is_finite() && ms > 0.0, "{key}: {out}");
+        }
+    }
+}
+
+/// `bench splat --model` on a tiny hand-made model: 3 orbit views of 200×200 without
+/// `--scene`, the scene's test view with it; every view sees Gaussians and has positive
+/// times at each thread count.
+#[test]
+fn bench_splat_times_a_model() {
+    use diffsvg::volume::splat::{Gaussians, save};
+    let dir = scratch("bench-splat-model");
+    // 27 Gaussians of SH degree 1 on a grid inside the synthetic scene's spheres.
+    let mut g = Gaussians::new(1);
+    for i in 0..27 {
+        let p = [i % 3, i / 3 % 3, i / 9].map(|c| (c as f32 - 1.0) * 0.3);
+        let sh: Vec<f32> = (0..12).map(|k| ((i + k) % 5) as f32 * 0.1 - 0.2).collect();
+        g.push(p, [-2.5, -2.0, -3.0], [1.0, 0.1, -0.2, 0.3], 1.0, &sh);
+    }
+    let model = dir.join("tiny.ply");
+    save(&g, &model).unwrap();
+    let scene = small_scene(&dir, "scene");
+    let run = |extra: &[&str]| {
+        let mut args = vec!["bench", "splat", "--no-garden", "--model", s(&model)];
+        args.extend_from_slice(&["--runs", "2", "--threads", "1,2", "--json"]);
+        args.extend_from_slice(extra);
+        let r = diffsvg(&args);
+        assert!(r.status.success(), "{}", stderr(&r));
+        let out = stdout(&r);
+        let j: Value = serde_json::from_str(&out).unwrap_or_else(|e| panic!("{e}: {out}"));
+        let workloads = j["workloads"].as_array().unwrap();
+        assert_eq!(workloads.len(), 1, "{out}");
+        let w = &workloads[0];
+        assert_eq!(w["name"], s(&model), "{out}");
+        assert_eq!(
+            (w["gaussians"].as_u64(), w["sh_degree"].as_u64()),
+            (Some(27), Some(1))
+        );
+        let views = w["views"].as_array().unwrap().clone();
+        for v in &views {
+            let visible = v["visible"].as_u64().unwrap();
+            assert!(visible > 0 && visible <= 27, "{out}");
+            let timings = v["timings"].as_array().unwrap();
+            let threads: Vec<_> = timings.iter().map(|t| t["threads"].as_u64()).collect();
+            assert_eq!(threads, [Some(1), Some(2)], "{out}");
+            for t in timings {
+                for key in ["forward_ms", "backward_ms"] {
+                    let ms = t[key].as_f64().unwrap();
+                    assert!(ms.is_finite() && ms > 0.0, "{key}: {out}");
+                }
+            }
+        }
+        views
+    };
+    let orbit = run(&[]);
+    assert_eq!(orbit.len(), 3);
+    for (i, v) in orbit.iter().enumerate() {
+        assert_eq!(v["name"], format!("orbit {i}"));
+        assert_eq!(
+            (v["width"].as_u64(), v["height"].as_u64()),
+            (Some(200), Some(200))
+        );
+    }
+    let test = run(&["--scene", s(&scene)]);
+    assert_eq!(test.len(), 1);
+    assert_eq!(
+        (test[0]["width"].as_u64(), test[0]["height"].as_u64()),
+        (Some(8), Some(8))
+    );
+    // The table has both columns.
+    let r = diffsvg(&[
+        "bench",
+        "splat",
+        "--no-garden",
+        "--model",
+        s(&model),
+        "--runs",
+        "1",
+    ]);
+    assert!(r.status.success(), "{}", stderr(&r));
+    let out = stdout(&r);
+    assert!(out.contains("| forward (ms) | backward (ms) |"), "{out}");
+    assert_eq!(
+        out.lines().filter(|l| l.contains("orbit")).count(),
+        6,
+        "{out}"
+    );
+}
+
+/// Without the garden file (and no `--model`), `bench splat` fails with one line naming it.
+#[test]
+fn bench_splat_names_a_missing_garden() {
+    let dir = scratch("bench-splat-missing");
+    let missing = dir.join("no-such-garden.npz");
+    let r = diffsvg(&["bench", "splat", "--garden", s(&missing), "--runs", "1"]);
+    let err = stderr(&r);
+    assert_eq!(r.status.code(), Some(2), "{err}");
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(
+        err.contains("no-such-garden.npz") && err.contains("not found"),
+        "{err}"
+    );
+    assert!(stdout(&r).is_empty());
 }

@@ -156,6 +156,14 @@ pub struct Rendered {
     pub(crate) ends: Vec<u32>,
 }
 
+impl Rendered {
+    /// Number of Gaussians that survived culling: in front of the camera (beyond
+    /// [`RenderSettings::near`]), not degenerate, and overlapping the image.
+    pub fn visible(&self) -> usize {
+        self.projected.len()
+    }
+}
+
 /// Renders `gaussians` seen by `camera` (see the module documentation).
 ///
 /// # Errors

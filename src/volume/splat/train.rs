@@ -221,7 +221,7 @@ pub fn find_point_cloud(dir: &Path) -> Option<PathBuf> {
 /// three nearest other points. SH of degree `sh_degree` (higher terms 0).
 ///
 /// # Errors
-/// The file's problem, named with the file ([`load_points`](super::points)), or a cloud
+/// The file's problem, named with the file (`points::load_points`), or a cloud
 /// with no points.
 ///
 /// # Panics
