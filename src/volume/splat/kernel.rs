@@ -15,7 +15,7 @@
 
 use wide::{f32x8, i32x8, u32x8};
 
-use super::render::{MAX_ALPHA, MIN_ALPHA, Projected, TILE};
+use super::render::{MAX_ALPHA, MIN_ALPHA, Projected, TILE, floor_within};
 
 /// Vectors per tile row.
 pub(crate) const HALVES: usize = TILE as usize / 8;
@@ -84,9 +84,10 @@ pub(crate) fn row_halves(p: &Projected, left: f32, dy: f32) -> (usize, usize) {
     // The chord in pixel-center offsets from the row's start: x + 0.5 − left ∈ [lo, hi].
     let lo = (-b * dy - root) / a + left - 0.5 - 1.0;
     let hi = (-b * dy + root) / a + left - 0.5 + 1.0;
-    let first = (lo / 8.0).floor().clamp(0.0, HALVES as f32) as usize;
-    let last = (hi / 8.0).floor() + 1.0;
-    (first, last.clamp(0.0, HALVES as f32) as usize)
+    (
+        floor_within(lo / 8.0, HALVES),
+        floor_within(hi / 8.0 + 1.0, HALVES),
+    )
 }
 
 /// A lane mask (all bits set or clear) of floats as one of integers.

@@ -555,9 +555,25 @@ struct TileOut {
 /// reach: its screen box `center.y ± extent.y`, as `[r0, r1)` tile rows.
 #[inline]
 pub(crate) fn splat_rows(p: &Projected, y0: usize, rows: usize) -> (usize, usize) {
-    let lo = (p.mean2d.y - p.extent.y - 0.5 - y0 as f32).floor().max(0.0) as usize;
-    let hi = (p.mean2d.y + p.extent.y - 0.5 - y0 as f32).ceil() + 1.0;
-    (lo.min(rows), (hi.max(0.0) as usize).min(rows))
+    let lo = floor_within(p.mean2d.y - p.extent.y - 0.5 - y0 as f32, rows);
+    let hi = ceil_within(p.mean2d.y + p.extent.y - 0.5 - y0 as f32 + 1.0, rows);
+    (lo, hi)
+}
+
+/// `⌊x⌋` clamped to `[0, max]` (NaN gives 0), without a library call: `floor` is one
+/// on plain x86-64, and these run once per splat and tile row.
+#[inline]
+pub(crate) fn floor_within(x: f32, max: usize) -> usize {
+    // Truncation is the floor for x ≥ 0; below 0 the clamp gives 0 either way.
+    (x.max(0.0) as usize).min(max)
+}
+
+/// `⌈x⌉` clamped to `[0, max]` (NaN gives 0), without a library call.
+#[inline]
+pub(crate) fn ceil_within(x: f32, max: usize) -> usize {
+    let x = x.max(0.0);
+    let t = x as usize;
+    (t + ((t as f32) < x) as usize).min(max)
 }
 
 /// Front-to-back blending of one tile, splat by splat over the tile's pixels (the inner
