@@ -9,7 +9,7 @@ use anyhow::{Result, bail};
 use serde_json::json;
 
 use super::progress::{install_interrupt_handler, interrupted};
-use super::volume::{sibling, write_psnr_plot};
+use super::volume::{check_bound, sibling, write_psnr_plot};
 use diffsvg::glam::Vec3;
 use diffsvg::image_io::write_atomic;
 use diffsvg::limits::MAX_GAUSSIANS;
@@ -91,7 +91,12 @@ pub fn run(a: SplatArgs) -> Result<()> {
     let (center, dist) = data.focus();
     let half = match a.bound {
         Some(b) if !(b.is_finite() && b > 0.0) => bail!("--bound {b} must be a positive number"),
-        Some(b) => b,
+        Some(b) => {
+            // As for `recon voxel`: a box far too large or small for the cameras (or for
+            // f32) would start from Gaussians of infinite or zero size.
+            check_bound(b, center, dist)?;
+            b
+        }
         None => dist * if data.white_background { 0.4 } else { 1.0 },
     };
     if !(half.is_finite() && half > 0.0 && center.is_finite()) {

@@ -330,7 +330,7 @@ const BOUND_RANGE: (f32, f32) = (1e-3, 1e3);
 
 /// Checks `--bound` against the cameras: within [`BOUND_RANGE`] times their distance
 /// `dist` (when that is known) and a box that `f32` can hold around `center`.
-fn check_bound(b: f32, center: Vec3, dist: f32) -> Result<()> {
+pub(super) fn check_bound(b: f32, center: Vec3, dist: f32) -> Result<()> {
     if dist.is_finite() && dist > 0.0 {
         let (lo, hi) = (BOUND_RANGE.0 * dist, BOUND_RANGE.1 * dist);
         if !(lo..=hi).contains(&b) {
@@ -537,14 +537,15 @@ enum Model {
 }
 
 impl Model {
-    /// Reads a model file, choosing the kind by its first bytes (`ply` for Gaussians).
+    /// Reads a model file, choosing the kind by its first bytes (a `ply` line, ending in
+    /// `\n` or `\r\n` as the PLY reader accepts, for Gaussians).
     fn load(path: &Path, step: f32) -> Result<Model> {
         use std::io::Read as _;
-        let mut head = [0u8; 4];
-        let n = std::fs::File::open(path)
-            .and_then(|mut f| f.read(&mut head))
+        let mut head = Vec::with_capacity(5);
+        std::fs::File::open(path)
+            .and_then(|f| f.take(5).read_to_end(&mut head))
             .with_context(|| format!("{}: cannot read the model", path.display()))?;
-        if n >= 4 && &head == b"ply\n" {
+        if head.starts_with(b"ply\n") || head.starts_with(b"ply\r\n") {
             let g = splat::load(path)?;
             Ok(Model::Splat(g, splat::RenderSettings::default()))
         } else {

@@ -473,8 +473,12 @@ fn parse_transforms(path: &Path) -> Result<Vec<Frame>> {
         path: path.to_path_buf(),
         what,
     };
-    let root: Value =
-        serde_json::from_slice(&bytes).map_err(|e| bad(format!("malformed JSON: {e}")))?;
+    let root: Value = serde_json::from_slice(&bytes).map_err(|e| {
+        bad(format!(
+            "malformed JSON: {e}{}",
+            non_json_number(&bytes, &e)
+        ))
+    })?;
     let top = root
         .as_object()
         .ok_or_else(|| bad("the top level must be a JSON object".into()))?;
@@ -553,6 +557,21 @@ fn parse_transforms(path: &Path) -> Result<Vec<Frame>> {
         });
     }
     Ok(out)
+}
+
+/// A note when a JSON syntax error sits on `NaN` or `Infinity` (which Python's `json`
+/// module writes for non-finite floats, but JSON has no such numbers); empty otherwise.
+fn non_json_number(bytes: &[u8], e: &serde_json::Error) -> &'static str {
+    let Some(line) = bytes.split(|&b| b == b'\n').nth(e.line().saturating_sub(1)) else {
+        return "";
+    };
+    let at = e.column().saturating_sub(1).min(line.len());
+    let rest = line[at..].strip_prefix(b"-").unwrap_or(&line[at..]);
+    if rest.starts_with(b"NaN") || rest.starts_with(b"Infinity") {
+        " (NaN and Infinity are not JSON numbers: every value must be finite)"
+    } else {
+        ""
+    }
 }
 
 /// Whether a `file_path` is absolute or climbs above its folder with `..`.

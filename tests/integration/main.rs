@@ -19,5 +19,6 @@ mod regress_raster;
 mod regress_volume;
 mod roundtrip;
 mod splat;
+mod splat_cli;
 mod vectorize;
 mod volume;

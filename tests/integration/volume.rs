@@ -110,7 +110,7 @@ fn rows(cam: &Camera) -> Value {
 /// Writes a NeRF-synthetic folder: `n_train` and `n_test` views of `size²` pixels
 /// (`train/r_i.png`, `test/r_i.png`, `file_path` without the extension as in the real
 /// datasets), test cameras between the training ones.
-fn write_scene(dir: &Path, n_train: usize, n_test: usize, size: u32) {
+pub(super) fn write_scene(dir: &Path, n_train: usize, n_test: usize, size: u32) {
     for (split, n, phase) in [("train", n_train, 0.0), ("test", n_test, 1.3)] {
         std::fs::create_dir_all(dir.join(split)).unwrap();
         let frames: Vec<Value> = (0..n)
@@ -130,31 +130,31 @@ fn write_scene(dir: &Path, n_train: usize, n_test: usize, size: u32) {
     }
 }
 
-fn write_json(path: &Path, v: &Value) {
+pub(super) fn write_json(path: &Path, v: &Value) {
     std::fs::write(path, serde_json::to_vec_pretty(v).unwrap()).unwrap();
 }
 
-fn read_json(path: &Path) -> Value {
+pub(super) fn read_json(path: &Path) -> Value {
     serde_json::from_slice(&std::fs::read(path).unwrap()).unwrap()
 }
 
-fn stdout(o: &Output) -> String {
+pub(super) fn stdout(o: &Output) -> String {
     String::from_utf8_lossy(&o.stdout).into_owned()
 }
 
-fn stderr(o: &Output) -> String {
+pub(super) fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
 /// The last line of stdout as JSON.
-fn summary(o: &Output) -> Value {
+pub(super) fn summary(o: &Output) -> Value {
     let out = stdout(o);
     let last = out.trim().lines().last().unwrap_or_default();
     serde_json::from_str(last).unwrap_or_else(|e| panic!("{e}: not JSON: {out}"))
 }
 
 /// The mean PSNR of an all-white picture (an empty model) over the test photos of `dir`.
-fn empty_model_psnr(dir: &Path) -> f64 {
+pub(super) fn empty_model_psnr(dir: &Path) -> f64 {
     let ds = diffsvg::volume::dataset::Dataset::load(dir, 1).unwrap();
     let sum: f64 = ds
         .test
@@ -323,7 +323,7 @@ fn recon_voxel_then_view_reproduce_a_synthetic_scene() {
 // Bad input
 
 /// A small valid scene (2 train and 1 test views of 8×8) in `dir/name`.
-fn small_scene(dir: &Path, name: &str) -> PathBuf {
+pub(super) fn small_scene(dir: &Path, name: &str) -> PathBuf {
     let scene = dir.join(name);
     write_scene(&scene, 2, 1, 8);
     scene
@@ -331,7 +331,7 @@ fn small_scene(dir: &Path, name: &str) -> PathBuf {
 
 /// Asserts a clean failure: exit status 2, no panic, stderr naming every needle, and no
 /// file at all in `out_dir` (no model, log or temporary file).
-fn assert_clean_failure(o: &Output, needles: &[&str], out_dir: &Path) {
+pub(super) fn assert_clean_failure(o: &Output, needles: &[&str], out_dir: &Path) {
     let err = stderr(o);
     assert_eq!(o.status.code(), Some(2), "stderr: {err}");
     assert!(!err.contains("panicked"), "{err}");
