@@ -424,13 +424,6 @@ pub fn train(
                 )));
             }
         }
-        if d.reset_every > 0 && iter % d.reset_every == 0 && iter < d.until {
-            let cap = logit(0.01);
-            for l in &mut gaussians.logit_opacities {
-                *l = l.min(cap);
-            }
-            state.opacities.clear();
-        }
         lap(4, &mut outcome);
         let step = TrainStep {
             iteration: iter,
@@ -448,6 +441,17 @@ pub fn train(
         if !go_on {
             outcome.stopped = true;
             break;
+        }
+        // The opacity reset comes after the observer has seen this iteration's model, so
+        // that an evaluation (or a stop) never meets the model just after a reset.
+        if d.reset_every > 0 && iter % d.reset_every == 0 && iter < d.until {
+            let t_reset = Instant::now();
+            let cap = logit(0.01);
+            for l in &mut gaussians.logit_opacities {
+                *l = l.min(cap);
+            }
+            state.opacities.clear();
+            outcome.parts[4] += t_reset.elapsed().as_secs_f32();
         }
     }
     outcome.seconds = (start.elapsed() - observing).as_secs_f32();
