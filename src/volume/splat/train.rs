@@ -176,9 +176,16 @@ pub struct TrainOutcome {
 }
 
 /// `count` Gaussians at uniformly random places in the cube `center ± half`, with random
-/// colors, opacity 0.1, no rotation, and isotropic scales equal to the expected mean
-/// distance to the three nearest neighbours of such a cloud, as the reference code
-/// initializes synthetic scenes. SH of degree `sh_degree` (higher terms 0).
+/// colors, no rotation, and isotropic scales `s` equal to the expected mean distance to
+/// the three nearest neighbours of such a cloud, as the reference code initializes
+/// synthetic scenes. SH of degree `sh_degree` (higher terms 0).
+///
+/// The opacity is not the reference's 0.1, which makes a dense cloud an opaque haze (a
+/// ray through 50 000 of them in lego's box meets about 60, and keeps 0.2% of its light),
+/// whose gradients stay weak until the first opacity reset. It is chosen so that a ray
+/// through the box keeps about half its light: each Gaussian takes `o·2πs²` of the
+/// light of rays crossing it, so `o = ln 2 · (2·half)² / (count · 2πs²)`, clamped to
+/// `[0.01, 0.1]`.
 ///
 /// # Panics
 /// If `sh_degree > 3`.
@@ -190,7 +197,12 @@ pub fn random_init(center: Vec3, half: f32, count: usize, sh_degree: u32, seed: 
     // k = 1, 2, 3 is 1.158 times the radius (3/(4πρ))^(1/3).
     let volume = (2.0 * half).powi(3);
     let radius = (3.0 * volume / (4.0 * std::f32::consts::PI * count.max(1) as f32)).cbrt();
-    let log_scale = (1.158 * radius).ln();
+    let scale = 1.158 * radius;
+    let log_scale = scale.ln();
+    let side = 2.0 * half;
+    let opacity = (std::f32::consts::LN_2 * side * side
+        / (count.max(1) as f32 * 2.0 * std::f32::consts::PI * scale * scale))
+        .clamp(0.01, 0.1);
     let mut coeffs = vec![0.0f32; 3 * k];
     for _ in 0..count {
         let offset = Vec3::new(rng.uniform(), rng.uniform(), rng.uniform()) * 2.0 - 1.0;
@@ -202,7 +214,7 @@ pub fn random_init(center: Vec3, half: f32, count: usize, sh_degree: u32, seed: 
             mean,
             [log_scale; 3],
             [1.0, 0.0, 0.0, 0.0],
-            logit(0.1),
+            logit(opacity),
             &coeffs,
         );
     }
@@ -786,7 +798,14 @@ mod tests {
             assert!((0.5..=1.5).contains(&m[0]) && (1.5..=2.5).contains(&m[1]));
             assert!((2.5..=3.5).contains(&m[2]));
         }
-        assert!((g.opacity(0) - 0.1).abs() < 1e-6);
+        // 1000 in a unit box: s = 1.158·(3/(4π·1000))^(1/3) = 0.0718, so the opacity that
+        // leaves half the light of a ray through the box is ln 2/(1000·2π·s²) = 0.0214.
+        assert!((g.opacity(0) - 0.0214).abs() < 2e-4, "{}", g.opacity(0));
+        // A sparse cloud keeps the reference's 0.1; a very dense one stops at 0.01.
+        let sparse = random_init(Vec3::ZERO, 0.5, 20, 0, 1);
+        assert!((sparse.opacity(0) - 0.1).abs() < 1e-6);
+        let dense = random_init(Vec3::ZERO, 0.5, 200_000, 0, 1);
+        assert!((dense.opacity(0) - 0.01).abs() < 1e-6);
         assert_eq!(g, random_init(Vec3::new(1.0, 2.0, 3.0), 0.5, 1000, 2, 9));
     }
 
