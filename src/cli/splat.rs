@@ -9,7 +9,7 @@ use anyhow::{Result, bail};
 use serde_json::json;
 
 use super::progress::{install_interrupt_handler, interrupted};
-use super::volume::{check_bound, sibling, write_psnr_plot};
+use super::volume::{Reporting, check_bound, sibling, write_psnr_plot};
 use diffsvg::glam::Vec3;
 use diffsvg::image_io::write_atomic;
 use diffsvg::limits::MAX_GAUSSIANS;
@@ -52,16 +52,8 @@ pub struct SplatArgs {
     /// Random seed of the initial points, the view order and the splits.
     #[arg(long, default_value_t = 0)]
     seed: u64,
-    /// Every this many iterations, render the test views and log their mean PSNR (the
-    /// time this takes is not counted as training time); 0: only at the end.
-    #[arg(long, default_value_t = 0)]
-    eval_every: usize,
-    /// Print one JSON object per 50 iterations and a summary instead of a progress bar.
-    #[arg(long)]
-    json: bool,
-    /// No progress output (the summary line is still printed).
-    #[arg(long, short)]
-    quiet: bool,
+    #[command(flatten)]
+    report: Reporting,
 }
 
 /// Runs `diffsvg recon splat`.
@@ -141,11 +133,11 @@ pub fn run(a: SplatArgs) -> Result<()> {
     let load_s = t_load.elapsed().as_secs_f64();
 
     install_interrupt_handler();
-    let bar = super::progress::terminal_bar(a.json || a.quiet, iters, "");
+    let bar = super::progress::terminal_bar(a.report.json || a.report.quiet, iters, "");
     let mut log: Vec<(TrainStep, Option<f64>)> = Vec::new();
     let outcome = splat::train(&mut model, &data.train, &opts, &mut |s, g| {
-        let eval = a.eval_every > 0
-            && s.iteration % a.eval_every == 0
+        let eval = a.report.eval_every > 0
+            && s.iteration % a.report.eval_every == 0
             && s.iteration < iters
             && !data.test.is_empty();
         let test = if eval {
@@ -169,7 +161,7 @@ pub fn run(a: SplatArgs) -> Result<()> {
                 ));
             }
         }
-        if a.json && (s.iteration % 50 == 0 || test.is_some()) {
+        if a.report.json && (s.iteration % 50 == 0 || test.is_some()) {
             println!(
                 "{}",
                 json!({"iteration": s.iteration, "loss": s.loss, "psnr": s.psnr,
@@ -199,7 +191,7 @@ pub fn run(a: SplatArgs) -> Result<()> {
         test_psnr,
     )?;
     let [r, l, b, u, d] = outcome.parts;
-    if a.json {
+    if a.report.json {
         println!(
             "{}",
             json!({"done": true, "output": a.output, "iterations": outcome.iterations,

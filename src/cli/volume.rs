@@ -35,6 +35,21 @@ enum ReconModel {
     Splat(super::splat::SplatArgs),
 }
 
+/// Progress and evaluation flags of `recon voxel` and `recon splat`.
+#[derive(clap::Args, Debug)]
+pub(super) struct Reporting {
+    /// Every this many iterations, render the test views and log their mean PSNR (the
+    /// time this takes is not counted as training time); 0: only at the end.
+    #[arg(long, default_value_t = 0)]
+    pub eval_every: usize,
+    /// Print one JSON object per 50 iterations and a summary instead of a progress bar.
+    #[arg(long)]
+    pub json: bool,
+    /// No progress output (the summary line is still printed).
+    #[arg(long, short)]
+    pub quiet: bool,
+}
+
 /// Arguments of `diffsvg recon voxel`.
 #[derive(clap::Args, Debug)]
 pub struct VoxelArgs {
@@ -83,16 +98,8 @@ pub struct VoxelArgs {
     /// Random seed of the ray batches.
     #[arg(long, default_value_t = 0)]
     seed: u64,
-    /// Every this many iterations, render the test views and log their mean PSNR (the
-    /// time this takes is not counted as training time); 0: only at the end.
-    #[arg(long, default_value_t = 0)]
-    eval_every: usize,
-    /// Print one JSON object per 50 iterations and a summary instead of a progress bar.
-    #[arg(long)]
-    json: bool,
-    /// No progress output (the summary line is still printed).
-    #[arg(long, short)]
-    quiet: bool,
+    #[command(flatten)]
+    report: Reporting,
 }
 
 /// Arguments of `diffsvg view`.
@@ -232,14 +239,14 @@ fn run_voxel(a: VoxelArgs) -> Result<()> {
     };
 
     install_interrupt_handler();
-    let bar = super::progress::terminal_bar(a.json || a.quiet, a.iters, "");
+    let bar = super::progress::terminal_bar(a.report.json || a.report.quiet, a.iters, "");
     // One row per 50 iterations and per evaluation: (step, test PSNR).
     let mut log: Vec<(TrainStep, Option<f64>)> = Vec::new();
     let mut last: Option<TrainStep> = None;
     let outcome = voxel::train(&mut grid, &rays, &colors, &opts, &mut |s, g| {
         last = Some(*s);
-        let eval = a.eval_every > 0
-            && s.iteration % a.eval_every == 0
+        let eval = a.report.eval_every > 0
+            && s.iteration % a.report.eval_every == 0
             && s.iteration < a.iters
             && !data.test.is_empty();
         let test = eval.then(|| mean_psnr(g, &test_rays, &data.test, &render));
@@ -263,7 +270,7 @@ fn run_voxel(a: VoxelArgs) -> Result<()> {
                 ));
             }
         }
-        if a.json && (s.iteration % 50 == 0 || test.is_some()) {
+        if a.report.json && (s.iteration % 50 == 0 || test.is_some()) {
             println!(
                 "{}",
                 json!({"iteration": s.iteration, "loss": s.loss, "psnr": s.psnr,
@@ -293,7 +300,7 @@ fn run_voxel(a: VoxelArgs) -> Result<()> {
     }
     write_log(&a.output, &log)?;
     let dense = (a.res as u64 + 1).pow(3);
-    if a.json {
+    if a.report.json {
         println!(
             "{}",
             json!({"done": true, "output": a.output, "iterations": outcome.iterations,
