@@ -3,6 +3,7 @@
 use rayon::prelude::*;
 
 use super::coverage::{Cells, accumulate_line, coverage, integrate_rows};
+use super::paint::PaintEval;
 use super::prepare::{GroupSpan, Item, Op, Prepared, prepare_forward};
 use crate::image_io::Image;
 use crate::scene::Scene;
@@ -186,6 +187,16 @@ impl<'a> BandRenderer<'a> {
             let y = acc.y0 as usize + r;
             let row = &acc.data[r * acc.w..r * acc.w + cols];
             let dst = &mut target[area.index(acc.x0 as usize, y)..][..cols];
+            if let PaintEval::Solid(solid) = &item.paint {
+                // One color: no per-pixel position or paint call.
+                for (&wv, d) in row.iter().zip(dst.iter_mut()) {
+                    let (cov, _) = coverage(wv, item.evenodd);
+                    if cov > 0.0 {
+                        over(d, solid.premul, cov);
+                    }
+                }
+                continue;
+            }
             for (i, (&wv, d)) in row.iter().zip(dst.iter_mut()).enumerate() {
                 let (cov, _) = coverage(wv, item.evenodd);
                 if cov <= 0.0 {
