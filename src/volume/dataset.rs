@@ -810,7 +810,7 @@ fn box_downscale(src: &[[f32; 3]], w: usize, h: usize, k: usize) -> Vec<[f32; 3]
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use glam::Vec3;
     use serde_json::json;
@@ -1125,7 +1125,7 @@ mod tests {
 
     /// `scenes/` under `$DIFFSVG_DATA`, or under `../shared/data` beside the checkout, when
     /// present (see [`skip`]).
-    fn scenes(test: &str) -> Option<PathBuf> {
+    pub(crate) fn scenes(test: &str) -> Option<PathBuf> {
         let data = std::env::var_os("DIFFSVG_DATA")
             .map(PathBuf::from)
             .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data"));

@@ -140,7 +140,6 @@ fn bilinear(rgb: &[[f32; 3]], w: usize, h: usize, u: f64, v: f64) -> [f32; 3] {
 mod tests {
     use super::*;
     use glam::{Affine3A, Vec3};
-    use std::path::PathBuf;
 
     fn pose() -> Affine3A {
         Affine3A::from_translation(Vec3::new(0.5, -1.0, 3.0))
@@ -292,17 +291,11 @@ mod tests {
 
     #[test]
     fn fox_undistorts_when_present() {
-        let fox = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data/scenes/fox");
-        if !fox.is_dir() {
-            if std::env::var_os("DIFFSVG_REQUIRE_DATA").is_some_and(|v| v == "1") {
-                panic!(
-                    "{} missing, and DIFFSVG_REQUIRE_DATA=1 forbids skipping",
-                    fox.display()
-                );
-            }
-            eprintln!("skipping: {} missing", fox.display());
+        let Some(scenes) = crate::volume::dataset::tests::scenes("fox_undistorts_when_present")
+        else {
             return;
-        }
+        };
+        let fox = scenes.join("fox");
         let data = super::super::dataset::load(&fox, 8).unwrap();
         assert!(data.train.iter().all(|v| v.camera.has_distortion()));
         let t = std::time::Instant::now();
