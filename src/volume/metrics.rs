@@ -153,16 +153,12 @@ fn filter_valid(img: &[f64], w: usize, h: usize, kernel: &[f64]) -> Vec<f64> {
 mod tests {
     use super::*;
 
-    /// A small deterministic pseudo-random generator (xorshift), values in `[0, 1)`.
+    /// Values in `[0, 1)` from the crate's one seeded generator.
     fn noise(seed: u64) -> impl FnMut() -> f32 {
-        let mut s = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
-        move || {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            (s >> 40) as f32 / (1u64 << 24) as f32
-        }
+        let mut rng = crate::volume::rng::Rng(seed);
+        move || rng.uniform()
     }
+
 
     fn smooth_image(w: usize, h: usize) -> Vec<[f32; 3]> {
         (0..w * h)

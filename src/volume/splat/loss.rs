@@ -309,16 +309,12 @@ fn column_filter(
 mod tests {
     use super::*;
 
-    /// A small deterministic pseudo-random generator (xorshift), values in `[0, 1)`.
+    /// Values in `[0, 1)` from the crate's one seeded generator.
     fn noise(seed: u64) -> impl FnMut() -> f64 {
-        let mut s = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
-        move || {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            (s >> 11) as f64 / (1u64 << 53) as f64
-        }
+        let mut rng = crate::volume::rng::Rng(seed);
+        move || (rng.next() >> 11) as f64 / (1u64 << 53) as f64
     }
+
 
     /// A random image pair whose channels differ by at least 0.05 everywhere, so that
     /// finite differences never cross the L1 kink.
