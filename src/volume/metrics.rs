@@ -159,7 +159,6 @@ mod tests {
         move || rng.uniform()
     }
 
-
     fn smooth_image(w: usize, h: usize) -> Vec<[f32; 3]> {
         (0..w * h)
             .map(|i| {

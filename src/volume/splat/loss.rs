@@ -315,7 +315,6 @@ mod tests {
         move || (rng.next() >> 11) as f64 / (1u64 << 53) as f64
     }
 
-
     /// A random image pair whose channels differ by at least 0.05 everywhere, so that
     /// finite differences never cross the L1 kink.
     fn pair(w: usize, h: usize, seed: u64) -> (Vec<[f64; 3]>, Vec<[f64; 3]>) {
