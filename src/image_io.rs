@@ -117,23 +117,18 @@ impl Image {
 
     /// Composites the image over an opaque or translucent straight color (in `[0, 1]`).
     pub fn over_background(&mut self, bg: [f32; 4]) {
-        let b = [bg[0] * bg[3], bg[1] * bg[3], bg[2] * bg[3], bg[3]];
+        let b = premultiplied(bg);
         for p in &mut self.data {
-            let t = 1.0 - p[3];
-            for c in 0..4 {
-                p[c] += t * b[c];
-            }
+            over_background_px(p, b);
         }
     }
 
     /// Backward of [`over_background`](Self::over_background): turns `∂L/∂(composited)`
     /// (this image) into `∂L/∂(image before compositing)`, in place.
     pub fn over_background_backward(&mut self, bg: [f32; 4]) {
-        let b = [bg[0] * bg[3], bg[1] * bg[3], bg[2] * bg[3], bg[3]];
+        let b = premultiplied(bg);
         for g in &mut self.data {
-            // out_c = p_c + (1 − p_a)·b_c
-            let gb: f32 = (0..4).map(|c| g[c] * b[c]).sum();
-            g[3] -= gb;
+            over_background_backward_px(g, b);
         }
     }
 
@@ -424,6 +419,28 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
         return Err(Error::io(path, e));
     }
     Ok(())
+}
+
+/// A straight RGBA color, premultiplied.
+pub(crate) fn premultiplied(c: [f32; 4]) -> [f32; 4] {
+    [c[0] * c[3], c[1] * c[3], c[2] * c[3], c[3]]
+}
+
+/// One pixel of [`Image::over_background`]: `p` (premultiplied) over `b` (premultiplied).
+#[inline]
+pub(crate) fn over_background_px(p: &mut [f32; 4], b: [f32; 4]) {
+    let t = 1.0 - p[3];
+    for c in 0..4 {
+        p[c] += t * b[c];
+    }
+}
+
+/// One pixel of [`Image::over_background_backward`]: `out_c = p_c + (1 − p_a)·b_c`, so
+/// only `∂L/∂p_a` changes.
+#[inline]
+pub(crate) fn over_background_backward_px(g: &mut [f32; 4], b: [f32; 4]) {
+    let gb: f32 = (0..4).map(|c| g[c] * b[c]).sum();
+    g[3] -= gb;
 }
 
 #[cfg(test)]

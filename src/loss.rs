@@ -37,6 +37,10 @@ impl Loss {
     /// Loss over the first `channels` channels (3: RGB only, for images composited over an
     /// opaque background; 4: premultiplied RGBA), the mean over pixels and those channels,
     /// and `∂L/∂img` when `want_grad` (zero in the other channels).
+    ///
+    /// The sum runs over bands of [`SUM_ROWS`] rows, each summed in pixel order, then over
+    /// the bands in order: the order of the rasterizer's fused pass
+    /// ([`raster::render_and_backward_fused`](crate::raster)), so both give the same bits.
     pub fn eval(
         self,
         img: &Image,
@@ -51,9 +55,37 @@ impl Loss {
         );
         let channels = channels.clamp(1, 4);
         let n = (img.data.len() * channels).max(1) as f64;
+        let band = (img.width as usize * SUM_ROWS).max(1);
         let mut sum = 0.0f64;
         let mut g = want_grad.then(|| Image::new(img.width, img.height));
-        for (k, (p, t)) in img.data.iter().zip(&target.data).enumerate() {
+        for (k, (p, t)) in img
+            .data
+            .chunks(band)
+            .zip(target.data.chunks(band))
+            .enumerate()
+        {
+            let d = g
+                .as_mut()
+                .map(|g| &mut g.data[k * band..k * band + p.len()]);
+            sum += self.band_sum(p, t, channels, n, d);
+        }
+        (sum / n, g)
+    }
+
+    /// One band's part of [`eval`](Self::eval): the sum of the per-channel terms over
+    /// `img` against `target` (same length) in pixel order, not yet divided by `n`, the
+    /// whole image's count of compared values. When `grad` is given, its first `channels`
+    /// channels receive `∂L/∂img` (the others are left alone).
+    pub(crate) fn band_sum(
+        self,
+        img: &[[f32; 4]],
+        target: &[[f32; 4]],
+        channels: usize,
+        n: f64,
+        mut grad: Option<&mut [[f32; 4]]>,
+    ) -> f64 {
+        let mut sum = 0.0f64;
+        for (k, (p, t)) in img.iter().zip(target).enumerate() {
             for c in 0..channels {
                 let d = p[c] as f64 - t[c] as f64;
                 let (v, dv) = match self {
@@ -61,14 +93,18 @@ impl Loss {
                     Loss::L1 => (d.abs(), d.signum() * (d != 0.0) as i32 as f64),
                 };
                 sum += v;
-                if let Some(g) = &mut g {
-                    g.data[k][c] = (dv / n) as f32;
+                if let Some(g) = grad.as_deref_mut() {
+                    g[k][c] = (dv / n) as f32;
                 }
             }
         }
-        (sum / n, g)
+        sum
     }
 }
+
+/// Rows per band of a loss sum (see [`Loss::eval`]); the rasterizer's bands have the same
+/// height.
+pub const SUM_ROWS: usize = 16;
 
 #[cfg(test)]
 mod tests {

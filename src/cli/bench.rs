@@ -43,7 +43,8 @@ pub struct Args {
 
 fn run_backward(a: &Args) -> Result<()> {
     use diffsvg::loss::Loss;
-    use diffsvg::raster::backward_with_stats;
+    use diffsvg::optim::Objective;
+    use diffsvg::raster::render_and_backward_fused;
     let threads = a.threads.iter().copied().max().unwrap_or(1);
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
@@ -61,12 +62,12 @@ fn run_backward(a: &Args) -> Result<()> {
                 let _ = render_prepared(&Prepared::new(&scene, &opts));
             });
             let mut peak = 0usize;
+            // The fused pass: each band rendered, scored and differentiated at once.
+            let objective = Objective::new(&target, Loss::Mse, None, 1);
             let mut step = || {
                 let p = Prepared::new(&scene, &opts);
-                let img = render_prepared(&p);
-                let (_, d) = Loss::Mse.grad(&img, &target);
-                let (_, stats) = backward_with_stats(&scene, &p, &d);
-                peak = stats.peak_bytes();
+                let out = render_and_backward_fused(&scene, &p, &objective);
+                peak = out.stats.peak_bytes();
             };
             let both = median_ms(a.runs, &mut step);
             (fwd, both, peak as f64 / (1024.0 * 1024.0))

@@ -234,17 +234,16 @@ pub fn run(a: Args) -> Result<()> {
             "{}",
             json!({"done": true, "output": a.output, "steps": out.steps, "stop": reason,
                 "initial_psnr": first, "psnr": out.best_psnr, "loss": out.best_loss,
-                "seconds": secs, "forward_ms": out.median_ms.0, "backward_ms": out.median_ms.1})
+                "seconds": secs, "step_ms": out.median_step_ms})
         );
     } else {
         println!(
             "fit: {} steps ({reason}), PSNR {first:.2} → {:.2} dB, loss {:.4e}, {secs:.2} s \
-             (median forward {:.2} ms, backward {:.2} ms); wrote {}",
+             (median step {:.2} ms); wrote {}",
             out.steps,
             out.best_psnr,
             out.best_loss,
-            out.median_ms.0,
-            out.median_ms.1,
+            out.median_step_ms,
             a.output.display()
         );
     }

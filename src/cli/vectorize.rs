@@ -151,7 +151,7 @@ pub fn run(a: Args) -> Result<()> {
             json!({"done": true, "output": a.output, "mode": format!("{mode:?}").to_lowercase(),
                 "paths": n, "psnr": out.psnr, "mse": out.mse, "steps": out.steps,
                 "rounds": out.rounds, "pruned": out.pruned, "seconds": secs,
-                "forward_ms": out.median_ms.0, "backward_ms": out.median_ms.1})
+                "step_ms": out.median_step_ms})
         );
     } else {
         println!(

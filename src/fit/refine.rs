@@ -4,7 +4,8 @@ use std::time::{Duration, Instant};
 
 use crate::metrics::{median, psnr_from_mse};
 use crate::optim::{Adam, AdamConfig, LearningRates, Objective, Schedule, project};
-use crate::raster::{RenderOptions, backward_prepared, prepare, render_prepared};
+use crate::raster::prepare::prepare_forward;
+use crate::raster::{RenderOptions, prepare, render_prepared};
 use crate::scene::Scene;
 
 /// Settings of one refinement run.
@@ -48,8 +49,10 @@ pub struct Step {
     pub psnr: f64,
     /// Wall time since the run started.
     pub elapsed: Duration,
-    /// Milliseconds of this iteration spent rendering (preparation and forward pass).
-    pub forward_ms: f64,
+    /// Milliseconds this evaluation took: preparation, rendering, the objective and, when
+    /// a step follows, the gradient (rendered and differentiated in one pass for
+    /// per-pixel objectives).
+    pub step_ms: f64,
 }
 
 /// An observer's answer.
@@ -87,8 +90,9 @@ pub struct FitOutcome {
     pub history: Vec<Step>,
     /// Why the run ended.
     pub reason: StopReason,
-    /// Median milliseconds per forward pass and per backward pass.
-    pub median_ms: (f64, f64),
+    /// Median milliseconds per optimizer step: preparation, rendering, objective and
+    /// gradient (the evaluations that a step followed).
+    pub median_step_ms: f64,
 }
 
 /// Refines `scene` toward `objective`: `opts.iters` Adam steps, each preceded by an
@@ -108,16 +112,23 @@ pub fn refine(
     let mut best_psnr = f64::NEG_INFINITY;
     // Grown as steps are taken: `iters` is a request, not an allocation size.
     let mut history = Vec::new();
-    let (mut fwd_ms, mut bwd_ms) = (Vec::new(), Vec::new());
+    let mut step_ms = Vec::new();
     let mut reason = StopReason::Finished;
     let mut steps = 0;
     for it in 0..=opts.iters {
         let t0 = Instant::now();
-        let prepared = prepare(&scene, opts.render.tolerance, None);
-        let img = render_prepared(&prepared);
-        let forward_ms = t0.elapsed().as_secs_f64() * 1e3;
-        fwd_ms.push(forward_ms);
-        let (loss, mse, d_img) = objective.eval_with_mse(&img);
+        // Every evaluation but the last is followed by a step: rendered and differentiated
+        // together. The last one only renders.
+        let (loss, mse, grads) = if it < opts.iters {
+            let prepared = prepare(&scene, opts.render.tolerance, None);
+            let (_, loss, mse, g) = objective.render_and_backward(&scene, &prepared);
+            (loss, mse, Some(g))
+        } else {
+            let img = render_prepared(&prepare_forward(&scene, opts.render.tolerance));
+            let (loss, mse, _) = objective.eval_with_mse(&img);
+            (loss, mse, None)
+        };
+        let ms = t0.elapsed().as_secs_f64() * 1e3;
         let psnr = psnr_from_mse(mse);
         if loss < best_loss {
             best_loss = loss;
@@ -129,7 +140,7 @@ pub fn refine(
             loss,
             psnr,
             elapsed: start.elapsed(),
-            forward_ms,
+            step_ms: ms,
         };
         history.push(step);
         if observe(&step, &scene) == Control::Stop {
@@ -140,12 +151,10 @@ pub fn refine(
             reason = StopReason::ReachedPsnr;
             break;
         }
-        if it == opts.iters {
+        let Some(grads) = grads else {
             break;
-        }
-        let t1 = Instant::now();
-        let grads = backward_prepared(&scene, &prepared, &d_img);
-        bwd_ms.push(t1.elapsed().as_secs_f64() * 1e3);
+        };
+        step_ms.push(ms);
         let mut params = scene.params();
         adam.step(
             &mut params,
@@ -164,7 +173,7 @@ pub fn refine(
         steps,
         history,
         reason,
-        median_ms: (median(&mut fwd_ms), median(&mut bwd_ms)),
+        median_step_ms: median(&mut step_ms),
     }
 }
 

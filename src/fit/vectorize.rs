@@ -106,8 +106,9 @@ pub struct VectorizeOutcome {
     pub elapsed: Duration,
     /// Every evaluation: (steps so far, seconds, PSNR, paths).
     pub curve: Vec<(usize, f64, f64, usize)>,
-    /// Median forward and backward milliseconds per step.
-    pub median_ms: (f64, f64),
+    /// Median milliseconds per optimizer step (render, objective and gradient), over the
+    /// rounds' medians.
+    pub median_step_ms: f64,
 }
 
 /// Progress events.
@@ -143,7 +144,7 @@ pub fn vectorize(
         pruned: 0,
         elapsed: Duration::ZERO,
         curve: Vec::new(),
-        median_ms: (0.0, 0.0),
+        median_step_ms: 0.0,
     };
     let bg = objective.background().unwrap_or([0.0; 4]);
     let mut scene = match opts.mode {
@@ -167,7 +168,7 @@ pub fn vectorize(
     } else {
         0
     };
-    let (mut fwd, mut bwd) = (Vec::new(), Vec::new());
+    let mut step_ms = Vec::new();
     let mut stopped = false;
     for (r, &add) in schedule.iter().enumerate() {
         let last = r + 1 == schedule.len();
@@ -207,8 +208,7 @@ pub fn vectorize(
             c
         });
         out.steps += run.steps;
-        fwd.push(run.median_ms.0);
-        bwd.push(run.median_ms.1);
+        step_ms.push(run.median_step_ms);
         scene = run.best;
         if opts.mode == Mode::Adaptive {
             // Drop what no longer changes the image (a change below 0.001 dB). The pruner
@@ -235,7 +235,7 @@ pub fn vectorize(
         }
     }
     out.elapsed = start.elapsed();
-    out.median_ms = (median(&mut fwd), median(&mut bwd));
+    out.median_step_ms = median(&mut step_ms);
     Ok(out)
 }
 

@@ -1,9 +1,11 @@
 //! The image objective: background compositing, the loss, and an optional multi-scale
 //! (image pyramid) term.
 
-use crate::image_io::Image;
+use crate::image_io::{Image, over_background_backward_px, over_background_px, premultiplied};
 use crate::loss::Loss;
 use crate::metrics::psnr_from_mse;
+use crate::raster::{BandLoss, Prepared, render_and_backward_fused};
+use crate::scene::Scene;
 
 /// What a fit minimizes: `Σ_k L(down^k(render over background), down^k(target))` for
 /// pyramid levels `k = 0 … levels − 1`, each level a 2×2 box average of the one above
@@ -128,6 +130,40 @@ impl Objective {
         (total, mse, grad)
     }
 
+    /// Whether the objective is a sum of per-pixel terms (one pyramid level), which
+    /// [`render_and_backward`](Self::render_and_backward) evaluates inside the backward
+    /// pass.
+    pub fn is_per_pixel(&self) -> bool {
+        self.targets.len() == 1
+    }
+
+    /// Renders `p` (prepared from `scene` for the backward pass) and returns the
+    /// rendering (not composited), the objective, the full-resolution MSE and the gradient
+    /// in [`Scene::params`] order: the bits of [`render_prepared`](crate::raster::render_prepared),
+    /// [`eval_with_mse`](Self::eval_with_mse) and
+    /// [`backward_with_stats`](crate::raster::backward_with_stats) in a row. Per-pixel
+    /// objectives take the fused pass (each row band rendered, scored and differentiated
+    /// at once); the pyramid renders first and differentiates after.
+    pub fn render_and_backward(&self, scene: &Scene, p: &Prepared) -> (Image, f64, f64, Vec<f64>) {
+        if self.is_per_pixel() {
+            let f = render_and_backward_fused(scene, p, self);
+            let n = self.value_count();
+            let (loss, mse) = (f.sums[0] / n, f.sums[1] / n);
+            (f.image, loss, mse, f.grad)
+        } else {
+            let img = crate::raster::render_prepared(p);
+            let (loss, mse, d) = self.eval_with_mse(&img);
+            let g = crate::raster::backward_with_stats(scene, p, &d).0;
+            (img, loss, mse, g)
+        }
+    }
+
+    /// Count of compared values at full resolution (pixels × channels), the divisor of
+    /// the mean.
+    fn value_count(&self) -> f64 {
+        (self.targets[0].data.len() * self.channels).max(1) as f64
+    }
+
     /// Mean squared error of a rendering against the target at full resolution, over the
     /// compared channels.
     pub fn mse(&self, render: &Image) -> f64 {
@@ -140,6 +176,43 @@ impl Objective {
     /// PSNR in dB (peak 1) of a rendering against the target, from [`mse`](Self::mse).
     pub fn psnr(&self, render: &Image) -> f64 {
         psnr_from_mse(self.mse(render))
+    }
+}
+
+impl BandLoss for Objective {
+    /// Level 0 of [`eval_with_mse`](Objective::eval_with_mse) over one band: composited
+    /// over the background, compared, differentiated and the compositing undone, with the
+    /// same per-pixel operations and sums; returns (loss sum, MSE sum) before the mean.
+    fn band(&self, y0: usize, rendered: &[[f32; 4]], d_out: &mut [[f32; 4]]) -> [f64; 2] {
+        let t = &self.targets[0];
+        let start = y0 * t.width as usize;
+        let target = &t.data[start..start + rendered.len()];
+        let n = self.value_count();
+        let bg = self.background.map(premultiplied);
+        let composited: std::borrow::Cow<'_, [[f32; 4]]> = match bg {
+            Some(b) => {
+                let mut c = rendered.to_vec();
+                for p in &mut c {
+                    over_background_px(p, b);
+                }
+                c.into()
+            }
+            None => rendered.into(),
+        };
+        let loss = self
+            .loss
+            .band_sum(&composited, target, self.channels, n, Some(d_out));
+        let mse = if self.loss == Loss::Mse {
+            loss
+        } else {
+            Loss::Mse.band_sum(&composited, target, self.channels, n, None)
+        };
+        if let Some(b) = bg {
+            for g in d_out.iter_mut() {
+                over_background_backward_px(g, b);
+            }
+        }
+        [loss, mse]
     }
 }
 

@@ -27,7 +27,7 @@ use rayon::prelude::*;
 
 use super::coverage::{Cells, backward_line, coverage, coverage_slopes};
 use super::prepare::{ItemKind, Op, Prepared, item_rect, prepare, stroke_outline};
-use super::render::{Area, BAND_ROWS, BandRenderer, RenderOptions, composite_layer};
+use super::render::{Area, BAND_ROWS, BandRenderer, RenderOptions, composite_layer, over};
 use super::stroke::NONE;
 use crate::image_io::Image;
 use crate::scene::{ParamLayout, Path, Point, Scene};
@@ -97,6 +97,8 @@ struct BandGrads {
     groups: Vec<(u32, f64)>,
     /// Bytes the replay kept for this band.
     tape_bytes: usize,
+    /// The loss's partial sums over this band.
+    sums: [f64; 2],
 }
 
 /// Memory use of a backward pass.
@@ -118,10 +120,15 @@ impl BackwardStats {
 /// One pixel of a drawn item kept by the replay.
 #[derive(Clone, Copy)]
 struct TapeCell {
-    /// Index in the item's box (`row * acc.w + col`).
-    ix: u32,
-    /// Winding integral.
-    wv: f32,
+    /// Column in the item's box (below `MAX_SIDE` + 2).
+    col: u16,
+    /// Row in the item's box (below `BAND_ROWS`).
+    row: u16,
+    /// Coverage.
+    cov: f32,
+    /// One-sided slopes of the coverage rule at the winding integral (−1, 0 or 1).
+    up: i8,
+    down: i8,
     /// Color below the item.
     below: [f32; 4],
 }
@@ -132,10 +139,11 @@ enum Rec {
         item: usize,
         /// The item's box in this band (with guard columns), as `Cells` without data.
         acc: Cells<f32>,
-        /// The cells that take part in the reverse walk, in row-major order: only those
-        /// with coverage or a coverage slope (an edge passes), so that memory follows
-        /// the pixels a shape's boundary and interior cover, not its box.
-        cells: Vec<TapeCell>,
+        /// The range of the band's record of cells that take part in the reverse walk, in
+        /// row-major order: only those with coverage or a coverage slope (an edge passes),
+        /// so that memory follows the pixels a shape's boundary and interior cover, not
+        /// its box.
+        cells: std::ops::Range<usize>,
     },
     Push,
     Pop {
@@ -165,6 +173,75 @@ pub fn backward_with_stats(
         (p.width, p.height),
         "gradient image size must match the canvas"
     );
+    let w = p.width as usize;
+    let out = backward_bands(scene, p, None, &|y0, rows, _| {
+        (d_image.data[y0 * w..(y0 + rows) * w].to_vec(), [0.0; 2])
+    });
+    (out.grad, out.stats)
+}
+
+/// A loss that is a sum of per-pixel terms, so that it can be evaluated one row band at a
+/// time inside the backward pass ([`render_and_backward_fused`]).
+pub trait BandLoss: Sync {
+    /// Given the rows `y0 .. y0 + rendered.len() / width` of the rendering (premultiplied,
+    /// the canvas's full width, row-major), writes `∂L/∂pixel` into `d_out` (same length,
+    /// zero on entry) and returns the band's partial sums (two quantities of the loss's
+    /// choosing, e.g. the loss and the MSE), which are added up in band order.
+    fn band(&self, y0: usize, rendered: &[[f32; 4]], d_out: &mut [[f32; 4]]) -> [f64; 2];
+}
+
+/// What [`render_and_backward_fused`] returns.
+#[derive(Clone, Debug)]
+pub struct Fused {
+    /// The rendering, premultiplied.
+    pub image: Image,
+    /// The loss's partial sums, added in band order.
+    pub sums: [f64; 2],
+    /// The gradient, in [`Scene::params`] order.
+    pub grad: Vec<f64>,
+    /// Memory use of the pass.
+    pub stats: BackwardStats,
+}
+
+/// Renders `p` (prepared from `scene` for the backward pass) and takes the gradient of a
+/// per-pixel loss in one pass per row band: each band is rendered, its pixels' loss
+/// gradient taken, and its backward pass run while the band's record is still in cache.
+/// No second rendering and no whole-image record; the sums and the gradient have the
+/// same bits for any number of threads, and equal those of [`render_prepared`]
+/// (super::render_prepared) followed by the loss and [`backward_with_stats`].
+pub fn render_and_backward_fused(scene: &Scene, p: &Prepared, loss: &dyn BandLoss) -> Fused {
+    let mut image = Image::new(p.width, p.height);
+    let out = backward_bands(scene, p, Some(&mut image), &|y0, _, rendered| {
+        let mut d = vec![[0.0f32; 4]; rendered.len()];
+        let sums = loss.band(y0, rendered, &mut d);
+        (d, sums)
+    });
+    Fused {
+        image,
+        sums: out.sums,
+        grad: out.grad,
+        stats: out.stats,
+    }
+}
+
+/// The result of [`backward_bands`].
+struct BandsOut {
+    grad: Vec<f64>,
+    stats: BackwardStats,
+    sums: [f64; 2],
+}
+
+/// `∂L/∂pixel` of one band from its rendering: `(y0, rows, rendered) → (d_out, sums)`.
+type BandGradient<'a> = dyn Fn(usize, usize, &[[f32; 4]]) -> (Vec<[f32; 4]>, [f64; 2]) + Sync + 'a;
+
+/// The backward pass over every band: each band is rendered (into `image` when given),
+/// `d_of` gives its pixels' gradient, and its reverse walk runs at once.
+fn backward_bands(
+    scene: &Scene,
+    p: &Prepared,
+    image: Option<&mut Image>,
+    d_of: &BandGradient<'_>,
+) -> BandsOut {
     assert!(
         p.for_backward,
         "the backward pass needs a scene made by prepare, not prepare_forward"
@@ -173,9 +250,11 @@ pub fn backward_with_stats(
     let layout = ParamLayout::new(scene);
     let mut grad = vec![0.0; layout.len()];
     let mut stats = BackwardStats::default();
+    let mut sums = [0.0f64; 2];
     if w == 0 || h == 0 {
-        return (grad, stats);
+        return BandsOut { grad, stats, sums };
     }
+    let mut image = image.map(|img| img.data.as_mut_slice());
     let mut vert_g: Vec<Vec<Point>> = p
         .items
         .iter()
@@ -201,17 +280,30 @@ pub fn backward_with_stats(
             end += 1;
         }
         stats.bands_in_flight = stats.bands_in_flight.max(end - first);
-        let results: Vec<BandGrads> = (first..end)
-            .into_par_iter()
-            .map(|b| {
-                let y0 = b * BAND_ROWS;
-                let rows = BAND_ROWS.min(h - y0);
-                band_backward(p, y0, rows, &d_image.data[y0 * w..(y0 + rows) * w])
-            })
-            .collect();
+        let run = |b: usize, base: &mut [[f32; 4]]| {
+            let y0 = b * BAND_ROWS;
+            let rows = BAND_ROWS.min(h - y0);
+            band_backward(p, y0, rows, base, d_of)
+        };
+        let results: Vec<BandGrads> = match image.as_deref_mut() {
+            Some(img) => img[first * BAND_ROWS * w..(end * BAND_ROWS).min(h) * w]
+                .par_chunks_mut(BAND_ROWS * w)
+                .enumerate()
+                .map(|(k, base)| run(first + k, base))
+                .collect(),
+            None => (first..end)
+                .into_par_iter()
+                .map(|b| {
+                    let rows = BAND_ROWS.min(h - b * BAND_ROWS);
+                    run(b, &mut vec![[0.0f32; 4]; rows * w])
+                })
+                .collect(),
+        };
         first = end;
         for r in results {
             stats.band_bytes_max = stats.band_bytes_max.max(r.tape_bytes);
+            sums[0] += r.sums[0];
+            sums[1] += r.sums[1];
             for (item, list) in r.verts {
                 let g = &mut vert_g[item as usize];
                 for (k, d) in list {
@@ -334,7 +426,7 @@ pub fn backward_with_stats(
     for (g, v) in group_g.iter().enumerate() {
         grad[layout.groups[g]] += v;
     }
-    (grad, stats)
+    BandsOut { grad, stats, sums }
 }
 
 /// Adds an item's paint gradient into the parameter gradient.
@@ -352,67 +444,97 @@ fn scatter_paint(
     grad[opacity] += pg[n - 1];
 }
 
-/// Whether a cell with winding integral `wv` takes part in the reverse walk: touched by
-/// an edge (or on a grid-aligned item, where untouched cells next to an edge count), with
-/// coverage or a coverage slope.
-fn takes_part(wv: f32, evenodd: bool, grid_aligned: bool) -> bool {
-    if wv == 0.0 && !grid_aligned {
-        return false;
+/// Draws one row of `item` onto `dst` from its winding integrals `wrow` (first pixel at
+/// device `(x0, y)`, row `row` of the item's box), recording the cells that take part in
+/// the reverse walk: touched by an edge (or on a grid-aligned item, where untouched cells
+/// next to an edge count), with coverage or a coverage slope. The pixels get the bits of
+/// [`composite_row`](super::render::composite_row).
+#[allow(clippy::too_many_arguments)]
+fn record_row(
+    item: &super::prepare::Item,
+    wrow: &[f32],
+    colors: &mut [[f32; 4]],
+    dst: &mut [[f32; 4]],
+    x0: usize,
+    y: usize,
+    row: usize,
+    cells: &mut Vec<TapeCell>,
+) {
+    item.paint.row(x0, y, colors);
+    for (col, ((&wv, d), s)) in wrow
+        .iter()
+        .zip(dst.iter_mut())
+        .zip(colors.iter())
+        .enumerate()
+    {
+        if wv == 0.0 && !item.grid_aligned {
+            continue;
+        }
+        let (cov, _) = coverage(wv, item.evenodd);
+        let (up, down) = coverage_slopes(wv, item.evenodd);
+        if cov == 0.0 && up == 0.0 && down == 0.0 {
+            continue;
+        }
+        cells.push(TapeCell {
+            col: col as u16,
+            row: row as u16,
+            cov,
+            up: up as i8,
+            down: down as i8,
+            below: *d,
+        });
+        if cov > 0.0 {
+            over(d, *s, cov);
+        }
     }
-    let (cov, _) = coverage(wv, evenodd);
-    let (up, down) = coverage_slopes(wv, evenodd);
-    !(cov == 0.0 && up == 0.0 && down == 0.0)
 }
 
-fn band_backward(p: &Prepared, y0: usize, rows: usize, d_out: &[[f32; 4]]) -> BandGrads {
-    let width = p.width as usize;
-    // 1. Replay, recording.
-    let mut base = vec![[0.0f32; 4]; rows * width];
+/// One band: rendered onto `base` (transparent, `rows × width`) while recording, then its
+/// pixels' gradient from `d_of`, then the reverse walk.
+fn band_backward(
+    p: &Prepared,
+    y0: usize,
+    rows: usize,
+    base: &mut [[f32; 4]],
+    d_of: &BandGradient<'_>,
+) -> BandGrads {
+    // 1. Render, recording.
     let mut r = BandRenderer::new(p, y0, rows);
     let base_area = r.band_area();
     let mut layers: Vec<(Area, Vec<[f32; 4]>)> = Vec::new();
     let mut tape: Vec<Rec> = Vec::new();
+    let mut cells: Vec<TapeCell> = Vec::new();
     let (mut i, mut group_ix) = (0usize, 0usize);
     while i < p.ops.len() {
         match p.ops[i] {
             Op::Draw(ix) => {
                 let item = &p.items[ix];
-                if !r.winding(item) {
+                if !r.deltas(item) {
                     i += 1;
                     continue;
                 }
                 let (area, target) = match layers.last_mut() {
                     Some((a, l)) => (*a, l.as_mut_slice()),
-                    None => (base_area, base.as_mut_slice()),
+                    None => (base_area, &mut *base),
                 };
-                let acc = &r.acc;
-                let cols = acc.w.min(width - acc.x0 as usize);
-                let mut cells = Vec::new();
-                for row in 0..acc.h {
-                    let start = area.index(acc.x0 as usize, acc.y0 as usize + row);
-                    for col in 0..cols {
-                        let wv = acc.data[row * acc.w + col];
-                        if takes_part(wv, item.evenodd, item.grid_aligned) {
-                            cells.push(TapeCell {
-                                ix: (row * acc.w + col) as u32,
-                                wv,
-                                below: target[start + col],
-                            });
-                        }
-                    }
-                }
-                r.composite(item, target, area);
                 let shape = Cells {
-                    x0: acc.x0,
-                    y0: acc.y0,
-                    w: acc.w,
-                    h: acc.h,
+                    x0: r.acc.x0,
+                    y0: r.acc.y0,
+                    w: r.acc.w,
+                    h: r.acc.h,
                     data: Vec::new(),
                 };
+                let (x0, first) = (shape.x0 as usize, cells.len());
+                for row in 0..shape.h {
+                    let y = shape.y0 as usize + row;
+                    let (wrow, colors) = r.take_row(row);
+                    let dst = &mut target[area.index(x0, y)..][..wrow.len()];
+                    record_row(item, wrow, colors, dst, x0, y, row, &mut cells);
+                }
                 tape.push(Rec::Draw {
                     item: ix,
                     acc: shape,
-                    cells,
+                    cells: first..cells.len(),
                 });
             }
             Op::Push => {
@@ -435,7 +557,7 @@ fn band_backward(p: &Prepared, y0: usize, rows: usize, d_out: &[[f32; 4]]) -> Ba
                 let (ta, top) = layers.pop().expect("a layer per group");
                 let (ba, below_buf) = match layers.last_mut() {
                     Some((a, l)) => (*a, l.as_mut_slice()),
-                    None => (base_area, base.as_mut_slice()),
+                    None => (base_area, &mut *base),
                 };
                 let mut below = Vec::with_capacity(ta.len());
                 for row in 0..ta.h {
@@ -454,21 +576,22 @@ fn band_backward(p: &Prepared, y0: usize, rows: usize, d_out: &[[f32; 4]]) -> Ba
         }
         i += 1;
     }
-    // 2. Reverse walk with ∂L/∂(current layer).
+    // 2. The pixels' gradient, then the reverse walk with ∂L/∂(current layer).
+    let (d_out, sums) = d_of(y0, rows, base);
     let mut out = BandGrads {
+        sums,
         tape_bytes: tape
             .iter()
             .map(|r| match r {
-                Rec::Draw { cells, .. } => cells.len() * std::mem::size_of::<TapeCell>(),
-                Rec::Push => 0,
+                Rec::Draw { .. } | Rec::Push => 0,
                 Rec::Pop { top, below, .. } => (top.len() + below.len()) * 16,
             })
             .sum::<usize>()
+            + cells.len() * std::mem::size_of::<TapeCell>()
             + 2 * d_out.len() * 16,
         ..BandGrads::default()
     };
-    drop(base);
-    let mut g_stack: Vec<(Area, Vec<[f32; 4]>)> = vec![(base_area, d_out.to_vec())];
+    let mut g_stack: Vec<(Area, Vec<[f32; 4]>)> = vec![(base_area, d_out)];
     let mut gw = Cells::<[f32; 2]>::default();
     for rec in tape.iter().rev() {
         match rec {
@@ -508,20 +631,25 @@ fn band_backward(p: &Prepared, y0: usize, rows: usize, d_out: &[[f32; 4]]) -> Ba
             Rec::Push => {
                 g_stack.pop();
             }
-            Rec::Draw { item, acc, cells } => {
+            Rec::Draw {
+                item,
+                acc,
+                cells: range,
+            } => {
                 let it = &p.items[*item];
                 let (ga, g) = g_stack.last_mut().expect("layer gradient");
                 let ga = *ga;
-                gw.reset(acc.x0, acc.y0, acc.w, acc.h);
+                // `gw` is all zero between items: only the cells written below are
+                // cleared again after the boundary pass.
+                gw.reshape_zeroed(acc.x0, acc.y0, acc.w, acc.h);
                 let mut pg = vec![0.0f64; it.paint.grad_len()];
                 let solid = it.paint.is_solid();
                 let mut gs_sum = [0.0f64; 4];
-                for cell in cells {
-                    let (row, col) = (cell.ix as usize / acc.w, cell.ix as usize % acc.w);
+                let item_cells = &cells[range.clone()];
+                for cell in item_cells {
+                    let (row, col) = (cell.row as usize, cell.col as usize);
                     let y = acc.y0 as usize + row;
-                    let wv = cell.wv;
-                    let (cov, _) = coverage(wv, it.evenodd);
-                    let (up, down) = coverage_slopes(wv, it.evenodd);
+                    let cov = cell.cov;
                     let x = acc.x0 as usize + col;
                     let center = [x as f64 + 0.5, y as f64 + 0.5];
                     let s = it.paint.at(center);
@@ -531,7 +659,7 @@ fn band_backward(p: &Prepared, y0: usize, rows: usize, d_out: &[[f32; 4]]) -> Ba
                     let gd: f32 = (0..4).map(|c| go[c] * d[c]).sum();
                     let gsrc: f32 = (0..4).map(|c| go[c] * s[c]).sum();
                     let g_cov = gsrc - s[3] * gd;
-                    gw.data[row * acc.w + col] = [g_cov * up, g_cov * down];
+                    gw.data[row * acc.w + col] = [g_cov * cell.up as f32, g_cov * cell.down as f32];
                     if cov == 0.0 {
                         continue;
                     }
@@ -581,6 +709,9 @@ fn band_backward(p: &Prepared, y0: usize, rows: usize, d_out: &[[f32; 4]]) -> Ba
                 }
                 if !list.is_empty() {
                     out.verts.push((*item as u32, list));
+                }
+                for cell in item_cells {
+                    gw.data[cell.row as usize * acc.w + cell.col as usize] = [0.0; 2];
                 }
             }
         }

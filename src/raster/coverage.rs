@@ -43,6 +43,16 @@ impl<T: Copy + Default> Cells<T> {
         self.data.clear();
         self.data.resize(w * h, T::default());
     }
+
+    /// Resizes to `w × h` at `(x0, y0)` when every value is already zero: only cells
+    /// beyond the current length are written.
+    pub(crate) fn reshape_zeroed(&mut self, x0: i64, y0: i64, w: usize, h: usize) {
+        self.x0 = x0;
+        self.y0 = y0;
+        self.w = w;
+        self.h = h;
+        self.data.resize(w * h, T::default());
+    }
 }
 
 /// Accumulates line segments into `acc`, whose columns must span the segments' clamped

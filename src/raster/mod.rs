@@ -38,7 +38,10 @@ pub(crate) mod render;
 pub(crate) mod stroke;
 
 pub(crate) use backward::backward_prepared;
-pub use backward::{BackwardStats, backward_with_stats, render_and_backward, render_backward};
+pub use backward::{
+    BackwardStats, BandLoss, Fused, backward_with_stats, render_and_backward,
+    render_and_backward_fused, render_backward,
+};
 pub(crate) use prepare::prepare;
 pub use prepare::{Prepared, warnings};
 pub use render::{RenderOptions, render, render_prepared};

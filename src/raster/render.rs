@@ -21,8 +21,8 @@ impl Default for RenderOptions {
     }
 }
 
-/// Rows per band: the unit of parallel work.
-pub(crate) const BAND_ROWS: usize = 16;
+/// Rows per band: the unit of parallel work, and of the loss's partial sums.
+pub(crate) const BAND_ROWS: usize = crate::loss::SUM_ROWS;
 
 /// Renders `scene` onto a transparent canvas. Pixel values are premultiplied `f32`; paints
 /// are evaluated at pixel centers and coverage is the exact area of each pixel square
@@ -49,12 +49,23 @@ pub fn render_prepared(p: &Prepared) -> Image {
 }
 
 /// Renders the rows `y0 .. y0 + rows` of a prepared scene; shared with the backward pass,
-/// which replays a band to recover the intermediate layers.
+/// which renders a band while recording what its reverse walk needs.
+///
+/// An item is drawn in two steps: [`deltas`](Self::deltas) accumulates its edges into
+/// `acc` as per-cell winding deltas, then [`take_row`](Self::take_row) turns one row at a
+/// time into winding integrals (a running sum) while clearing it, so that `acc` is all
+/// zero again when the item is done and the next item needs no clearing pass.
 pub(crate) struct BandRenderer<'a> {
     pub(crate) p: &'a Prepared,
     pub(crate) y0: usize,
     pub(crate) rows: usize,
     pub(crate) acc: Cells<f32>,
+    /// Whether every value of `acc.data` is zero.
+    clean: bool,
+    /// One row's winding integrals, from [`take_row`](Self::take_row).
+    row: Vec<f32>,
+    /// One row's paint colors (scratch).
+    colors: Vec<[f32; 4]>,
 }
 
 impl<'a> BandRenderer<'a> {
@@ -64,6 +75,9 @@ impl<'a> BandRenderer<'a> {
             y0,
             rows,
             acc: Cells::default(),
+            clean: true,
+            row: Vec::new(),
+            colors: Vec::new(),
         }
     }
 
@@ -137,6 +151,18 @@ impl<'a> BandRenderer<'a> {
     /// Accumulates the winding integrals of `item` over the band into `self.acc`.
     /// Returns `false` when the item does not touch the band.
     pub(crate) fn winding(&mut self, item: &Item) -> bool {
+        if !self.deltas(item) {
+            return false;
+        }
+        integrate_rows(&mut self.acc);
+        self.clean = false;
+        true
+    }
+
+    /// Accumulates the edges of `item` into `self.acc` as winding deltas, to be read row by
+    /// row with [`take_row`](Self::take_row) (every row, which leaves `acc` clear).
+    /// Returns `false` when the item does not touch the band.
+    pub(crate) fn deltas(&mut self, item: &Item) -> bool {
         let w = self.p.width as f64;
         let b = item.bbox;
         if b[2] <= 0.0 || b[0] >= w {
@@ -152,7 +178,13 @@ impl<'a> BandRenderer<'a> {
         let cx0 = (b[0].floor() - 1.0).max(0.0);
         let cx1 = b[2].ceil().min(w);
         let cols = (cx1 - cx0) as usize + 2;
-        self.acc.reset(cx0 as i64, top as i64, cols, bottom - top);
+        if self.clean {
+            self.acc
+                .reshape_zeroed(cx0 as i64, top as i64, cols, bottom - top);
+        } else {
+            self.acc.reset(cx0 as i64, top as i64, cols, bottom - top);
+            self.clean = true;
+        }
         let (ylo, yhi) = (top as f64, bottom as f64);
         for &(s, n) in &item.rings {
             let ring = &item.pts[s..s + n];
@@ -165,47 +197,74 @@ impl<'a> BandRenderer<'a> {
                 accumulate_line(&mut self.acc, a, c, w);
             }
         }
-        integrate_rows(&mut self.acc);
         true
+    }
+
+    /// The winding integrals of row `r` of `acc` (after [`deltas`](Self::deltas)), over
+    /// its columns inside the canvas, and a scratch row of colors as long; the row's
+    /// deltas are cleared.
+    pub(crate) fn take_row(&mut self, r: usize) -> (&[f32], &mut [[f32; 4]]) {
+        let acc = &mut self.acc;
+        let cols = acc.w.min(self.p.width as usize - acc.x0 as usize);
+        if self.row.len() < acc.w {
+            self.row.resize(acc.w, 0.0);
+            self.colors.resize(acc.w, [0.0; 4]);
+        }
+        let mut s = 0.0f32;
+        for (c, out) in acc.data[r * acc.w..(r + 1) * acc.w]
+            .iter_mut()
+            .zip(&mut self.row)
+        {
+            s += *c;
+            *c = 0.0;
+            *out = s;
+        }
+        (&self.row[..cols], &mut self.colors[..cols])
     }
 
     /// Draws one item source-over onto `target`, a layer covering `area` (which holds
     /// every pixel the item touches in this band).
     pub(crate) fn draw(&mut self, item: &Item, target: &mut [[f32; 4]], area: Area) {
-        if self.winding(item) {
-            self.composite(item, target, area);
+        if !self.deltas(item) {
+            return;
+        }
+        let (x0, y0) = (self.acc.x0 as usize, self.acc.y0 as usize);
+        for r in 0..self.acc.h {
+            let y = y0 + r;
+            let (row, colors) = self.take_row(r);
+            let dst = &mut target[area.index(x0, y)..][..row.len()];
+            composite_row(item, row, colors, dst, x0, y);
         }
     }
+}
 
-    /// Composites `item` onto `target` (covering `area`) using the winding integrals in
-    /// `self.acc`.
-    pub(crate) fn composite(&self, item: &Item, target: &mut [[f32; 4]], area: Area) {
-        let width = self.p.width as usize;
-        let acc = &self.acc;
-        let cols = acc.w.min(width - acc.x0 as usize);
-        for r in 0..acc.h {
-            let y = acc.y0 as usize + r;
-            let row = &acc.data[r * acc.w..r * acc.w + cols];
-            let dst = &mut target[area.index(acc.x0 as usize, y)..][..cols];
-            if let PaintEval::Solid(solid) = &item.paint {
-                // One color: no per-pixel position or paint call.
-                for (&wv, d) in row.iter().zip(dst.iter_mut()) {
-                    let (cov, _) = coverage(wv, item.evenodd);
-                    if cov > 0.0 {
-                        over(d, solid.premul, cov);
-                    }
-                }
-                continue;
+/// Composites one row of `item` onto `dst` from its winding integrals `row`, the row's
+/// first pixel being device pixel `(x0, y)`; `colors` (as long) is scratch for the
+/// paint's colors along the row.
+#[inline]
+pub(crate) fn composite_row(
+    item: &Item,
+    row: &[f32],
+    colors: &mut [[f32; 4]],
+    dst: &mut [[f32; 4]],
+    x0: usize,
+    y: usize,
+) {
+    if let PaintEval::Solid(solid) = &item.paint {
+        // One color: no per-pixel position or paint call.
+        for (&wv, d) in row.iter().zip(dst.iter_mut()) {
+            let (cov, _) = coverage(wv, item.evenodd);
+            if cov > 0.0 {
+                over(d, solid.premul, cov);
             }
-            for (i, (&wv, d)) in row.iter().zip(dst.iter_mut()).enumerate() {
-                let (cov, _) = coverage(wv, item.evenodd);
-                if cov <= 0.0 {
-                    continue;
-                }
-                let x = acc.x0 as f64 + i as f64 + 0.5;
-                let s = item.paint.at([x, y as f64 + 0.5]);
-                over(d, s, cov);
-            }
+        }
+        return;
+    }
+    item.paint.row(x0, y, colors);
+    for ((&wv, d), s) in row.iter().zip(dst.iter_mut()).zip(colors.iter()) {
+        let (cov, _) = coverage(wv, item.evenodd);
+        if cov > 0.0 {
+            over(d, *s, cov);
         }
     }
 }

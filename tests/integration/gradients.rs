@@ -271,3 +271,54 @@ fn backward_has_the_same_bits_for_any_thread_count() {
             .all(|(a, b)| a.to_bits() == b.to_bits())
     );
 }
+
+/// The fused pass (each band rendered, scored and differentiated at once) gives the bits
+/// of rendering, the objective and the backward pass run one after the other, on any
+/// thread count: image, loss, MSE and every gradient entry.
+#[test]
+fn fused_pass_has_the_bits_of_the_separate_passes() {
+    use diffsvg::optim::Objective;
+    use diffsvg::raster::{Prepared, backward_with_stats, render_prepared};
+    let opts = RenderOptions::default();
+    let mut scenes: Vec<(String, Scene)> = (0..4u64)
+        .map(|k| (format!("random {k}"), random_scene(k * 31 + 5)))
+        .collect();
+    for p in super::common::samples() {
+        let s = Scene::load(&p, Sizing::Natural).unwrap();
+        scenes.push((p.display().to_string(), s));
+    }
+    let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    let pixels = |i: &Image| {
+        i.data
+            .iter()
+            .flat_map(|p| p.map(f32::to_bits))
+            .collect::<Vec<_>>()
+    };
+    for (name, s) in &scenes {
+        for (loss, bg) in [
+            (Loss::Mse, None),
+            (Loss::Mse, Some([1.0; 4])),
+            (Loss::L1, Some([0.2, 0.4, 0.9, 0.5])),
+        ] {
+            let target = nudged_target(s, 1.0, bg);
+            let obj = Objective::new(&target, loss, bg, 1);
+            assert!(obj.is_per_pixel());
+            let p = Prepared::new(s, &opts);
+            let img = render_prepared(&p);
+            let (l, m, d) = obj.eval_with_mse(&img);
+            let (g, _) = backward_with_stats(s, &p, &d);
+            for threads in [1, 3] {
+                let (fi, fl, fm, fg) = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap()
+                    .install(|| obj.render_and_backward(s, &p));
+                let what = format!("{name}, {loss:?}, background {bg:?}, {threads} thread(s)");
+                assert!(pixels(&fi) == pixels(&img), "{what}: image");
+                assert_eq!(fl.to_bits(), l.to_bits(), "{what}: loss {fl} vs {l}");
+                assert_eq!(fm.to_bits(), m.to_bits(), "{what}: MSE {fm} vs {m}");
+                assert!(bits(&fg) == bits(&g), "{what}: gradient");
+            }
+        }
+    }
+}
