@@ -156,7 +156,7 @@ pub fn run(a: Args) -> Result<()> {
         for (k, (_, pool)) in pools.iter().enumerate() {
             let t = pool.install(|| {
                 median_ms(a.runs, || {
-                    let _ = render_prepared(&Prepared::new(&scene, &opts));
+                    let _ = diffsvg::raster::render(&scene, &opts);
                 })
             });
             let ratio = reference / t;

@@ -2,10 +2,14 @@
 //!
 //! Each row band is handled on its own, in parallel:
 //!
-//! 1. **Replay.** The band is rendered again, keeping for every drawn item the color
-//!    *below* it (over the item's box in this band) and its winding integrals, and for every
-//!    group layer its content and the color below it. Memory per band grows with the widths
-//!    of the shapes crossing it, not with the number of shapes times the canvas.
+//! 1. **Render, recording.** The band is rendered, keeping for every drawn item the color
+//!    *below* it and its coverage and coverage slopes over the cells an edge touches or the
+//!    shape covers, and for every group layer its content and the color below it. Memory
+//!    per band grows with the widths of the shapes crossing it, not with the number of
+//!    shapes times the canvas. With a per-pixel loss ([`render_and_backward_fused`]) this
+//!    *is* the forward pass: the band's loss gradient is taken right after, while the
+//!    record is in cache; otherwise ([`render_backward`]) the band's `∂L/∂pixel` comes from
+//!    an image computed before.
 //! 2. **Reverse walk.** The program is walked backwards. Source-over
 //!    `out = s·cov + d·(1 − s_a·cov)` gives `∂L/∂cov`, `∂L/∂s` and `∂L/∂d` per pixel; the
 //!    last is what the items below see (the transmittance walked top-down).
@@ -25,9 +29,12 @@
 
 use rayon::prelude::*;
 
-use super::coverage::{Cells, backward_line, coverage, coverage_slopes};
+use super::coverage::{Cells, backward_line, coverage_row, coverage_slopes_row};
+use super::paint::PaintEval;
 use super::prepare::{ItemKind, Op, Prepared, item_rect, prepare, stroke_outline};
-use super::render::{Area, BAND_ROWS, BandRenderer, RenderOptions, composite_layer, over};
+use super::render::{
+    Area, BAND_ROWS, BandRenderer, RenderOptions, RowScratch, composite_layer, over,
+};
 use super::stroke::NONE;
 use crate::image_io::Image;
 use crate::scene::{ParamLayout, Path, Point, Scene};
@@ -453,28 +460,28 @@ fn scatter_paint(
 fn record_row(
     item: &super::prepare::Item,
     wrow: &[f32],
-    colors: &mut [[f32; 4]],
+    sc: &mut RowScratch,
     dst: &mut [[f32; 4]],
     x0: usize,
     y: usize,
     row: usize,
     cells: &mut Vec<TapeCell>,
 ) {
+    let n = wrow.len();
+    let (covs, ups, downs) = (&mut sc.covs[..n], &mut sc.ups[..n], &mut sc.downs[..n]);
+    let colors = &mut sc.colors[..n];
+    coverage_row(wrow, item.evenodd, covs);
+    coverage_slopes_row(wrow, item.evenodd, ups, downs);
     item.paint.row(x0, y, colors);
-    for (col, ((&wv, d), s)) in wrow
-        .iter()
-        .zip(dst.iter_mut())
-        .zip(colors.iter())
-        .enumerate()
-    {
-        if wv == 0.0 && !item.grid_aligned {
+    for col in 0..n {
+        if wrow[col] == 0.0 && !item.grid_aligned {
             continue;
         }
-        let (cov, _) = coverage(wv, item.evenodd);
-        let (up, down) = coverage_slopes(wv, item.evenodd);
+        let (cov, up, down) = (covs[col], ups[col], downs[col]);
         if cov == 0.0 && up == 0.0 && down == 0.0 {
             continue;
         }
+        let d = &mut dst[col];
         cells.push(TapeCell {
             col: col as u16,
             row: row as u16,
@@ -484,7 +491,7 @@ fn record_row(
             below: *d,
         });
         if cov > 0.0 {
-            over(d, *s, cov);
+            over(d, colors[col], cov);
         }
     }
 }
@@ -527,9 +534,9 @@ fn band_backward(
                 let (x0, first) = (shape.x0 as usize, cells.len());
                 for row in 0..shape.h {
                     let y = shape.y0 as usize + row;
-                    let (wrow, colors) = r.take_row(row);
+                    let (wrow, sc) = r.take_row(row);
                     let dst = &mut target[area.index(x0, y)..][..wrow.len()];
-                    record_row(item, wrow, colors, dst, x0, y, row, &mut cells);
+                    record_row(item, wrow, sc, dst, x0, y, row, &mut cells);
                 }
                 tape.push(Rec::Draw {
                     item: ix,
@@ -643,7 +650,10 @@ fn band_backward(
                 // cleared again after the boundary pass.
                 gw.reshape_zeroed(acc.x0, acc.y0, acc.w, acc.h);
                 let mut pg = vec![0.0f64; it.paint.grad_len()];
-                let solid = it.paint.is_solid();
+                let solid = match &it.paint {
+                    PaintEval::Solid(c) => Some(c.premul),
+                    PaintEval::Gradient(_) => None,
+                };
                 let mut gs_sum = [0.0f64; 4];
                 let item_cells = &cells[range.clone()];
                 for cell in item_cells {
@@ -652,7 +662,10 @@ fn band_backward(
                     let cov = cell.cov;
                     let x = acc.x0 as usize + col;
                     let center = [x as f64 + 0.5, y as f64 + 0.5];
-                    let s = it.paint.at(center);
+                    let s = match solid {
+                        Some(s) => s,
+                        None => it.paint.at(center),
+                    };
                     let k = ga.index(x, y);
                     let go = g[k];
                     let d = cell.below;
@@ -668,7 +681,7 @@ fn band_backward(
                         gs[c] = (go[c] * cov) as f64;
                     }
                     gs[3] -= (cov * gd) as f64;
-                    if solid {
+                    if solid.is_some() {
                         for c in 0..4 {
                             gs_sum[c] += gs[c];
                         }
@@ -680,7 +693,7 @@ fn band_backward(
                         g[k][c] = go[c] * keep;
                     }
                 }
-                if solid {
+                if solid.is_some() {
                     it.paint.backward([0.0; 2], gs_sum, &mut pg);
                 }
                 out.paints.push((*item as u32, pg));

@@ -2,7 +2,7 @@
 
 use rayon::prelude::*;
 
-use super::coverage::{Cells, accumulate_line, coverage, integrate_rows};
+use super::coverage::{Cells, accumulate_line, coverage_row, integrate_rows};
 use super::paint::PaintEval;
 use super::prepare::{GroupSpan, Item, Op, Prepared, prepare_forward};
 use crate::image_io::Image;
@@ -64,8 +64,20 @@ pub(crate) struct BandRenderer<'a> {
     clean: bool,
     /// One row's winding integrals, from [`take_row`](Self::take_row).
     row: Vec<f32>,
-    /// One row's paint colors (scratch).
-    colors: Vec<[f32; 4]>,
+    /// Per-row scratch.
+    scratch: RowScratch,
+}
+
+/// Scratch values along one row of an item's box.
+#[derive(Default)]
+pub(crate) struct RowScratch {
+    /// Coverages.
+    pub(crate) covs: Vec<f32>,
+    /// One-sided coverage slopes (backward pass only).
+    pub(crate) ups: Vec<f32>,
+    pub(crate) downs: Vec<f32>,
+    /// Paint colors.
+    pub(crate) colors: Vec<[f32; 4]>,
 }
 
 impl<'a> BandRenderer<'a> {
@@ -77,7 +89,7 @@ impl<'a> BandRenderer<'a> {
             acc: Cells::default(),
             clean: true,
             row: Vec::new(),
-            colors: Vec::new(),
+            scratch: RowScratch::default(),
         }
     }
 
@@ -201,14 +213,18 @@ impl<'a> BandRenderer<'a> {
     }
 
     /// The winding integrals of row `r` of `acc` (after [`deltas`](Self::deltas)), over
-    /// its columns inside the canvas, and a scratch row of colors as long; the row's
-    /// deltas are cleared.
-    pub(crate) fn take_row(&mut self, r: usize) -> (&[f32], &mut [[f32; 4]]) {
+    /// its columns inside the canvas, and scratch rows at least as long; the row's deltas
+    /// are cleared.
+    pub(crate) fn take_row(&mut self, r: usize) -> (&[f32], &mut RowScratch) {
         let acc = &mut self.acc;
         let cols = acc.w.min(self.p.width as usize - acc.x0 as usize);
         if self.row.len() < acc.w {
             self.row.resize(acc.w, 0.0);
-            self.colors.resize(acc.w, [0.0; 4]);
+            let sc = &mut self.scratch;
+            sc.covs.resize(acc.w, 0.0);
+            sc.ups.resize(acc.w, 0.0);
+            sc.downs.resize(acc.w, 0.0);
+            sc.colors.resize(acc.w, [0.0; 4]);
         }
         let mut s = 0.0f32;
         for (c, out) in acc.data[r * acc.w..(r + 1) * acc.w]
@@ -219,7 +235,7 @@ impl<'a> BandRenderer<'a> {
             *c = 0.0;
             *out = s;
         }
-        (&self.row[..cols], &mut self.colors[..cols])
+        (&self.row[..cols], &mut self.scratch)
     }
 
     /// Draws one item source-over onto `target`, a layer covering `area` (which holds
@@ -231,29 +247,32 @@ impl<'a> BandRenderer<'a> {
         let (x0, y0) = (self.acc.x0 as usize, self.acc.y0 as usize);
         for r in 0..self.acc.h {
             let y = y0 + r;
-            let (row, colors) = self.take_row(r);
+            let (row, sc) = self.take_row(r);
             let dst = &mut target[area.index(x0, y)..][..row.len()];
-            composite_row(item, row, colors, dst, x0, y);
+            composite_row(item, row, &mut sc.covs, &mut sc.colors, dst, x0, y);
         }
     }
 }
 
 /// Composites one row of `item` onto `dst` from its winding integrals `row`, the row's
-/// first pixel being device pixel `(x0, y)`; `colors` (as long) is scratch for the
-/// paint's colors along the row.
+/// first pixel being device pixel `(x0, y)`; `covs` and `colors` (as long) are scratch
+/// for the coverages and the paint's colors along the row.
 #[inline]
 pub(crate) fn composite_row(
     item: &Item,
     row: &[f32],
+    covs: &mut [f32],
     colors: &mut [[f32; 4]],
     dst: &mut [[f32; 4]],
     x0: usize,
     y: usize,
 ) {
+    let covs = &mut covs[..row.len()];
+    let colors = &mut colors[..row.len()];
+    coverage_row(row, item.evenodd, covs);
     if let PaintEval::Solid(solid) = &item.paint {
         // One color: no per-pixel position or paint call.
-        for (&wv, d) in row.iter().zip(dst.iter_mut()) {
-            let (cov, _) = coverage(wv, item.evenodd);
+        for (&cov, d) in covs.iter().zip(dst.iter_mut()) {
             if cov > 0.0 {
                 over(d, solid.premul, cov);
             }
@@ -261,8 +280,7 @@ pub(crate) fn composite_row(
         return;
     }
     item.paint.row(x0, y, colors);
-    for ((&wv, d), s) in row.iter().zip(dst.iter_mut()).zip(colors.iter()) {
-        let (cov, _) = coverage(wv, item.evenodd);
+    for ((&cov, d), s) in covs.iter().zip(dst.iter_mut()).zip(colors.iter()) {
         if cov > 0.0 {
             over(d, *s, cov);
         }
