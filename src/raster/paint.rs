@@ -165,11 +165,6 @@ impl PaintEval {
         }
     }
 
-    /// Whether the paint is one color everywhere.
-    pub(crate) fn is_solid(&self) -> bool {
-        matches!(self, PaintEval::Solid(_))
-    }
-
     /// Length of this paint's gradient vector in [`PaintEval::backward`]: a solid paint has
     /// `r, g, b, opacity`; a gradient its geometry (4 or 6), `offset, r, g, b, opacity`
     /// per stop, then the item opacity.
