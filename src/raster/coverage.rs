@@ -276,9 +276,9 @@ pub(crate) fn backward_line(
         let tb = nx.min(ny).min(t1);
         if tb > ta {
             let m = at(0.5 * (ta + tb));
-            let col = (m[0] - xlo).floor();
-            let row = (m[1] - ylo).floor();
-            let gv = if dx == 0.0 && m[0] == m[0].floor() {
+            let col = floor_f64(m[0] - xlo);
+            let row = floor_f64(m[1] - ylo);
+            let gv = if dx == 0.0 && m[0] == floor_f64(m[0]) {
                 // On a vertical grid line: cells `col − 1` (left) and `col` (right).
                 let (left, right) = (cell(col - 1.0, row), cell(col, row));
                 let (low, high) = if dy > 0.0 {
@@ -287,7 +287,7 @@ pub(crate) fn backward_line(
                     (right, left)
                 };
                 0.5 * (low[0] + high[1]) as f64
-            } else if dy == 0.0 && m[1] == m[1].floor() {
+            } else if dy == 0.0 && m[1] == floor_f64(m[1]) {
                 // On a horizontal grid line: rows `row − 1` (above) and `row` (below).
                 let (above, below) = (cell(col, row - 1.0), cell(col, row));
                 let (low, high) = if dx > 0.0 {
@@ -387,6 +387,17 @@ fn floor_non_negative(x: f64) -> f64 {
 fn ceil_non_negative(x: f64) -> f64 {
     let t = floor_non_negative(x);
     if t < x { t + 1.0 } else { t }
+}
+
+/// `x.floor()` for any `x`.
+#[inline]
+fn floor_f64(x: f64) -> f64 {
+    if x.abs() < 4.5e15 {
+        let t = (x as i64) as f64;
+        if t > x { t - 1.0 } else { t }
+    } else {
+        x.floor()
+    }
 }
 
 /// `x.floor()`.
@@ -626,6 +637,10 @@ mod rounding_tests {
             assert_eq!(round_f32(x), x.round(), "round {x}");
             let d = x.abs() as f64;
             assert_eq!(floor_non_negative(d), d.floor(), "floor {d}");
+            // Equal as numbers (−0 may come out as +0, which compares and indexes alike).
+            assert_eq!(floor_f64(d), d.floor(), "floor {d}");
+            assert_eq!(floor_f64(-d), (-d).floor(), "floor {}", -d);
+            assert_eq!(floor_f64(d + 0.5), (d + 0.5).floor(), "floor {}", d + 0.5);
             assert_eq!(ceil_non_negative(d), d.ceil(), "ceil {d}");
         }
         assert!(round_f32(f32::NAN).is_nan());
