@@ -22,6 +22,13 @@
 //! let grad = raster::render_backward(&scene, &opts, &d_img);
 //! assert_eq!(grad.len(), scene.params().len());
 //! assert!(loss > 0.0 && grad.iter().all(|g| g.is_finite()));
+//!
+//! // A per-pixel objective renders, scores and differentiates each row band at once
+//! // (the fit loops' path): the same bits as the three steps above.
+//! let objective = diffsvg::optim::Objective::new(&target, Loss::Mse, None, 1);
+//! let prepared = raster::Prepared::new(&scene, &opts);
+//! let (_img, fused_loss, _mse, fused_grad) = objective.render_and_backward(&scene, &prepared);
+//! assert_eq!((fused_loss, &fused_grad), (loss, &grad));
 //! # Ok::<(), diffsvg::Error>(())
 //! ```
 //!
@@ -56,8 +63,9 @@
 //! [`volume`] reads posed photos (NeRF-synthetic and instant-ngp folders) into cameras
 //! and rays, and fits a sparse voxel grid of density and spherical-harmonic color
 //! ([`volume::voxel`]) through its exact volume-rendering gradient, with the same
-//! [`optim`] module as the 2D fitter. [`volume::splat`] holds 3D Gaussians and reads and
-//! writes them as the PLY files of Gaussian-splatting viewers (no renderer yet).
+//! [`optim`] module as the 2D fitter. [`volume::splat`] fits 3D Gaussians, rasterized by
+//! tiles with a hand-written backward pass, and reads and writes them as the PLY files of
+//! Gaussian-splatting viewers.
 
 #![warn(unreachable_pub)]
 
