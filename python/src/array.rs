@@ -2,8 +2,8 @@
 //! copied) on the way out.
 
 use diffsvg::Image;
-use numpy::ndarray::Array3;
 use numpy::PyUntypedArrayMethods;
+use numpy::ndarray::Array3;
 use numpy::{IntoPyArray, PyArray1, PyArray3, PyReadonlyArray1, PyReadonlyArrayDyn};
 use pyo3::prelude::*;
 
@@ -62,7 +62,11 @@ pub(crate) fn vec_out(py: Python<'_>, v: Vec<f64>) -> Bound<'_, PyArray1<f64>> {
 }
 
 /// A 1-D `float64` array of length `len` with finite values; `what` names it.
-pub(crate) fn vector_in(a: &PyReadonlyArray1<'_, f64>, len: usize, what: &str) -> PyResult<Vec<f64>> {
+pub(crate) fn vector_in(
+    a: &PyReadonlyArray1<'_, f64>,
+    len: usize,
+    what: &str,
+) -> PyResult<Vec<f64>> {
     let v: Vec<f64> = match a.as_slice() {
         Ok(s) => s.to_vec(),
         Err(_) => a.as_array().iter().copied().collect(),

@@ -97,7 +97,14 @@ fn parse_schedule(s: &str) -> PyResult<Schedule> {
 
 /// The rates `[points, color, opacity, width, paint, stops]`, each finite and ≥ 0.
 fn rates(r: [f64; 6]) -> PyResult<LearningRates> {
-    let names = ["lr_points", "lr_color", "lr_opacity", "lr_width", "lr_paint", "lr_stops"];
+    let names = [
+        "lr_points",
+        "lr_color",
+        "lr_opacity",
+        "lr_width",
+        "lr_paint",
+        "lr_stops",
+    ];
     for (n, v) in names.iter().zip(r) {
         if !(v >= 0.0 && v.is_finite()) {
             return Err(bad(format!("{n} {v} must be a finite number ≥ 0")));
@@ -180,7 +187,9 @@ pub(crate) fn fit<'py>(
     let (objective, opts) = fit_setup(
         &target,
         iters,
-        [lr_points, lr_color, lr_opacity, lr_width, lr_paint, lr_stops],
+        [
+            lr_points, lr_color, lr_opacity, lr_width, lr_paint, lr_stops,
+        ],
         schedule,
         loss,
         background,
@@ -269,7 +278,9 @@ pub(crate) fn vectorize<'py>(
     let (objective, fit) = fit_setup(
         &target,
         iters,
-        [lr_points, lr_color, lr_opacity, lr_width, lr_paint, lr_stops],
+        [
+            lr_points, lr_color, lr_opacity, lr_width, lr_paint, lr_stops,
+        ],
         schedule,
         loss,
         background,
