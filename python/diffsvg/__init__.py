@@ -423,9 +423,11 @@ def fit(scene: Scene, target, iters: int = 500, *, lr_points: float = 1.0,
     psnr, seconds).
     """
     t = _target_for(target, scene.width, scene.height)
-    s, info = _native.fit(_scene(scene), t, iters, lr_points, lr_color, lr_opacity, lr_width,
-                          lr_paint, lr_stops, schedule, loss, _color(background, "background"),
-                          pyramid, until_psnr, tolerance, progress)
+    options = dict(lr_points=lr_points, lr_color=lr_color, lr_opacity=lr_opacity,
+                   lr_width=lr_width, lr_paint=lr_paint, lr_stops=lr_stops,
+                   schedule=schedule, loss=loss, background=_color(background, "background"),
+                   pyramid=pyramid, tolerance=tolerance)
+    s, info = _native.fit(_scene(scene), t, iters, until_psnr, options, progress)
     return Scene(_native_scene=s), info
 
 
@@ -449,9 +451,9 @@ def vectorize(target, paths: int = 64, mode: str = "adaptive", iters: int = 1000
             t = load_target(target, width, h)
     else:
         t = _image(target, "target")
-    s, info = _native.vectorize(t, paths, mode, iters, seed, target_psnr, segments,
-                                background=_color(background, "background"),
-                                progress=progress, **rates)
+    options = dict(rates, background=_color(background, "background"))
+    s, info = _native.vectorize(t, paths, mode, iters, seed, target_psnr, segments, options,
+                                progress)
     return Scene(_native_scene=s), info
 
 

@@ -13,8 +13,17 @@ use pyo3::types::PyDict;
 
 use crate::array::{color_in, image_in};
 use crate::error::{bad, to_py};
-use crate::render::options;
+use crate::render::options as options_for;
 use crate::scene::PyScene;
+
+/// A dict of `key => value` pairs (values converted by `set_item`).
+macro_rules! dict {
+    ($py:expr; $($k:literal => $v:expr),* $(,)?) => {{
+        let d = PyDict::new($py);
+        $(d.set_item($k, $v)?;)*
+        d
+    }};
+}
 
 /// Most paths a job may ask for: memory and time grow with it, so a mistyped count is
 /// refused rather than attempted.
@@ -95,44 +104,66 @@ fn parse_schedule(s: &str) -> PyResult<Schedule> {
     }
 }
 
-/// The rates `[points, color, opacity, width, paint, stops]`, each finite and ≥ 0.
-fn rates(r: [f64; 6]) -> PyResult<LearningRates> {
-    let names = [
+/// The options shared by `fit` and `vectorize`, from a dict (unknown keys refused):
+/// `lr_points`, `lr_color`, `lr_opacity`, `lr_width`, `lr_paint`, `lr_stops` (finite,
+/// ≥ 0), `schedule`, `loss`, `background` (straight RGBA), `pyramid`, `tolerance`.
+fn fit_setup(
+    target: &PyReadonlyArrayDyn<'_, f32>,
+    iters: usize,
+    until_psnr: Option<f64>,
+    options: Option<&Bound<'_, PyDict>>,
+) -> PyResult<(Objective, FitOptions)> {
+    const KEYS: [&str; 11] = [
         "lr_points",
         "lr_color",
         "lr_opacity",
         "lr_width",
         "lr_paint",
         "lr_stops",
+        "schedule",
+        "loss",
+        "background",
+        "pyramid",
+        "tolerance",
     ];
-    for (n, v) in names.iter().zip(r) {
-        if !(v >= 0.0 && v.is_finite()) {
-            return Err(bad(format!("{n} {v} must be a finite number ≥ 0")));
+    let get = |k: &str| -> PyResult<Option<Bound<'_, PyAny>>> {
+        match options {
+            Some(d) => Ok(d.get_item(k)?.filter(|v| !v.is_none())),
+            None => Ok(None),
+        }
+    };
+    if let Some(d) = options {
+        for k in d.keys() {
+            let k: String = k.extract()?;
+            if !KEYS.contains(&k.as_str()) {
+                return Err(bad(format!(
+                    "unknown option {k:?}; expected one of {KEYS:?}"
+                )));
+            }
         }
     }
-    Ok(LearningRates {
-        points: r[0],
-        color: r[1],
-        opacity: r[2],
-        width: r[3],
-        paint: r[4],
-        stops: r[5],
-    })
-}
-
-/// Everything a fit needs besides the scene.
-#[allow(clippy::too_many_arguments)]
-fn fit_setup(
-    target: &PyReadonlyArrayDyn<'_, f32>,
-    iters: usize,
-    lr: [f64; 6],
-    schedule: &str,
-    loss: &str,
-    background: Option<[f32; 4]>,
-    pyramid: usize,
-    until_psnr: Option<f64>,
-    tolerance: f64,
-) -> PyResult<(Objective, FitOptions)> {
+    let mut rates = LearningRates::default();
+    for (k, r) in KEYS.iter().zip([
+        &mut rates.points,
+        &mut rates.color,
+        &mut rates.opacity,
+        &mut rates.width,
+        &mut rates.paint,
+        &mut rates.stops,
+    ]) {
+        if let Some(v) = get(k)? {
+            let v: f64 = v.extract()?;
+            if !(v >= 0.0 && v.is_finite()) {
+                return Err(bad(format!("{k} {v} must be a finite number ≥ 0")));
+            }
+            *r = v;
+        }
+    }
+    let schedule: String = get("schedule")?.map_or(Ok("constant".into()), |v| v.extract())?;
+    let loss: String = get("loss")?.map_or(Ok("mse".into()), |v| v.extract())?;
+    let background: Option<[f32; 4]> = get("background")?.map(|v| v.extract()).transpose()?;
+    let pyramid: usize = get("pyramid")?.map_or(Ok(1), |v| v.extract())?;
+    let tolerance: f64 = get("tolerance")?.map_or(Ok(0.02), |v| v.extract())?;
     let target = image_in(target, "target")?;
     if target.width == 0 || target.height == 0 {
         return Err(bad("target: the image is empty"));
@@ -146,57 +177,33 @@ fn fit_setup(
     if !(1..=16).contains(&pyramid) {
         return Err(bad(format!("pyramid {pyramid} must be in 1..=16")));
     }
-    let objective = Objective::new(&target, parse_loss(loss)?, bg, pyramid);
+    let objective = Objective::new(&target, parse_loss(&loss)?, bg, pyramid);
     let opts = FitOptions {
         iters,
-        rates: rates(lr)?,
-        schedule: parse_schedule(schedule)?,
+        rates,
+        schedule: parse_schedule(&schedule)?,
         until_psnr,
-        render: options(tolerance)?,
+        render: options_for(tolerance)?,
         ..FitOptions::default()
     };
     Ok((objective, opts))
 }
 
 /// Refines every parameter of `scene` toward `target` (premultiplied RGBA `float32`,
-/// the scene's size) with exact gradients and Adam. Returns `(best scene, info)`.
+/// the scene's size) with exact gradients and Adam; `options` as in `fit_setup`.
+/// Returns `(best scene, info)`.
 #[pyfunction]
-#[pyo3(signature = (scene, target, iters=500, lr_points=1.0, lr_color=0.01, lr_opacity=0.01,
-    lr_width=0.1, lr_paint=0.5, lr_stops=0.005, schedule="constant", loss="mse",
-    background=None, pyramid=1, until_psnr=None, tolerance=0.02, progress=None))]
-#[allow(clippy::too_many_arguments)]
+#[pyo3(signature = (scene, target, iters=500, until_psnr=None, options=None, progress=None))]
 pub(crate) fn fit<'py>(
     py: Python<'py>,
     scene: PyRef<'py, PyScene>,
     target: PyReadonlyArrayDyn<'py, f32>,
     iters: usize,
-    lr_points: f64,
-    lr_color: f64,
-    lr_opacity: f64,
-    lr_width: f64,
-    lr_paint: f64,
-    lr_stops: f64,
-    schedule: &str,
-    loss: &str,
-    background: Option<[f32; 4]>,
-    pyramid: usize,
     until_psnr: Option<f64>,
-    tolerance: f64,
+    options: Option<Bound<'py, PyDict>>,
     progress: Option<Py<PyAny>>,
 ) -> PyResult<(PyScene, Bound<'py, PyDict>)> {
-    let (objective, opts) = fit_setup(
-        &target,
-        iters,
-        [
-            lr_points, lr_color, lr_opacity, lr_width, lr_paint, lr_stops,
-        ],
-        schedule,
-        loss,
-        background,
-        pyramid,
-        until_psnr,
-        tolerance,
-    )?;
+    let (objective, opts) = fit_setup(&target, iters, until_psnr, options.as_ref())?;
     let t = objective.target();
     let s = scene.inner.clone();
     if (t.width, t.height) != (s.width, s.height) {
@@ -213,34 +220,33 @@ pub(crate) fn fit<'py>(
         })
     });
     prog.finish()?;
-    let info = PyDict::new(py);
-    info.set_item("loss", out.best_loss)?;
-    info.set_item("psnr", out.best_psnr)?;
-    info.set_item("steps", out.steps)?;
-    info.set_item(
-        "reason",
-        match out.reason {
-            StopReason::Finished => "finished",
-            StopReason::ReachedPsnr => "reached_psnr",
-            StopReason::Interrupted => "stopped",
-        },
-    )?;
-    info.set_item("forward_ms", out.median_ms.0)?;
-    info.set_item("backward_ms", out.median_ms.1)?;
-    let last = out.history.last();
-    info.set_item("final_loss", last.map(|s| s.loss))?;
-    info.set_item("seconds", last.map(|s| s.elapsed.as_secs_f64()))?;
+    let reason = match out.reason {
+        StopReason::Finished => "finished",
+        StopReason::ReachedPsnr => "reached_psnr",
+        StopReason::Interrupted => "stopped",
+    };
     let rows: Vec<Vec<f64>> = out
         .history
         .iter()
         .map(|s| vec![s.iter as f64, s.loss, s.psnr, s.elapsed.as_secs_f64()])
         .collect();
-    let hist = if rows.is_empty() {
+    let history = if rows.is_empty() {
         PyArray2::zeros(py, [0, 4], false)
     } else {
         PyArray2::from_vec2(py, &rows).map_err(|e| bad(e.to_string()))?
     };
-    info.set_item("history", hist)?;
+    let last = out.history.last();
+    let info = dict! {py;
+        "loss" => out.best_loss,
+        "psnr" => out.best_psnr,
+        "steps" => out.steps,
+        "reason" => reason,
+        "forward_ms" => out.median_ms.0,
+        "backward_ms" => out.median_ms.1,
+        "final_loss" => last.map(|s| s.loss),
+        "seconds" => last.map(|s| s.elapsed.as_secs_f64()),
+        "history" => history,
+    };
     Ok((PyScene { inner: out.best }, info))
 }
 
@@ -249,9 +255,7 @@ pub(crate) fn fit<'py>(
 /// (vtracer, pruned, refined). Returns `(scene, info)`.
 #[pyfunction]
 #[pyo3(signature = (target, paths=64, mode="adaptive", iters=1000, seed=0, target_psnr=None,
-    segments=4, lr_points=1.0, lr_color=0.01, lr_opacity=0.01, lr_width=0.1, lr_paint=0.5,
-    lr_stops=0.005, schedule="constant", loss="mse", background=None, pyramid=1,
-    tolerance=0.02, progress=None))]
+    segments=4, options=None, progress=None))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn vectorize<'py>(
     py: Python<'py>,
@@ -262,32 +266,10 @@ pub(crate) fn vectorize<'py>(
     seed: u64,
     target_psnr: Option<f64>,
     segments: usize,
-    lr_points: f64,
-    lr_color: f64,
-    lr_opacity: f64,
-    lr_width: f64,
-    lr_paint: f64,
-    lr_stops: f64,
-    schedule: &str,
-    loss: &str,
-    background: Option<[f32; 4]>,
-    pyramid: usize,
-    tolerance: f64,
+    options: Option<Bound<'py, PyDict>>,
     progress: Option<Py<PyAny>>,
 ) -> PyResult<(PyScene, Bound<'py, PyDict>)> {
-    let (objective, fit) = fit_setup(
-        &target,
-        iters,
-        [
-            lr_points, lr_color, lr_opacity, lr_width, lr_paint, lr_stops,
-        ],
-        schedule,
-        loss,
-        background,
-        pyramid,
-        None,
-        tolerance,
-    )?;
+    let (objective, fit) = fit_setup(&target, iters, None, options.as_ref())?;
     let mode = match mode {
         "adaptive" => Mode::Adaptive,
         "fixed" => Mode::Fixed,
@@ -329,15 +311,16 @@ pub(crate) fn vectorize<'py>(
     });
     prog.finish()?;
     let out = out.map_err(to_py)?;
-    let info = PyDict::new(py);
-    info.set_item("psnr", out.psnr)?;
-    info.set_item("mse", out.mse)?;
-    info.set_item("steps", out.steps)?;
-    info.set_item("rounds", out.rounds)?;
-    info.set_item("pruned", out.pruned)?;
-    info.set_item("seconds", out.elapsed.as_secs_f64())?;
-    info.set_item("forward_ms", out.median_ms.0)?;
-    info.set_item("backward_ms", out.median_ms.1)?;
+    let info = dict! {py;
+        "psnr" => out.psnr,
+        "mse" => out.mse,
+        "steps" => out.steps,
+        "rounds" => out.rounds,
+        "pruned" => out.pruned,
+        "seconds" => out.elapsed.as_secs_f64(),
+        "forward_ms" => out.median_ms.0,
+        "backward_ms" => out.median_ms.1,
+    };
     Ok((PyScene { inner: out.scene }, info))
 }
 
@@ -413,11 +396,12 @@ pub(crate) fn digit<'py>(
     };
     let (h, w) = (shape[0], shape[1]);
     let f = py.detach(|| fit_digit(&v, w, h, &opts));
-    let info = PyDict::new(py);
-    info.set_item("iou", f.iou)?;
-    info.set_item("mse", f.mse)?;
-    info.set_item("segments", f.segments.clone())?;
-    info.set_item("steps", f.steps)?;
+    let info = dict! {py;
+        "iou" => f.iou,
+        "mse" => f.mse,
+        "segments" => f.segments.clone(),
+        "steps" => f.steps,
+    };
     Ok((PyScene { inner: f.scene }, info))
 }
 
@@ -446,12 +430,13 @@ pub(crate) fn glyph<'py>(
         ..GlyphOptions::default()
     };
     let out = py.detach(|| fit_glyph(&t, &opts));
-    let info = PyDict::new(py);
-    info.set_item("iou", out.iou)?;
-    info.set_item("mse", out.mse)?;
-    info.set_item("segments", out.segments)?;
-    info.set_item("reached", out.reached)?;
-    info.set_item("steps", out.steps)?;
-    info.set_item("seconds", out.elapsed.as_secs_f64())?;
+    let info = dict! {py;
+        "iou" => out.iou,
+        "mse" => out.mse,
+        "segments" => out.segments,
+        "reached" => out.reached,
+        "steps" => out.steps,
+        "seconds" => out.elapsed.as_secs_f64(),
+    };
     Ok((PyScene { inner: out.scene }, info))
 }
