@@ -12,6 +12,7 @@ cd "$(dirname "$0")/.."
 PYTHON=${PYTHON:-python3}
 VENV="$PWD/target/python-venv"
 
+SECONDS=0
 if ! cmp -s python/requirements.txt "$VENV/requirements.txt" 2>/dev/null; then
     rm -rf "$VENV"
     "$PYTHON" -m venv "$VENV"
@@ -20,6 +21,7 @@ if ! cmp -s python/requirements.txt "$VENV/requirements.txt" 2>/dev/null; then
     cp python/requirements.txt "$VENV/requirements.txt"
 fi
 
+venv_s=$SECONDS
 # The command-line binary the tests compare with (built already by `cargo test --release`).
 cargo build --release --quiet
 # The wheel, as `pip install` would get it; installed over any earlier one.
@@ -28,6 +30,8 @@ rm -rf target/wheels
     --interpreter "$VENV/bin/python" -o target/wheels
 "$VENV/bin/python" -m pip install --quiet --disable-pip-version-check --no-deps \
     --force-reinstall target/wheels/diffsvg-*.whl
+wheel_s=$((SECONDS - venv_s))
 # From the tests' folder, so that `import diffsvg` finds the installed wheel, not python/.
 cd python/tests
 "$VENV/bin/python" -m pytest -q -p no:cacheprovider "$@"
+echo "python/test.sh: environment ${venv_s}s, wheel ${wheel_s}s, tests $((SECONDS - venv_s - wheel_s))s"

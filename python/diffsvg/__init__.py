@@ -43,7 +43,9 @@ __all__ = [
     "random_blobs",
     "random_strokes",
     "digit",
+    "digits",
     "glyph",
+    "glyphs",
 ]
 
 Color = Optional[Sequence[float]]
@@ -482,3 +484,26 @@ def glyph(target, iou: float = 0.99, max_segments: int = 64, iters: int = 150):
     fewest cubic segments reaching ``iou``; ``(scene, info)``."""
     s, info = _native.glyph(_image(target, "target"), iou, max_segments, iters)
     return Scene(_native_scene=s), info
+
+
+def _each(fn, items, progress: Progress, kwargs):
+    out = []
+    for i, item in enumerate(items):
+        scene, info = fn(item, **kwargs)
+        out.append((scene, info))
+        if progress is not None and progress({"index": i, **info}) is False:
+            break
+    return out
+
+
+def digits(images, progress: Progress = None, **kwargs):
+    """:func:`digit` over a stack of digits (``(n, h, w)`` in [0, 1]); a list of
+    ``(scene, info)``. ``progress`` sees each digit's info with its ``index``; returning
+    ``False`` stops after that digit."""
+    return _each(digit, images, progress, kwargs)
+
+
+def glyphs(images, progress: Progress = None, **kwargs):
+    """:func:`glyph` over several glyph images; a list of ``(scene, info)``, ``progress``
+    as in :func:`digits`."""
+    return _each(glyph, images, progress, kwargs)

@@ -1,6 +1,8 @@
 """The long jobs from Python: fit, vectorize, digits, glyphs, progress and stopping."""
 
+import _thread
 import re
+import threading
 
 import numpy as np
 import pytest
@@ -69,3 +71,18 @@ def test_vectorize_and_glyph_and_digit():
     d[5:23, 13:15] = 1.0
     s, dinfo = diffsvg.digit(d)
     assert s.path_count >= 1 and dinfo["iou"] > 0.5
+    seen = []
+    out = diffsvg.digits(np.stack([d, d.T]), progress=lambda i: seen.append(i["index"]))
+    assert len(out) == 2 and seen == [0, 1]
+    assert diffsvg.digits(np.stack([d, d]), progress=lambda i: False)[0][1]["iou"] > 0.5
+
+
+def test_ctrl_c_stops_a_fit():
+    """KeyboardInterrupt reaches the running job (which has released the GIL) and stops it."""
+    scene = diffsvg.random_blobs(8, 64, 64, seed=1)
+    target = np.ones((64, 64, 4), np.float32)
+    timer = threading.Timer(0.3, _thread.interrupt_main)
+    timer.start()
+    with pytest.raises(KeyboardInterrupt):
+        diffsvg.fit(scene, target, iters=10**7)
+    timer.join()
