@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # The Python half of README's test command: builds the package (maturin, release profile,
 # the repository's target folder) into a virtual environment this script creates, then
-# runs the Python tests. Needs python3 (3.9 or newer; the JAX tests 3.11) with venv and
-# pip reaching PyPI; the versions are pinned in python/requirements.txt.
+# runs the Python tests. Needs python3 3.11 or newer (the pinned JAX's minimum; the package
+# itself runs on 3.9) with venv and pip reaching PyPI; the versions are pinned in
+# python/requirements.txt.
 #
 # The environment lives in target/python-venv and is made anew when requirements.txt
 # changes. Tests that need ../shared/data (or $DIFFSVG_DATA) skip with a printed reason
@@ -13,6 +14,10 @@ PYTHON=${PYTHON:-python3}
 VENV="$PWD/target/python-venv"
 
 SECONDS=0
+if ! "$PYTHON" -c 'import sys; sys.exit(sys.version_info < (3, 11))' 2>/dev/null; then
+    echo "python/test.sh: $PYTHON is missing or older than 3.11 (set PYTHON=...)" >&2
+    exit 2
+fi
 if ! cmp -s python/requirements.txt "$VENV/requirements.txt" 2>/dev/null; then
     rm -rf "$VENV"
     "$PYTHON" -m venv "$VENV"
