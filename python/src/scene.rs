@@ -1,0 +1,313 @@
+//! `diffsvg.Scene`: an SVG drawing as the library holds it, with its parameters as numpy.
+
+use std::path::PathBuf;
+
+use diffsvg::optim::project;
+use diffsvg::scene::params::{PaintOffsets, written_point_gradient};
+use diffsvg::scene::{GradientKind, Paint, ParamGroup, ParamLayout, SegmentKind};
+use diffsvg::{Scene, Sizing};
+use numpy::{PyArray1, PyArray2, PyReadonlyArray1};
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList};
+
+use crate::array::{vec_out, vector_in};
+use crate::error::{bad, to_py};
+
+/// A vector scene: paths with fills and strokes (solid or gradient paints) in groups, in
+/// device pixels (y down). Load it with `Scene.load` or `Scene.from_svg`.
+#[pyclass(name = "Scene", module = "diffsvg._native")]
+#[derive(Clone)]
+pub(crate) struct PyScene {
+    pub(crate) inner: Scene,
+}
+
+fn sizing(width: Option<u32>, height: Option<u32>, scale: Option<f64>) -> PyResult<Sizing> {
+    Ok(match (width, height, scale) {
+        (None, None, None) => Sizing::Natural,
+        (Some(w), None, None) => Sizing::Width(w),
+        (Some(w), Some(h), None) => Sizing::Exact(w, h),
+        (None, None, Some(s)) if s.is_finite() && s > 0.0 => Sizing::Scale(s),
+        (None, None, Some(s)) => return Err(bad(format!("scale {s} must be a positive number"))),
+        _ => {
+            return Err(bad(
+                "give width, width and height, or scale (height alone or with scale is ambiguous)",
+            ));
+        }
+    })
+}
+
+fn group_code(g: ParamGroup) -> u8 {
+    ParamGroup::ALL.iter().position(|x| *x == g).unwrap_or(0) as u8
+}
+
+/// `{"kind", "offset", "len", "geometry", "stops"}` of one paint: `len` slots from `offset`
+/// hold its paint values then its opacity (solid: `r, g, b, opacity`; gradient: geometry,
+/// stops, opacity).
+fn paint_entry<'py>(
+    py: Python<'py>,
+    paint: &Paint,
+    po: Option<PaintOffsets>,
+    opacity: usize,
+) -> PyResult<Option<Bound<'py, PyDict>>> {
+    let Some(po) = po else { return Ok(None) };
+    let d = PyDict::new(py);
+    d.set_item("offset", po.base)?;
+    d.set_item("len", opacity + 1 - po.base)?;
+    match paint {
+        Paint::Solid(_) => d.set_item("kind", "solid")?,
+        Paint::Gradient(g) => {
+            let (kind, n) = match g.kind {
+                GradientKind::Linear { .. } => ("linear", 4),
+                GradientKind::Radial { .. } => ("radial", 6),
+            };
+            d.set_item("kind", kind)?;
+            d.set_item("geometry", n)?;
+            d.set_item("stops", g.stops.len())?;
+        }
+    }
+    Ok(Some(d))
+}
+
+#[pymethods]
+impl PyScene {
+    /// An empty scene of `width × height` pixels.
+    #[new]
+    fn new(width: u32, height: u32) -> Self {
+        PyScene {
+            inner: Scene::new(width, height),
+        }
+    }
+
+    /// Loads an SVG or SVGZ file. `width` (with `height`: exactly that size) or `scale`
+    /// resize the canvas; by default the SVG's own size. Errors name the file.
+    #[staticmethod]
+    #[pyo3(signature = (path, width=None, height=None, scale=None))]
+    fn load(
+        py: Python<'_>,
+        path: PathBuf,
+        width: Option<u32>,
+        height: Option<u32>,
+        scale: Option<f64>,
+    ) -> PyResult<Self> {
+        let s = sizing(width, height, scale)?;
+        let inner = py.detach(|| Scene::load(&path, s)).map_err(to_py)?;
+        Ok(PyScene { inner })
+    }
+
+    /// Parses SVG text; `name` is what error messages call it.
+    #[staticmethod]
+    #[pyo3(signature = (text, width=None, height=None, scale=None, name="<string>"))]
+    fn from_svg(
+        text: &str,
+        width: Option<u32>,
+        height: Option<u32>,
+        scale: Option<f64>,
+        name: &str,
+    ) -> PyResult<Self> {
+        let s = sizing(width, height, scale)?;
+        let inner = Scene::from_svg_str(text, name, s).map_err(to_py)?;
+        Ok(PyScene { inner })
+    }
+
+    /// Writes the scene as SVG (to a temporary file, then renamed).
+    fn save(&self, path: PathBuf) -> PyResult<()> {
+        self.inner.save_svg(&path).map_err(to_py)
+    }
+
+    /// The scene as SVG text.
+    fn to_svg(&self) -> String {
+        self.inner.to_svg_string()
+    }
+
+    /// Canvas width, pixels.
+    #[getter]
+    fn width(&self) -> u32 {
+        self.inner.width
+    }
+
+    /// Canvas height, pixels.
+    #[getter]
+    fn height(&self) -> u32 {
+        self.inner.height
+    }
+
+    /// Number of paths.
+    #[getter]
+    fn path_count(&self) -> usize {
+        self.inner.path_count()
+    }
+
+    /// A copy.
+    fn copy(&self) -> Self {
+        self.clone()
+    }
+
+    fn __copy__(&self) -> Self {
+        self.clone()
+    }
+
+    fn __deepcopy__(&self, _memo: &Bound<'_, PyAny>) -> Self {
+        self.clone()
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "Scene({}x{}, {} paths, {} parameters)",
+            self.inner.width,
+            self.inner.height,
+            self.inner.path_count(),
+            ParamLayout::new(&self.inner).len()
+        )
+    }
+
+    /// Every parameter as one `float64` vector, in the library's order.
+    fn params<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        vec_out(py, self.inner.params())
+    }
+
+    /// Writes a parameter vector (`float64`, finite, the length of `params()`), then
+    /// projects onto valid scenes (colors and opacities into `[0, 1]`, widths ≥ 0, stop
+    /// offsets ordered, coordinates within the readable range).
+    fn set_params(&mut self, values: PyReadonlyArray1<'_, f64>) -> PyResult<()> {
+        let n = ParamLayout::new(&self.inner).len();
+        let v = vector_in(&values, n, "set_params")?;
+        self.inner.set_params(&v);
+        project(&mut self.inner);
+        Ok(())
+    }
+
+    /// The layout of `params()`: per slot its group (an index into `group_names`) and its
+    /// owner (an index into `owners`, dicts with `id` and `kind` "path" or "group").
+    fn layout<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let l = ParamLayout::new(&self.inner);
+        let d = PyDict::new(py);
+        let groups: Vec<u8> = l.slots.iter().map(|s| group_code(s.group)).collect();
+        let owners: Vec<u32> = l.slots.iter().map(|s| s.owner as u32).collect();
+        d.set_item("group", PyArray1::from_vec(py, groups))?;
+        d.set_item("owner", PyArray1::from_vec(py, owners))?;
+        let names: Vec<&str> = ParamGroup::ALL.iter().map(|g| g.name()).collect();
+        d.set_item("group_names", names)?;
+        let owners = PyList::empty(py);
+        for o in &l.owners {
+            let e = PyDict::new(py);
+            e.set_item("id", &o.id)?;
+            e.set_item("kind", if o.is_group { "group" } else { "path" })?;
+            owners.append(e)?;
+        }
+        d.set_item("owners", owners)?;
+        Ok(d)
+    }
+
+    /// Where each shape's and group's arrays lie in `params()`: a dict with `shapes` (per
+    /// path: `id`, `points` = (offset, count), `segments` per subpath, `closed` per
+    /// subpath, `kinds` of the written segments ("L", "Q", "C"), `fill` and `stroke` paint
+    /// entries or None, `stroke_width` offset or None) and `groups` (`id`, `offset`).
+    fn structure<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let l = ParamLayout::new(&self.inner);
+        let shapes = PyList::empty(py);
+        let mut err = None;
+        let mut i = 0;
+        self.inner.for_each_path(|p| {
+            let r = (|| -> PyResult<()> {
+                let off = l.paths[i];
+                let d = PyDict::new(py);
+                d.set_item("id", &p.id)?;
+                d.set_item("points", (off.points, p.points.len()))?;
+                let segs: Vec<usize> = p.subpaths.iter().map(|s| s.kinds.len()).collect();
+                let closed: Vec<bool> = p.subpaths.iter().map(|s| s.closed).collect();
+                let kinds: Vec<String> = p
+                    .subpaths
+                    .iter()
+                    .map(|s| {
+                        s.kinds
+                            .iter()
+                            .map(|k| match k {
+                                SegmentKind::Line => 'L',
+                                SegmentKind::Quad => 'Q',
+                                SegmentKind::Cubic => 'C',
+                            })
+                            .collect()
+                    })
+                    .collect();
+                d.set_item("segments", segs)?;
+                d.set_item("closed", closed)?;
+                d.set_item("kinds", kinds)?;
+                let fill = match &p.fill {
+                    Some(f) => paint_entry(py, &f.paint, off.fill, off.fill_opacity)?,
+                    None => None,
+                };
+                d.set_item("fill", fill)?;
+                let (stroke, width) = match &p.stroke {
+                    Some(s) => (
+                        paint_entry(py, &s.paint, off.stroke, off.stroke_opacity)?,
+                        Some(off.stroke_width),
+                    ),
+                    None => (None, None),
+                };
+                d.set_item("stroke", stroke)?;
+                d.set_item("stroke_width", width)?;
+                shapes.append(d)?;
+                Ok(())
+            })();
+            if let Err(e) = r {
+                err.get_or_insert(e);
+            }
+            i += 1;
+        });
+        if let Some(e) = err {
+            return Err(e);
+        }
+        let groups = PyList::empty(py);
+        let mut ids = Vec::new();
+        collect_group_ids(&self.inner.nodes, &mut ids);
+        for (id, off) in ids.iter().zip(&l.groups) {
+            let e = PyDict::new(py);
+            e.set_item("id", id)?;
+            e.set_item("offset", off)?;
+            groups.append(e)?;
+        }
+        let d = PyDict::new(py);
+        d.set_item("shapes", shapes)?;
+        d.set_item("groups", groups)?;
+        Ok(d)
+    }
+
+    /// The control-point part of a gradient (a vector in `params()` layout) chained to
+    /// the points as written in each path's data (a line's derived control points passed
+    /// to its ends, a quadratic's to its control point), one `(k, 2)` `float64` array per
+    /// path: the `points` of `diffsvg grad --json`.
+    fn written_points_gradient<'py>(
+        &self,
+        py: Python<'py>,
+        grad: PyReadonlyArray1<'_, f64>,
+    ) -> PyResult<Vec<Bound<'py, PyArray2<f64>>>> {
+        let l = ParamLayout::new(&self.inner);
+        let g = vector_in(&grad, l.len(), "written_points_gradient")?;
+        let mut out = Vec::new();
+        let mut i = 0;
+        self.inner.for_each_path(|p| {
+            let off = l.paths[i].points;
+            let w = written_point_gradient(p, &g[off..off + 2 * p.points.len()]);
+            out.push(w);
+            i += 1;
+        });
+        out.into_iter()
+            .map(|w| {
+                let rows: Vec<Vec<f64>> = w.iter().map(|p| p.to_vec()).collect();
+                if rows.is_empty() {
+                    return Ok(PyArray2::zeros(py, [0, 2], false));
+                }
+                PyArray2::from_vec2(py, &rows).map_err(|e| bad(e.to_string()))
+            })
+            .collect()
+    }
+}
+
+fn collect_group_ids(nodes: &[diffsvg::Node], out: &mut Vec<String>) {
+    for n in nodes {
+        if let diffsvg::Node::Group(g) = n {
+            out.push(g.id.clone());
+            collect_group_ids(&g.children, out);
+        }
+    }
+}

@@ -1,0 +1,132 @@
+"""Scenes, parameters and rendering through the numpy API."""
+
+import threading
+import time
+
+import numpy as np
+import pytest
+
+import diffsvg
+from conftest import SAMPLES, run_cli
+
+SQUARE = """<svg xmlns="http://www.w3.org/2000/svg" width="20" height="10">
+  <rect x="5" y="2" width="10" height="6" fill="red" fill-opacity="0.5"/></svg>"""
+
+
+def test_render_is_premultiplied_rows_down():
+    s = diffsvg.Scene.from_svg(SQUARE)
+    img = diffsvg.render(s)
+    assert img.shape == (10, 20, 4) and img.dtype == np.float32
+    # Inside: red at half opacity, premultiplied; outside: transparent.
+    assert img[3, 6].tolist() == [0.5, 0.0, 0.0, 0.5]
+    assert img[0, 0].tolist() == [0.0, 0.0, 0.0, 0.0]
+    # Rows are y: row 1 is above the square (y from 2), row 2 inside it.
+    assert img[1, 10, 3] == 0.0 and img[2, 10, 3] == 0.5
+    # Over white, alpha becomes 1 and red stays 1.
+    bg = diffsvg.render(s, background=(1, 1, 1))
+    assert bg[3, 6].tolist() == [1.0, 0.5, 0.5, 1.0]
+    straight = diffsvg.unpremultiply(img)
+    assert straight[3, 6].tolist() == [1.0, 0.0, 0.0, 0.5]
+
+
+def test_render_at_another_size():
+    s = diffsvg.Scene.from_svg(SQUARE)
+    img = diffsvg.render(s, width=40)
+    assert img.shape == (20, 40, 4)
+    assert img[6, 12].tolist() == [0.5, 0.0, 0.0, 0.5]
+
+
+def test_render_matches_the_cli(tmp_path):
+    svg = SAMPLES / "11-landscape.svg"
+    run_cli("render", svg, "-o", tmp_path / "cli.png")
+    ours = diffsvg.render(diffsvg.Scene.load(svg))
+    diffsvg.save_png(ours, tmp_path / "py.png")
+    # Both PNGs from the same float image: identical bytes after decoding.
+    a = diffsvg.load_image(tmp_path / "cli.png")
+    b = diffsvg.load_image(tmp_path / "py.png")
+    assert np.array_equal(a, b)
+
+
+def test_params_round_trip_and_arrays_structure(tmp_path):
+    s = diffsvg.Scene.load(SAMPLES / "10-logo.svg")
+    p = s.params()
+    assert p.dtype == np.float64 and p.shape == (len(s.layout()["group"]),)
+    a = s.arrays()
+    # Every number once: the arrays flatten back to params exactly.
+    assert np.array_equal(s.flatten(s.arrays(np.float64)), p)
+    assert sum(np.asarray(x).size for x in diffsvg._leaves(a)) == p.size
+    for sh, info in zip(a["shapes"], s.structure()["shapes"]):
+        assert sh["points"].shape == (info["points"][1], 2)
+        assert sh["points"].dtype == np.float32
+    # float32 round trips keep the float64 values.
+    s.set_arrays(a)
+    assert np.array_equal(s.params(), p)
+    s.set_params(p.astype(np.float32))
+    assert np.array_equal(s.params(), p)
+    # A moved point moves; save and load keep it.
+    a["shapes"][1]["points"][0] += 3.0
+    s.set_arrays(a)
+    assert s.params()[s.structure()["shapes"][1]["points"][0]] == np.float32(p[s.structure()["shapes"][1]["points"][0]] + 3.0)
+    s.save(tmp_path / "moved.svg")
+    back = diffsvg.Scene.load(tmp_path / "moved.svg")
+    assert np.allclose(back.params(), s.params(), atol=1e-3)
+    assert diffsvg.Scene.from_svg(s.to_svg()).path_count == s.path_count
+
+
+def test_gradient_kinds_and_layout():
+    s = diffsvg.Scene.load(SAMPLES / "04-radial-gradient.svg")
+    kinds = {sh[k]["kind"] for sh in s.structure()["shapes"] for k in ("fill", "stroke")
+             if sh[k] is not None}
+    assert "radial" in kinds
+    a = s.arrays()
+    radial = [sh["fill"] for sh, i in zip(a["shapes"], s.structure()["shapes"])
+              if i["fill"] and i["fill"]["kind"] == "radial"][0]
+    assert radial["geometry"].shape == (6,) and radial["stops"].shape[1] == 5
+
+
+def test_render_backward_matches_finite_differences():
+    s = diffsvg.Scene.from_svg(SQUARE)
+    target = np.zeros((10, 20, 4), np.float32)
+    img = diffsvg.render(s)
+    value, d = diffsvg.loss(img, target, grad=True)
+    g = diffsvg.render_backward(s, d, structured=False)
+    p = s.params()
+    # The square's left edge (x = 5, points 0 and the last before closing) moved right
+    # shrinks the red area: the loss falls.
+    h = 1e-3
+    i = 0  # x of the first point
+    q = p.copy(); q[i] += h; s.set_params(q)
+    up = diffsvg.loss(diffsvg.render(s), target)
+    q[i] -= 2 * h; s.set_params(q)
+    down = diffsvg.loss(diffsvg.render(s), target)
+    s.set_params(p)
+    numeric = (up - down) / (2 * h)
+    assert g[i] < 0 and abs(g[i] - numeric) < 1e-3 * abs(numeric) + 1e-9
+    # Structured gradients mirror the arrays.
+    gs = diffsvg.render_backward(s, d)
+    assert gs["shapes"][0]["points"].shape == s.arrays()["shapes"][0]["points"].shape
+
+
+def test_the_gil_is_released_while_rendering():
+    s = diffsvg.random_blobs(512, 1024, 1024, seed=1)
+    d = np.full((1024, 1024, 4), 1e-6, np.float32)
+    ticks = []
+    done = threading.Event()
+
+    def work():
+        for _ in range(2):
+            diffsvg.render(s)
+            diffsvg.render_backward(s, d, structured=False)
+        done.set()
+
+    t0 = time.perf_counter()
+    t = threading.Thread(target=work)
+    t.start()
+    while not done.is_set():
+        ticks.append(time.perf_counter())
+        time.sleep(0.001)
+    t.join()
+    ms = (time.perf_counter() - t0) * 1e3
+    # This loop ticks about once a millisecond while the other thread renders; were the
+    # GIL held, it would tick only between the four calls.
+    assert len(ticks) > max(20, 0.3 * ms), (len(ticks), ms)
