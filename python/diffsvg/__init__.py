@@ -420,9 +420,9 @@ def fit(scene: Scene, target, iters: int = 500, *, lr_points: float = 1.0,
     only). ``progress(step)`` is called after every evaluation with ``iter``, ``loss``,
     ``psnr``, ``seconds``; returning ``False`` or raising stops the run (an exception is
     re-raised once the GIL is back; Ctrl-C raises KeyboardInterrupt the same way).
-    ``info`` has ``loss``, ``psnr``, ``steps``, ``reason``, median ``forward_ms`` and
-    ``backward_ms``, ``final_loss``, ``seconds`` and ``history`` (rows of iter, loss,
-    psnr, seconds).
+    ``info`` has ``loss``, ``psnr``, ``steps``, ``reason``, the median ``step_ms`` (render,
+    loss and gradient of one step), ``final_loss``, ``seconds`` and ``history`` (rows of
+    iter, loss, psnr, seconds).
     """
     t = _target_for(target, scene.width, scene.height)
     options = dict(lr_points=lr_points, lr_color=lr_color, lr_opacity=lr_opacity,

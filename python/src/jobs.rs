@@ -241,8 +241,7 @@ pub(crate) fn fit<'py>(
         "psnr" => out.best_psnr,
         "steps" => out.steps,
         "reason" => reason,
-        "forward_ms" => out.median_ms.0,
-        "backward_ms" => out.median_ms.1,
+        "step_ms" => out.median_step_ms,
         "final_loss" => last.map(|s| s.loss),
         "seconds" => last.map(|s| s.elapsed.as_secs_f64()),
         "history" => history,
@@ -318,8 +317,7 @@ pub(crate) fn vectorize<'py>(
         "rounds" => out.rounds,
         "pruned" => out.pruned,
         "seconds" => out.elapsed.as_secs_f64(),
-        "forward_ms" => out.median_ms.0,
-        "backward_ms" => out.median_ms.1,
+        "step_ms" => out.median_step_ms,
     };
     Ok((PyScene { inner: out.scene }, info))
 }

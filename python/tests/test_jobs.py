@@ -48,7 +48,8 @@ def test_painterly_matches_the_cli_benchmark():
     out = run_cli("bench", "painterly", "--paths", "16", "--size", "64", "--iters", "10",
                   "--target", SAMPLES / "11-landscape.svg").stdout
     row = [l for l in out.splitlines() if l.startswith("| 16 |")][0]
-    cli_mse = float(row.split("|")[5])
+    # | paths | forward | step | step/forward | total (s) | final MSE | …
+    cli_mse = float(row.split("|")[6])
     scene = diffsvg.random_blobs(16, 64, 64, seed=0)
     _, info = diffsvg.fit(scene, target, iters=10, lr_points=1.0, lr_color=0.01,
                           lr_opacity=0.01, background=(1, 1, 1))
