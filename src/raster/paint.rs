@@ -64,6 +64,8 @@ struct RowStops {
     /// The steepest change of any channel per unit of `t` between two stops; infinite at
     /// a hard stop (two offsets equal, colors not).
     slope: f64,
+    /// Whether the colors at `t = 0` and `t = 1` agree, so that `repeat` has no seam.
+    seamless: bool,
 }
 
 impl RowStops {
@@ -83,6 +85,7 @@ impl RowStops {
             }
         }
         RowStops {
+            seamless: stop_color(stops, 0.0) == stop_color(stops, 1.0),
             offsets: stops.iter().map(|s| s.offset as f32).collect(),
             colors: stops.iter().map(|s| color(s).map(|v| v as f32)).collect(),
             slope,
@@ -114,8 +117,8 @@ impl RowStops {
 /// `4·max|t|·2⁻²⁴`; premultiplied channels change at most twice as fast as straight ones;
 /// the `f32` interpolation and premultiplication add about `10⁻⁶`. With the bound 4 the
 /// worst case is `2·4·4·2⁻²⁴ + 10⁻⁶ ≈ 2.9·10⁻⁶`, below 1/1024 of an 8-bit color level
-/// (`3.8·10⁻⁶`); rows beyond it, `repeat` gradients (whose seams are jumps) and hard stops
-/// are evaluated per pixel in `f64`.
+/// (`3.8·10⁻⁶`); rows beyond it, `repeat` gradients whose ends differ in color (their
+/// seams are jumps) and hard stops are evaluated per pixel in `f64`.
 const F32_SLOPE_T: f64 = 4.0;
 
 /// Below this distance between its end points, in gradient space, a linear gradient is
@@ -296,9 +299,11 @@ impl GradientEval {
                 let m = t.rem_euclid(2.0);
                 if m <= 1.0 { m } else { 2.0 - m }
             }
-            Spread::Repeat => unreachable!("repeat rows are evaluated in f64"),
+            // Only without a seam (see `fast`): a `t` off by a rounding across an integer
+            // then changes the color by no more than elsewhere.
+            Spread::Repeat => t - t.floor(),
         };
-        let fast = self.spread != Spread::Repeat;
+        let fast = self.spread != Spread::Repeat || self.row_stops.seamless;
         let geo = geometry(&self.kind);
         match geo {
             Geometry::Linear(_) => {
@@ -600,7 +605,7 @@ mod tests {
             if case % 7 == 0 {
                 offsets[1] = offsets[0]; // a hard stop
             }
-            let stops: Vec<Stop> = offsets
+            let mut stops: Vec<Stop> = offsets
                 .iter()
                 .map(|&o| Stop {
                     offset: o,
@@ -612,6 +617,11 @@ mod tests {
                     opacity: rng.range(0.2, 1.0),
                 })
                 .collect();
+            if case % 5 == 0 {
+                // Seamless ends (repeat without a jump).
+                stops[n - 1].color = stops[0].color;
+                stops[n - 1].opacity = stops[0].opacity;
+            }
             let (a, sc) = (rng.range(0.0, 6.3), rng.range(0.3, 3.0));
             let transform = [
                 sc * a.cos(),
@@ -653,7 +663,8 @@ mod tests {
             paint.row(x0, y, &mut row);
             if let PaintEval::Gradient(g) = &paint {
                 // Rows that may take the f32 path (a finite slope, no repeat seams).
-                fast_rows += (g.spread != Spread::Repeat && g.row_stops.slope.is_finite()) as usize;
+                fast_rows += ((g.spread != Spread::Repeat || g.row_stops.seamless)
+                    && g.row_stops.slope.is_finite()) as usize;
             }
             for (i, c) in row.iter().enumerate() {
                 let want = paint.at([(x0 + i) as f64 + 0.5, y as f64 + 0.5]);
