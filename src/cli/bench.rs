@@ -50,7 +50,7 @@ fn run_backward(a: &Args) -> Result<()> {
         .num_threads(threads)
         .build()?;
     let mut table = format!(
-        "Painterly case, 256×256, {threads} thread(s), medians of {} runs.\n\n| shapes | forward (ms) | forward+backward (ms) | ratio | backward replay memory (MiB) | ×(canvas RGBA f32) |\n|---:|---:|---:|---:|---:|---:|\n",
+        "Painterly case, 256×256, {threads} thread(s), medians of {} runs.\n\n| shapes | forward (ms) | forward+backward (ms) | ratio | backward record memory (MiB) | ×(canvas RGBA f32) |\n|---:|---:|---:|---:|---:|---:|\n",
         a.runs
     );
     for &n in &a.shapes {
