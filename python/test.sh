@@ -28,9 +28,7 @@ fi
 
 venv_s=$SECONDS
 # The command-line binary the tests compare with (built already by `cargo test --release`).
-rm -f target/.rustc_info.json   # see .ci/run (fresh_probe)
 cargo build --release --quiet
-rm -f target/.rustc_info.json
 # The wheel, as `pip install` would get it; installed over any earlier one.
 rm -rf target/wheels
 "$VENV/bin/maturin" build --release --quiet -m python/Cargo.toml \

@@ -389,8 +389,18 @@ static TEMP_COUNTER: AtomicU64 = AtomicU64::new(0);
 ///
 /// The temporary name holds the process id, the writing thread and a process-wide
 /// counter, so writers never share one, even when they write the same output at once
-/// (the last rename wins; each rename is whole).
+/// (the last rename wins; each rename is whole). A path that names a device, pipe or
+/// socket (`/dev/null`, a FIFO) is written in place instead.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    // A device, pipe or socket (`-o /dev/null`, a FIFO) is written in place: renaming a
+    // temporary file over it would replace the device with a regular file.
+    if std::fs::metadata(path).is_ok_and(|m| !m.is_file() && !m.is_dir()) {
+        let mut f = std::fs::OpenOptions::new()
+            .write(true)
+            .open(path)
+            .map_err(|e| Error::io(path, e))?;
+        return f.write_all(bytes).map_err(|e| Error::io(path, e));
+    }
     if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
         std::fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
     }
@@ -446,6 +456,22 @@ pub(crate) fn over_background_backward_px(g: &mut [f32; 4], b: [f32; 4]) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Writing "atomically" to `/dev/null` must leave it a device: a rename over it
+    /// replaced the device with a regular file (seen once, as root, with `-o /dev/null`).
+    #[cfg(unix)]
+    #[test]
+    fn writing_to_a_device_keeps_the_device() {
+        use std::os::unix::fs::FileTypeExt;
+        let null = Path::new("/dev/null");
+        let is_device = || std::fs::metadata(null).is_ok_and(|m| m.file_type().is_char_device());
+        if !is_device() {
+            println!("skipped: /dev/null is not a character device here");
+            return;
+        }
+        write_atomic(null, b"discarded").unwrap();
+        assert!(is_device(), "/dev/null was replaced");
+    }
 
     #[test]
     fn contact_sheet_places_pairs_in_a_grid() {
