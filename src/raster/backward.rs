@@ -214,8 +214,9 @@ pub struct Fused {
 /// per-pixel loss in one pass per row band: each band is rendered, its pixels' loss
 /// gradient taken, and its backward pass run while the band's record is still in cache.
 /// No second rendering and no whole-image record; the sums and the gradient have the
-/// same bits for any number of threads, and equal those of [`render_prepared`]
-/// (super::render_prepared) followed by the loss and [`backward_with_stats`].
+/// same bits for any number of threads, and equal those of
+/// [`render_prepared`](super::render_prepared) followed by the loss and
+/// [`backward_with_stats`].
 pub fn render_and_backward_fused(scene: &Scene, p: &Prepared, loss: &dyn BandLoss) -> Fused {
     let mut image = Image::new(p.width, p.height);
     let out = backward_bands(scene, p, Some(&mut image), &|y0, _, rendered| {
