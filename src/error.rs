@@ -37,6 +37,14 @@ pub enum Error {
         /// Which value and why.
         what: String,
     },
+    /// An option of a job is out of range (checked before any file is read).
+    #[error("{name} {message}")]
+    Setting {
+        /// The option, as its field is named in the library (`max_gaussians`).
+        name: String,
+        /// The value and the problem (`"0 must be at least 1"`).
+        message: String,
+    },
     /// An image could not be decoded or encoded, or has the wrong size.
     #[error("{path}: {message}")]
     Image {

@@ -13,6 +13,8 @@ Conventions (the library's):
   vector; ``Scene.arrays()`` gives the same numbers per shape as DiffVG names them
   (control points ``(n, 2)``, fill/stroke color ``(4,)`` = r, g, b, opacity, stroke width,
   gradient geometry and stops). Gradients come back in the same structures.
+* **3D** (``recon_voxel``, ``recon_splat``): a posed-photo folder (NeRF-synthetic or
+  instant-ngp) in, a model file out, as ``diffsvg recon``; ``diffsvg view`` renders it.
 * **Errors.** Bad input raises ``DiffsvgError`` (a ``ValueError``), ``FileNotFoundError``
   or ``OSError`` with one line naming the file or argument; nothing panics.
 """
@@ -46,6 +48,8 @@ __all__ = [
     "digits",
     "glyph",
     "glyphs",
+    "recon_voxel",
+    "recon_splat",
 ]
 
 Color = Optional[Sequence[float]]
@@ -507,3 +511,54 @@ def glyphs(images, progress: Progress = None, **kwargs):
     """:func:`glyph` over several glyph images; a list of ``(scene, info)``, ``progress``
     as in :func:`digits`."""
     return _each(glyph, images, progress, kwargs)
+
+
+def recon_voxel(scene, output, *, res: int = 128, iters: int = 3000, batch: int = 8192,
+                downscale: int = 1, degree: int = 2, bound: Optional[float] = None,
+                step: float = 0.5, tv_density: Optional[float] = None,
+                tv_sh: Optional[float] = None, sparsity: Optional[float] = None,
+                seed: int = 0, eval_every: int = 0, progress: Progress = None) -> dict:
+    """Fits a sparse voxel grid of density and spherical-harmonic color (Plenoxels) to
+    the posed photos in the folder ``scene`` and writes it to ``output`` (``.vox``),
+    exactly as ``diffsvg recon voxel`` with the same options (same file, bit for bit).
+
+    ``res``: final cells per axis (training starts at 64³ or coarser and doubles);
+    ``batch``: rays per iteration; ``bound``: half the box's side in world units (default
+    from the cameras); ``step``: sample spacing in voxels; ``tv_density``, ``tv_sh``,
+    ``sparsity``: regularization weights (default by kind of dataset). ``progress(step)``
+    runs after every iteration with ``iteration``, ``loss``, ``psnr`` (batch, dB),
+    ``rays_per_second``, ``res``, ``allocated``, ``seconds`` and ``test_psnr`` (``None``
+    unless this iteration evaluated the test views, every ``eval_every``); returning
+    ``False`` stops, and the model so far is written.
+
+    Returns a dict: ``output``, ``iterations``, ``stopped``, ``seconds`` (training),
+    ``load_seconds``, ``test_psnr`` (mean over the test views, dB; ``None`` without any),
+    ``res``, ``allocated`` (voxel slots), ``batch`` (rays per iteration used) and ``log``:
+    rows of iteration, seconds, res, allocated, batch PSNR, test PSNR (NaN where not
+    evaluated), one per 50 iterations and per evaluation, the last the end of the run.
+    """
+    return _native.recon_voxel(
+        os.fspath(scene), os.fspath(output), res, iters, batch, downscale, degree, bound,
+        step, tv_density, tv_sh, sparsity, seed, eval_every, progress)
+
+
+def recon_splat(scene, output, *, iters: int = 5000, downscale: int = 1,
+                max_gaussians: int = 300_000, initial: int = 50_000, degree: int = 3,
+                bound: Optional[float] = None, seed: int = 0, eval_every: int = 0,
+                progress: Progress = None) -> dict:
+    """Fits 3D Gaussians (splatting) to the posed photos in ``scene`` and writes them to
+    ``output`` (``.ply``, the layout Gaussian-splatting viewers read), as ``diffsvg recon
+    splat``. Photos with lens distortion are undistorted first. The model starts from the
+    folder's point cloud or from ``initial`` random Gaussians in the box ``bound``.
+
+    ``progress(step)`` runs after every iteration with ``iteration``, ``loss``, ``psnr``
+    (this view, dB), ``gaussians``, ``sh_degree``, ``seconds`` and ``test_psnr``
+    (as in :func:`recon_voxel`). Returns a dict: ``output``, ``iterations``, ``stopped``,
+    ``seconds``, ``load_seconds``, ``test_psnr``, ``gaussians``, ``undistorted`` (the
+    fraction of pixels that fell outside the photos when they were undistorted, else
+    ``None``) and ``log``: rows of iteration, seconds, gaussians, SH degree, view PSNR,
+    test PSNR (NaN where not evaluated).
+    """
+    return _native.recon_splat(
+        os.fspath(scene), os.fspath(output), iters, downscale, max_gaussians, initial,
+        degree, bound, seed, eval_every, progress)

@@ -60,3 +60,13 @@ def digit(pixels: F32, target_iou: float = 0.85, max_strokes: int = 2, max_segme
           scale: int = 2) -> Tuple[Scene, dict]: ...
 def glyph(target: F32, iou: float = 0.99, max_segments: int = 64,
           iters: int = 150) -> Tuple[Scene, dict]: ...
+def recon_voxel(scene: str | PathLike, output: str | PathLike, res: int = 128,
+                iters: int = 3000, batch: int = 8192, downscale: int = 1, degree: int = 2,
+                bound: Optional[float] = None, step: float = 0.5,
+                tv_density: Optional[float] = None, tv_sh: Optional[float] = None,
+                sparsity: Optional[float] = None, seed: int = 0, eval_every: int = 0,
+                progress: Progress = None) -> dict: ...
+def recon_splat(scene: str | PathLike, output: str | PathLike, iters: int = 5000,
+                downscale: int = 1, max_gaussians: int = 300000, initial: int = 50000,
+                degree: int = 3, bound: Optional[float] = None, seed: int = 0,
+                eval_every: int = 0, progress: Progress = None) -> dict: ...

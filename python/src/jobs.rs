@@ -1,4 +1,4 @@
-//! The long jobs: refinement, vectorization, digits and glyphs, with the GIL released and
+//! The long 2D jobs: refinement, vectorization, digits and glyphs, with the GIL released and
 //! a Python progress callback called after every evaluation.
 
 use diffsvg::fit::digit::{DigitOptions, fit_digit};
@@ -31,13 +31,13 @@ const MAX_PATHS: usize = 100_000;
 
 /// Calls a Python progress callback (and checks for Ctrl-C) from inside a job that runs
 /// without the GIL; the first exception stops the job and is raised once it returns.
-struct Progress {
+pub(crate) struct Progress {
     callback: Option<Py<PyAny>>,
     error: Option<PyErr>,
 }
 
 impl Progress {
-    fn new(callback: Option<Py<PyAny>>) -> Self {
+    pub(crate) fn new(callback: Option<Py<PyAny>>) -> Self {
         Progress {
             callback,
             error: None,
@@ -47,7 +47,10 @@ impl Progress {
     /// Calls the callback with the dict `fill` builds; `Control::Stop` on an exception
     /// (from the callback, or a pending KeyboardInterrupt) or when the callback returns
     /// `False`.
-    fn call(&mut self, fill: impl FnOnce(&Bound<'_, PyDict>) -> PyResult<()>) -> Control {
+    pub(crate) fn call(
+        &mut self,
+        fill: impl FnOnce(&Bound<'_, PyDict>) -> PyResult<()>,
+    ) -> Control {
         if self.error.is_some() {
             return Control::Stop;
         }
@@ -72,7 +75,7 @@ impl Progress {
         }
     }
 
-    fn finish(self) -> PyResult<()> {
+    pub(crate) fn finish(self) -> PyResult<()> {
         self.error.map_or(Ok(()), Err)
     }
 }

@@ -10,6 +10,7 @@
 mod array;
 mod error;
 mod jobs;
+mod recon;
 mod render;
 mod scene;
 
@@ -32,5 +33,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(jobs::random_strokes, m)?)?;
     m.add_function(wrap_pyfunction!(jobs::digit, m)?)?;
     m.add_function(wrap_pyfunction!(jobs::glyph, m)?)?;
+    m.add_function(wrap_pyfunction!(recon::recon_voxel, m)?)?;
+    m.add_function(wrap_pyfunction!(recon::recon_splat, m)?)?;
     Ok(())
 }

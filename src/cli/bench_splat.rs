@@ -178,7 +178,7 @@ pub fn run(a: SplatBenchArgs) -> Result<()> {
                 .take(MODEL_VIEWS)
                 .map(|v| (format!("{}{note}", v.name), v.camera))
                 .collect();
-            Some((views, super::splat::background(&data)))
+            Some((views, diffsvg::volume::recon::background(&data)))
         }
         None => None,
     };

@@ -3,19 +3,17 @@
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use std::time::Instant;
 
-use anyhow::{Result, bail};
+use anyhow::Result;
 use serde_json::json;
 
 use super::progress::{install_interrupt_handler, interrupted};
-use super::volume::{Reporting, check_bound, sibling, write_psnr_plot};
-use diffsvg::glam::Vec3;
+use super::util::flag_error;
+use super::volume::{Reporting, psnr_text, sibling, write_psnr_plot};
 use diffsvg::image_io::write_atomic;
-use diffsvg::limits::MAX_GAUSSIANS;
-use diffsvg::volume::dataset::{Dataset, View};
-use diffsvg::volume::metrics::psnr;
-use diffsvg::volume::splat::{self, Densify, Gaussians, RenderSettings, TrainOptions, TrainStep};
+use diffsvg::volume::dataset::Dataset;
+use diffsvg::volume::recon::{SplatJob, load_for_splat, recon_splat};
+use diffsvg::volume::splat::{self, TrainStep};
 
 /// Arguments of `diffsvg recon splat`.
 #[derive(clap::Args, Debug)]
@@ -59,95 +57,20 @@ pub struct SplatArgs {
 /// Runs `diffsvg recon splat`.
 pub fn run(a: SplatArgs) -> Result<()> {
     super::util::check_output(&a.output, "ply")?;
-    if a.max_gaussians == 0 || a.max_gaussians > MAX_GAUSSIANS {
-        bail!(
-            "--max-gaussians {} must be between 1 and {MAX_GAUSSIANS}",
-            a.max_gaussians
-        );
-    }
-    if a.degree > 3 {
-        bail!("--degree {} must be 0 to 3", a.degree);
-    }
-    if a.downscale == 0 || a.iters == 0 || a.initial == 0 {
-        bail!("--downscale, --iters and --initial must be at least 1");
-    }
-    if a.initial > MAX_GAUSSIANS {
-        bail!("--initial {} is above {MAX_GAUSSIANS}", a.initial);
-    }
-    let t_load = Instant::now();
-    let data = load_dataset(&a.scene, a.downscale)?;
-    let settings = RenderSettings {
-        background: background(&data),
-        ..RenderSettings::default()
-    };
-    let (center, dist) = data.focus();
-    let half = match a.bound {
-        Some(b) if !(b.is_finite() && b > 0.0) => bail!("--bound {b} must be a positive number"),
-        Some(b) => {
-            // As for `recon voxel`: a box far too large or small for the cameras (or for
-            // f32) would start from Gaussians of infinite or zero size.
-            check_bound(b, center, dist)?;
-            b
-        }
-        None => dist * if data.white_background { 0.4 } else { 1.0 },
-    };
-    if !(half.is_finite() && half > 0.0 && center.is_finite()) {
-        bail!(
-            "{}: cannot size the box from the cameras (median distance {dist} from {center}); \
-             give --bound",
-            a.scene.display()
-        );
-    }
-    let mut model = match splat::find_point_cloud(&a.scene) {
-        Some(path) => splat::from_point_cloud(&path, a.degree)?,
-        None => splat::random_init(
-            center,
-            half,
-            a.initial.min(a.max_gaussians),
-            a.degree,
-            a.seed,
-        ),
-    };
-    let extent = camera_extent(&data.train);
-    let iters = a.iters;
-    // The reference schedule (30 000 iterations: densify 500..15 000 every 100, reset
-    // opacity every 3000, SH degree up every 1000) scaled to the run's length.
-    let scaled = |x: usize| ((x as f64 * iters as f64 / 30_000.0).round() as usize).max(1);
-    let opts = TrainOptions {
-        iterations: iters,
+    let job = SplatJob {
+        iters: a.iters,
+        downscale: a.downscale,
+        max_gaussians: a.max_gaussians,
+        initial: a.initial,
+        degree: a.degree,
+        bound: a.bound,
         seed: a.seed,
-        render: settings,
-        sh_degree: a.degree,
-        sh_interval: scaled(1000).max(iters / 8),
-        extent,
-        densify: Densify {
-            from: scaled(500),
-            until: iters / 2,
-            every: scaled(100).clamp(25, 100),
-            reset_every: scaled(3000).max(200),
-            max_gaussians: a.max_gaussians,
-            ..Densify::default()
-        },
-        ..TrainOptions::default()
+        eval_every: a.report.eval_every,
     };
-    let load_s = t_load.elapsed().as_secs_f64();
-
+    job.validate().map_err(flag_error)?;
     install_interrupt_handler();
-    let bar = super::progress::terminal_bar(a.report.json || a.report.quiet, iters, "");
-    let mut log: Vec<(TrainStep, Option<f64>)> = Vec::new();
-    let outcome = splat::train(&mut model, &data.train, &opts, &mut |s, g| {
-        let eval = a.report.eval_every > 0
-            && s.iteration % a.report.eval_every == 0
-            && s.iteration < iters
-            && !data.test.is_empty();
-        let test = if eval {
-            mean_psnr(g, &data.test, &settings).ok()
-        } else {
-            None
-        };
-        if test.is_some() || s.iteration % 50 == 0 {
-            log.push((*s, test));
-        }
+    let bar = super::progress::terminal_bar(a.report.json || a.report.quiet, a.iters, "");
+    let out = recon_splat(&a.scene, &job, &mut |s, test| {
         if let Some(b) = &bar {
             b.set_position(s.iteration as u64);
             b.set_message(format!(
@@ -170,33 +93,31 @@ pub fn run(a: SplatArgs) -> Result<()> {
             );
         }
         !interrupted()
-    })?;
+    })
+    .map_err(flag_error)?;
     if let Some(b) = bar {
         b.finish_and_clear();
     }
-    splat::save(&model, &a.output)?;
-    let test_psnr = if data.test.is_empty() {
-        None
-    } else {
-        Some(mean_psnr(&model, &data.test, &settings)?)
-    };
-    // The final row (written by write_log) carries the end of the run.
-    log.retain(|r| r.0.iteration != outcome.iterations);
+    if let Some(outside) = out.undistorted {
+        undistortion_note(&a.scene, outside);
+    }
+    let (model, outcome) = (&out.model, out.outcome);
+    splat::save(model, &a.output)?;
     write_log(
         &a.output,
-        &log,
+        &out.log,
         outcome.iterations,
         outcome.seconds,
         model.len(),
-        test_psnr,
+        out.test_psnr,
     )?;
     let [r, l, b, u, d] = outcome.parts;
     if a.report.json {
         println!(
             "{}",
             json!({"done": true, "output": a.output, "iterations": outcome.iterations,
-                "seconds": outcome.seconds, "load_seconds": load_s, "test_psnr": test_psnr,
-                "gaussians": model.len(), "stopped": outcome.stopped,
+                "seconds": outcome.seconds, "load_seconds": out.load_seconds,
+                "test_psnr": out.test_psnr, "gaussians": model.len(), "stopped": outcome.stopped,
                 "seconds_per_part": {"render": r, "loss": l, "backward": b, "update": u,
                     "density_control": d}})
         );
@@ -212,9 +133,7 @@ pub fn run(a: SplatArgs) -> Result<()> {
             100.0 * u / outcome.seconds,
             100.0 * d / outcome.seconds,
             model.len(),
-            test_psnr
-                .map(|p| format!("{p:.2} dB"))
-                .unwrap_or_else(|| "n/a (no test views)".into()),
+            psnr_text(out.test_psnr),
             a.output.display()
         );
     }
@@ -224,79 +143,23 @@ pub fn run(a: SplatArgs) -> Result<()> {
     Ok(())
 }
 
-/// Loads a dataset for splatting: photos with lens distortion are undistorted (a
-/// rasterizer projects through a pinhole), with a note on stderr.
+/// Loads a dataset for splatting ([`load_for_splat`]), with a note on stderr when its
+/// photos were undistorted.
 pub(super) fn load_dataset(dir: &Path, downscale: u32) -> Result<Dataset> {
-    let data = Dataset::load(dir, downscale)?;
-    if data.train.is_empty() {
-        bail!("{}: no training views", dir.display());
+    let (data, undistorted) = load_for_splat(dir, downscale)?;
+    if let Some(outside) = undistorted {
+        undistortion_note(dir, outside);
     }
-    let distorted = data
-        .train
-        .iter()
-        .chain(&data.test)
-        .any(|v| v.camera.has_distortion());
-    if !distorted {
-        return Ok(data);
-    }
-    let (data, outside) = diffsvg::volume::undistort::undistort_dataset(&data);
-    let total: usize = data
-        .train
-        .iter()
-        .chain(&data.test)
-        .map(|v| v.rgb.len())
-        .sum();
+    Ok(data)
+}
+
+fn undistortion_note(dir: &Path, outside: f64) {
     eprintln!(
         "note: {}: the photos have lens distortion; undistorted to pinhole views ({:.2}% of \
          pixels fell outside the photos and repeat its edge)",
         dir.display(),
-        100.0 * outside as f64 / total.max(1) as f64
+        100.0 * outside
     );
-    Ok(data)
-}
-
-/// White for objects composited over white (NeRF-synthetic), black for real photos.
-pub(super) fn background(data: &Dataset) -> [f32; 3] {
-    if data.white_background {
-        [1.0; 3]
-    } else {
-        [0.0; 3]
-    }
-}
-
-/// The reference code's scene extent: 1.1 times the largest distance of a training
-/// camera from the cameras' mean position (1 when that is 0).
-fn camera_extent(views: &[View]) -> f32 {
-    let n = views.len().max(1) as f32;
-    let mean = views
-        .iter()
-        .map(|v| v.camera.position())
-        .fold(Vec3::ZERO, |a, b| a + b)
-        / n;
-    let r = views
-        .iter()
-        .map(|v| v.camera.position().distance(mean))
-        .fold(0.0f32, f32::max);
-    if r > 0.0 && r.is_finite() {
-        1.1 * r
-    } else {
-        1.0
-    }
-}
-
-/// Mean PSNR (capped at 99 dB per view) of `model` rendered from `views`.
-pub(super) fn mean_psnr(
-    model: &Gaussians,
-    views: &[View],
-    settings: &RenderSettings,
-) -> Result<f64> {
-    let mut sum = 0.0;
-    for v in views {
-        let out = splat::render(model, &v.camera, settings)
-            .map_err(|e| anyhow::anyhow!("rendering view {}: {e}", v.name))?;
-        sum += psnr(&out.rgb, &v.rgb).min(99.0);
-    }
-    Ok(sum / views.len().max(1) as f64)
 }
 
 /// Writes `<model>.log.csv` (iteration, training seconds, Gaussians, SH degree, training

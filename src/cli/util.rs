@@ -63,6 +63,18 @@ pub fn sibling(path: &Path, suffix: &str) -> PathBuf {
     path.with_file_name(format!("{stem}.{suffix}.png"))
 }
 
+/// A library error for the command line: an option out of range
+/// ([`diffsvg::Error::Setting`]) is named by its flag (`max_gaussians` →
+/// `--max-gaussians`); other errors pass unchanged.
+pub fn flag_error(e: diffsvg::Error) -> anyhow::Error {
+    match e {
+        diffsvg::Error::Setting { name, message } => {
+            anyhow::anyhow!("--{} {message}", name.replace('_', "-"))
+        }
+        e => e.into(),
+    }
+}
+
 /// Reads a whole file of at most [`MAX_FILE_BYTES`](diffsvg::limits::MAX_FILE_BYTES) bytes,
 /// naming it in the error.
 pub fn read(path: &Path) -> Result<Vec<u8>> {

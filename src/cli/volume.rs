@@ -11,14 +11,15 @@ use serde_json::json;
 use super::choices::SplitArg;
 use super::plot::{PlotSpec, Series, write_plot};
 use super::progress::{install_interrupt_handler, interrupted};
+use super::util::flag_error;
 use diffsvg::glam::Vec3;
 use diffsvg::image_io::{Image, contact_sheet, write_atomic};
-use diffsvg::volume::Ray;
 use diffsvg::volume::camera::{Camera, orbit};
 use diffsvg::volume::dataset::{Dataset, View};
 use diffsvg::volume::metrics::{psnr, ssim};
+use diffsvg::volume::recon::{VoxelJob, recon_voxel};
 use diffsvg::volume::splat;
-use diffsvg::volume::voxel::{self, Grid, RenderSettings, TrainOptions, TrainStep};
+use diffsvg::volume::voxel::{self, Grid, RenderSettings, TrainStep};
 
 /// Arguments of `diffsvg recon`.
 #[derive(clap::Args, Debug)]
@@ -152,107 +153,24 @@ fn check_model_path(path: &Path) -> Result<()> {
 
 fn run_voxel(a: VoxelArgs) -> Result<()> {
     check_model_path(&a.output)?;
-    if !(8..=voxel::MAX_RES).contains(&a.res) {
-        bail!("--res {} must be between 8 and {}", a.res, voxel::MAX_RES);
-    }
-    if a.degree > 3 {
-        bail!("--degree {} must be 0 to 3", a.degree);
-    }
-    if a.downscale == 0 || a.iters == 0 || a.batch == 0 {
-        bail!("--downscale, --iters and --batch must be at least 1");
-    }
-    let render = render_settings(a.step)?;
-    let t_load = Instant::now();
-    let data = Dataset::load(&a.scene, a.downscale)?;
-    if data.train.is_empty() {
-        bail!("{}: no training views", a.scene.display());
-    }
-    let (rays, colors) = pixels(&data.train);
-    // The test views' rays, made once for every evaluation.
-    let test_rays: Vec<Vec<Ray>> = data.test.iter().map(|v| v.camera.rays()).collect();
-    let (center, dist) = data.focus();
-    let defaults = SceneDefaults::for_dataset(&data);
-    let half = match a.bound {
-        Some(b) if !(b.is_finite() && b > 0.0) => bail!("--bound {b} must be a positive number"),
-        Some(b) => {
-            check_bound(b, center, dist)?;
-            b
-        }
-        None => {
-            let half = defaults.box_factor * dist;
-            if !(half.is_finite() && half > 0.0 && center.is_finite()) {
-                bail!(
-                    "{}: cannot size the box from the cameras (median distance {dist} from \
-                     {center}); give --bound",
-                    a.scene.display()
-                );
-            }
-            if let Err(e) = check_box(center, half) {
-                bail!(
-                    "{}: cannot size the box from the cameras: {e}; give --bound",
-                    a.scene.display()
-                );
-            }
-            half
-        }
-    };
-    let load_s = t_load.elapsed().as_secs_f64();
-
-    // Coarse to fine: a dense grid at 64³ (or half the resolution for small grids),
-    // doubled until `--res`: after 10% of the run, and every further 30%. Slots that no
-    // training ray weighs are freed at every resampling, at every tenth of the run and
-    // at the end (64³ → 128³ reached 30 dB on lego at 200²).
-    let levels = levels(a.res);
-    let upsample: Vec<(usize, u32)> = levels[1..]
-        .iter()
-        .enumerate()
-        .map(|(i, &r)| (((0.1 + 0.3 * i as f64) * a.iters as f64) as usize, r))
-        .map(|(it, r)| (it.max(1), r))
-        .collect();
-    let mut grid = Grid::dense(
-        center - Vec3::splat(half),
-        center + Vec3::splat(half),
-        levels[0],
-        a.degree,
-        0.1,
-    );
-    // Rays are drawn with replacement; more per batch than there are pixels only repeats.
-    let batch = a.batch.min(rays.len());
-    if batch < a.batch {
-        eprintln!(
-            "note: --batch {} is more than the {} training pixels; using {batch}",
-            a.batch,
-            rays.len()
-        );
-    }
-    let opts = TrainOptions {
-        iterations: a.iters,
-        batch_size: batch,
+    let job = VoxelJob {
+        res: a.res,
+        iters: a.iters,
+        batch: a.batch,
+        downscale: a.downscale,
+        degree: a.degree,
+        bound: a.bound,
+        step: a.step,
+        tv_density: a.tv_density,
+        tv_sh: a.tv_sh,
+        sparsity: a.sparsity,
         seed: a.seed,
-        render,
-        upsample,
-        prune_every: (a.iters / 10).max(1),
-        tv_density: a.tv_density.unwrap_or(defaults.tv_density),
-        tv_sh: a.tv_sh.unwrap_or(defaults.tv_sh),
-        sparsity: a.sparsity.unwrap_or(defaults.sparsity),
-        ..TrainOptions::default()
+        eval_every: a.report.eval_every,
     };
-
+    job.validate().map_err(flag_error)?;
     install_interrupt_handler();
     let bar = super::progress::terminal_bar(a.report.json || a.report.quiet, a.iters, "");
-    // One row per 50 iterations and per evaluation: (step, test PSNR).
-    let mut log: Vec<(TrainStep, Option<f64>)> = Vec::new();
-    let mut last: Option<TrainStep> = None;
-    let outcome = voxel::train(&mut grid, &rays, &colors, &opts, &mut |s, g| {
-        last = Some(*s);
-        let eval = a.report.eval_every > 0
-            && s.iteration % a.report.eval_every == 0
-            && s.iteration < a.iters
-            && !data.test.is_empty();
-        let test = eval.then(|| mean_psnr(g, &test_rays, &data.test, &render));
-        if test.is_some() || s.iteration % 50 == 0 {
-            log.push((*s, test));
-        }
+    let out = recon_voxel(&a.scene, &job, &mut |s, test| {
         if let Some(b) = &bar {
             b.set_position(s.iteration as u64);
             b.set_message(format!(
@@ -279,34 +197,29 @@ fn run_voxel(a: VoxelArgs) -> Result<()> {
             );
         }
         !interrupted()
-    })?;
+    })
+    .map_err(flag_error)?;
     if let Some(b) = bar {
         b.finish_and_clear();
     }
-    voxel::save(&grid, &a.output)?;
-    let test_psnr = if data.test.is_empty() {
-        None
-    } else {
-        Some(mean_psnr(&grid, &test_rays, &data.test, &render))
-    };
-    if let Some(s) = last {
-        // The last row carries the final test PSNR (and the size after the final prune).
-        log.retain(|r| r.0.iteration != s.iteration);
-        let s = TrainStep {
-            allocated: grid.allocated(),
-            ..s
-        };
-        log.push((s, test_psnr));
+    if out.batch < a.batch {
+        eprintln!(
+            "note: --batch {} is more than the {} training pixels; used {}",
+            a.batch, out.batch, out.batch
+        );
     }
-    write_log(&a.output, &log)?;
+    let grid = &out.grid;
+    voxel::save(grid, &a.output)?;
+    write_log(&a.output, &out.log)?;
     let dense = (a.res as u64 + 1).pow(3);
+    let outcome = out.outcome;
     if a.report.json {
         println!(
             "{}",
             json!({"done": true, "output": a.output, "iterations": outcome.iterations,
-                "seconds": outcome.seconds, "load_seconds": load_s, "test_psnr": test_psnr,
-                "allocated": grid.allocated(), "dense": dense, "res": grid.res(),
-                "stopped": outcome.stopped})
+                "seconds": outcome.seconds, "load_seconds": out.load_seconds,
+                "test_psnr": out.test_psnr, "allocated": grid.allocated(), "dense": dense,
+                "res": grid.res(), "stopped": outcome.stopped})
         );
     } else {
         println!(
@@ -318,9 +231,7 @@ fn run_voxel(a: VoxelArgs) -> Result<()> {
             grid.allocated(),
             dense,
             100.0 * grid.allocated() as f64 / dense as f64,
-            test_psnr
-                .map(|p| format!("{p:.2} dB"))
-                .unwrap_or_else(|| "n/a (no test views)".into()),
+            psnr_text(out.test_psnr),
             a.output.display()
         );
     }
@@ -330,96 +241,10 @@ fn run_voxel(a: VoxelArgs) -> Result<()> {
     Ok(())
 }
 
-/// Smallest and largest `--bound` as a multiple of the cameras' median distance from
-/// where they look: a box a thousandth of that distance is smaller than a pixel of any
-/// view, one a thousand times larger puts the scene in a single cell.
-const BOUND_RANGE: (f32, f32) = (1e-3, 1e3);
-
-/// Checks `--bound` against the cameras: within [`BOUND_RANGE`] times their distance
-/// `dist` (when that is known) and a box that `f32` can hold around `center`.
-pub(super) fn check_bound(b: f32, center: Vec3, dist: f32) -> Result<()> {
-    if dist.is_finite() && dist > 0.0 {
-        let (lo, hi) = (BOUND_RANGE.0 * dist, BOUND_RANGE.1 * dist);
-        if !(lo..=hi).contains(&b) {
-            bail!(
-                "--bound {b:?} must be between {lo} and {hi} ({:e} to {:e} times the cameras' \
-                 median distance {dist} from where they look)",
-                BOUND_RANGE.0,
-                BOUND_RANGE.1
-            );
-        }
-    }
-    check_box(center, b).map_err(|e| anyhow::anyhow!("--bound {b:?}: {e}"))
-}
-
-/// Errors unless `center ± half` is a finite box whose sides `f32` can tell apart from a
-/// point (64 distinct values per axis at least).
-fn check_box(center: Vec3, half: f32) -> std::result::Result<(), String> {
-    let (min, max) = (center - Vec3::splat(half), center + Vec3::splat(half));
-    if !(min.is_finite() && max.is_finite()) {
-        return Err(format!("the box around {center} is not finite"));
-    }
-    let ulp = center.abs().max_element().max(f32::MIN_POSITIVE) * f32::EPSILON;
-    if 2.0 * half < 64.0 * ulp {
-        return Err(format!(
-            "a box of half side {half} around {center} is too small for f32"
-        ));
-    }
-    Ok(())
-}
-
-/// The resolutions of the coarse-to-fine schedule: from 64 (or `res / 2` when that is
-/// at least 32 and `res` less than 128, or `res` itself for small grids) doubling to
-/// `res`.
-fn levels(res: u32) -> Vec<u32> {
-    let mut r = if res >= 128 {
-        64
-    } else if res / 2 >= 32 {
-        res / 2
-    } else {
-        res
-    };
-    let mut v = vec![r];
-    while r < res {
-        r = (2 * r).min(res);
-        v.push(r);
-    }
-    v
-}
-
-/// What `recon voxel` uses where the flags say nothing, by kind of dataset.
-struct SceneDefaults {
-    /// Half the box's side over the cameras' median distance.
-    box_factor: f32,
-    tv_density: f32,
-    tv_sh: f32,
-    sparsity: f32,
-}
-
-impl SceneDefaults {
-    fn for_dataset(data: &Dataset) -> SceneDefaults {
-        if data.white_background {
-            // An object on white: a box around the object, no regularization.
-            SceneDefaults {
-                box_factor: 0.4,
-                tv_density: 0.0,
-                tv_sh: 0.0,
-                sparsity: 0.0,
-            }
-        } else {
-            // Real photos show the room around the object, which the box must reach
-            // (fox: only 62% of a view's rays meet a 0.4 box; the rest can only be
-            // white). 43 fox views from one side let the grid explain each photo with
-            // floaters in front of its camera (held-out 13 dB at 64³); these terms gave
-            // 19.5 dB.
-            SceneDefaults {
-                box_factor: 1.0,
-                tv_density: 1e-5,
-                tv_sh: 1e-6,
-                sparsity: 1e-2,
-            }
-        }
-    }
+/// A test PSNR for the summary line: `"31.20 dB"` or why there is none.
+pub(super) fn psnr_text(p: Option<f64>) -> String {
+    p.map(|p| format!("{p:.2} dB"))
+        .unwrap_or_else(|| "n/a (no test views)".into())
 }
 
 /// Writes `<model>.log.csv` (iteration, training seconds, resolution, allocated slots,
@@ -501,27 +326,6 @@ fn render_settings(step: f32) -> Result<RenderSettings> {
         .validate()
         .map_err(|e| anyhow::anyhow!("--step: {e}"))?;
     Ok(render)
-}
-
-/// Every pixel of every view as a ray and its color.
-fn pixels(views: &[View]) -> (Vec<Ray>, Vec<[f32; 3]>) {
-    let mut rays = Vec::new();
-    let mut colors = Vec::new();
-    for v in views {
-        rays.extend(v.camera.rays());
-        colors.extend_from_slice(&v.rgb);
-    }
-    (rays, colors)
-}
-
-/// Mean PSNR of `views`, each rendered along its rays `rays[i]`.
-fn mean_psnr(grid: &Grid, rays: &[Vec<Ray>], views: &[View], render: &RenderSettings) -> f64 {
-    let sum: f64 = rays
-        .iter()
-        .zip(views)
-        .map(|(r, v)| psnr(&voxel::render_rays(grid, r, render), &v.rgb).min(99.0))
-        .sum();
-    sum / views.len() as f64
 }
 
 fn to_image(rgb: &[[f32; 3]], w: u32, h: u32) -> Image {
@@ -614,7 +418,7 @@ pub fn run_view(a: ViewArgs) -> Result<()> {
         (None, _) => None,
     };
     if let (Model::Splat(_, s), Some(d)) = (&mut model, &data) {
-        s.background = super::splat::background(d);
+        s.background = diffsvg::volume::recon::background(d);
     }
     // Cameras first, so that a bad orbit fails before anything is written.
     let orbit_cams = if a.orbit > 0 {
@@ -820,7 +624,7 @@ fn write_gif(frames: &[Image], path: &Path) -> Result<()> {
 
 #[cfg(test)]
 mod tests {
-    use super::{arc_cameras, levels};
+    use super::arc_cameras;
     use diffsvg::glam::Vec3;
     use diffsvg::volume::camera::Camera;
     use diffsvg::volume::dataset::View;
@@ -869,14 +673,5 @@ mod tests {
             "{az:?}"
         );
         assert!(az.iter().all(|&a| !(60.5..299.5).contains(&a)), "{az:?}");
-    }
-
-    #[test]
-    fn coarse_to_fine_levels_start_at_64_and_double() {
-        assert_eq!(levels(256), [64, 128, 256]);
-        assert_eq!(levels(128), [64, 128]);
-        assert_eq!(levels(200), [64, 128, 200]);
-        assert_eq!(levels(64), [32, 64]);
-        assert_eq!(levels(40), [40]);
     }
 }

@@ -25,6 +25,7 @@ pub mod metrics;
 
 use glam::Vec3;
 
+pub mod recon;
 pub(crate) mod rng;
 pub(crate) mod sh;
 pub mod splat;

@@ -1,0 +1,209 @@
+//! 3D reconstruction from posed photos: `recon_voxel` and `recon_splat`, the library's
+//! [`diffsvg::volume::recon`] jobs with the GIL released, a progress callback, and the
+//! model written atomically to a file as the command line writes it.
+
+use std::path::{Path, PathBuf};
+
+use diffsvg::fit::Control;
+use diffsvg::volume::recon::{
+    SplatJob, VoxelJob, recon_splat as lib_splat, recon_voxel as lib_voxel,
+};
+use diffsvg::volume::{splat, voxel};
+use numpy::PyArray2;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+use crate::error::{bad, to_py};
+use crate::jobs::Progress;
+
+/// Refuses an output path without the extension `ext` or that is a folder, before a long
+/// run rather than after it.
+fn check_output(path: &Path, ext: &str) -> PyResult<()> {
+    match path.extension().and_then(|e| e.to_str()) {
+        Some(e) if e.eq_ignore_ascii_case(ext) => {}
+        _ => {
+            return Err(bad(format!(
+                "{}: output must be a .{ext} file",
+                path.display()
+            )));
+        }
+    }
+    if path.is_dir() {
+        return Err(bad(format!("{}: output is a folder", path.display())));
+    }
+    Ok(())
+}
+
+/// A log as a `(rows, 6)` `float64` array; a test PSNR not evaluated is NaN.
+fn log_array<'py>(py: Python<'py>, rows: Vec<Vec<f64>>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    if rows.is_empty() {
+        return Ok(PyArray2::zeros(py, [0, 6], false));
+    }
+    PyArray2::from_vec2(py, &rows).map_err(|e| bad(e.to_string()))
+}
+
+/// Fits a sparse voxel grid (Plenoxels) to a posed-photo folder and writes it to
+/// `output` (`.vox`). Options as `diffsvg recon voxel`'s flags. Returns a dict.
+#[pyfunction]
+#[pyo3(signature = (scene, output, res=128, iters=3000, batch=8192, downscale=1, degree=2,
+    bound=None, step=0.5, tv_density=None, tv_sh=None, sparsity=None, seed=0, eval_every=0,
+    progress=None))]
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn recon_voxel<'py>(
+    py: Python<'py>,
+    scene: PathBuf,
+    output: PathBuf,
+    res: u32,
+    iters: usize,
+    batch: usize,
+    downscale: u32,
+    degree: u32,
+    bound: Option<f32>,
+    step: f32,
+    tv_density: Option<f32>,
+    tv_sh: Option<f32>,
+    sparsity: Option<f32>,
+    seed: u64,
+    eval_every: usize,
+    progress: Option<Py<PyAny>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    check_output(&output, "vox")?;
+    let job = VoxelJob {
+        res,
+        iters,
+        batch,
+        downscale,
+        degree,
+        bound,
+        step,
+        tv_density,
+        tv_sh,
+        sparsity,
+        seed,
+        eval_every,
+    };
+    job.validate().map_err(to_py)?;
+    let mut prog = Progress::new(progress);
+    let out = py.detach(|| {
+        lib_voxel(&scene, &job, &mut |s, test| {
+            prog.call(|d| {
+                d.set_item("iteration", s.iteration)?;
+                d.set_item("loss", s.loss)?;
+                d.set_item("psnr", s.psnr)?;
+                d.set_item("rays_per_second", s.rays_per_second)?;
+                d.set_item("res", s.res)?;
+                d.set_item("allocated", s.allocated)?;
+                d.set_item("seconds", s.elapsed)?;
+                d.set_item("test_psnr", test)
+            }) == Control::Continue
+        })
+    });
+    prog.finish()?;
+    let out = out.map_err(to_py)?;
+    py.detach(|| voxel::save(&out.grid, &output))
+        .map_err(to_py)?;
+    let rows = out
+        .log
+        .iter()
+        .map(|(s, t)| {
+            vec![
+                s.iteration as f64,
+                s.elapsed as f64,
+                s.res as f64,
+                s.allocated as f64,
+                s.psnr as f64,
+                t.unwrap_or(f64::NAN),
+            ]
+        })
+        .collect();
+    let d = PyDict::new(py);
+    d.set_item("output", output)?;
+    d.set_item("iterations", out.outcome.iterations)?;
+    d.set_item("stopped", out.outcome.stopped)?;
+    d.set_item("seconds", out.outcome.seconds)?;
+    d.set_item("load_seconds", out.load_seconds)?;
+    d.set_item("test_psnr", out.test_psnr)?;
+    d.set_item("res", out.grid.res())?;
+    d.set_item("allocated", out.grid.allocated())?;
+    d.set_item("batch", out.batch)?;
+    d.set_item("log", log_array(py, rows)?)?;
+    Ok(d)
+}
+
+/// Fits 3D Gaussians to a posed-photo folder and writes them to `output` (`.ply`, the
+/// layout Gaussian-splatting viewers read). Options as `diffsvg recon splat`'s flags.
+/// Returns a dict.
+#[pyfunction]
+#[pyo3(signature = (scene, output, iters=5000, downscale=1, max_gaussians=300_000,
+    initial=50_000, degree=3, bound=None, seed=0, eval_every=0, progress=None))]
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn recon_splat<'py>(
+    py: Python<'py>,
+    scene: PathBuf,
+    output: PathBuf,
+    iters: usize,
+    downscale: u32,
+    max_gaussians: usize,
+    initial: usize,
+    degree: u32,
+    bound: Option<f32>,
+    seed: u64,
+    eval_every: usize,
+    progress: Option<Py<PyAny>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    check_output(&output, "ply")?;
+    let job = SplatJob {
+        iters,
+        downscale,
+        max_gaussians,
+        initial,
+        degree,
+        bound,
+        seed,
+        eval_every,
+    };
+    job.validate().map_err(to_py)?;
+    let mut prog = Progress::new(progress);
+    let out = py.detach(|| {
+        lib_splat(&scene, &job, &mut |s, test| {
+            prog.call(|d| {
+                d.set_item("iteration", s.iteration)?;
+                d.set_item("loss", s.loss)?;
+                d.set_item("psnr", s.psnr)?;
+                d.set_item("gaussians", s.gaussians)?;
+                d.set_item("sh_degree", s.sh_degree)?;
+                d.set_item("seconds", s.elapsed)?;
+                d.set_item("test_psnr", test)
+            }) == Control::Continue
+        })
+    });
+    prog.finish()?;
+    let out = out.map_err(to_py)?;
+    py.detach(|| splat::save(&out.model, &output))
+        .map_err(to_py)?;
+    let rows = out
+        .log
+        .iter()
+        .map(|(s, t)| {
+            vec![
+                s.iteration as f64,
+                s.elapsed as f64,
+                s.gaussians as f64,
+                s.sh_degree as f64,
+                s.psnr as f64,
+                t.unwrap_or(f64::NAN),
+            ]
+        })
+        .collect();
+    let d = PyDict::new(py);
+    d.set_item("output", output)?;
+    d.set_item("iterations", out.outcome.iterations)?;
+    d.set_item("stopped", out.outcome.stopped)?;
+    d.set_item("seconds", out.outcome.seconds)?;
+    d.set_item("load_seconds", out.load_seconds)?;
+    d.set_item("test_psnr", out.test_psnr)?;
+    d.set_item("gaussians", out.model.len())?;
+    d.set_item("undistorted", out.undistorted)?;
+    d.set_item("log", log_array(py, rows)?)?;
+    Ok(d)
+}

@@ -1,0 +1,125 @@
+"""3D reconstruction from Python: recon_voxel and recon_splat give the command line's model
+file bit for bit, report progress, stop when asked, and refuse bad input by name."""
+
+import json
+
+import numpy as np
+import pytest
+
+import diffsvg
+from conftest import run_cli
+
+
+def write_scene(root, n_train=6, n_test=2, size=8):
+    """A tiny NeRF-synthetic folder: cameras on a circle around the origin looking at it,
+    photos of a gray ball over white (the ball's disc drawn where the pinhole sees it)."""
+    fov = 0.7
+    for split, n, phase in [("train", n_train, 0.0), ("test", n_test, 1.3)]:
+        (root / split).mkdir(parents=True)
+        frames = []
+        for i in range(n):
+            a = phase + 2 * np.pi * i / n
+            pos = 4.0 * np.array([np.cos(a), np.sin(a), 0.5])
+            z = pos / np.linalg.norm(pos)
+            x = np.cross([0.0, 0.0, 1.0], z)
+            x /= np.linalg.norm(x)
+            y = np.cross(z, x)
+            m = np.eye(4)
+            m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = x, y, z, pos
+            # Pixel centers' angle from the axis; the ball (radius 1) subtends asin(1/|p|).
+            f = 0.5 * size / np.tan(fov / 2)
+            c = (np.arange(size) + 0.5 - size / 2) / f
+            r = np.hypot(c[None, :], c[:, None])
+            inside = np.arctan(r) < np.arcsin(1.0 / np.linalg.norm(pos))
+            img = np.ones((size, size, 4), np.float32)
+            img[inside, :3] = 0.3
+            diffsvg.save_png(img, root / split / f"r_{i}.png")
+            frames.append({"file_path": f"./{split}/r_{i}", "transform_matrix": m.tolist()})
+        (root / f"transforms_{split}.json").write_text(
+            json.dumps({"camera_angle_x": fov, "frames": frames}))
+    return root
+
+
+def cli_summary(*args):
+    out = run_cli(*args, "--json").stdout
+    return json.loads(out.strip().splitlines()[-1])
+
+
+def test_recon_voxel_equals_the_cli(tmp_path):
+    scene = write_scene(tmp_path / "ball")
+    seen = []
+    info = diffsvg.recon_voxel(scene, tmp_path / "py.vox", res=16, iters=60, batch=256,
+                               eval_every=20, progress=seen.append)
+    cli = cli_summary("recon", "voxel", "--scene", scene, "-o", tmp_path / "cli.vox",
+                      "--res", "16", "--iters", "60", "--batch", "256", "--eval-every", "20")
+    assert (tmp_path / "py.vox").read_bytes() == (tmp_path / "cli.vox").read_bytes()
+    assert info["test_psnr"] == cli["test_psnr"]
+    assert info["allocated"] == cli["allocated"] and info["res"] == cli["res"] == 16
+    assert info["iterations"] == 60 and not info["stopped"]
+    # The ball is learned: clearly better than an empty (all white) model.
+    photos = [diffsvg.load_image(p)[..., :3] for p in sorted((scene / "test").glob("*.png"))]
+    empty = np.mean([-10 * np.log10(np.mean((1 - p) ** 2)) for p in photos])
+    assert info["test_psnr"] > empty + 3, (info["test_psnr"], empty)
+    assert [s["iteration"] for s in seen] == list(range(1, 61))
+    assert [s["iteration"] for s in seen if s["test_psnr"] is not None] == [20, 40]
+    log = info["log"]
+    assert log.shape[1] == 6 and log[-1, 0] == 60 and log[-1, 5] == info["test_psnr"]
+    # Rows at the evaluations (20, 40), every 50 iterations and at the end.
+    assert log[:, 0].tolist() == [20, 40, 50, 60]
+    assert np.isnan(log[:, 5]).tolist() == [False, False, True, False]
+    # The written file is one `diffsvg view` reads.
+    run_cli("view", tmp_path / "py.vox", "--scene", scene, "-o", tmp_path / "views")
+
+
+def test_recon_splat_equals_the_cli_and_stops(tmp_path):
+    scene = write_scene(tmp_path / "ball")
+    info = diffsvg.recon_splat(scene, tmp_path / "py.ply", iters=40, initial=200, seed=3)
+    cli = cli_summary("recon", "splat", "--scene", scene, "-o", tmp_path / "cli.ply",
+                      "--iters", "40", "--initial", "200", "--seed", "3")
+    assert (tmp_path / "py.ply").read_bytes() == (tmp_path / "cli.ply").read_bytes()
+    assert info["test_psnr"] == cli["test_psnr"] and info["gaussians"] == cli["gaussians"]
+    assert info["undistorted"] is None
+    stopped = diffsvg.recon_splat(scene, tmp_path / "stop.ply", iters=40, initial=200,
+                                  progress=lambda s: s["iteration"] < 5)
+    assert stopped["stopped"] and stopped["iterations"] == 5
+    assert (tmp_path / "stop.ply").exists()
+
+
+def test_recon_refuses_bad_input_by_name(tmp_path):
+    scene = write_scene(tmp_path / "ball")
+    cases = [
+        (dict(res=4), "res 4 must be between 8"),
+        (dict(degree=7), "degree 7 must be 0 to 3"),
+        (dict(bound=-1.0), "bound -1"),
+        (dict(bound=1e30), "bound 1e30 must be between"),
+        (dict(step=0.0), "step 0"),
+    ]
+    for kwargs, message in cases:
+        with pytest.raises(diffsvg.DiffsvgError, match=message):
+            diffsvg.recon_voxel(scene, tmp_path / "m.vox", iters=2, **kwargs)
+    with pytest.raises(diffsvg.DiffsvgError, match="max_gaussians 0"):
+        diffsvg.recon_splat(scene, tmp_path / "m.ply", max_gaussians=0)
+    with pytest.raises(diffsvg.DiffsvgError, match=r"m\.png: output must be a \.vox"):
+        diffsvg.recon_voxel(scene, tmp_path / "m.png")
+    with pytest.raises((FileNotFoundError, diffsvg.DiffsvgError), match="no-such-scene"):
+        diffsvg.recon_splat(tmp_path / "no-such-scene", tmp_path / "m.ply")
+    (scene / "transforms_train.json").write_text("{ not json")
+    with pytest.raises(diffsvg.DiffsvgError, match="transforms_train.json"):
+        diffsvg.recon_voxel(scene, tmp_path / "m.vox", iters=2)
+    # Nothing was written by any refused run.
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ball"]
+
+
+def test_recon_progress_exception_is_raised(tmp_path):
+    scene = write_scene(tmp_path / "ball")
+
+    class Boom(Exception):
+        pass
+
+    def cb(step):
+        if step["iteration"] == 3:
+            raise Boom("stop at 3")
+
+    with pytest.raises(Boom, match="stop at 3"):
+        diffsvg.recon_voxel(scene, tmp_path / "m.vox", res=8, iters=10, batch=16, progress=cb)
+    assert not (tmp_path / "m.vox").exists()
