@@ -33,7 +33,7 @@ use super::coverage::{Cells, backward_line, coverage_row, coverage_slopes_row};
 use super::paint::PaintEval;
 use super::prepare::{ItemKind, Op, Prepared, item_rect, prepare, stroke_outline};
 use super::render::{
-    Area, BAND_ROWS, BandRenderer, RenderOptions, RowScratch, composite_layer, over,
+    Area, BAND_ROWS, BandRenderer, RenderOptions, RowScratch, composite_layer, covered_span, over,
 };
 use super::stroke::NONE;
 use crate::image_io::Image;
@@ -473,7 +473,11 @@ fn record_row(
     let colors = &mut sc.colors[..n];
     coverage_row(wrow, item.evenodd, covs);
     coverage_slopes_row(wrow, item.evenodd, ups, downs);
-    item.paint.row(x0, y, colors);
+    // Colors only where some coverage is (where `over` reads them), over the same
+    // columns as the forward pass's `composite_row`, so the bits agree.
+    if let Some((a, b)) = covered_span(covs) {
+        item.paint.row(x0 + a, y, &mut colors[a..b]);
+    }
     for col in 0..n {
         if wrow[col] == 0.0 && !item.grid_aligned {
             continue;

@@ -389,9 +389,9 @@ fn ceil_non_negative(x: f64) -> f64 {
     if t < x { t + 1.0 } else { t }
 }
 
-/// `x.floor()` for any `x`.
+/// `x.floor()` for any `x`, without the library call that baseline x86-64 makes of it.
 #[inline]
-fn floor_f64(x: f64) -> f64 {
+pub(crate) fn floor_f64(x: f64) -> f64 {
     if x.abs() < 4.5e15 {
         let t = (x as i64) as f64;
         if t > x { t - 1.0 } else { t }
@@ -400,9 +400,9 @@ fn floor_f64(x: f64) -> f64 {
     }
 }
 
-/// `x.floor()`.
+/// `x.floor()`, without the library call that baseline x86-64 makes of it.
 #[inline]
-fn floor_f32(x: f32) -> f32 {
+pub(crate) fn floor_f32(x: f32) -> f32 {
     if x.abs() < 8.0e6 {
         let t = (x as i32) as f32;
         if t > x { t - 1.0 } else { t }

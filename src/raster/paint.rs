@@ -10,6 +10,7 @@
 //! `t = 0` and the end circle `(c, r)` at `t = 1` with a non-negative radius. Where no such
 //! circle exists the pixel is left unpainted.
 
+use super::coverage::{floor_f32, floor_f64};
 use super::jet::{Jet, Scalar};
 use crate::scene::geom::dist;
 use crate::scene::{Affine, Gradient, GradientKind, Paint, Point, Spread, Stop, apply, invert};
@@ -61,6 +62,9 @@ struct RowStops {
     offsets: Vec<f32>,
     /// Straight RGBA per stop (stop opacity in alpha).
     colors: Vec<[f32; 4]>,
+    /// Per pair of neighbouring stops, the change of each channel per unit of `t` (0
+    /// between stops at the same offset).
+    rates: Vec<[f32; 4]>,
     /// The steepest change of any channel per unit of `t` between two stops; infinite at
     /// a hard stop (two offsets equal, colors not).
     slope: f64,
@@ -84,7 +88,22 @@ impl RowStops {
                 });
             }
         }
+        let rates = stops
+            .windows(2)
+            .map(|w| {
+                let (a, b) = (color(&w[0]), color(&w[1]));
+                let span = w[1].offset - w[0].offset;
+                std::array::from_fn(|k| {
+                    if span > 0.0 {
+                        ((b[k] - a[k]) / span) as f32
+                    } else {
+                        0.0
+                    }
+                })
+            })
+            .collect();
         RowStops {
+            rates,
             seamless: stop_color(stops, 0.0) == stop_color(stops, 1.0),
             offsets: stops.iter().map(|s| s.offset as f32).collect(),
             colors: stops.iter().map(|s| color(s).map(|v| v as f32)).collect(),
@@ -92,8 +111,10 @@ impl RowStops {
         }
     }
 
-    /// Straight RGBA at `t` in `[0, 1]`, as [`stop_color`] computes it, in `f32`.
-    #[inline]
+    /// Straight RGBA at `t` in `[0, 1]`, as [`stop_color`] computes it, in `f32`: the
+    /// color of the stop below plus the distance from it times the pair's rate (no
+    /// division per pixel; gradients have few stops, so the pair is found by a scan).
+    #[inline(always)]
     fn color(&self, t: f32) -> [f32; 4] {
         let (o, c) = (&self.offsets, &self.colors);
         let n = o.len();
@@ -103,19 +124,28 @@ impl RowStops {
         if t >= o[n - 1] {
             return c[n - 1];
         }
-        let j = o.partition_point(|&v| v <= t).clamp(1, n - 1);
+        // The first stop above `t`; one exists since `t < o[n − 1]` (a NaN stops at 1).
+        let mut j = 1;
+        while j < n - 1 && o[j] <= t {
+            j += 1;
+        }
         let i = j - 1;
-        let span = o[j] - o[i];
-        let u = if span > 0.0 { (t - o[i]) / span } else { 1.0 };
-        let (a, b) = (c[i], c[j]);
-        [0, 1, 2, 3].map(|k| a[k] + u * (b[k] - a[k]))
+        let u = t - o[i];
+        let (a, r) = (c[i], self.rates[i]);
+        [
+            a[0] + u * r[0],
+            a[1] + u * r[1],
+            a[2] + u * r[2],
+            a[3] + u * r[3],
+        ]
     }
 }
 
 /// How large `slope · max|t|` over a row may be for the row to be evaluated in `f32`
 /// ([`RowStops::slope`]). The error of `t` computed as `t₀ + i·Δt` in `f32` is at most
 /// `4·max|t|·2⁻²⁴`; premultiplied channels change at most twice as fast as straight ones;
-/// the `f32` interpolation and premultiplication add about `10⁻⁶`. With the bound 4 the
+/// the `f32` interpolation (a rate rounded to `f32`, one product, one sum) and the
+/// premultiplication add about `10⁻⁶`. With the bound 4 the
 /// worst case is `2·4·4·2⁻²⁴ + 10⁻⁶ ≈ 2.9·10⁻⁶`, below 1/1024 of an 8-bit color level
 /// (`3.8·10⁻⁶`); rows beyond it, `repeat` gradients whose ends differ in color (their
 /// seams are jumps) and hard stops are evaluated per pixel in `f64`.
@@ -293,15 +323,16 @@ impl GradientEval {
             let a = c[3] * op;
             [c[0] * a, c[1] * a, c[2] * a, a]
         };
+        // `t − 2⌊t/2⌋` is exact (Sterbenz), as `rem_euclid(2)` is, without its call.
         let f32_spread = |t: f32| match self.spread {
             Spread::Pad => t.clamp(0.0, 1.0),
             Spread::Reflect => {
-                let m = t.rem_euclid(2.0);
+                let m = t - 2.0 * floor_f32(0.5 * t);
                 if m <= 1.0 { m } else { 2.0 - m }
             }
             // Only without a seam (see `fast`): a `t` off by a rounding across an integer
             // then changes the color by no more than elsewhere.
-            Spread::Repeat => t - t.floor(),
+            Spread::Repeat => t - floor_f32(t),
         };
         let fast = self.spread != Spread::Repeat || self.row_stops.seamless;
         let geo = geometry(&self.kind);
@@ -320,14 +351,36 @@ impl GradientEval {
                     return;
                 }
             }
-            Geometry::Radial(_) => {
+            Geometry::Radial(v) => {
+                let solver = RadialRow::new(v);
+                let fast_radial = fast && self.row_stops.slope <= F32_SLOPE_T;
+                if let (Some(r), true) = (&solver, fast_radial) {
+                    // The common case, in a loop of its own for the compiler. The spread
+                    // is taken in `f64` (exactly), so only the spread `t` in `[0, 1]` is
+                    // rounded to `f32`: its error, at most 2⁻²⁵, times the slope is what
+                    // the colors can be off by, whatever `t` was.
+                    let mode = self.spread;
+                    for (i, o) in out.iter_mut().enumerate() {
+                        let k = i as f64;
+                        let q = [q0[0] + k * dq[0], q0[1] + k * dq[1]];
+                        *o = match r.t(q) {
+                            Some(t) => premul(self.row_stops.color(spread(mode, t).0 as f32)),
+                            None => [0.0; 4],
+                        };
+                    }
+                    return;
+                }
                 for (i, o) in out.iter_mut().enumerate() {
                     let k = i as f64;
                     let q = [q0[0] + k * dq[0], q0[1] + k * dq[1]];
-                    *o = match gradient_t(&geo, q) {
+                    let t = match &solver {
+                        Some(r) => r.t(q),
+                        None => gradient_t(&geo, q),
+                    };
+                    *o = match t {
                         None => [0.0; 4],
-                        Some(t) if fast && self.row_stops.slope * t.abs() <= F32_SLOPE_T => {
-                            premul(self.row_stops.color(f32_spread(t as f32)))
+                        Some(t) if fast_radial => {
+                            premul(self.row_stops.color(spread(self.spread, t).0 as f32))
                         }
                         Some(t) => {
                             self.premultiplied(stop_color(&self.stops, spread(self.spread, t).0))
@@ -474,6 +527,65 @@ impl Geometry<f64> {
     }
 }
 
+/// [`gradient_t`] of a radial gradient with its per-gradient terms computed once, for
+/// rows of pixels: the same quadratic in `f64`, solved for the larger root only unless
+/// its radius is negative. Not for the near-linear case (`a ≈ 0`).
+struct RadialRow {
+    /// Focal point, `c − f`, `r − fr` and `fr`.
+    f: Point,
+    cd: Point,
+    dr: f64,
+    fr: f64,
+    a: f64,
+    inv_a: f64,
+}
+
+impl RadialRow {
+    fn new([cx, cy, r, fx, fy, fr]: [f64; 6]) -> Option<RadialRow> {
+        let (cdx, cdy) = (cx - fx, cy - fy);
+        let dr = r - fr;
+        let a = cdx * cdx + cdy * cdy - dr * dr;
+        // As in `gradient_t`, which handles the near-linear case.
+        if a.abs() < 1e-9 * (r * r).max(1e-12) {
+            return None;
+        }
+        Some(RadialRow {
+            f: [fx, fy],
+            cd: [cdx, cdy],
+            dr,
+            fr,
+            a,
+            inv_a: 1.0 / a,
+        })
+    }
+
+    /// `t` at gradient-space point `q`; `None` where the gradient is undefined.
+    #[inline]
+    fn t(&self, q: Point) -> Option<f64> {
+        let (px, py) = (q[0] - self.f[0], q[1] - self.f[1]);
+        let b = px * self.cd[0] + py * self.cd[1] + self.fr * self.dr;
+        let c = px * px + py * py - self.fr * self.fr;
+        let disc = b * b - self.a * c;
+        if disc < 0.0 {
+            return None;
+        }
+        let s = disc.sqrt();
+        // The larger root is `(b + s)/a` for `a > 0`, `(b − s)/a` for `a < 0`.
+        let (hi, lo) = if self.a > 0.0 {
+            ((b + s) * self.inv_a, (b - s) * self.inv_a)
+        } else {
+            ((b - s) * self.inv_a, (b + s) * self.inv_a)
+        };
+        if self.fr + hi * self.dr >= 0.0 {
+            Some(hi)
+        } else if self.fr + lo * self.dr >= 0.0 {
+            Some(lo)
+        } else {
+            None
+        }
+    }
+}
+
 /// The gradient parameter `t` at gradient-space point `q`, before spreading. `None` where
 /// a two-point conical gradient is undefined.
 pub(crate) fn gradient_t<S: Scalar>(g: &Geometry<S>, q: Point) -> Option<S> {
@@ -536,9 +648,10 @@ pub(crate) fn spread<S: Scalar>(mode: Spread, t: S) -> (f64, f64) {
                 (v, 1.0)
             }
         }
-        Spread::Repeat => (v - v.floor(), 1.0),
+        // `v − 2⌊v/2⌋` is exact (Sterbenz), the value `rem_euclid(2)` gives.
+        Spread::Repeat => (v - floor_f64(v), 1.0),
         Spread::Reflect => {
-            let m = v.rem_euclid(2.0);
+            let m = v - 2.0 * floor_f64(0.5 * v);
             if m <= 1.0 { (m, 1.0) } else { (2.0 - m, -1.0) }
         }
     }

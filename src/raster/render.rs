@@ -346,12 +346,24 @@ pub(crate) fn composite_row(
         }
         return;
     }
-    item.paint.row(x0, y, colors);
-    for ((&cov, d), s) in covs.iter().zip(dst.iter_mut()).zip(colors.iter()) {
+    let Some((a, b)) = covered_span(covs) else {
+        return;
+    };
+    item.paint.row(x0 + a, y, &mut colors[a..b]);
+    for ((&cov, d), s) in covs[a..b].iter().zip(&mut dst[a..b]).zip(&colors[a..b]) {
         if cov > 0.0 {
             over(d, *s, cov);
         }
     }
+}
+
+/// The columns `a..b` from the first to the last pixel of a row with coverage above 0,
+/// the only ones whose paint is needed; `None` when there is none.
+#[inline]
+pub(crate) fn covered_span(covs: &[f32]) -> Option<(usize, usize)> {
+    let a = covs.iter().position(|&c| c > 0.0)?;
+    let b = covs.iter().rposition(|&c| c > 0.0)? + 1;
+    Some((a, b))
 }
 
 /// A rectangle of pixels `[x0, x0 + w) × [y0, y0 + h)` (device coordinates) stored
