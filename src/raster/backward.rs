@@ -297,7 +297,11 @@ fn backward_bands(
             Some(img) => img[first * BAND_ROWS * w..(end * BAND_ROWS).min(h) * w]
                 .par_chunks_mut(BAND_ROWS * w)
                 .enumerate()
-                .map(|(k, base)| run(first + k, base))
+                .map(|(k, base)| {
+                    // Already zero; see `render_prepared` for why it is written anyway.
+                    base.fill([0.0; 4]);
+                    run(first + k, base)
+                })
                 .collect(),
             None => (first..end)
                 .into_par_iter()
