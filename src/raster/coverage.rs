@@ -241,9 +241,10 @@ pub(crate) fn backward_line(
     // Next integer grid line strictly after `v` in the direction of `d`, as a parameter.
     let next = |v: f64, o: f64, d: f64| -> f64 {
         if d > 0.0 {
-            (v.floor() + 1.0 - o) / d
+            (floor_f64(v) + 1.0 - o) / d
         } else if d < 0.0 {
-            (v.ceil() - 1.0 - o) / d
+            // `ceil(v)` is `−floor(−v)`, exactly.
+            (-floor_f64(-v) - 1.0 - o) / d
         } else {
             f64::INFINITY
         }
