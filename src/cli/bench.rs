@@ -101,6 +101,34 @@ fn median_ms(runs: usize, mut f: impl FnMut()) -> f64 {
     t[t.len() / 2]
 }
 
+/// Milliseconds `f` takes.
+fn timed_ms(f: impl FnOnce()) -> f64 {
+    let s = Instant::now();
+    f();
+    s.elapsed().as_secs_f64() * 1e3
+}
+
+/// Median of the milliseconds each of `fs` reports (each times its own work) over `runs`
+/// rounds, after one warm-up round; in each round every function runs once, in turn.
+fn interleaved_medians_ms(runs: usize, fs: &mut [Box<dyn FnMut() -> f64 + '_>]) -> Vec<f64> {
+    for f in fs.iter_mut() {
+        f();
+    }
+    let mut times = vec![Vec::with_capacity(runs.max(1)); fs.len()];
+    for _ in 0..runs.max(1) {
+        for (f, t) in fs.iter_mut().zip(&mut times) {
+            t.push(f());
+        }
+    }
+    times
+        .into_iter()
+        .map(|mut t| {
+            t.sort_by(|a, b| a.total_cmp(b));
+            t[t.len() / 2]
+        })
+        .collect()
+}
+
 /// Runs `diffsvg bench`.
 pub fn run(a: Args) -> Result<()> {
     if let Some(w) = a.what {
@@ -149,16 +177,27 @@ pub fn run(a: Args) -> Result<()> {
         let path = std::path::Path::new(name);
         let scene = from_tree(tree, path, *sizing)?;
         let opts = RenderOptions::default();
-        let reference = median_ms(a.runs, || {
-            let _ = render_resvg(tree, path, *sizing);
-        });
-        let mut row = format!("| {name} | {reference:.2} |");
-        for (k, (_, pool)) in pools.iter().enumerate() {
-            let t = pool.install(|| {
-                median_ms(a.runs, || {
-                    let _ = diffsvg::raster::render(&scene, &opts);
+        // resvg and each thread count take turns, run by run, so that a slower or faster
+        // spell of a shared machine weighs on every column alike.
+        // A pool's run is timed inside the pool, without handing the work to its threads.
+        let mut contenders: Vec<Box<dyn FnMut() -> f64 + '_>> = vec![Box::new(|| {
+            timed_ms(|| {
+                let _ = render_resvg(tree, path, *sizing);
+            })
+        })];
+        for (_, pool) in &pools {
+            contenders.push(Box::new(|| {
+                pool.install(|| {
+                    timed_ms(|| {
+                        let _ = diffsvg::raster::render(&scene, &opts);
+                    })
                 })
-            });
+            }));
+        }
+        let medians = interleaved_medians_ms(a.runs, &mut contenders);
+        let reference = medians[0];
+        let mut row = format!("| {name} | {reference:.2} |");
+        for (k, &t) in medians[1..].iter().enumerate() {
             let ratio = reference / t;
             ratios[k].push(ratio);
             row += &format!(" {t:.2} | {ratio:.2}× |");
