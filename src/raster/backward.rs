@@ -33,7 +33,8 @@ use super::coverage::{Cells, backward_line, coverage_row, coverage_slopes_row};
 use super::paint::PaintEval;
 use super::prepare::{ItemKind, Op, Prepared, item_rect, prepare, stroke_outline};
 use super::render::{
-    Area, BAND_ROWS, BandRenderer, RenderOptions, RowScratch, composite_layer, covered_span, over,
+    Area, BAND_ROWS, BandRenderer, RenderOptions, RowScratch, blank_canvas, composite_layer,
+    covered_span, over,
 };
 use super::stroke::NONE;
 use crate::image_io::Image;
@@ -218,7 +219,7 @@ pub struct Fused {
 /// [`render_prepared`](super::render_prepared) followed by the loss and
 /// [`backward_with_stats`].
 pub fn render_and_backward_fused(scene: &Scene, p: &Prepared, loss: &dyn BandLoss) -> Fused {
-    let mut image = Image::new(p.width, p.height);
+    let mut image = blank_canvas(p.width, p.height);
     let out = backward_bands(scene, p, Some(&mut image), &|y0, _, rendered| {
         let mut d = vec![[0.0f32; 4]; rendered.len()];
         let sums = loss.band(y0, rendered, &mut d);
@@ -297,11 +298,7 @@ fn backward_bands(
             Some(img) => img[first * BAND_ROWS * w..(end * BAND_ROWS).min(h) * w]
                 .par_chunks_mut(BAND_ROWS * w)
                 .enumerate()
-                .map(|(k, base)| {
-                    // Already zero; see `render_prepared` for why it is written anyway.
-                    base.fill([0.0; 4]);
-                    run(first + k, base)
-                })
+                .map(|(k, base)| run(first + k, base))
                 .collect(),
             None => (first..end)
                 .into_par_iter()
