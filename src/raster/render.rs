@@ -346,6 +346,7 @@ pub(crate) fn composite_row(
         // stores (`over` gives `s·1 + d·0`, the same bits).
         let s = solid.premul;
         let opaque = s[3] == 1.0;
+        let run = [s; 8];
         let mut cc = covs.chunks_exact(8);
         let mut dd = dst.chunks_exact_mut(8);
         for (c, d) in (&mut cc).zip(&mut dd) {
@@ -353,7 +354,9 @@ pub(crate) fn composite_row(
                 continue;
             }
             if opaque && all_one(c) {
-                d.fill(s);
+                // From a row of eight colors: whole 16-byte stores (a fill of `s` is split
+                // into smaller ones around the known alpha of 1).
+                d.copy_from_slice(&run);
                 continue;
             }
             for (&cov, d) in c.iter().zip(d) {
