@@ -14,6 +14,7 @@ use super::coverage::{floor_f32, floor_f64};
 use super::jet::{Jet, Scalar};
 use crate::scene::geom::dist;
 use crate::scene::{Affine, Gradient, GradientKind, Paint, Point, Spread, Stop, apply, invert};
+use wide::f64x2;
 
 /// A paint ready for per-pixel evaluation.
 #[derive(Clone, Debug)]
@@ -360,13 +361,31 @@ impl GradientEval {
                     // rounded to `f32`: its error, at most 2⁻²⁵, times the slope is what
                     // the colors can be off by, whatever `t` was.
                     let mode = self.spread;
-                    for (i, o) in out.iter_mut().enumerate() {
-                        let k = i as f64;
-                        let q = [q0[0] + k * dq[0], q0[1] + k * dq[1]];
-                        *o = match r.t(q) {
-                            Some(t) => premul(self.row_stops.color(spread(mode, t).0 as f32)),
-                            None => [0.0; 4],
-                        };
+                    // Per run of up to 64 pixels: first the spread `t`s, two at a time
+                    // (the same values as one at a time) in a loop short enough for the
+                    // square roots of several pairs to overlap, then the colors.
+                    const RUN: usize = 64;
+                    let mut ts = [0.0f32; RUN];
+                    for (run, outs) in out.chunks_mut(RUN).enumerate() {
+                        let base = (run * RUN) as f64;
+                        let mut defined = 0u64;
+                        for j in (0..outs.len()).step_by(2) {
+                            let k = f64x2::new([base + j as f64, base + j as f64 + 1.0]);
+                            let qx = f64x2::splat(q0[0]) + k * f64x2::splat(dq[0]);
+                            let qy = f64x2::splat(q0[1]) + k * f64x2::splat(dq[1]);
+                            let (t, ok) = r.t2(qx, qy);
+                            let t = spread2(mode, t).to_array();
+                            ts[j] = t[0] as f32;
+                            ts[j + 1] = t[1] as f32;
+                            defined |= (ok.to_bitmask() as u64) << j;
+                        }
+                        for (j, o) in outs.iter_mut().enumerate() {
+                            *o = if defined & (1 << j) != 0 {
+                                premul(self.row_stops.color(ts[j]))
+                            } else {
+                                [0.0; 4]
+                            };
+                        }
                     }
                     return;
                 }
@@ -582,6 +601,60 @@ impl RadialRow {
             Some(lo)
         } else {
             None
+        }
+    }
+}
+
+impl RadialRow {
+    /// [`t`](Self::t) at two points, lane by lane with the same bits: the values, and a
+    /// mask of the lanes where `t` is defined (the others hold anything).
+    #[inline]
+    fn t2(&self, qx: f64x2, qy: f64x2) -> (f64x2, f64x2) {
+        let splat = f64x2::splat;
+        let zero = f64x2::ZERO;
+        let (px, py) = (qx - splat(self.f[0]), qy - splat(self.f[1]));
+        let b = px * splat(self.cd[0]) + py * splat(self.cd[1]) + splat(self.fr * self.dr);
+        let c = px * px + py * py - splat(self.fr * self.fr);
+        let disc = b * b - splat(self.a) * c;
+        // `disc ≥ 0` is false for NaN, as `disc < 0` then `sqrt` make `None` one at a time.
+        let real = disc.simd_ge(zero);
+        let s = real.select(disc, zero).sqrt();
+        let inv_a = splat(self.inv_a);
+        let (hi, lo) = if self.a > 0.0 {
+            ((b + s) * inv_a, (b - s) * inv_a)
+        } else {
+            ((b - s) * inv_a, (b + s) * inv_a)
+        };
+        let (fr, dr) = (splat(self.fr), splat(self.dr));
+        let hi_ok = (fr + hi * dr).simd_ge(zero);
+        let lo_ok = (fr + lo * dr).simd_ge(zero);
+        (hi_ok.select(hi, lo), real & (hi_ok | lo_ok))
+    }
+}
+
+/// [`spread`]'s `t` at two values, with the same bits; lanes of 2⁵¹ or more in size (and
+/// NaN) are spread one at a time.
+#[inline]
+fn spread2(mode: Spread, v: f64x2) -> f64x2 {
+    let one = f64x2::ONE;
+    if !v.abs().simd_lt(f64x2::splat(2f64.powi(51))).all() {
+        return f64x2::new(v.to_array().map(|x| spread(mode, x).0));
+    }
+    // `floor`, exactly: rounding to the nearest integer by adding and taking away
+    // 1.5·2⁵², then one less where that rounded up.
+    let floor = |x: f64x2| {
+        let m = f64x2::splat(1.5 * 2f64.powi(52));
+        let r = (x + m) - m;
+        r - (r.simd_gt(x) & one)
+    };
+    match mode {
+        Spread::Pad => v
+            .simd_le(f64x2::ZERO)
+            .select(f64x2::ZERO, v.simd_ge(one).select(one, v)),
+        Spread::Repeat => v - floor(v),
+        Spread::Reflect => {
+            let m = v - f64x2::splat(2.0) * floor(f64x2::splat(0.5) * v);
+            m.simd_le(one).select(m, f64x2::splat(2.0) - m)
         }
     }
 }
@@ -806,6 +879,81 @@ mod tests {
         assert!((spread(Spread::Repeat, 1.25).0 - 0.25).abs() < 1e-12);
         assert!((spread(Spread::Reflect, 1.25).0 - 0.75).abs() < 1e-12);
         assert!((spread(Spread::Reflect, -0.25).0 - 0.25).abs() < 1e-12);
+    }
+
+    /// Two lanes at a time give the bits of one at a time: radial `t` (focal points
+    /// inside and outside the circle, so `a` of both signs and undefined points) and
+    /// every spread, near integers, far out and at NaN.
+    #[test]
+    fn pairs_have_the_bits_of_single_pixels() {
+        let mut seed = 11u64;
+        let mut rnd = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for _ in 0..2000 {
+            let g = [
+                rnd() * 100.0,
+                rnd() * 100.0,
+                1.0 + rnd() * 50.0,
+                rnd() * 150.0 - 25.0,
+                rnd() * 150.0 - 25.0,
+                rnd() * 10.0,
+            ];
+            let Some(r) = RadialRow::new(g) else {
+                continue;
+            };
+            let q = [
+                [rnd() * 300.0 - 100.0, rnd() * 300.0 - 100.0],
+                [rnd() * 100.0, rnd() * 100.0],
+            ];
+            let (t, ok) = r.t2(
+                f64x2::new([q[0][0], q[1][0]]),
+                f64x2::new([q[0][1], q[1][1]]),
+            );
+            let (t, ok) = (t.to_array(), ok.to_bitmask());
+            for lane in 0..2 {
+                match r.t(q[lane]) {
+                    Some(v) => {
+                        assert!(ok & (1 << lane) != 0);
+                        assert_eq!(v.to_bits(), t[lane].to_bits());
+                    }
+                    None => assert_eq!(ok & (1 << lane), 0),
+                }
+            }
+        }
+        let values = [
+            0.0,
+            -0.0,
+            1.0,
+            -1.0,
+            0.5,
+            2.0,
+            3.0 - 1e-15,
+            -7.25,
+            1e9 + 0.5,
+            3e15,
+            1e300,
+        ];
+        for mode in [Spread::Pad, Spread::Repeat, Spread::Reflect] {
+            for pair in values.windows(2) {
+                let got = spread2(mode, f64x2::new([pair[0], pair[1]])).to_array();
+                for lane in 0..2 {
+                    let want = spread(mode, pair[lane]).0;
+                    assert_eq!(
+                        got[lane].to_bits(),
+                        want.to_bits(),
+                        "{mode:?} {}",
+                        pair[lane]
+                    );
+                }
+            }
+            assert!(
+                spread2(mode, f64x2::new([f64::NAN, 0.5])).to_array()[1] == spread(mode, 0.5).0
+            );
+        }
     }
 
     #[test]
