@@ -474,10 +474,15 @@ fn record_row(
     let colors = &mut sc.colors[..n];
     coverage_row(wrow, item.evenodd, covs);
     coverage_slopes_row(wrow, item.evenodd, ups, downs);
-    // Colors only where some coverage is (where `over` reads them), over the same
-    // columns as the forward pass's `composite_row`, so the bits agree.
-    if let Some((a, b)) = covered_span(covs) {
-        item.paint.row(x0 + a, y, &mut colors[a..b]);
+    // A gradient's colors only where some coverage is (where `over` reads them), over
+    // the same columns as the forward pass's `composite_row`, so the bits agree.
+    match &item.paint {
+        PaintEval::Solid(s) => colors.fill(s.premul),
+        PaintEval::Gradient(_) => {
+            if let Some((a, b)) = covered_span(covs) {
+                item.paint.row(x0 + a, y, &mut colors[a..b]);
+            }
+        }
     }
     for col in 0..n {
         if wrow[col] == 0.0 && !item.grid_aligned {
