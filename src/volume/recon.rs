@@ -2,7 +2,7 @@
 //! that `diffsvg recon voxel` / `recon splat` and the Python package share: the scene's
 //! box from the cameras, defaults by kind of dataset (objects on white or real photos),
 //! the coarse-to-fine and densification schedules scaled to the run's length, and the
-//! held-out evaluation. Training itself is [`voxel::train`] and [`splat::train`].
+//! held-out evaluation. Training itself is [`voxel::train()`] and [`splat::train()`].
 //!
 //! Options are checked before any file is read; an option out of range is
 //! [`Error::Setting`] naming the option as its field is named here (`bound`,
