@@ -68,8 +68,42 @@ enum Command {
     Compare(compare::Args),
 }
 
-/// Runs the command line; returns the process exit code.
+/// Exit status when stdout was closed early (`diffsvg bench | head`): what a shell reports
+/// for a process ended by SIGPIPE, as other tools in a pipeline end.
+const CLOSED_STDOUT: u8 = 128 + 13;
+
+/// Whether a panic's message is `println!` finding stdout closed.
+fn is_closed_stdout(message: Option<&str>) -> bool {
+    message.is_some_and(|m| m.starts_with("failed printing to stdout") && m.contains("Broken pipe"))
+}
+
+/// Runs the command line; returns the process exit code. A closed stdout ends the run
+/// quietly with [`CLOSED_STDOUT`] (the panic `println!` raises is caught, without its
+/// message; destructors run, so no temporary file is left).
 pub fn main() -> ExitCode {
+    let previous = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        if !is_closed_stdout(info.payload_as_str()) {
+            previous(info);
+        }
+    }));
+    match std::panic::catch_unwind(run) {
+        Ok(code) => code,
+        Err(payload) => {
+            let message = payload
+                .downcast_ref::<String>()
+                .map(String::as_str)
+                .or_else(|| payload.downcast_ref::<&str>().copied());
+            if is_closed_stdout(message) {
+                ExitCode::from(CLOSED_STDOUT)
+            } else {
+                std::panic::resume_unwind(payload)
+            }
+        }
+    }
+}
+
+fn run() -> ExitCode {
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,
         Err(e) if e.use_stderr() => {

@@ -258,3 +258,24 @@ fn loss_and_grad_commands() {
     let r = diffsvg(&["loss", s(&a), s(&target), "--loss", "huber"]);
     assert_eq!(r.status.code(), Some(2));
 }
+
+/// `diffsvg bench … | head`: a reader that closes the pipe early ends the run quietly with
+/// the status a shell gives a process ended by SIGPIPE, not a panic message.
+#[test]
+fn a_closed_stdout_ends_the_run_quietly() {
+    use std::process::{Command, Stdio};
+    let glyph = root().join("svg-samples/glyphs/0.svg");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_diffsvg"))
+        .args(["bench", s(&glyph), "--runs", "1", "--sizes", "8"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("runs diffsvg");
+    // Close the reading end before anything is printed.
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(err.trim().is_empty(), "nothing on stderr: {err}");
+    assert_eq!(out.status.code(), Some(141), "{err}");
+}
