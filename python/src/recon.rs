@@ -34,12 +34,41 @@ fn check_output(path: &Path, ext: &str) -> PyResult<()> {
     Ok(())
 }
 
-/// A log as a `(rows, 6)` `float64` array; a test PSNR not evaluated is NaN.
-fn log_array<'py>(py: Python<'py>, rows: Vec<Vec<f64>>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+/// A log as a `(rows, 6)` `float64` array.
+fn log_array<'py>(
+    py: Python<'py>,
+    rows: impl Iterator<Item = [f64; 6]>,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let rows: Vec<Vec<f64>> = rows.map(Vec::from).collect();
     if rows.is_empty() {
         return Ok(PyArray2::zeros(py, [0, 6], false));
     }
     PyArray2::from_vec2(py, &rows).map_err(|e| bad(e.to_string()))
+}
+
+/// A test PSNR not evaluated is NaN in a log.
+fn nan_if_none(t: Option<f64>) -> f64 {
+    t.unwrap_or(f64::NAN)
+}
+
+/// The keys every reconstruction returns: `output`; `iterations`, `stopped` and
+/// `seconds` (how training ended); `load_seconds` and `test_psnr`; the `log` from `rows`.
+fn summary<'py>(
+    py: Python<'py>,
+    output: PathBuf,
+    (iterations, stopped, seconds): (usize, bool, f32),
+    (load_seconds, test_psnr): (f64, Option<f64>),
+    rows: impl Iterator<Item = [f64; 6]>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("output", output)?;
+    d.set_item("iterations", iterations)?;
+    d.set_item("stopped", stopped)?;
+    d.set_item("seconds", seconds)?;
+    d.set_item("load_seconds", load_seconds)?;
+    d.set_item("test_psnr", test_psnr)?;
+    d.set_item("log", log_array(py, rows)?)?;
+    Ok(d)
 }
 
 /// Fits a sparse voxel grid (Plenoxels) to a posed-photo folder and writes it to
@@ -102,31 +131,23 @@ pub(crate) fn recon_voxel<'py>(
     let out = out.map_err(to_py)?;
     py.detach(|| voxel::save(&out.grid, &output))
         .map_err(to_py)?;
-    let rows = out
-        .log
-        .iter()
-        .map(|(s, t)| {
-            vec![
-                s.iteration as f64,
-                s.elapsed as f64,
-                s.res as f64,
-                s.allocated as f64,
-                s.psnr as f64,
-                t.unwrap_or(f64::NAN),
-            ]
-        })
-        .collect();
-    let d = PyDict::new(py);
-    d.set_item("output", output)?;
-    d.set_item("iterations", out.outcome.iterations)?;
-    d.set_item("stopped", out.outcome.stopped)?;
-    d.set_item("seconds", out.outcome.seconds)?;
-    d.set_item("load_seconds", out.load_seconds)?;
-    d.set_item("test_psnr", out.test_psnr)?;
+    let rows = out.log.iter().map(|(s, t)| {
+        let (res, allocated) = (s.res as f64, s.allocated as f64);
+        [
+            s.iteration as f64,
+            s.elapsed as f64,
+            res,
+            allocated,
+            s.psnr as f64,
+            nan_if_none(*t),
+        ]
+    });
+    let o = &out.outcome;
+    let ended = (o.iterations, o.stopped, o.seconds);
+    let d = summary(py, output, ended, (out.load_seconds, out.test_psnr), rows)?;
     d.set_item("res", out.grid.res())?;
     d.set_item("allocated", out.grid.allocated())?;
     d.set_item("batch", out.batch)?;
-    d.set_item("log", log_array(py, rows)?)?;
     Ok(d)
 }
 
@@ -181,29 +202,21 @@ pub(crate) fn recon_splat<'py>(
     let out = out.map_err(to_py)?;
     py.detach(|| splat::save(&out.model, &output))
         .map_err(to_py)?;
-    let rows = out
-        .log
-        .iter()
-        .map(|(s, t)| {
-            vec![
-                s.iteration as f64,
-                s.elapsed as f64,
-                s.gaussians as f64,
-                s.sh_degree as f64,
-                s.psnr as f64,
-                t.unwrap_or(f64::NAN),
-            ]
-        })
-        .collect();
-    let d = PyDict::new(py);
-    d.set_item("output", output)?;
-    d.set_item("iterations", out.outcome.iterations)?;
-    d.set_item("stopped", out.outcome.stopped)?;
-    d.set_item("seconds", out.outcome.seconds)?;
-    d.set_item("load_seconds", out.load_seconds)?;
-    d.set_item("test_psnr", out.test_psnr)?;
+    let rows = out.log.iter().map(|(s, t)| {
+        let (gaussians, degree) = (s.gaussians as f64, s.sh_degree as f64);
+        [
+            s.iteration as f64,
+            s.elapsed as f64,
+            gaussians,
+            degree,
+            s.psnr as f64,
+            nan_if_none(*t),
+        ]
+    });
+    let o = &out.outcome;
+    let ended = (o.iterations, o.stopped, o.seconds);
+    let d = summary(py, output, ended, (out.load_seconds, out.test_psnr), rows)?;
     d.set_item("gaussians", out.model.len())?;
     d.set_item("undistorted", out.undistorted)?;
-    d.set_item("log", log_array(py, rows)?)?;
     Ok(d)
 }
