@@ -520,8 +520,13 @@ mod tests {
     fn running_sums_have_the_bits_of_the_sequential_sum() {
         // Sparse deltas (runs of zeros of every length, ±0, tiny and huge values), rows of
         // every length around the chunk size.
-        let mut rng = crate::volume::rng::Rng(7);
-        let mut next = || (rng.next() >> 32) as u32;
+        let mut seed = 7u64;
+        let mut next = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 33) as u32
+        };
         for len in 0..40 {
             for _ in 0..50 {
                 let mut deltas: Vec<f32> = (0..len)
