@@ -556,6 +556,32 @@ mod tests {
     }
 
     #[test]
+    fn large_canvases_are_written_zeros_and_render_the_same() {
+        // 2048 × 1100 pixels of 16 bytes: above the size whose zeros are written rather
+        // than allocated zeroed.
+        let (w, h) = (2048u32, 1100u32);
+        assert!(w as usize * h as usize * 16 >= 32 << 20);
+        let blank = blank_canvas(w, h);
+        assert_eq!(
+            (blank.width, blank.height, blank.data.len()),
+            (w, h, 2048 * 1100)
+        );
+        assert!(blank.data.iter().all(|p| *p == [0.0; 4]));
+        let mut s = rect_scene(100.25, 1000.5, 1900.0, 1090.0, FillRule::NonZero);
+        s.width = w;
+        s.height = h;
+        let img = render(&s, &RenderOptions::default());
+        let area = (1900.0 - 100.25) * (1090.0 - 1000.5);
+        assert!(
+            (total_alpha(&img) - area).abs() < 1e-2,
+            "{}",
+            total_alpha(&img)
+        );
+        assert_eq!(img.get(1000, 1050), [1.0, 0.0, 0.0, 1.0]);
+        assert_eq!(img.get(1000, 10), [0.0; 4]);
+    }
+
+    #[test]
     fn bands_do_not_change_bits_with_threads() {
         let s = rect_scene(3.3, 2.7, 37.1, 38.9, FillRule::NonZero);
         let a = render(&s, &RenderOptions::default());
