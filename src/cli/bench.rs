@@ -97,8 +97,7 @@ fn median_ms(runs: usize, mut f: impl FnMut()) -> f64 {
             s.elapsed().as_secs_f64() * 1e3
         })
         .collect();
-    t.sort_by(|a, b| a.total_cmp(b));
-    t[t.len() / 2]
+    diffsvg::metrics::median(&mut t)
 }
 
 /// Milliseconds `f` takes.
@@ -122,10 +121,7 @@ fn interleaved_medians_ms(runs: usize, fs: &mut [Box<dyn FnMut() -> f64 + '_>]) 
     }
     times
         .into_iter()
-        .map(|mut t| {
-            t.sort_by(|a, b| a.total_cmp(b));
-            t[t.len() / 2]
-        })
+        .map(|mut t| diffsvg::metrics::median(&mut t))
         .collect()
 }
 

@@ -318,14 +318,7 @@ pub(super) fn write_psnr_plot(
 
 /// Rendering with `step` voxels between samples, or an error naming the flag.
 fn render_settings(step: f32) -> Result<RenderSettings> {
-    let render = RenderSettings {
-        step,
-        ..RenderSettings::default()
-    };
-    render
-        .validate()
-        .map_err(|e| anyhow::anyhow!("--step: {e}"))?;
-    Ok(render)
+    RenderSettings::with_step(step).map_err(|e| anyhow::anyhow!("--step: {e}"))
 }
 
 fn to_image(rgb: &[[f32; 3]], w: u32, h: u32) -> Image {

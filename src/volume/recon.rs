@@ -221,15 +221,9 @@ impl VoxelJob {
     }
 
     fn render(&self) -> Result<RenderSettings> {
-        let render = RenderSettings {
-            step: self.step,
-            ..RenderSettings::default()
-        };
         // The renderer's message starts with the option's name.
-        render
-            .validate()
-            .map_err(|e| setting("step", e.trim_start_matches("step ").into()))?;
-        Ok(render)
+        RenderSettings::with_step(self.step)
+            .map_err(|e| setting("step", e.trim_start_matches("step ").into()))
     }
 }
 
@@ -548,8 +542,7 @@ fn scene_box(
 ) -> Result<(Vec3, f32)> {
     let (center, dist) = data.focus();
     if let Some(b) = bound {
-        check_positive(b)?;
-        // A box far too large or small for the cameras (or for f32) would start from
+        // Positive and finite already (`validate`). A box far too large or small for the cameras (or for f32) would start from
         // cells or Gaussians of infinite or zero size.
         check_bound(b, center, dist).map_err(|e| setting("bound", e))?;
         return Ok((center, b));

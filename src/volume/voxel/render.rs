@@ -55,6 +55,17 @@ impl Default for RenderSettings {
 }
 
 impl RenderSettings {
+    /// The default settings with samples `step` voxels apart; an error (naming the
+    /// value) when `step` is not a finite number of at least 0.01.
+    pub fn with_step(step: f32) -> Result<RenderSettings, String> {
+        let render = RenderSettings {
+            step,
+            ..RenderSettings::default()
+        };
+        render.validate()?;
+        Ok(render)
+    }
+
     /// Checks the settings; the message names the bad value.
     pub fn validate(&self) -> Result<(), String> {
         if !(self.step.is_finite() && self.step >= 0.01) {
