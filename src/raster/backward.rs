@@ -681,9 +681,13 @@ fn band_backward(
                     let go = g[k];
                     let d = cell.below;
                     let gd: f32 = (0..4).map(|c| go[c] * d[c]).sum();
-                    let gsrc: f32 = (0..4).map(|c| go[c] * s[c]).sum();
-                    let g_cov = gsrc - s[3] * gd;
-                    gw.data[row * acc.w + col] = [g_cov * cell.up as f32, g_cov * cell.down as f32];
+                    // Inside a shape both slopes are 0: `gw` keeps its zero.
+                    if cell.up != 0 || cell.down != 0 {
+                        let gsrc: f32 = (0..4).map(|c| go[c] * s[c]).sum();
+                        let g_cov = gsrc - s[3] * gd;
+                        gw.data[row * acc.w + col] =
+                            [g_cov * cell.up as f32, g_cov * cell.down as f32];
+                    }
                     if cov == 0.0 {
                         continue;
                     }
@@ -711,31 +715,28 @@ fn band_backward(
                 // Boundary gradients of the edges crossing this band.
                 let (ylo, yhi) = (acc.y0 as f64, (acc.y0 as usize + acc.h) as f64);
                 let mut list = Vec::new();
-                for &(s, n) in &it.rings {
-                    for k in 0..n {
-                        let ia = s + k;
-                        let ib = s + if k + 1 == n { 0 } else { k + 1 };
-                        let (a, b) = (it.pts[ia], it.pts[ib]);
-                        // Inclusive: an edge on the band's boundary line counts in
-                        // both bands, each for the cells on its side.
-                        if a[1].max(b[1]) < ylo || a[1].min(b[1]) > yhi {
-                            continue;
-                        }
-                        let (mut da, mut db) = ([0.0; 2], [0.0; 2]);
-                        backward_line(&gw, a, b, &mut da, &mut db);
-                        if da != [0.0; 2] {
-                            list.push((ia as u32, da));
-                        }
-                        if db != [0.0; 2] {
-                            list.push((ib as u32, db));
-                        }
+                it.for_each_edge_near(ylo, yhi, |ia, ib| {
+                    let (a, b) = (it.pts[ia], it.pts[ib]);
+                    // Inclusive: an edge on the band's boundary line counts in both
+                    // bands, each for the cells on its side.
+                    if a[1].max(b[1]) < ylo || a[1].min(b[1]) > yhi {
+                        return;
                     }
-                }
+                    let [da, db] = backward_line(&gw, a, b);
+                    if da != [0.0; 2] {
+                        list.push((ia as u32, da));
+                    }
+                    if db != [0.0; 2] {
+                        list.push((ib as u32, db));
+                    }
+                });
                 if !list.is_empty() {
                     out.verts.push((*item as u32, list));
                 }
                 for cell in item_cells {
-                    gw.data[cell.row as usize * acc.w + cell.col as usize] = [0.0; 2];
+                    if cell.up != 0 || cell.down != 0 {
+                        gw.data[cell.row as usize * acc.w + cell.col as usize] = [0.0; 2];
+                    }
                 }
             }
         }

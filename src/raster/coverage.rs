@@ -192,7 +192,7 @@ fn line_local(acc: &mut Cells<f32>, p0: Point, p1: Point) {
     }
 }
 
-/// Backward of [`accumulate_line`]: adds `∂L/∂p0` and `∂L/∂p1`.
+/// Backward of [`accumulate_line`]: `∂L/∂p0` and `∂L/∂p1`.
 ///
 /// `g` holds, per cell, the loss gradient with respect to the cell's winding integral as
 /// two one-sided values: `[∂L/∂w⁺, ∂L/∂w⁻]` for `w` increasing and decreasing (they differ
@@ -205,16 +205,26 @@ fn line_local(acc: &mut Cells<f32>, p0: Point, p1: Point) {
 /// low cell's `∂L/∂w⁺` and the high cell's `∂L/∂w⁻`, averaged. So at kinks the result is the
 /// mean of the one-sided derivatives, which is what a central difference measures, and a
 /// shape whose edges sit exactly on pixel boundaries still gets a useful gradient.
-pub(crate) fn backward_line(
-    g: &Cells<[f32; 2]>,
-    p0: Point,
-    p1: Point,
-    dp0: &mut Point,
-    dp1: &mut Point,
-) {
+///
+/// Returns `[∂L/∂p0, ∂L/∂p1]`, each `+0.0` where nothing reaches it.
+#[inline]
+pub(crate) fn backward_line(g: &Cells<[f32; 2]>, p0: Point, p1: Point) -> [Point; 2] {
     let (dx, dy) = (p1[0] - p0[0], p1[1] - p0[1]);
+    let (s0, s1) = line_weights(g, p0, dx, dy);
+    // `0.0 + …`: the bits of accumulating into zeroed gradients (a `−0.0` product adds
+    // up to `+0.0`).
+    let n = [-dy, dx];
+    [
+        [0.0 + s0 * n[0], 0.0 + s0 * n[1]],
+        [0.0 + s1 * n[0], 0.0 + s1 * n[1]],
+    ]
+}
+
+/// `(Σ G ∫(1 − t), Σ G ∫ t)` of [`backward_line`]'s segment, returned in registers (a
+/// gradient written through a pointer and read back whole stalled the caller).
+fn line_weights(g: &Cells<[f32; 2]>, p0: Point, dx: f64, dy: f64) -> (f64, f64) {
     if (dx == 0.0 && dy == 0.0) || g.w == 0 || g.h == 0 {
-        return;
+        return (0.0, 0.0);
     }
     let ylo = g.y0 as f64;
     let yhi = ylo + g.h as f64;
@@ -226,7 +236,7 @@ pub(crate) fn backward_line(
     for (o, d, lo, hi) in [(p0[0], dx, xlo, xhi), (p0[1], dy, ylo, yhi)] {
         if d == 0.0 {
             if o < lo || o > hi {
-                return;
+                return (0.0, 0.0);
             }
         } else {
             let (a, b) = ((lo - o) / d, (hi - o) / d);
@@ -235,7 +245,7 @@ pub(crate) fn backward_line(
         }
     }
     if t1 <= t0 {
-        return;
+        return (0.0, 0.0);
     }
     let at = |t: f64| [p0[0] + dx * t, p0[1] + dy * t];
     // Next integer grid line strictly after `v` in the direction of `d`, as a parameter.
@@ -315,11 +325,7 @@ pub(crate) fn backward_line(
             ny += step_y;
         }
     }
-    let n = [-dy, dx];
-    dp0[0] += s0 * n[0];
-    dp0[1] += s0 * n[1];
-    dp1[0] += s1 * n[0];
-    dp1[1] += s1 * n[1];
+    (s0, s1)
 }
 
 /// One-sided slopes `(d cov/dw⁺, d cov/dw⁻)` of the coverage rule at `w` (see
@@ -670,8 +676,7 @@ mod tests {
         let mut grad = vec![[0.0; 2]; n];
         for i in 0..n {
             let j = (i + 1) % n;
-            let (mut a, mut b) = ([0.0; 2], [0.0; 2]);
-            backward_line(g, poly[i], poly[j], &mut a, &mut b);
+            let [a, b] = backward_line(g, poly[i], poly[j]);
             for c in 0..2 {
                 grad[i][c] += a[c];
                 grad[j][c] += b[c];

@@ -221,17 +221,13 @@ impl<'a> BandRenderer<'a> {
             self.clean = true;
         }
         let (ylo, yhi) = (top as f64, bottom as f64);
-        for &(s, n) in &item.rings {
-            let ring = &item.pts[s..s + n];
-            for k in 0..n {
-                let a = ring[k];
-                let c = ring[if k + 1 == n { 0 } else { k + 1 }];
-                if a[1].max(c[1]) <= ylo || a[1].min(c[1]) >= yhi {
-                    continue;
-                }
-                accumulate_line(&mut self.acc, a, c, w);
+        let acc = &mut self.acc;
+        item.for_each_edge_near(ylo, yhi, |ia, ic| {
+            let (a, c) = (item.pts[ia], item.pts[ic]);
+            if a[1].max(c[1]) > ylo && a[1].min(c[1]) < yhi {
+                accumulate_line(acc, a, c, w);
             }
-        }
+        });
         true
     }
 
