@@ -582,6 +582,55 @@ mod tests {
         Scene::from_svg_str(svg, "t.svg", Sizing::Natural).unwrap()
     }
 
+    #[test]
+    fn edge_runs_skip_only_edges_away_from_the_band() {
+        // Two rings (an outer circle and a star-shaped hole) of many short edges each.
+        let svg = r#"<svg xmlns="http://www.w3.org/2000/svg" width="200" height="200">
+          <path fill-rule="evenodd" d="M100 10 A90 90 0 1 1 99.9 10 Z
+            M100 40 L120 90 L170 100 L120 110 L100 160 L80 110 L30 100 L80 90 Z"/></svg>"#;
+        let p = prepare(&load(svg), 0.02, None);
+        let it = &p.items[0];
+        assert_eq!(it.rings.len(), 2);
+        assert!(it.pts.len() > 10 * RUN_EDGES, "{} vertices", it.pts.len());
+        let mut all = Vec::new();
+        for &(s, n) in &it.rings {
+            for k in 0..n {
+                all.push((s + k, s + (k + 1) % n));
+            }
+        }
+        let bands = (0..=420)
+            .map(|k| k as f64 * 0.5)
+            .flat_map(|y| [(y, y), (y, y + 16.0)]);
+        for (ylo, yhi) in bands {
+            let mut seen = Vec::new();
+            it.for_each_edge_near(ylo, yhi, |a, b| seen.push((a, b)));
+            // In ring order, a subsequence of all edges…
+            let mut rest = all.iter();
+            assert!(
+                seen.iter().all(|e| rest.any(|f| f == e)),
+                "band {ylo}..{yhi}"
+            );
+            // …holding every edge that touches the band.
+            for &(a, b) in &all {
+                let (ya, yb) = (it.pts[a][1], it.pts[b][1]);
+                if ya.max(yb) >= ylo && ya.min(yb) <= yhi {
+                    assert!(
+                        seen.contains(&(a, b)),
+                        "band {ylo}..{yhi} lost edge {a}-{b}"
+                    );
+                }
+            }
+            if yhi - ylo < 20.0 {
+                assert!(
+                    seen.len() < all.len() / 2,
+                    "band {ylo}..{yhi}: {} of {}",
+                    seen.len(),
+                    all.len()
+                );
+            }
+        }
+    }
+
     fn rect(dash: &str) -> String {
         format!(
             r#"<svg xmlns="http://www.w3.org/2000/svg" width="40" height="40"><rect x="5" y="5" width="28" height="28" fill="none" stroke="black" stroke-width="3" {dash}/></svg>"#
