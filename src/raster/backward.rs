@@ -97,10 +97,15 @@ fn tape_estimates(p: &Prepared, bands: usize) -> Vec<usize> {
 /// Gradients of one band.
 #[derive(Default)]
 struct BandGrads {
-    /// Per touched item: (vertex, ∂L/∂vertex) pairs in the order found.
-    verts: Vec<(u32, Vec<(u32, Point)>)>,
-    /// Per touched item: paint gradient ([`PaintEval::grad_len`](super::paint::PaintEval::grad_len)).
-    paints: Vec<(u32, Vec<f64>)>,
+    /// `(item, vertex, ∂L/∂vertex)` in the order found (one flat list: no allocation per
+    /// item and band).
+    verts: Vec<(u32, u32, Point)>,
+    /// The touched items, in the order found; their paint gradients
+    /// ([`PaintEval::grad_len`](super::paint::PaintEval::grad_len) values each) follow
+    /// one another in `paint_vals`.
+    paints: Vec<u32>,
+    /// The paint gradients of `paints`, back to back.
+    paint_vals: Vec<f64>,
     /// Per group: ∂L/∂opacity.
     groups: Vec<(u32, f64)>,
     /// Bytes the replay kept for this band.
@@ -124,6 +129,15 @@ impl BackwardStats {
         self.band_bytes_max * self.bands_in_flight
     }
 }
+
+thread_local! {
+    /// Each worker's record of cells, reused from band to band (and step to step): a
+    /// fresh one per band cost allocations, copies as it grew, and page faults.
+    static TAPE_CELLS: std::cell::RefCell<Vec<TapeCell>> = const { std::cell::RefCell::new(Vec::new()) };
+}
+
+/// Largest record of cells a worker keeps between bands, bytes.
+const KEEP_CELL_BYTES: usize = 32 << 20;
 
 /// One pixel of a drawn item kept by the replay.
 #[derive(Clone, Copy)]
@@ -313,15 +327,14 @@ fn backward_bands(
             stats.band_bytes_max = stats.band_bytes_max.max(r.tape_bytes);
             sums[0] += r.sums[0];
             sums[1] += r.sums[1];
-            for (item, list) in r.verts {
-                let g = &mut vert_g[item as usize];
-                for (k, d) in list {
-                    g[k as usize][0] += d[0];
-                    g[k as usize][1] += d[1];
-                }
+            for (item, k, d) in r.verts {
+                let g = &mut vert_g[item as usize][k as usize];
+                g[0] += d[0];
+                g[1] += d[1];
             }
-            for (item, list) in r.paints {
-                for (a, b) in paint_g[item as usize].iter_mut().zip(list) {
+            let mut vals = r.paint_vals.iter();
+            for item in r.paints {
+                for (a, b) in paint_g[item as usize].iter_mut().zip(&mut vals) {
                     *a += b;
                 }
             }
@@ -521,7 +534,8 @@ fn band_backward(
     let base_area = r.band_area();
     let mut layers: Vec<(Area, Vec<[f32; 4]>)> = Vec::new();
     let mut tape: Vec<Rec> = Vec::new();
-    let mut cells: Vec<TapeCell> = Vec::new();
+    let mut cells = TAPE_CELLS.with(|c| c.take());
+    cells.clear();
     let (mut i, mut group_ix) = (0usize, 0usize);
     while i < p.ops.len() {
         match p.ops[i] {
@@ -660,7 +674,9 @@ fn band_backward(
                 // `gw` is all zero between items: only the cells written below are
                 // cleared again after the boundary pass.
                 gw.reshape_zeroed(acc.x0, acc.y0, acc.w, acc.h);
-                let mut pg = vec![0.0f64; it.paint.grad_len()];
+                let pg_at = out.paint_vals.len();
+                out.paint_vals.resize(pg_at + it.paint.grad_len(), 0.0);
+                let pg = &mut out.paint_vals[pg_at..];
                 let solid = match &it.paint {
                     PaintEval::Solid(c) => Some(c.premul),
                     PaintEval::Gradient(_) => None,
@@ -701,7 +717,7 @@ fn band_backward(
                             gs_sum[c] += gs[c];
                         }
                     } else {
-                        it.paint.backward(center, gs, &mut pg);
+                        it.paint.backward(center, gs, pg);
                     }
                     let keep = 1.0 - s[3] * cov;
                     for c in 0..4 {
@@ -709,12 +725,12 @@ fn band_backward(
                     }
                 }
                 if solid.is_some() {
-                    it.paint.backward([0.0; 2], gs_sum, &mut pg);
+                    it.paint.backward([0.0; 2], gs_sum, pg);
                 }
-                out.paints.push((*item as u32, pg));
+                out.paints.push(*item as u32);
                 // Boundary gradients of the edges crossing this band.
                 let (ylo, yhi) = (acc.y0 as f64, (acc.y0 as usize + acc.h) as f64);
-                let mut list = Vec::new();
+                let verts = &mut out.verts;
                 it.for_each_edge_near(ylo, yhi, |ia, ib| {
                     let (a, b) = (it.pts[ia], it.pts[ib]);
                     // Inclusive: an edge on the band's boundary line counts in both
@@ -724,15 +740,12 @@ fn band_backward(
                     }
                     let [da, db] = backward_line(&gw, a, b);
                     if da != [0.0; 2] {
-                        list.push((ia as u32, da));
+                        verts.push((*item as u32, ia as u32, da));
                     }
                     if db != [0.0; 2] {
-                        list.push((ib as u32, db));
+                        verts.push((*item as u32, ib as u32, db));
                     }
                 });
-                if !list.is_empty() {
-                    out.verts.push((*item as u32, list));
-                }
                 for cell in item_cells {
                     if cell.up != 0 || cell.down != 0 {
                         gw.data[cell.row as usize * acc.w + cell.col as usize] = [0.0; 2];
@@ -740,6 +753,10 @@ fn band_backward(
                 }
             }
         }
+    }
+    // Kept for this thread's next band unless it grew past what is worth holding idle.
+    if cells.capacity() * std::mem::size_of::<TapeCell>() <= KEEP_CELL_BYTES {
+        TAPE_CELLS.with(|c| c.replace(cells));
     }
     out
 }

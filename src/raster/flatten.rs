@@ -97,8 +97,23 @@ pub(crate) fn flatten(
     visible: [f64; 4],
     counts: Option<&[u32]>,
 ) -> (Flattened, ChordCounts) {
-    let mut out = Flattened::default();
-    let mut used = Vec::new();
+    // Chord counts first, so that the vertex lists are allocated once.
+    let mut used = Vec::with_capacity(path.subpaths.iter().map(|sp| sp.segments()).sum());
+    for sp in &path.subpaths {
+        for k in 0..sp.segments() {
+            used.push(match counts {
+                Some(c) => c.get(used.len()).copied().unwrap_or(1).max(1),
+                None => chord_count(&path.segment_points(sp, k), tolerance, visible),
+            });
+        }
+    }
+    let verts = path.subpaths.len() + used.iter().map(|&n| n as usize).sum::<usize>();
+    let mut out = Flattened {
+        pts: Vec::with_capacity(verts),
+        src: Vec::with_capacity(verts),
+        corner: Vec::with_capacity(verts),
+        contours: Vec::with_capacity(path.subpaths.len()),
+    };
     let mut seg_ix = 0usize;
     for sp in &path.subpaths {
         let start = out.pts.len();
@@ -111,12 +126,8 @@ pub(crate) fn flatten(
         for k in 0..sp.segments() {
             let first = sp.start + 3 * k;
             let p = path.segment_points(sp, k);
-            let n = match counts {
-                Some(c) => c.get(seg_ix).copied().unwrap_or(1).max(1),
-                None => chord_count(&p, tolerance, visible),
-            };
+            let n = used[seg_ix];
             seg_ix += 1;
-            used.push(n);
             for j in 1..=n {
                 let t = j as f64 / n as f64;
                 out.pts.push(if j == n { p[3] } else { eval(&p, t) });
