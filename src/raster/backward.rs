@@ -688,10 +688,12 @@ fn band_backward(
                     let y = acc.y0 as usize + row;
                     let cov = cell.cov;
                     let x = acc.x0 as usize + col;
-                    let center = [x as f64 + 0.5, y as f64 + 0.5];
+                    // Pixel center, for gradient paints only (through `u32`: the
+                    // conversion from `usize` is a branchy sequence on x86-64).
+                    let center = || [x as u32 as f64 + 0.5, y as u32 as f64 + 0.5];
                     let s = match solid {
                         Some(s) => s,
-                        None => it.paint.at(center),
+                        None => it.paint.at(center()),
                     };
                     let k = ga.index(x, y);
                     let go = g[k];
@@ -717,7 +719,7 @@ fn band_backward(
                             gs_sum[c] += gs[c];
                         }
                     } else {
-                        it.paint.backward(center, gs, pg);
+                        it.paint.backward(center(), gs, pg);
                     }
                     let keep = 1.0 - s[3] * cov;
                     for c in 0..4 {

@@ -1,5 +1,6 @@
 //! Turning a scene into drawable polygons, once per render.
 
+use super::coverage::floor_f64;
 use super::dash::{Dashed, Visible, dash, dash_count};
 use super::flatten::{ChordCounts, Flattened, flatten};
 use super::paint::PaintEval;
@@ -554,8 +555,8 @@ fn item(
     for &(s, n) in &rings {
         for k in 0..n {
             let (a, b) = (pts[s + k], pts[s + (k + 1) % n]);
-            grid_aligned |=
-                (a[0] == b[0] && a[0] == a[0].floor()) || (a[1] == b[1] && a[1] == a[1].floor());
+            grid_aligned |= (a[0] == b[0] && a[0] == floor_f64(a[0]))
+                || (a[1] == b[1] && a[1] == floor_f64(a[1]));
         }
     }
     Some(Item {

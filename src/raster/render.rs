@@ -2,7 +2,7 @@
 
 use rayon::prelude::*;
 
-use super::coverage::{Cells, accumulate_line, coverage_row, integrate_rows};
+use super::coverage::{Cells, accumulate_line, coverage_row, floor_f64, integrate_rows};
 use super::paint::PaintEval;
 use super::prepare::{GroupSpan, Item, Op, Prepared, prepare_forward};
 use crate::image_io::Image;
@@ -205,13 +205,15 @@ impl<'a> BandRenderer<'a> {
         }
         // One pixel of margin around the bounds: the backward pass needs the pixels next to
         // an edge that lies exactly on a pixel boundary.
-        let top = ((b[1].floor() - 1.0).max(self.y0 as f64)) as usize;
-        let bottom = ((b[3].ceil() + 1.0).min((self.y0 + self.rows) as f64)).max(0.0) as usize;
+        // `floor_f64` and `−floor_f64(−x)` are `floor` and `ceil` without a libm call.
+        let top = ((floor_f64(b[1]) - 1.0).max(self.y0 as f64)) as usize;
+        let bottom =
+            ((-floor_f64(-b[3]) + 1.0).min((self.y0 + self.rows) as f64)).max(0.0) as usize;
         if top >= bottom {
             return false;
         }
-        let cx0 = (b[0].floor() - 1.0).max(0.0);
-        let cx1 = b[2].ceil().min(w);
+        let cx0 = (floor_f64(b[0]) - 1.0).max(0.0);
+        let cx1 = (-floor_f64(-b[2])).min(w);
         let cols = (cx1 - cx0) as usize + 2;
         if self.clean {
             self.acc
