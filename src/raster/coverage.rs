@@ -124,7 +124,7 @@ fn line_local(acc: &mut Cells<f32>, p0: Point, p1: Point) {
     let ox = acc.x0 as f64;
     let oy = acc.y0 as f64;
     let (ax, ay, bx, by) = (a[0] - ox, a[1] - oy, b[0] - ox, b[1] - oy);
-    let h = acc.h as f64;
+    let h = from_index(acc.h);
     if by <= 0.0 || ay >= h {
         return;
     }
@@ -136,9 +136,9 @@ fn line_local(acc: &mut Cells<f32>, p0: Point, p1: Point) {
     // Both are non-negative here (`ytop ≥ 0`, `ybot > ytop`): floor and ceil by casts.
     let mut row = to_index(floor_non_negative(ytop));
     let last = to_index(ceil_non_negative(ybot)).min(acc.h);
-    let max_col = (w - 1) as f64;
+    let max_col = from_index(w - 1);
     while row < last {
-        let r = row as f64;
+        let r = from_index(row);
         let dy = (r + 1.0).min(ybot) - r.max(ytop);
         let xnext = if r + 1.0 < ybot {
             x + dxdy * dy
@@ -227,9 +227,9 @@ fn line_weights(g: &Cells<[f32; 2]>, p0: Point, dx: f64, dy: f64) -> (f64, f64) 
         return (0.0, 0.0);
     }
     let ylo = g.y0 as f64;
-    let yhi = ylo + g.h as f64;
+    let yhi = ylo + from_index(g.h);
     let xlo = g.x0 as f64;
-    let xhi = xlo + g.w as f64;
+    let xhi = xlo + from_index(g.w);
     // Parameter range inside the closed box of g (boundary lines count: the cell inside
     // may see a piece lying on them).
     let (mut t0, mut t1) = (0.0f64, 1.0f64);
@@ -396,6 +396,13 @@ fn floor_non_negative(x: f64) -> f64 {
 #[inline]
 fn to_index(x: f64) -> usize {
     (x as i64).max(0) as usize
+}
+
+/// An index or size as an `f64`, through `i64` (one instruction on x86-64, where a
+/// direct `as f64` from `usize` is a branchy sequence); exact below 2⁵³.
+#[inline]
+fn from_index(i: usize) -> f64 {
+    i as i64 as f64
 }
 
 /// `x.ceil()` for `x ≥ 0`.

@@ -7,6 +7,7 @@ use super::paint::PaintEval;
 use super::stroke::{Style, outline};
 use crate::limits::MAX_DASHES_PER_PATH;
 use crate::scene::{FillRule, Node, Path, Point, Scene, Stroke};
+use rayon::prelude::*;
 
 /// Whether an item is a path's fill or its stroke.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -208,14 +209,32 @@ fn prepare_with(
         for_backward,
         tolerance,
     };
+    // Each path's geometry and items depend on that path alone: built in parallel (in
+    // paint order, so the result is the same on any thread count), then placed by the
+    // walk that lays out groups.
+    let mut paths: Vec<&Path> = Vec::new();
+    scene.for_each_path(|q| paths.push(q));
+    let build = |(ix, path): (usize, &&Path)| {
+        let fixed = counts.and_then(|c| c.get(ix)).map(|c| c.as_slice());
+        let size = (scene.width, scene.height);
+        build_path(path, ix, size, tolerance, fixed, for_backward)
+    };
+    let built: Vec<Built> = if paths.len() >= PARALLEL_PATHS {
+        paths.par_iter().enumerate().map(build).collect()
+    } else {
+        paths.iter().enumerate().map(build).collect()
+    };
     let mut b = Builder {
-        tolerance,
-        counts,
+        built: built.into_iter(),
         out: &mut p,
     };
     b.nodes(&scene.nodes);
     p
 }
+
+/// Scenes with at least this many paths are prepared in parallel (below, the threads'
+/// start-up costs more than the work).
+const PARALLEL_PATHS: usize = 16;
 
 /// The pixels an item can touch, `[x0, y0, x1, y1]` (end exclusive, clipped to the
 /// canvas): its box grown as [`BandRenderer::winding`](super::render) grows it (one pixel
@@ -360,16 +379,24 @@ pub(crate) fn flatten_rect(path: &Path, width: u32, height: u32) -> [f64; 4] {
 }
 
 struct Builder<'a> {
-    tolerance: f64,
-    counts: Option<&'a [ChordCounts]>,
+    /// Every path's geometry and items, in paint order.
+    built: std::vec::IntoIter<Built>,
     out: &'a mut Prepared,
+}
+
+/// One path prepared: its geometry and items (in drawing order).
+struct Built {
+    geom: PathGeom,
+    items: [Option<Item>; 2],
+    /// The dash pattern was dropped for a solid stroke.
+    solid_dash: bool,
 }
 
 impl Builder<'_> {
     fn nodes(&mut self, nodes: &[Node]) {
         for n in nodes {
             match n {
-                Node::Path(p) => self.path(p),
+                Node::Path(_) => self.path(),
                 Node::Group(g) => {
                     let group = self.out.groups.len();
                     self.out.groups.push(GroupSpan {
@@ -409,118 +436,127 @@ impl Builder<'_> {
         }
     }
 
-    fn path(&mut self, path: &Path) {
+    fn path(&mut self) {
+        let built = self.built.next().expect("a built path per path node");
         let ix = self.out.geoms.len();
-        let (width, height) = (self.out.width, self.out.height);
-        let keep = self.out.for_backward;
-        let visible = flatten_rect(path, width, height);
-        let fixed = self.counts.and_then(|c| c.get(ix)).map(|c| c.as_slice());
-        let (flat, counts) = flatten(path, self.tolerance, visible, fixed);
-        let mut geom = PathGeom {
-            flat,
-            counts,
-            ..PathGeom::default()
-        };
-        let fill_item = path.fill.as_ref().and_then(|f| {
-            let paint = PaintEval::new(&f.paint, f.opacity)?;
-            let mut pts = Vec::with_capacity(geom.flat.pts.len());
-            let mut src = Vec::with_capacity(if keep { geom.flat.pts.len() } else { 0 });
-            let mut rings = Vec::new();
-            for c in &geom.flat.contours {
-                if c.len >= 3 {
-                    rings.push((pts.len(), c.len));
-                    pts.extend_from_slice(&geom.flat.pts[c.start..c.start + c.len]);
-                    if keep {
-                        src.extend(c.start as u32..(c.start + c.len) as u32);
-                    }
-                }
-            }
-            item(
-                ix,
-                ItemKind::Fill,
-                pts,
-                src,
-                rings,
-                f.rule == FillRule::EvenOdd,
-                paint,
-            )
-        });
-        let mut solid = false;
-        let stroke_item = path.stroke.as_ref().and_then(|s| {
-            if !(s.width > 0.0) {
-                return None;
-            }
-            let paint = PaintEval::new(&s.paint, s.opacity)?;
-            let [a, b, c, d] = s.frame;
-            let inv = frame_inverse(s)?;
-            let to_frame =
-                |q: &Point| [inv[0] * q[0] + inv[2] * q[1], inv[1] * q[0] + inv[3] * q[1]];
-            let fpts: Vec<Point> = geom.flat.pts.iter().map(to_frame).collect();
-            let style = stroke_style(s, self.tolerance, false);
-            // Past the dash limit the pattern is dropped and the stroke drawn solid.
-            let pattern = s.dash.as_ref().filter(|pattern| {
-                let cost = dash_cost(s, pattern, &geom.flat, &fpts, &style, width, height);
-                solid = cost > MAX_DASHES_PER_PATH as f64;
-                !solid
-            });
-            let mut ol = match pattern {
-                Some(pattern) => {
-                    let visible = Visible {
-                        device: &geom.flat.pts,
-                        rect: dash_rect(s, width, height),
-                    };
-                    let dashed = dash(
-                        &fpts,
-                        &geom.flat.corner,
-                        &geom.flat.contours,
-                        pattern,
-                        s.dash_offset,
-                        Some(visible),
-                    );
-                    drop(fpts);
-                    let ol = outline(&dashed.pts, &dashed.corner, &dashed.contours, style);
-                    if keep {
-                        geom.dashed = Some(dashed);
-                    }
-                    ol
-                }
-                None => {
-                    let ol = outline(&fpts, &geom.flat.corner, &geom.flat.contours, style);
-                    drop(fpts);
-                    ol
-                }
-            };
-            // The outline's points become the item's, mapped to device space in place.
-            let pts: Vec<Point> = std::mem::take(&mut ol.pts)
-                .into_iter()
-                .map(|q| [a * q[0] + c * q[1], b * q[0] + d * q[1]])
-                .collect();
-            let rings = std::mem::take(&mut ol.rings);
-            let src = Vec::new();
-            geom.frame_inv = Some(inv);
-            item(ix, ItemKind::Stroke, pts, src, rings, false, paint)
-        });
-        if solid {
+        if built.solid_dash {
             self.out.solid_dashes.push(ix);
         }
-        let mut push = |it: Option<Item>| {
-            if let Some(it) = it {
-                self.out.ops.push(Op::Draw(self.out.items.len()));
-                self.out.items.push(it);
+        for it in built.items.into_iter().flatten() {
+            self.out.ops.push(Op::Draw(self.out.items.len()));
+            self.out.items.push(it);
+        }
+        self.out.geoms.push(built.geom);
+    }
+}
+
+/// Flattens path `ix` (paint order) of a `width × height` canvas and builds its items,
+/// with the chord counts `fixed` when given; `keep` keeps what the backward pass needs.
+fn build_path(
+    path: &Path,
+    ix: usize,
+    (width, height): (u32, u32),
+    tolerance: f64,
+    fixed: Option<&[u32]>,
+    keep: bool,
+) -> Built {
+    let visible = flatten_rect(path, width, height);
+    let (flat, counts) = flatten(path, tolerance, visible, fixed);
+    let mut geom = PathGeom {
+        flat,
+        counts,
+        ..PathGeom::default()
+    };
+    let fill_item = path.fill.as_ref().and_then(|f| {
+        let paint = PaintEval::new(&f.paint, f.opacity)?;
+        let mut pts = Vec::with_capacity(geom.flat.pts.len());
+        let mut src = Vec::with_capacity(if keep { geom.flat.pts.len() } else { 0 });
+        let mut rings = Vec::new();
+        for c in &geom.flat.contours {
+            if c.len >= 3 {
+                rings.push((pts.len(), c.len));
+                pts.extend_from_slice(&geom.flat.pts[c.start..c.start + c.len]);
+                if keep {
+                    src.extend(c.start as u32..(c.start + c.len) as u32);
+                }
+            }
+        }
+        item(
+            ix,
+            ItemKind::Fill,
+            pts,
+            src,
+            rings,
+            f.rule == FillRule::EvenOdd,
+            paint,
+        )
+    });
+    let mut solid = false;
+    let stroke_item = path.stroke.as_ref().and_then(|s| {
+        if !(s.width > 0.0) {
+            return None;
+        }
+        let paint = PaintEval::new(&s.paint, s.opacity)?;
+        let [a, b, c, d] = s.frame;
+        let inv = frame_inverse(s)?;
+        let to_frame = |q: &Point| [inv[0] * q[0] + inv[2] * q[1], inv[1] * q[0] + inv[3] * q[1]];
+        let fpts: Vec<Point> = geom.flat.pts.iter().map(to_frame).collect();
+        let style = stroke_style(s, tolerance, false);
+        // Past the dash limit the pattern is dropped and the stroke drawn solid.
+        let pattern = s.dash.as_ref().filter(|pattern| {
+            let cost = dash_cost(s, pattern, &geom.flat, &fpts, &style, width, height);
+            solid = cost > MAX_DASHES_PER_PATH as f64;
+            !solid
+        });
+        let mut ol = match pattern {
+            Some(pattern) => {
+                let visible = Visible {
+                    device: &geom.flat.pts,
+                    rect: dash_rect(s, width, height),
+                };
+                let dashed = dash(
+                    &fpts,
+                    &geom.flat.corner,
+                    &geom.flat.contours,
+                    pattern,
+                    s.dash_offset,
+                    Some(visible),
+                );
+                drop(fpts);
+                let ol = outline(&dashed.pts, &dashed.corner, &dashed.contours, style);
+                if keep {
+                    geom.dashed = Some(dashed);
+                }
+                ol
+            }
+            None => {
+                let ol = outline(&fpts, &geom.flat.corner, &geom.flat.contours, style);
+                drop(fpts);
+                ol
             }
         };
-        if path.stroke_first {
-            push(stroke_item);
-            push(fill_item);
+        // The outline's points become the item's, mapped to device space in place.
+        let pts: Vec<Point> = std::mem::take(&mut ol.pts)
+            .into_iter()
+            .map(|q| [a * q[0] + c * q[1], b * q[0] + d * q[1]])
+            .collect();
+        let rings = std::mem::take(&mut ol.rings);
+        let src = Vec::new();
+        geom.frame_inv = Some(inv);
+        item(ix, ItemKind::Stroke, pts, src, rings, false, paint)
+    });
+    if !keep {
+        // Only the chord counts are read after a forward render (gradient checks).
+        geom.flat = Flattened::default();
+    }
+    Built {
+        geom,
+        items: if path.stroke_first {
+            [stroke_item, fill_item]
         } else {
-            push(fill_item);
-            push(stroke_item);
-        }
-        if !keep {
-            // Only the chord counts are read after a forward render (gradient checks).
-            geom.flat = Flattened::default();
-        }
-        self.out.geoms.push(geom);
+            [fill_item, stroke_item]
+        },
+        solid_dash: solid,
     }
 }
 
@@ -581,6 +617,67 @@ mod tests {
 
     fn load(svg: &str) -> Scene {
         Scene::from_svg_str(svg, "t.svg", Sizing::Natural).unwrap()
+    }
+
+    #[test]
+    fn paths_prepared_in_parallel_come_out_in_paint_order() {
+        // More paths than `PARALLEL_PATHS`, in nested groups, filled, stroked, dashed.
+        let mut body = String::new();
+        for k in 0..3 * PARALLEL_PATHS {
+            let (x, y) = (5 + (k * 37) % 180, 5 + (k * 53) % 180);
+            let shape = format!(
+                r#"<path d="M{x} {y} c20 -10 30 25 10 30 s-25 5 -10 -30z" fill="rgb({k},90,200)" stroke="black" stroke-width="{}" {}/>"#,
+                1 + k % 4,
+                if k % 5 == 0 {
+                    r#"stroke-dasharray="4 3""#
+                } else {
+                    ""
+                }
+            );
+            body += &if k % 7 == 3 {
+                format!(r#"<g opacity="0.5">{shape}</g>"#)
+            } else {
+                shape
+            };
+        }
+        let scene = load(&format!(
+            r#"<svg xmlns="http://www.w3.org/2000/svg" width="200" height="200">{body}</svg>"#
+        ));
+        let in_pool = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| prepare(&scene, 0.02, None))
+        };
+        let (one, four) = (in_pool(1), in_pool(4));
+        assert_eq!(one.items.len(), four.items.len());
+        assert!(
+            one.items.len() > 4 * PARALLEL_PATHS,
+            "{} items",
+            one.items.len()
+        );
+        assert_eq!(
+            (&one.ops, &one.solid_dashes),
+            (&four.ops, &four.solid_dashes)
+        );
+        for (a, b) in one.items.iter().zip(&four.items) {
+            assert_eq!((a.path, a.kind, a.evenodd), (b.path, b.kind, b.evenodd));
+            assert_eq!(
+                (&a.pts, &a.src, &a.rings, &a.runs, a.bbox),
+                (&b.pts, &b.src, &b.rings, &b.runs, b.bbox)
+            );
+        }
+        // Items follow the paths' paint order.
+        assert!(one.items.windows(2).all(|w| w[0].path <= w[1].path));
+        let counts = |p: &Prepared| p.geoms.iter().map(|g| g.counts.clone()).collect::<Vec<_>>();
+        assert_eq!(counts(&one), counts(&four));
+        let fixed = prepare(&scene, 0.5, Some(&counts(&one)));
+        assert_eq!(
+            counts(&fixed),
+            counts(&one),
+            "fixed chord counts reach their own paths"
+        );
     }
 
     #[test]
