@@ -107,7 +107,11 @@ pub fn refine(
     let start = Instant::now();
     let rates = opts.rates.per_slot(&scene);
     let mut adam = Adam::new(rates.len(), opts.adam);
+    // Only parameters change during a run: the best scene is the starting one with the
+    // best parameters, kept as a vector (a scene clone per improvement cost copies and
+    // allocations on the serial path of every step).
     let mut best = scene.clone();
+    let mut best_params: Option<Vec<f64>> = None;
     let mut best_loss = f64::INFINITY;
     let mut best_psnr = f64::NEG_INFINITY;
     // Grown as steps are taken: `iters` is a request, not an allocation size.
@@ -133,7 +137,7 @@ pub fn refine(
         if loss < best_loss {
             best_loss = loss;
             best_psnr = psnr;
-            best.clone_from(&scene);
+            best_params = Some(scene.params());
         }
         let step = Step {
             iter: it,
@@ -165,6 +169,9 @@ pub fn refine(
         scene.set_params(&params);
         project(&mut scene);
         steps += 1;
+    }
+    if let Some(p) = best_params {
+        best.set_params(&p);
     }
     FitOutcome {
         best,
