@@ -97,14 +97,15 @@ fn tape_estimates(p: &Prepared, bands: usize) -> Vec<usize> {
 /// Gradients of one band.
 #[derive(Default)]
 struct BandGrads {
-    /// `(item, vertex, ∂L/∂vertex)` in the order found (one flat list: no allocation per
-    /// item and band).
-    verts: Vec<(u32, u32, Point)>,
-    /// The touched items, in the order found; their paint gradients
-    /// ([`PaintEval::grad_len`](super::paint::PaintEval::grad_len) values each) follow
-    /// one another in `paint_vals`.
-    paints: Vec<u32>,
-    /// The paint gradients of `paints`, back to back.
+    /// `(vertex, ∂L/∂vertex)` in the order found, item after item (one flat list: no
+    /// allocation per item and band).
+    verts: Vec<(u32, Point)>,
+    /// The touched items, in the order found (each once), with where their vertex
+    /// gradients start in `verts` (they run to the next item's start) and their paint
+    /// gradients ([`PaintEval::grad_len`](super::paint::PaintEval::grad_len) values) in
+    /// `paint_vals`.
+    touched: Vec<Touched>,
+    /// The paint gradients of `touched`, back to back.
     paint_vals: Vec<f64>,
     /// Per group: ∂L/∂opacity.
     groups: Vec<(u32, f64)>,
@@ -112,6 +113,14 @@ struct BandGrads {
     tape_bytes: usize,
     /// The loss's partial sums over this band.
     sums: [f64; 2],
+}
+
+/// One item's share of a band's gradients ([`BandGrads::touched`]).
+#[derive(Clone, Copy)]
+struct Touched {
+    item: u32,
+    verts: u32,
+    paint: u32,
 }
 
 /// Memory use of a backward pass.
@@ -323,137 +332,279 @@ fn backward_bands(
                 .collect(),
         };
         first = end;
-        for r in results {
+        for r in &results {
             stats.band_bytes_max = stats.band_bytes_max.max(r.tape_bytes);
             sums[0] += r.sums[0];
             sums[1] += r.sums[1];
-            for (item, k, d) in r.verts {
-                let g = &mut vert_g[item as usize][k as usize];
-                g[0] += d[0];
-                g[1] += d[1];
-            }
-            let mut vals = r.paint_vals.iter();
-            for item in r.paints {
-                for (a, b) in paint_g[item as usize].iter_mut().zip(&mut vals) {
-                    *a += b;
-                }
-            }
-            for (g, v) in r.groups {
+            for &(g, v) in &r.groups {
                 group_g[g as usize] += v;
             }
         }
+        add_band_grads(&results, &mut vert_g, &mut paint_g);
     }
+    // A path's parameters are one run of slots, apart from every other path's: the
+    // gradient splits into the paths' runs, and paths are scattered in parallel (each
+    // path's items in order, so the bits are those of one loop over the items).
     let mut paths: Vec<&Path> = Vec::new();
     scene.for_each_path(|q| paths.push(q));
+    let blocks = path_blocks(&layout, paths.len());
+    let mut items_of = vec![0..0; paths.len()];
     for (ii, item) in p.items.iter().enumerate() {
-        let path = paths[item.path];
-        let geom = &p.geoms[item.path];
-        let off = &layout.paths[item.path];
-        let mut flat_g = vec![[0.0f64; 2]; geom.flat.pts.len()];
-        match item.kind {
-            ItemKind::Fill => {
-                for (j, g) in vert_g[ii].iter().enumerate() {
-                    let k = item.src[j] as usize;
-                    flat_g[k][0] += g[0];
-                    flat_g[k][1] += g[1];
-                }
-                if let Some(po) = off.fill {
-                    scatter_paint(&mut grad, po, off.fill_opacity, &paint_g[ii]);
-                }
-            }
-            ItemKind::Stroke => {
-                let (Some(stroke), Some(inv)) = (&path.stroke, geom.frame_inv) else {
-                    continue;
-                };
-                let [fa, fb, fc, fd] = stroke.frame;
-                let hw = 0.5 * stroke.width;
-                let fpts: Vec<Point> = geom
-                    .flat
-                    .pts
-                    .iter()
-                    .map(|q| [inv[0] * q[0] + inv[2] * q[1], inv[1] * q[0] + inv[3] * q[1]])
-                    .collect();
-                // The outline's recipes, rebuilt as prepare built them (not kept there).
-                let ol = stroke_outline(stroke, geom, &fpts, p.tolerance);
-                debug_assert_eq!(ol.recipes.len(), item.pts.len());
-                let center: &[Point] = match &geom.dashed {
-                    Some(d) => &d.pts,
-                    None => &fpts,
-                };
-                let mut cg = vec![[0.0f64; 2]; center.len()];
-                let mut gh = 0.0;
-                for (j, g) in vert_g[ii].iter().enumerate() {
-                    if g[0] == 0.0 && g[1] == 0.0 {
-                        continue;
-                    }
-                    // Device = F · frame point.
-                    let gf = [fa * g[0] + fb * g[1], fc * g[0] + fd * g[1]];
-                    let r = ol.recipes[j];
-                    let ins = r.inputs();
-                    let at = |k: u32| {
-                        if k == NONE {
-                            [0.0; 2]
-                        } else {
-                            center[k as usize]
-                        }
-                    };
-                    let (gp, ghh) = r.vjp(at(ins[0]), at(ins[1]), at(ins[2]), hw, gf);
-                    for (k, d) in ins.iter().zip(gp) {
-                        if *k != NONE {
-                            cg[*k as usize][0] += d[0];
-                            cg[*k as usize][1] += d[1];
-                        }
-                    }
-                    gh += ghh;
-                }
-                let fg = match &geom.dashed {
-                    Some(d) => {
-                        let mut fg = vec![[0.0f64; 2]; fpts.len()];
-                        for (s, g) in d.src.iter().zip(&cg) {
-                            for c in 0..2 {
-                                fg[s.a as usize][c] += (1.0 - s.u) * g[c];
-                                fg[s.b as usize][c] += s.u * g[c];
-                            }
-                        }
-                        fg
-                    }
-                    None => cg,
-                };
-                // Frame point = inv · device point.
-                for (k, g) in fg.iter().enumerate() {
-                    flat_g[k][0] += inv[0] * g[0] + inv[1] * g[1];
-                    flat_g[k][1] += inv[2] * g[0] + inv[3] * g[1];
-                }
-                grad[off.stroke_width] += 0.5 * gh;
-                if let Some(po) = off.stroke {
-                    scatter_paint(&mut grad, po, off.stroke_opacity, &paint_g[ii]);
-                }
-            }
-        }
-        // Flattened vertices are Bernstein blends of control points.
-        for (k, g) in flat_g.iter().enumerate() {
-            if g[0] == 0.0 && g[1] == 0.0 {
-                continue;
-            }
-            let s = geom.flat.src[k];
-            for (m, wgt) in s.weights().iter().enumerate() {
-                if *wgt != 0.0 {
-                    let slot = off.points + 2 * (s.first as usize + m);
-                    grad[slot] += wgt * g[0];
-                    grad[slot + 1] += wgt * g[1];
-                }
-            }
+        let r = &mut items_of[item.path];
+        if r.start == r.end {
+            *r = ii..ii + 1;
+        } else {
+            debug_assert_eq!(r.end, ii, "a path's items are consecutive");
+            r.end = ii + 1;
         }
     }
+    let mut rest: &mut [f64] = &mut grad;
+    let mut at = 0;
+    let mut jobs = Vec::with_capacity(paths.len());
+    for (pi, block) in blocks.iter().enumerate() {
+        let tail = std::mem::take(&mut rest).split_at_mut(block.start - at).1;
+        let (mine, tail) = tail.split_at_mut(block.len());
+        jobs.push((
+            pi,
+            Block {
+                base: block.start,
+                g: mine,
+            },
+        ));
+        rest = tail;
+        at = block.end;
+    }
+    jobs.into_par_iter().for_each(|(pi, mut block)| {
+        for ii in items_of[pi].clone() {
+            scatter_item(
+                p,
+                ii,
+                paths[pi],
+                &layout.paths[pi],
+                &vert_g,
+                &paint_g,
+                &mut block,
+            );
+        }
+    });
     for (g, v) in group_g.iter().enumerate() {
         grad[layout.groups[g]] += v;
     }
     BandsOut { grad, stats, sums }
 }
 
+/// The slots of path `k` (paint order) in `layout`: one run each, in walk order.
+fn path_blocks(layout: &ParamLayout, paths: usize) -> Vec<std::ops::Range<usize>> {
+    // Owners are paths and groups in walk order; path `k` is the `k`-th that is no group.
+    let mut path_of = vec![usize::MAX; layout.owners.len()];
+    let mut k = 0;
+    for (o, owner) in layout.owners.iter().enumerate() {
+        if !owner.is_group {
+            path_of[o] = k;
+            k += 1;
+        }
+    }
+    let mut blocks: Vec<Option<std::ops::Range<usize>>> = vec![None; paths];
+    for (s, slot) in layout.slots.iter().enumerate() {
+        let Some(b) = path_of.get(slot.owner).and_then(|&k| blocks.get_mut(k)) else {
+            continue;
+        };
+        match b {
+            Some(r) => {
+                assert_eq!(r.end, s, "a path's parameters are one run of slots");
+                r.end = s + 1;
+            }
+            None => *b = Some(s..s + 1),
+        }
+    }
+    // A path without parameters gets an empty run where the previous one ended.
+    let mut end = 0;
+    blocks
+        .into_iter()
+        .map(|b| {
+            let r = b.unwrap_or(end..end);
+            assert!(r.start >= end, "paths' parameters come in paint order");
+            end = r.end;
+            r
+        })
+        .collect()
+}
+
+/// A path's run of the parameter gradient, indexed by slot.
+struct Block<'a> {
+    base: usize,
+    g: &'a mut [f64],
+}
+
+impl std::ops::Index<usize> for Block<'_> {
+    type Output = f64;
+    fn index(&self, slot: usize) -> &f64 {
+        &self.g[slot - self.base]
+    }
+}
+
+impl std::ops::IndexMut<usize> for Block<'_> {
+    fn index_mut(&mut self, slot: usize) -> &mut f64 {
+        &mut self.g[slot - self.base]
+    }
+}
+
+/// Adds item `ii`'s vertex and paint gradients to its path's parameters in `grad`:
+/// outline vertices back to the centerline (strokes), flattened vertices to control
+/// points.
+#[allow(clippy::too_many_arguments)]
+fn scatter_item(
+    p: &Prepared,
+    ii: usize,
+    path: &Path,
+    off: &crate::scene::params::PathOffsets,
+    vert_g: &[Vec<Point>],
+    paint_g: &[Vec<f64>],
+    grad: &mut Block<'_>,
+) {
+    let item = &p.items[ii];
+    let geom = &p.geoms[item.path];
+    let mut flat_g = vec![[0.0f64; 2]; geom.flat.pts.len()];
+    match item.kind {
+        ItemKind::Fill => {
+            for (j, g) in vert_g[ii].iter().enumerate() {
+                let k = item.src[j] as usize;
+                flat_g[k][0] += g[0];
+                flat_g[k][1] += g[1];
+            }
+            if let Some(po) = off.fill {
+                scatter_paint(grad, po, off.fill_opacity, &paint_g[ii]);
+            }
+        }
+        ItemKind::Stroke => {
+            let (Some(stroke), Some(inv)) = (&path.stroke, geom.frame_inv) else {
+                return;
+            };
+            let [fa, fb, fc, fd] = stroke.frame;
+            let hw = 0.5 * stroke.width;
+            let fpts: Vec<Point> = geom
+                .flat
+                .pts
+                .iter()
+                .map(|q| [inv[0] * q[0] + inv[2] * q[1], inv[1] * q[0] + inv[3] * q[1]])
+                .collect();
+            // The outline's recipes, rebuilt as prepare built them (not kept there).
+            let ol = stroke_outline(stroke, geom, &fpts, p.tolerance);
+            debug_assert_eq!(ol.recipes.len(), item.pts.len());
+            let center: &[Point] = match &geom.dashed {
+                Some(d) => &d.pts,
+                None => &fpts,
+            };
+            let mut cg = vec![[0.0f64; 2]; center.len()];
+            let mut gh = 0.0;
+            for (j, g) in vert_g[ii].iter().enumerate() {
+                if g[0] == 0.0 && g[1] == 0.0 {
+                    continue;
+                }
+                // Device = F · frame point.
+                let gf = [fa * g[0] + fb * g[1], fc * g[0] + fd * g[1]];
+                let r = ol.recipes[j];
+                let ins = r.inputs();
+                let at = |k: u32| {
+                    if k == NONE {
+                        [0.0; 2]
+                    } else {
+                        center[k as usize]
+                    }
+                };
+                let (gp, ghh) = r.vjp(at(ins[0]), at(ins[1]), at(ins[2]), hw, gf);
+                for (k, d) in ins.iter().zip(gp) {
+                    if *k != NONE {
+                        cg[*k as usize][0] += d[0];
+                        cg[*k as usize][1] += d[1];
+                    }
+                }
+                gh += ghh;
+            }
+            let fg = match &geom.dashed {
+                Some(d) => {
+                    let mut fg = vec![[0.0f64; 2]; fpts.len()];
+                    for (s, g) in d.src.iter().zip(&cg) {
+                        for c in 0..2 {
+                            fg[s.a as usize][c] += (1.0 - s.u) * g[c];
+                            fg[s.b as usize][c] += s.u * g[c];
+                        }
+                    }
+                    fg
+                }
+                None => cg,
+            };
+            // Frame point = inv · device point.
+            for (k, g) in fg.iter().enumerate() {
+                flat_g[k][0] += inv[0] * g[0] + inv[1] * g[1];
+                flat_g[k][1] += inv[2] * g[0] + inv[3] * g[1];
+            }
+            grad[off.stroke_width] += 0.5 * gh;
+            if let Some(po) = off.stroke {
+                scatter_paint(grad, po, off.stroke_opacity, &paint_g[ii]);
+            }
+        }
+    }
+    // Flattened vertices are Bernstein blends of control points.
+    for (k, g) in flat_g.iter().enumerate() {
+        if g[0] == 0.0 && g[1] == 0.0 {
+            continue;
+        }
+        let s = geom.flat.src[k];
+        for (m, wgt) in s.weights().iter().enumerate() {
+            if *wgt != 0.0 {
+                let slot = off.points + 2 * (s.first as usize + m);
+                grad[slot] += wgt * g[0];
+                grad[slot + 1] += wgt * g[1];
+            }
+        }
+    }
+}
+
+/// Adds a chunk of bands' vertex and paint gradients (`results`, in band order) into
+/// each item's, items in parallel: every item's sums take its bands in order, so the bits
+/// are those of adding band after band.
+fn add_band_grads(results: &[BandGrads], vert_g: &mut [Vec<Point>], paint_g: &mut [Vec<f64>]) {
+    const NONE: u32 = u32::MAX;
+    let items = vert_g.len();
+    // `at[b · items + i]`: the entry of item `i` in band `b`'s `touched`, if any.
+    let mut at = vec![NONE; results.len() * items];
+    for (b, r) in results.iter().enumerate() {
+        for (e, t) in r.touched.iter().enumerate() {
+            at[b * items + t.item as usize] = e as u32;
+        }
+    }
+    vert_g
+        .par_iter_mut()
+        .zip(paint_g.par_iter_mut())
+        .enumerate()
+        .for_each(|(i, (vg, pg))| {
+            for (b, r) in results.iter().enumerate() {
+                let e = at[b * items + i];
+                if e == NONE {
+                    continue;
+                }
+                let t = r.touched[e as usize];
+                let end = r
+                    .touched
+                    .get(e as usize + 1)
+                    .map_or(r.verts.len(), |n| n.verts as usize);
+                for &(k, d) in &r.verts[t.verts as usize..end] {
+                    let g = &mut vg[k as usize];
+                    g[0] += d[0];
+                    g[1] += d[1];
+                }
+                let vals = &r.paint_vals[t.paint as usize..][..pg.len()];
+                for (a, v) in pg.iter_mut().zip(vals) {
+                    *a += v;
+                }
+            }
+        });
+}
+
 /// Adds an item's paint gradient into the parameter gradient.
 fn scatter_paint(
-    grad: &mut [f64],
+    grad: &mut Block<'_>,
     po: crate::scene::params::PaintOffsets,
     opacity: usize,
     pg: &[f64],
@@ -675,6 +826,11 @@ fn band_backward(
                 // cleared again after the boundary pass.
                 gw.reshape_zeroed(acc.x0, acc.y0, acc.w, acc.h);
                 let pg_at = out.paint_vals.len();
+                out.touched.push(Touched {
+                    item: *item as u32,
+                    verts: out.verts.len() as u32,
+                    paint: pg_at as u32,
+                });
                 out.paint_vals.resize(pg_at + it.paint.grad_len(), 0.0);
                 let pg = &mut out.paint_vals[pg_at..];
                 let solid = match &it.paint {
@@ -729,7 +885,6 @@ fn band_backward(
                 if solid.is_some() {
                     it.paint.backward([0.0; 2], gs_sum, pg);
                 }
-                out.paints.push(*item as u32);
                 // Boundary gradients of the edges crossing this band.
                 let (ylo, yhi) = (acc.y0 as f64, (acc.y0 as usize + acc.h) as f64);
                 let verts = &mut out.verts;
@@ -742,10 +897,10 @@ fn band_backward(
                     }
                     let [da, db] = backward_line(&gw, a, b);
                     if da != [0.0; 2] {
-                        verts.push((*item as u32, ia as u32, da));
+                        verts.push((ia as u32, da));
                     }
                     if db != [0.0; 2] {
-                        verts.push((*item as u32, ib as u32, db));
+                        verts.push((ib as u32, db));
                     }
                 });
                 for cell in item_cells {
