@@ -923,6 +923,51 @@ mod tests {
     use super::*;
     use crate::scene::{Fill, FillRule, Group, Node, Paint};
 
+    /// Every path's parameters form one run, in paint order, holding exactly the slots
+    /// it owns (groups' opacities fall between runs), even with paths nested in groups,
+    /// gradient paints and strokes: what lets the scatter split the gradient by path.
+    #[test]
+    fn path_blocks_are_each_paths_own_slots() {
+        let svg = r##"<svg xmlns="http://www.w3.org/2000/svg" width="64" height="64">
+          <defs><linearGradient id="g"><stop offset="0" stop-color="red"/><stop offset="1" stop-color="blue"/></linearGradient></defs>
+          <rect x="2" y="2" width="20" height="20" fill="url(#g)" stroke="black" stroke-width="2"/>
+          <g opacity="0.5"><circle cx="30" cy="30" r="9" fill="teal"/>
+            <g opacity="0.7"><path d="M40 40 L60 44 L50 60 Z" fill="none" stroke="orange"/></g></g>
+          <ellipse cx="12" cy="50" rx="8" ry="5" fill="url(#g)" fill-opacity="0.6"/></svg>"##;
+        let scene = Scene::from_svg_str(svg, "t.svg", crate::Sizing::Natural).unwrap();
+        let layout = ParamLayout::new(&scene);
+        let mut paths = 0;
+        scene.for_each_path(|_| paths += 1);
+        assert_eq!(paths, 4);
+        let blocks = path_blocks(&layout, paths);
+        let path_owners: Vec<usize> = (0..layout.owners.len())
+            .filter(|&o| !layout.owners[o].is_group)
+            .collect();
+        let mut covered = 0;
+        for (k, r) in blocks.iter().enumerate() {
+            assert!(r.start < r.end, "path {k} has parameters");
+            let owned: Vec<usize> = (0..layout.slots.len())
+                .filter(|&s| layout.slots[s].owner == path_owners[k])
+                .collect();
+            assert_eq!(owned, r.clone().collect::<Vec<_>>(), "path {k}");
+            let off = &layout.paths[k];
+            assert!(r.contains(&off.points), "path {k}: points");
+            if let Some(po) = off.fill {
+                assert!(
+                    r.contains(&po.base) && r.contains(&off.fill_opacity),
+                    "path {k}: fill"
+                );
+            }
+            if let Some(po) = off.stroke {
+                let slots = [po.base, off.stroke_opacity, off.stroke_width];
+                assert!(slots.iter().all(|s| r.contains(s)), "path {k}: stroke");
+            }
+            covered += r.len();
+        }
+        assert!(blocks.windows(2).all(|w| w[0].end <= w[1].start));
+        assert_eq!(covered + layout.groups.len(), layout.len());
+    }
+
     /// A 10-pixel square inside `levels` nested groups of opacity 0.9, on a wide canvas.
     fn nested(levels: usize, size: u32) -> Scene {
         let mut p = Path::new("sq");
