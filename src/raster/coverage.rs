@@ -253,8 +253,7 @@ fn line_weights(g: &Cells<[f32; 2]>, p0: Point, dx: f64, dy: f64) -> (f64, f64) 
         if d > 0.0 {
             (floor_f64(v) + 1.0 - o) / d
         } else if d < 0.0 {
-            // `ceil(v)` is `−floor(−v)`, exactly.
-            (-floor_f64(-v) - 1.0 - o) / d
+            (ceil_f64(v) - 1.0 - o) / d
         } else {
             f64::INFINITY
         }
@@ -421,6 +420,12 @@ pub(crate) fn floor_f64(x: f64) -> f64 {
     } else {
         x.floor()
     }
+}
+
+/// `x.ceil()` for any `x`, as `−floor(−x)` (exact), without a library call.
+#[inline]
+pub(crate) fn ceil_f64(x: f64) -> f64 {
+    -floor_f64(-x)
 }
 
 /// `x.floor()`, without the library call that baseline x86-64 makes of it.
@@ -664,6 +669,8 @@ mod rounding_tests {
             assert_eq!(floor_f64(d), d.floor(), "floor {d}");
             assert_eq!(floor_f64(-d), (-d).floor(), "floor {}", -d);
             assert_eq!(floor_f64(d + 0.5), (d + 0.5).floor(), "floor {}", d + 0.5);
+            assert_eq!(ceil_f64(-d - 0.5), (-d - 0.5).ceil(), "ceil {}", -d - 0.5);
+            assert_eq!(ceil_f64(d), d.ceil(), "ceil {d}");
             assert_eq!(ceil_non_negative(d), d.ceil(), "ceil {d}");
         }
         assert!(round_f32(f32::NAN).is_nan());

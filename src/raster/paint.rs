@@ -886,14 +886,8 @@ mod tests {
     /// every spread, near integers, far out and at NaN.
     #[test]
     fn pairs_have_the_bits_of_single_pixels() {
-        // A linear congruential stream (raster may not use the 3D core's generator).
-        let mut seed = 11u64;
-        let mut rnd = || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rng = crate::scene::random::Rng::new(11);
+        let mut rnd = || rng.range(0.0, 1.0);
         for _ in 0..2000 {
             let g = [
                 rnd() * 100.0,

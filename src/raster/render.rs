@@ -2,7 +2,7 @@
 
 use rayon::prelude::*;
 
-use super::coverage::{Cells, accumulate_line, coverage_row, floor_f64, integrate_rows};
+use super::coverage::{Cells, accumulate_line, ceil_f64, coverage_row, floor_f64, integrate_rows};
 use super::paint::PaintEval;
 use super::prepare::{GroupSpan, Item, Op, Prepared, prepare_forward};
 use crate::image_io::Image;
@@ -205,15 +205,14 @@ impl<'a> BandRenderer<'a> {
         }
         // One pixel of margin around the bounds: the backward pass needs the pixels next to
         // an edge that lies exactly on a pixel boundary.
-        // `floor_f64` and `−floor_f64(−x)` are `floor` and `ceil` without a libm call.
+        // `floor` and `ceil` without a libm call.
         let top = ((floor_f64(b[1]) - 1.0).max(self.y0 as f64)) as usize;
-        let bottom =
-            ((-floor_f64(-b[3]) + 1.0).min((self.y0 + self.rows) as f64)).max(0.0) as usize;
+        let bottom = ((ceil_f64(b[3]) + 1.0).min((self.y0 + self.rows) as f64)).max(0.0) as usize;
         if top >= bottom {
             return false;
         }
         let cx0 = (floor_f64(b[0]) - 1.0).max(0.0);
-        let cx1 = (-floor_f64(-b[2])).min(w);
+        let cx1 = ceil_f64(b[2]).min(w);
         let cols = (cx1 - cx0) as usize + 2;
         if self.clean {
             self.acc
@@ -518,13 +517,8 @@ mod tests {
     fn running_sums_have_the_bits_of_the_sequential_sum() {
         // Sparse deltas (runs of zeros of every length, ±0, tiny and huge values), rows of
         // every length around the chunk size.
-        let mut seed = 7u64;
-        let mut next = || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (seed >> 33) as u32
-        };
+        let mut rng = crate::scene::random::Rng::new(7);
+        let mut next = || (rng.next_u64() >> 32) as u32;
         for len in 0..40 {
             for _ in 0..50 {
                 let mut deltas: Vec<f32> = (0..len)
