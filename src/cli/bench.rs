@@ -26,9 +26,10 @@ pub struct Args {
     /// Thread counts for diffsvg (resvg always uses one).
     #[arg(long, value_delimiter = ',', default_value = "1,2")]
     threads: Vec<usize>,
-    /// Canvas sizes for the random scene of 500 curved translucent paths.
-    #[arg(long, value_delimiter = ',', default_value = "256,512,1024")]
-    sizes: Vec<u32>,
+    /// Canvas sizes for the random scene of 500 curved translucent paths [default:
+    /// 256,512,1024 without INPUTS, none with them].
+    #[arg(long, value_delimiter = ',')]
+    sizes: Option<Vec<u32>>,
     /// Write the Markdown table here as well.
     #[arg(long)]
     report: Option<PathBuf>,
@@ -149,7 +150,12 @@ pub fn run(a: Args) -> Result<()> {
             .into_owned();
         cases.push((name, tree, Sizing::Natural));
     }
-    for &size in &a.sizes {
+    let sizes = match &a.sizes {
+        Some(s) => s.clone(),
+        None if a.inputs.is_empty() => vec![256, 512, 1024],
+        None => Vec::new(),
+    };
+    for &size in &sizes {
         let scene = curved_paths(500, size, 1);
         let tree = parse_tree(scene.to_svg_string().as_bytes(), "random.svg".as_ref())?;
         cases.push((format!("500 random paths, {size}²"), tree, Sizing::Natural));

@@ -129,6 +129,29 @@ fn line_local(acc: &mut Cells<f32>, p0: Point, p1: Point) {
         return;
     }
     let w = acc.w;
+    let max_col = from_index(w - 1);
+    // A segment inside one row (most chords at a fine tolerance) takes the general loop's
+    // values without its division and bookkeeping. The loop's one `dy` is `by − ay`, and
+    // its `x` is `ax + 0·dxdy`: `ax` itself, up to the sign of a zero `ax`, which no sum
+    // below can tell (the bounds on the two differences keep `dxdy` finite, so that
+    // `0·dxdy` is no NaN). So the bits are the loop's (tested). `by ≤ h` follows from
+    // `ay < h` and `by ≤ ⌊ay⌋ + 1`.
+    if ay >= 0.0 && by - ay > 1e-200 && (bx - ax).abs() < 1e100 {
+        let r = floor_non_negative(ay);
+        if by <= r + 1.0 {
+            let row = to_index(r);
+            let line = &mut acc.data[row * w..(row + 1) * w];
+            return row_piece(line, ax, bx, (by - ay) * dir, max_col);
+        }
+    }
+    line_rows(acc, [ax, ay], [bx, by], dir);
+}
+
+/// [`line_local`]'s general case: `a` above `b` (`ay < by`, local coordinates), `dir` the
+/// sign of the original segment's direction; row by row, clipped to the buffer's rows.
+fn line_rows(acc: &mut Cells<f32>, [ax, ay]: Point, [bx, by]: Point, dir: f64) {
+    let (w, h) = (acc.w, from_index(acc.h));
+    let max_col = from_index(w - 1);
     let dxdy = (bx - ax) / (by - ay);
     let ytop = ay.max(0.0);
     let ybot = by.min(h);
@@ -136,7 +159,6 @@ fn line_local(acc: &mut Cells<f32>, p0: Point, p1: Point) {
     // Both are non-negative here (`ytop ≥ 0`, `ybot > ytop`): floor and ceil by casts.
     let mut row = to_index(floor_non_negative(ytop));
     let last = to_index(ceil_non_negative(ybot)).min(acc.h);
-    let max_col = from_index(w - 1);
     while row < last {
         let r = from_index(row);
         let dy = (r + 1.0).min(ybot) - r.max(ytop);
@@ -147,48 +169,56 @@ fn line_local(acc: &mut Cells<f32>, p0: Point, p1: Point) {
         } else {
             ax + (ybot - ay) * dxdy
         };
-        let d = dy * dir;
         let line = &mut acc.data[row * w..(row + 1) * w];
-        let (xl, xr) = if x < xnext { (x, xnext) } else { (xnext, x) };
-        let xl = xl.clamp(0.0, max_col);
-        let xr = xr.clamp(0.0, max_col);
-        let xlf = floor_non_negative(xl);
-        let xli = to_index(xlf);
-        let xrc = ceil_non_negative(xr);
-        let xri = to_index(xrc);
-        if xri <= xli + 1 {
-            // Within one cell: area right of the piece stays, the rest carries on.
-            let xm = 0.5 * (xl + xr) - xlf;
-            line[xli] += (d * (1.0 - xm)) as f32;
-            if xli + 1 < w {
-                line[xli + 1] += (d * xm) as f32;
-            }
-        } else {
-            // Across several cells: the piece's height is spread uniformly over x.
-            let s = 1.0 / (xr - xl);
-            let xlfrac = xl - xlf;
-            let a0 = 0.5 * s * (1.0 - xlfrac) * (1.0 - xlfrac);
-            let xrfrac = xr - xrc + 1.0;
-            let am = 0.5 * s * xrfrac * xrfrac;
-            line[xli] += (d * a0) as f32;
-            if xri == xli + 2 {
-                line[xli + 1] += (d * (1.0 - a0 - am)) as f32;
-            } else {
-                let a1 = s * (1.5 - xlfrac);
-                line[xli + 1] += (d * (a1 - a0)) as f32;
-                let ds = (d * s) as f32;
-                for c in &mut line[xli + 2..xri - 1] {
-                    *c += ds;
-                }
-                let a2 = a1 + (xri - xli - 3) as f64 * s;
-                line[xri - 1] += (d * (1.0 - a2 - am)) as f32;
-            }
-            if xri < w {
-                line[xri] += (d * am) as f32;
-            }
-        }
+        row_piece(line, x, xnext, dy * dir, max_col);
         x = xnext;
         row += 1;
+    }
+}
+
+/// Adds the piece of a segment crossing one row from `x` to `xnext` (local columns) with
+/// signed height `d` to that row's deltas `line`: each cell it crosses gets the area right
+/// of the piece, the next cell the rest of the height.
+#[inline(always)]
+fn row_piece(line: &mut [f32], x: f64, xnext: f64, d: f64, max_col: f64) {
+    let w = line.len();
+    let (xl, xr) = if x < xnext { (x, xnext) } else { (xnext, x) };
+    let xl = xl.clamp(0.0, max_col);
+    let xr = xr.clamp(0.0, max_col);
+    let xlf = floor_non_negative(xl);
+    let xli = to_index(xlf);
+    let xrc = ceil_non_negative(xr);
+    let xri = to_index(xrc);
+    if xri <= xli + 1 {
+        // Within one cell: area right of the piece stays, the rest carries on.
+        let xm = 0.5 * (xl + xr) - xlf;
+        line[xli] += (d * (1.0 - xm)) as f32;
+        if xli + 1 < w {
+            line[xli + 1] += (d * xm) as f32;
+        }
+    } else {
+        // Across several cells: the piece's height is spread uniformly over x.
+        let s = 1.0 / (xr - xl);
+        let xlfrac = xl - xlf;
+        let a0 = 0.5 * s * (1.0 - xlfrac) * (1.0 - xlfrac);
+        let xrfrac = xr - xrc + 1.0;
+        let am = 0.5 * s * xrfrac * xrfrac;
+        line[xli] += (d * a0) as f32;
+        if xri == xli + 2 {
+            line[xli + 1] += (d * (1.0 - a0 - am)) as f32;
+        } else {
+            let a1 = s * (1.5 - xlfrac);
+            line[xli + 1] += (d * (a1 - a0)) as f32;
+            let ds = (d * s) as f32;
+            for c in &mut line[xli + 2..xri - 1] {
+                *c += ds;
+            }
+            let a2 = a1 + (xri - xli - 3) as f64 * s;
+            line[xri - 1] += (d * (1.0 - a2 - am)) as f32;
+        }
+        if xri < w {
+            line[xri] += (d * am) as f32;
+        }
     }
 }
 
@@ -210,7 +240,7 @@ fn line_local(acc: &mut Cells<f32>, p0: Point, p1: Point) {
 #[inline]
 pub(crate) fn backward_line(g: &Cells<[f32; 2]>, p0: Point, p1: Point) -> [Point; 2] {
     let (dx, dy) = (p1[0] - p0[0], p1[1] - p0[1]);
-    let (s0, s1) = line_weights(g, p0, dx, dy);
+    let (s0, s1) = line_weights(g, p0, p1, dx, dy);
     // `0.0 + …`: the bits of accumulating into zeroed gradients (a `−0.0` product adds
     // up to `+0.0`).
     let n = [-dy, dx];
@@ -222,7 +252,8 @@ pub(crate) fn backward_line(g: &Cells<[f32; 2]>, p0: Point, p1: Point) -> [Point
 
 /// `(Σ G ∫(1 − t), Σ G ∫ t)` of [`backward_line`]'s segment, returned in registers (a
 /// gradient written through a pointer and read back whole stalled the caller).
-fn line_weights(g: &Cells<[f32; 2]>, p0: Point, dx: f64, dy: f64) -> (f64, f64) {
+/// `dx`, `dy` are `p1 − p0` as the caller computed them.
+fn line_weights(g: &Cells<[f32; 2]>, p0: Point, p1: Point, dx: f64, dy: f64) -> (f64, f64) {
     if (dx == 0.0 && dy == 0.0) || g.w == 0 || g.h == 0 {
         return (0.0, 0.0);
     }
@@ -230,6 +261,33 @@ fn line_weights(g: &Cells<[f32; 2]>, p0: Point, dx: f64, dy: f64) -> (f64, f64) 
     let yhi = ylo + from_index(g.h);
     let xlo = g.x0 as f64;
     let xhi = xlo + from_index(g.w);
+    // A segment inside one cell of `g` (most chords at a fine tolerance): the walk below
+    // clips it to `t ∈ [0, 1]` and finds no grid line before `t = 1` (rounding is
+    // monotonic, so an end point short of the next line gives a parameter of at least 1),
+    // so it takes one piece with `∫ t = ∫ (1 − t) = 0.5` around the midpoint. The same
+    // bits without the walk's eight divisions (tested). The bounds are checked on the end
+    // point itself, not on `p0 + dx`, which may round across a line the point is short of.
+    let within = |o: f64, d: f64, e: f64, lo: f64, hi: f64| {
+        lo <= o.min(e)
+            && o.max(e) <= hi
+            && (d == 0.0 || (d > 0.0 && e <= floor_f64(o) + 1.0) || (d < 0.0 && e >= ceil_f64(o) - 1.0))
+    };
+    if within(p0[0], dx, p1[0], xlo, xhi) && within(p0[1], dy, p1[1], ylo, yhi) {
+        let gv = piece_gradient(g, [p0[0] + dx * 0.5, p0[1] + dy * 0.5], dx, dy);
+        return if gv != 0.0 {
+            (0.0 + gv * 0.5, 0.0 + gv * 0.5)
+        } else {
+            (0.0, 0.0)
+        };
+    }
+    line_walk(g, p0, dx, dy)
+}
+
+/// [`line_weights`]'s general case: the segment from `p0` along `(dx, dy)` (not both zero)
+/// clipped to `g`'s box and walked piece by piece between grid lines.
+fn line_walk(g: &Cells<[f32; 2]>, p0: Point, dx: f64, dy: f64) -> (f64, f64) {
+    let (xlo, ylo) = (g.x0 as f64, g.y0 as f64);
+    let (xhi, yhi) = (xlo + from_index(g.w), ylo + from_index(g.h));
     // Parameter range inside the closed box of g (boundary lines count: the cell inside
     // may see a piece lying on them).
     let (mut t0, mut t1) = (0.0f64, 1.0f64);
@@ -271,14 +329,6 @@ fn line_weights(g: &Cells<[f32; 2]>, p0: Point, dx: f64, dy: f64) -> (f64, f64) 
     } else {
         f64::INFINITY
     };
-    let cell = |col: f64, row: f64| -> [f32; 2] {
-        let (c, r) = (to_index(col), to_index(row));
-        if col >= 0.0 && row >= 0.0 && c < g.w && r < g.h {
-            g.data[r * g.w + c]
-        } else {
-            [0.0; 2]
-        }
-    };
     let mut ta = t0;
     let (mut s0, mut s1) = (0.0f64, 0.0f64); // Σ G ∫(1 − t), Σ G ∫ t
     let mut guard = 0usize;
@@ -286,31 +336,7 @@ fn line_weights(g: &Cells<[f32; 2]>, p0: Point, dx: f64, dy: f64) -> (f64, f64) 
         guard += 1;
         let tb = nx.min(ny).min(t1);
         if tb > ta {
-            let m = at(0.5 * (ta + tb));
-            let col = floor_f64(m[0] - xlo);
-            let row = floor_f64(m[1] - ylo);
-            let gv = if dx == 0.0 && m[0] == floor_f64(m[0]) {
-                // On a vertical grid line: cells `col − 1` (left) and `col` (right).
-                let (left, right) = (cell(col - 1.0, row), cell(col, row));
-                let (low, high) = if dy > 0.0 {
-                    (left, right)
-                } else {
-                    (right, left)
-                };
-                0.5 * (low[0] + high[1]) as f64
-            } else if dy == 0.0 && m[1] == floor_f64(m[1]) {
-                // On a horizontal grid line: rows `row − 1` (above) and `row` (below).
-                let (above, below) = (cell(col, row - 1.0), cell(col, row));
-                let (low, high) = if dx > 0.0 {
-                    (below, above)
-                } else {
-                    (above, below)
-                };
-                0.5 * (low[0] + high[1]) as f64
-            } else {
-                let c = cell(col, row);
-                0.5 * (c[0] + c[1]) as f64
-            };
+            let gv = piece_gradient(g, at(0.5 * (ta + tb)), dx, dy);
             if gv != 0.0 {
                 let it = 0.5 * (tb * tb - ta * ta);
                 s1 += gv * it;
@@ -326,6 +352,46 @@ fn line_weights(g: &Cells<[f32; 2]>, p0: Point, dx: f64, dy: f64) -> (f64, f64) 
         }
     }
     (s0, s1)
+}
+
+/// The gradient `G` that a piece of a segment with direction `(dx, dy)` and midpoint `m`
+/// (device pixels) sees: the mean of its cell's two one-sided values, or, for a piece
+/// lying on a grid line, the low cell's `∂L/∂w⁺` and the high cell's `∂L/∂w⁻` averaged
+/// (see [`backward_line`]). Cells outside `g` count as zero.
+#[inline(always)]
+fn piece_gradient(g: &Cells<[f32; 2]>, m: Point, dx: f64, dy: f64) -> f64 {
+    let cell = |col: f64, row: f64| -> [f32; 2] {
+        let (c, r) = (to_index(col), to_index(row));
+        if col >= 0.0 && row >= 0.0 && c < g.w && r < g.h {
+            g.data[r * g.w + c]
+        } else {
+            [0.0; 2]
+        }
+    };
+    let col = floor_f64(m[0] - g.x0 as f64);
+    let row = floor_f64(m[1] - g.y0 as f64);
+    if dx == 0.0 && m[0] == floor_f64(m[0]) {
+        // On a vertical grid line: cells `col − 1` (left) and `col` (right).
+        let (left, right) = (cell(col - 1.0, row), cell(col, row));
+        let (low, high) = if dy > 0.0 {
+            (left, right)
+        } else {
+            (right, left)
+        };
+        0.5 * (low[0] + high[1]) as f64
+    } else if dy == 0.0 && m[1] == floor_f64(m[1]) {
+        // On a horizontal grid line: rows `row − 1` (above) and `row` (below).
+        let (above, below) = (cell(col, row - 1.0), cell(col, row));
+        let (low, high) = if dx > 0.0 {
+            (below, above)
+        } else {
+            (above, below)
+        };
+        0.5 * (low[0] + high[1]) as f64
+    } else {
+        let c = cell(col, row);
+        0.5 * (c[0] + c[1]) as f64
+    }
 }
 
 /// One-sided slopes `(d cov/dw⁺, d cov/dw⁻)` of the coverage rule at `w` (see
@@ -731,6 +797,119 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// [`line_local`] without its one-row shortcut: the general row loop for every segment.
+    fn line_local_by_rows(acc: &mut Cells<f32>, p0: Point, p1: Point) {
+        if p0[1] == p1[1] {
+            return;
+        }
+        let (dir, a, b) = if p0[1] < p1[1] {
+            (1.0, p0, p1)
+        } else {
+            (-1.0, p1, p0)
+        };
+        let (ox, oy) = (acc.x0 as f64, acc.y0 as f64);
+        let (a, b) = ([a[0] - ox, a[1] - oy], [b[0] - ox, b[1] - oy]);
+        if b[1] <= 0.0 || a[1] >= from_index(acc.h) {
+            return;
+        }
+        line_rows(acc, a, b, dir);
+    }
+
+    #[test]
+    fn one_row_shortcut_has_the_bits_of_the_row_loop() {
+        let mut rng = crate::scene::random::Rng::new(11);
+        // Coordinates snapped now and then to whole and half pixels, to the buffer's edges
+        // (zero, of either sign) and to values a hair apart, where the shortcut's
+        // conditions sit on their boundaries.
+        let mut coord = |lo: f64, hi: f64| -> f64 {
+            let v = rng.range(lo, hi);
+            match rng.next_u64() % 8 {
+                0 => v.round(),
+                1 => (2.0 * v).round() / 2.0,
+                2 => 0.0,
+                3 => -0.0,
+                4 => v.round() + 1e-12,
+                _ => v,
+            }
+        };
+        let (mut fast, mut slow) = (Cells::default(), Cells::default());
+        let mut shortcuts = 0;
+        for case in 0..20_000 {
+            let (x0, y0) = if case % 2 == 0 { (0, 0) } else { (3, -2) };
+            fast.reset(x0, y0, 9, 6);
+            slow.reset(x0, y0, 9, 6);
+            for _ in 0..4 {
+                let ox = x0 as f64;
+                let p0 = [ox + coord(0.0, 8.0).abs(), coord(-1.0, 7.0) + y0 as f64];
+                let near = coord(-1.2, 1.2);
+                let p1 = [
+                    (p0[0] + coord(-2.0, 2.0)).clamp(ox, ox + 8.0),
+                    p0[1] + near,
+                ];
+                line_local(&mut fast, p0, p1);
+                line_local_by_rows(&mut slow, p0, p1);
+                let (ay, by) = (p0[1].min(p1[1]) - y0 as f64, p0[1].max(p1[1]) - y0 as f64);
+                if ay >= 0.0 && by <= 6.0 && ay.floor() + 1.0 >= by && ay < by {
+                    shortcuts += 1;
+                }
+            }
+            let bits = |c: &Cells<f32>| c.data.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&fast), bits(&slow), "case {case}");
+        }
+        assert!(shortcuts > 10_000, "only {shortcuts} one-row segments");
+    }
+
+    #[test]
+    fn one_cell_shortcut_has_the_bits_of_the_walk() {
+        let mut rng = crate::scene::random::Rng::new(5);
+        let mut g: Cells<[f32; 2]> = Cells::default();
+        g.reset(-1, 2, 6, 5);
+        for v in &mut g.data {
+            // Zeros, equal and unequal one-sided values.
+            let a = rng.range(-1.0, 1.0) as f32;
+            *v = match rng.next_u64() % 4 {
+                0 => [0.0, 0.0],
+                1 => [a, a],
+                _ => [a, rng.range(-1.0, 1.0) as f32],
+            };
+        }
+        let mut coord = |lo: f64, hi: f64| -> f64 {
+            let v = rng.range(lo, hi);
+            match rng.next_u64() % 8 {
+                0 => v.round(),
+                1 => (4.0 * v).round() / 4.0,
+                2 => v.round() - 1e-13,
+                3 => v.round() + 1e-13,
+                _ => v,
+            }
+        };
+        let mut shortcuts = 0;
+        for case in 0..100_000 {
+            let p0 = [coord(-2.0, 6.0), coord(1.0, 8.0)];
+            let p1 = match case % 3 {
+                0 => [p0[0], coord(1.0, 8.0)],
+                1 => [coord(-2.0, 6.0), p0[1]],
+                _ => [p0[0] + coord(-1.0, 1.0), p0[1] + coord(-1.0, 1.0)],
+            };
+            let (dx, dy) = (p1[0] - p0[0], p1[1] - p0[1]);
+            if dx == 0.0 && dy == 0.0 {
+                continue;
+            }
+            let fast = line_weights(&g, p0, p1, dx, dy);
+            let walk = line_walk(&g, p0, dx, dy);
+            assert_eq!(
+                (fast.0.to_bits(), fast.1.to_bits()),
+                (walk.0.to_bits(), walk.1.to_bits()),
+                "{p0:?} → {p1:?}"
+            );
+            let same_cell = |a: f64, b: f64| a.floor() == b.floor() || a.ceil() == b.ceil();
+            if same_cell(p0[0], p1[0]) && same_cell(p0[1], p1[1]) {
+                shortcuts += 1;
+            }
+        }
+        assert!(shortcuts > 10_000, "only {shortcuts} one-cell segments");
     }
 
     #[test]
