@@ -34,6 +34,21 @@ pub(crate) const RESVG_MAX_DEVICE_COORDINATE: f64 = 1.6e7;
 /// inside resvg or tiny-skia is caught (its message silenced) and returned as an
 /// [`Error::Unsupported`] naming the file, "resvg cannot render this file: …".
 pub fn render_resvg(tree: &usvg::Tree, name: &Path, sizing: Sizing) -> Result<Image> {
+    let pixmap = render_resvg_pixmap(tree, name, sizing)?;
+    Ok(Image::from_premultiplied_rgba8(
+        pixmap.width(),
+        pixmap.height(),
+        pixmap.data(),
+    ))
+}
+
+/// [`render_resvg`]'s canvas as resvg leaves it (8-bit premultiplied RGBA), without the
+/// conversion to an [`Image`]: what `diffsvg bench` times as resvg's own work.
+pub fn render_resvg_pixmap(
+    tree: &usvg::Tree,
+    name: &Path,
+    sizing: Sizing,
+) -> Result<tiny_skia::Pixmap> {
     let (w, h, t) = canvas_size(tree, sizing, name)?;
     let cannot = |why: String| Error::Unsupported {
         path: name.to_path_buf(),
@@ -59,7 +74,7 @@ pub fn render_resvg(tree: &usvg::Tree, name: &Path, sizing: Sizing) -> Result<Im
     );
     quietly(|| resvg::render(tree, ts, &mut pixmap.as_mut()))
         .map_err(|why| cannot(format!("it panicked ({why})")))?;
-    Ok(Image::from_premultiplied_rgba8(w, h, pixmap.data()))
+    Ok(pixmap)
 }
 
 /// The largest coordinate magnitude, in device pixels, of any node's stroked bounding box

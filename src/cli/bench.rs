@@ -8,7 +8,7 @@ use anyhow::Result;
 use super::parity::collect_svgs;
 use diffsvg::Sizing;
 use diffsvg::raster::{Prepared, RenderOptions, render_prepared};
-use diffsvg::reference::render_resvg;
+use diffsvg::reference::render_resvg_pixmap;
 use diffsvg::scene::random::curved_paths;
 use diffsvg::scene::{from_tree, parse_tree};
 
@@ -188,7 +188,7 @@ pub fn run(a: Args) -> Result<()> {
         // 1.4× from one invocation to the next (1.02–1.11× over four when on one thread).
         let resvg_time = || {
             timed_ms(|| {
-                let _ = render_resvg(tree, path, *sizing);
+                let _ = render_resvg_pixmap(tree, path, *sizing);
             })
         };
         let mut contenders: Vec<Box<dyn FnMut() -> f64 + '_>> =
