@@ -270,7 +270,9 @@ fn line_weights(g: &Cells<[f32; 2]>, p0: Point, p1: Point, dx: f64, dy: f64) -> 
     let within = |o: f64, d: f64, e: f64, lo: f64, hi: f64| {
         lo <= o.min(e)
             && o.max(e) <= hi
-            && (d == 0.0 || (d > 0.0 && e <= floor_f64(o) + 1.0) || (d < 0.0 && e >= ceil_f64(o) - 1.0))
+            && (d == 0.0
+                || (d > 0.0 && e <= floor_f64(o) + 1.0)
+                || (d < 0.0 && e >= ceil_f64(o) - 1.0))
     };
     if within(p0[0], dx, p1[0], xlo, xhi) && within(p0[1], dy, p1[1], ylo, yhi) {
         let gv = piece_gradient(g, [p0[0] + dx * 0.5, p0[1] + dy * 0.5], dx, dy);
@@ -844,10 +846,7 @@ mod tests {
                 let ox = x0 as f64;
                 let p0 = [ox + coord(0.0, 8.0).abs(), coord(-1.0, 7.0) + y0 as f64];
                 let near = coord(-1.2, 1.2);
-                let p1 = [
-                    (p0[0] + coord(-2.0, 2.0)).clamp(ox, ox + 8.0),
-                    p0[1] + near,
-                ];
+                let p1 = [(p0[0] + coord(-2.0, 2.0)).clamp(ox, ox + 8.0), p0[1] + near];
                 line_local(&mut fast, p0, p1);
                 line_local_by_rows(&mut slow, p0, p1);
                 let (ay, by) = (p0[1].min(p1[1]) - y0 as f64, p0[1].max(p1[1]) - y0 as f64);

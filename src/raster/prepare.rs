@@ -48,6 +48,11 @@ pub(crate) struct Item {
     pub(crate) grid_aligned: bool,
 }
 
+/// [`Prepared::work`] below which a scene is drawn on the calling thread alone: the
+/// bundled 64×64 glyphs (about 24 000) took longer on two threads than on one, drawings
+/// from 56 000 up gained from the second thread (`diffsvg bench`, 2 cores).
+pub(crate) const SERIAL_WORK: f64 = 40_000.0;
+
 /// Edges per run of [`Item::runs`].
 const RUN_EDGES: usize = 16;
 
@@ -175,6 +180,41 @@ impl Prepared {
     /// Canvas size in pixels, `(width, height)`.
     pub fn size(&self) -> (u32, u32) {
         (self.width, self.height)
+    }
+
+    /// A rough count of what rendering costs, in pixel-sized units: every item's box
+    /// within the canvas (four times over for a gradient paint), plus a few per vertex
+    /// (what accumulating an edge costs).
+    pub(crate) fn work(&self) -> f64 {
+        const PER_EDGE: f64 = 4.0;
+        const PER_GRADIENT_PIXEL: f64 = 4.0;
+        let (w, h) = (self.width as f64, self.height as f64);
+        self.items
+            .iter()
+            .map(|it| {
+                let b = it.bbox;
+                let cw = (b[2].min(w) - b[0].max(0.0)).max(0.0);
+                let ch = (b[3].min(h) - b[1].max(0.0)).max(0.0);
+                let per_pixel = match it.paint {
+                    PaintEval::Solid(_) => 1.0,
+                    PaintEval::Gradient(_) => PER_GRADIENT_PIXEL,
+                };
+                cw * ch * per_pixel + PER_EDGE * it.pts.len() as f64
+            })
+            .sum()
+    }
+
+    /// The least number of row bands a parallel task takes: all of them (the calling
+    /// thread renders alone) for a scene of less [`work`](Self::work) than
+    /// [`SERIAL_WORK`], which would take longer to hand to other threads than to draw;
+    /// one otherwise. The bands and their order are the same either way, and so are the
+    /// bits.
+    pub(crate) fn min_bands_per_task(&self) -> usize {
+        if self.work() < SERIAL_WORK {
+            usize::MAX
+        } else {
+            1
+        }
     }
 }
 
@@ -617,6 +657,36 @@ mod tests {
 
     fn load(svg: &str) -> Scene {
         Scene::from_svg_str(svg, "t.svg", Sizing::Natural).unwrap()
+    }
+
+    #[test]
+    fn small_scenes_are_drawn_on_one_thread_large_ones_on_all() {
+        let small = load(
+            r##"<svg xmlns="http://www.w3.org/2000/svg" width="64" height="64">
+            <rect width="64" height="64" fill="#fff"/>
+            <circle cx="32" cy="32" r="20" fill="#123"/></svg>"##,
+        );
+        let p = prepare(&small, 0.02, None);
+        assert!(
+            p.work() > 64.0 * 64.0 && p.work() < SERIAL_WORK,
+            "{}",
+            p.work()
+        );
+        assert_eq!(p.min_bands_per_task(), usize::MAX);
+        let large = crate::scene::random::curved_paths(100, 256, 3);
+        let p = prepare(&large, 0.02, None);
+        assert!(p.work() >= SERIAL_WORK, "{}", p.work());
+        assert_eq!(p.min_bands_per_task(), 1);
+        // A gradient paint counts its box four times over.
+        let gradient = load(
+            r##"<svg xmlns="http://www.w3.org/2000/svg" width="64" height="64">
+            <linearGradient id="g"><stop offset="0" stop-color="red"/>
+            <stop offset="1" stop-color="blue"/></linearGradient>
+            <rect width="64" height="64" fill="url(#g)"/></svg>"##,
+        );
+        let p = prepare(&gradient, 0.02, None);
+        let rect = 4.0 * 64.0 * 64.0;
+        assert!(p.work() >= rect && p.work() < rect + 100.0, "{}", p.work());
     }
 
     #[test]

@@ -40,6 +40,7 @@ pub fn render_prepared(p: &Prepared) -> Image {
     }
     img.data
         .par_chunks_mut(w * BAND_ROWS)
+        .with_min_len(p.min_bands_per_task())
         .enumerate()
         .for_each(|(band, out)| {
             let mut r = BandRenderer::new(p, band * BAND_ROWS, out.len() / w);

@@ -259,6 +259,30 @@ fn loss_and_grad_commands() {
     assert_eq!(r.status.code(), Some(2));
 }
 
+/// `diffsvg bench FILE` times that file against resvg and nothing else; `--sizes` adds the
+/// random scenes.
+#[test]
+fn bench_times_the_given_files_only() {
+    let glyph = root().join("svg-samples/glyphs/0.svg");
+    let r = diffsvg(&["bench", s(&glyph), "--runs", "1", "--threads", "1"]);
+    assert!(r.status.success());
+    let out = String::from_utf8_lossy(&r.stdout);
+    assert!(out.contains("| 0.svg |"), "{out}");
+    assert!(!out.contains("random paths"), "{out}");
+    let r = diffsvg(&[
+        "bench",
+        s(&glyph),
+        "--runs",
+        "1",
+        "--threads",
+        "1",
+        "--sizes",
+        "16",
+    ]);
+    assert!(r.status.success());
+    assert!(String::from_utf8_lossy(&r.stdout).contains("500 random paths, 16²"));
+}
+
 /// `diffsvg bench … | head`: a reader that closes the pipe early ends the run quietly with
 /// the status a shell gives a process ended by SIGPIPE, not a panic message.
 #[test]
