@@ -23,6 +23,14 @@ pub(crate) fn options(tolerance: f64) -> PyResult<RenderOptions> {
     Ok(RenderOptions { tolerance })
 }
 
+/// Runs `f` on a worker of rayon's pool: its parallel parts then start inside the pool
+/// instead of each being handed over from this thread and waited for (a wake-up each,
+/// most of the time of a small scene's call). Only for calls without Python callbacks,
+/// which must stay on the calling thread (signals reach the main thread only).
+fn on_pool<R: Send>(f: impl FnOnce() -> R + Send) -> R {
+    rayon::scope(|_| f())
+}
+
 /// Renders `scene` into a `(height, width, 4)` `float32` array of **premultiplied** RGBA
 /// in `[0, 1]`, y down. `width` (and optionally `height`) render at another size: the
 /// scene is scaled uniformly by `width / scene.width`, the canvas is `width × height`
@@ -58,11 +66,13 @@ pub(crate) fn render<'py>(
     };
     let scene_ref = sized.as_ref().unwrap_or(s);
     let img = py.detach(|| {
-        let mut img = raster_render(scene_ref, &opts);
-        if let Some(bg) = bg {
-            img.over_background(bg);
-        }
-        img
+        on_pool(|| {
+            let mut img = raster_render(scene_ref, &opts);
+            if let Some(bg) = bg {
+                img.over_background(bg);
+            }
+            img
+        })
     });
     Ok(image_out(py, img))
 }
@@ -91,10 +101,12 @@ pub(crate) fn render_backward<'py>(
         )));
     }
     let g = py.detach(|| {
-        if let Some(bg) = bg {
-            d.over_background_backward(bg);
-        }
-        raster_backward(s, &opts, &d)
+        on_pool(|| {
+            if let Some(bg) = bg {
+                d.over_background_backward(bg);
+            }
+            raster_backward(s, &opts, &d)
+        })
     });
     Ok(vec_out(py, g))
 }
