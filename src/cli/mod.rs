@@ -87,16 +87,7 @@ pub fn main() -> ExitCode {
             previous(info);
         }
     }));
-    // The command runs on a worker of rayon's pool, so that the parallel parts of each
-    // optimization step start inside the pool (a `join` the other workers may steal from)
-    // instead of each being handed to the pool from outside while this thread sleeps: a
-    // wake-up per parallel part, which was two thirds of a 28×28 digit step (0.18 → 0.06
-    // ms on one thread, `examples/step_cost`). Workers get the main thread's stack size.
-    const WORKER_STACK: usize = 8 << 20;
-    let _ = rayon::ThreadPoolBuilder::new()
-        .stack_size(WORKER_STACK)
-        .build_global();
-    match std::panic::catch_unwind(|| rayon::scope(|_| run())) {
+    match std::panic::catch_unwind(run) {
         Ok(code) => code,
         Err(payload) => {
             let message = payload
@@ -125,7 +116,29 @@ fn run() -> ExitCode {
             return ExitCode::SUCCESS;
         }
     };
-    let result = match cli.command {
+    // A command runs on a worker of rayon's pool, so that the parallel parts of each
+    // optimization step start inside the pool (a `join` the other workers may steal from)
+    // instead of each being handed to the pool from outside while this thread sleeps: a
+    // wake-up per parallel part, which was two thirds of a 28×28 digit step (0.18 → 0.06
+    // ms on one thread, `examples/step_cost`). Workers get the main thread's stack size.
+    // The benches stay on this thread: they time pools of their own, and a worker of the
+    // global pool waiting on another pool keeps looking for work, taking a core from the
+    // timed threads.
+    const WORKER_STACK: usize = 8 << 20;
+    match cli.command {
+        Command::Bench(a) => dispatch(Command::Bench(a)),
+        command => {
+            let _ = rayon::ThreadPoolBuilder::new()
+                .stack_size(WORKER_STACK)
+                .build_global();
+            rayon::scope(|_| dispatch(command))
+        }
+    }
+}
+
+/// Runs one parsed command; returns the process exit code.
+fn dispatch(command: Command) -> ExitCode {
+    let result = match command {
         Command::Render(a) => render::run(a),
         Command::Parity(a) => parity::run(a),
         Command::Bench(a) => bench::run(a),

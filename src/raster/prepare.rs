@@ -53,6 +53,40 @@ pub(crate) struct Item {
 /// from 56 000 up gained from the second thread (`diffsvg bench`, 2 cores).
 pub(crate) const SERIAL_WORK: f64 = 40_000.0;
 
+impl Item {
+    /// The premultiplied color of this item when it paints every pixel of a `width ×
+    /// height` canvas with exact coverage 1 and an opaque solid color: a fill whose one
+    /// ring is an axis-aligned rectangle containing the canvas (a background). Its winding
+    /// integral is then exactly ±1 in every pixel (each row gains exactly its full height
+    /// from each side, the sides clamped to the canvas's columns), so compositing it gives
+    /// the color itself, whatever lay below.
+    pub(crate) fn opaque_cover(&self, width: u32, height: u32) -> Option<[f32; 4]> {
+        let PaintEval::Solid(c) = &self.paint else {
+            return None;
+        };
+        if self.kind != ItemKind::Fill || c.premul[3] != 1.0 || self.rings.len() != 1 {
+            return None;
+        }
+        let (start, n) = self.rings[0];
+        let ring = &self.pts[start..start + n];
+        if n != 4 {
+            return None;
+        }
+        // Consecutive corners share one coordinate and differ in the other.
+        let rectangle = (0..4).all(|k| {
+            let (a, b) = (ring[k], ring[(k + 1) % 4]);
+            (a[0] == b[0]) != (a[1] == b[1])
+        });
+        let b = self.bbox;
+        let contains = b[0] <= 0.0
+            && b[1] <= 0.0
+            && b[2] >= width as f64
+            && b[3] >= height as f64
+            && b.iter().all(|v| v.is_finite());
+        (rectangle && contains).then_some(c.premul)
+    }
+}
+
 /// Edges per run of [`Item::runs`].
 const RUN_EDGES: usize = 16;
 

@@ -34,7 +34,10 @@ pub fn render(scene: &Scene, opts: &RenderOptions) -> Image {
 /// Renders an already prepared scene.
 pub fn render_prepared(p: &Prepared) -> Image {
     let (w, h) = (p.width as usize, p.height as usize);
-    let mut img = blank_canvas(p.width, p.height);
+    // What an opaque item covering the canvas (a background) hides is not drawn: the
+    // canvas starts as its color, which is what compositing it leaves in every pixel.
+    let (start, group, fill) = opaque_start(p);
+    let mut img = filled_canvas(p.width, p.height, fill);
     if w == 0 || h == 0 {
         return img;
     }
@@ -44,9 +47,33 @@ pub fn render_prepared(p: &Prepared) -> Image {
         .enumerate()
         .for_each(|(band, out)| {
             let mut r = BandRenderer::new(p, band * BAND_ROWS, out.len() / w);
-            r.run(out);
+            r.run(out, start, group);
         });
     img
+}
+
+/// Where a forward render may start: just after the last top-level item that paints the
+/// whole canvas an opaque color ([`Item::opaque_cover`]), as `(op, groups opened before
+/// it, color)`; `(0, 0, transparent)` when there is none.
+fn opaque_start(p: &Prepared) -> (usize, usize, [f32; 4]) {
+    let mut start = (0, 0, [0.0; 4]);
+    let (mut depth, mut groups) = (0usize, 0usize);
+    for (i, op) in p.ops.iter().enumerate() {
+        match *op {
+            Op::Draw(it) if depth == 0 => {
+                if let Some(c) = p.items[it].opaque_cover(p.width, p.height) {
+                    start = (i + 1, groups, c);
+                }
+            }
+            Op::Draw(_) => {}
+            Op::Push => {
+                depth += 1;
+                groups += 1;
+            }
+            Op::Pop { .. } => depth -= 1,
+        }
+    }
+    start
 }
 
 /// A transparent canvas. A large one has its zeros written, in parallel, rather than
@@ -57,14 +84,26 @@ pub fn render_prepared(p: &Prepared) -> Image {
 /// fault per page. Smaller canvases are reused heap memory, where writing the zeros is
 /// only a second pass (10% of a 256² drawing's time).
 pub(crate) fn blank_canvas(width: u32, height: u32) -> Image {
+    filled_canvas(width, height, [0.0; 4])
+}
+
+/// A canvas of one premultiplied color, written as [`blank_canvas`] writes its zeros.
+fn filled_canvas(width: u32, height: u32, color: [f32; 4]) -> Image {
     /// From this size on, glibc maps every allocation afresh (its largest mmap threshold).
     const FRESH_BYTES: usize = 32 << 20;
     let n = width as usize * height as usize;
     if n * std::mem::size_of::<[f32; 4]>() < FRESH_BYTES {
-        return Image::new(width, height);
+        if color == [0.0; 4] {
+            return Image::new(width, height);
+        }
+        return Image {
+            width,
+            height,
+            data: vec![color; n],
+        };
     }
     let mut data = Vec::with_capacity(n);
-    data.par_extend(rayon::iter::repeat_n([0.0f32; 4], n));
+    data.par_extend(rayon::iter::repeat_n(color, n));
     Image {
         width,
         height,
@@ -141,13 +180,14 @@ impl<'a> BandRenderer<'a> {
         })
     }
 
-    /// Runs the whole program onto `out` (`rows × width`, transparent or not).
-    pub(crate) fn run(&mut self, out: &mut [[f32; 4]]) {
+    /// Runs the program onto `out` (`rows × width`, transparent or not) from op `start`,
+    /// which lies at the top level after `group` groups were opened (`0, 0`: all of it).
+    fn run(&mut self, out: &mut [[f32; 4]], start: usize, group: usize) {
         let base = self.band_area();
         // Open layers, each only as large as its group's content in this band.
         let mut layers: Vec<(Area, Vec<[f32; 4]>)> = Vec::new();
         let ops = &self.p.ops;
-        let (mut i, mut group) = (0usize, 0usize);
+        let (mut i, mut group) = (start, group);
         while i < ops.len() {
             match ops[i] {
                 Op::Draw(it) => {
@@ -467,6 +507,113 @@ mod tests {
 
     fn total_alpha(img: &Image) -> f64 {
         img.data.iter().map(|p| p[3] as f64).sum()
+    }
+
+    /// [`render_prepared`] without skipping what an opaque background hides.
+    fn render_every_op(p: &Prepared) -> Image {
+        let (w, h) = (p.width as usize, p.height as usize);
+        let mut img = blank_canvas(p.width, p.height);
+        for (band, out) in img.data.chunks_mut(w * BAND_ROWS).enumerate() {
+            BandRenderer::new(p, band * BAND_ROWS, out.len() / w).run(out, 0, 0);
+        }
+        assert_eq!(img.data.len(), w * h);
+        img
+    }
+
+    fn bits(img: &Image) -> Vec<u32> {
+        img.data.iter().flatten().map(|v| v.to_bits()).collect()
+    }
+
+    #[test]
+    fn starting_after_an_opaque_background_keeps_the_bits() {
+        let load = |svg: &str| Scene::from_svg_str(svg, "t.svg", crate::Sizing::Natural).unwrap();
+        let wrap = |body: &str| {
+            format!(
+                r#"<svg xmlns="http://www.w3.org/2000/svg" width="40" height="30">{body}</svg>"#
+            )
+        };
+        let star = r##"<path d="M20 2 L30 28 L4 10 L36 10 L10 28 Z" fill="#4a8" fill-rule="evenodd" opacity="0.8"/>"##;
+        // (body, whether the render may start after a background)
+        let cases = [
+            (
+                format!(r#"<rect width="40" height="30" fill="white"/>{star}"#),
+                true,
+            ),
+            (
+                format!(r#"{star}<rect x="-5" y="-3" width="60" height="40" fill="teal"/>{star}"#),
+                true,
+            ),
+            (
+                format!(r#"<rect width="40" height="30" fill="white" fill-rule="evenodd"/>{star}"#),
+                true,
+            ),
+            (
+                format!(r#"<rect width="40" height="30" fill="white" opacity="0.5"/>{star}"#),
+                false,
+            ),
+            (
+                format!(
+                    r#"{star}<rect width="40" height="30" fill="white" fill-opacity="0.5"/>{star}"#
+                ),
+                false,
+            ),
+            (
+                format!(r#"<rect x="0.5" width="40" height="30" fill="white"/>{star}"#),
+                false,
+            ),
+            (
+                format!(r#"<rect width="39.9" height="30" fill="white"/>{star}"#),
+                false,
+            ),
+            (
+                format!(
+                    r#"<rect width="40" height="30" fill="white" transform="rotate(1 20 15)"/>{star}"#
+                ),
+                false,
+            ),
+            (
+                format!(r#"<g opacity="0.5"><rect width="40" height="30" fill="red"/></g>{star}"#),
+                false,
+            ),
+            (
+                format!(
+                    r#"<g opacity="0.5">{star}</g><rect width="40" height="30" fill="red"/><g opacity="0.7">{star}</g>"#
+                ),
+                true,
+            ),
+            (
+                format!(r#"<rect width="40" height="30" fill="none" stroke="red"/>{star}"#),
+                false,
+            ),
+        ];
+        for (body, skips) in &cases {
+            let scene = load(&wrap(body));
+            let p = prepare_forward(&scene, 0.02);
+            assert_eq!(opaque_start(&p).0 > 0, *skips, "{body}");
+            assert_eq!(
+                bits(&render_prepared(&p)),
+                bits(&render_every_op(&p)),
+                "{body}"
+            );
+        }
+        // The bundled drawings, most of which have a background.
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("svg-samples");
+        let mut started_late = 0;
+        for entry in std::fs::read_dir(&dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.extension().is_none_or(|e| e != "svg") {
+                continue;
+            }
+            let scene = Scene::load(&path, crate::Sizing::Natural).unwrap();
+            let p = prepare_forward(&scene, 0.02);
+            started_late += usize::from(opaque_start(&p).0 > 0);
+            assert_eq!(
+                bits(&render_prepared(&p)),
+                bits(&render_every_op(&p)),
+                "{path:?}"
+            );
+        }
+        assert!(started_late >= 8, "{started_late}");
     }
 
     #[test]
