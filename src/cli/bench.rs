@@ -23,7 +23,8 @@ pub struct Args {
     /// Timed runs per case; the median is reported.
     #[arg(long, default_value_t = 9)]
     runs: usize,
-    /// Thread counts for diffsvg (resvg always uses one).
+    /// Thread counts for diffsvg. resvg always uses one thread; it is timed beside each
+    /// count, on a worker of that count's pool, and the table shows the first series.
     #[arg(long, value_delimiter = ',', default_value = "1,2")]
     threads: Vec<usize>,
     /// Canvas sizes for the random scene of 500 curved translucent paths [default:
@@ -165,6 +166,7 @@ pub fn run(a: Args) -> Result<()> {
         .iter()
         .map(|&n| Ok((n, rayon::ThreadPoolBuilder::new().num_threads(n).build()?)))
         .collect::<Result<_>>()?;
+    anyhow::ensure!(!pools.is_empty(), "--threads: give at least one thread count");
     let mut table = String::from("| case | resvg (ms) |");
     for (n, _) in &pools {
         table += &format!(" diffsvg {n} thr (ms) | ratio |");
@@ -179,36 +181,38 @@ pub fn run(a: Args) -> Result<()> {
         let path = std::path::Path::new(name);
         let scene = from_tree(tree, path, *sizing)?;
         let opts = RenderOptions::default();
-        // resvg and each thread count take turns, run by run, so that a slower or faster
-        // spell of a shared machine weighs on every column alike.
-        // A pool's run is timed inside the pool, without handing the work to its threads.
-        // resvg runs on the first pool's worker too: on this two-core virtual machine the
-        // main thread and a worker can sit on cores of different speeds, and timing the
-        // two renderers on different threads swung a drawing's ratio between 0.8× and
-        // 1.4× from one invocation to the next (1.02–1.11× over four when on one thread).
-        let resvg_time = || {
-            timed_ms(|| {
-                let _ = render_resvg_pixmap(tree, path, *sizing);
-            })
-        };
-        let mut contenders: Vec<Box<dyn FnMut() -> f64 + '_>> =
-            vec![Box::new(|| match pools.first() {
-                Some((_, pool)) => pool.install(resvg_time),
-                None => resvg_time(),
-            })];
-        for (_, pool) in &pools {
-            contenders.push(Box::new(|| {
-                pool.install(|| {
-                    timed_ms(|| {
-                        let _ = diffsvg::raster::render(&scene, &opts);
+        // Per thread count, resvg and diffsvg take turns run by run in that count's pool,
+        // both timed on a worker of it (inside the pool, without handing the work over),
+        // so that a slower or faster spell of a shared machine weighs on both alike, and
+        // each ratio is against the resvg runs of its own series. On this two-core
+        // virtual machine, resvg timed on the main thread swung a drawing's one-thread
+        // ratio between 0.8× and 1.4× from one invocation to the next (1.02–1.11× on the
+        // same worker), and two-thread runs timed straight after another pool's ran at
+        // one-thread speed (8.2 ms instead of 4.9 on the 256² random scene).
+        let mut row = String::new();
+        for (k, (_, pool)) in pools.iter().enumerate() {
+            let mut contenders: [Box<dyn FnMut() -> f64 + '_>; 2] = [
+                Box::new(|| {
+                    pool.install(|| {
+                        timed_ms(|| {
+                            let _ = render_resvg_pixmap(tree, path, *sizing);
+                        })
                     })
-                })
-            }));
-        }
-        let medians = interleaved_medians_ms(a.runs, &mut contenders);
-        let reference = medians[0];
-        let mut row = format!("| {name} | {reference:.2} |");
-        for (k, &t) in medians[1..].iter().enumerate() {
+                }),
+                Box::new(|| {
+                    pool.install(|| {
+                        timed_ms(|| {
+                            let _ = diffsvg::raster::render(&scene, &opts);
+                        })
+                    })
+                }),
+            ];
+            let [reference, t] = interleaved_medians_ms(a.runs, &mut contenders)[..] else {
+                unreachable!("two contenders, two medians")
+            };
+            if k == 0 {
+                row = format!("| {name} | {reference:.2} |");
+            }
             let ratio = reference / t;
             ratios[k].push(ratio);
             row += &format!(" {t:.2} | {ratio:.2}× |");
