@@ -112,22 +112,9 @@ fn split_x(p0: Point, p1: Point, lo: f64, hi: f64, f: &mut dyn FnMut(Point, Poin
 
 /// Exact-area accumulation of one segment already clamped to the buffer's columns.
 fn line_local(acc: &mut Cells<f32>, p0: Point, p1: Point) {
-    if p0[1] == p1[1] {
+    let Some(([ax, ay], [bx, by], dir)) = downward_local(acc, p0, p1) else {
         return;
-    }
-    let (dir, a, b) = if p0[1] < p1[1] {
-        (1.0, p0, p1)
-    } else {
-        (-1.0, p1, p0)
     };
-    // Local coordinates.
-    let ox = acc.x0 as f64;
-    let oy = acc.y0 as f64;
-    let (ax, ay, bx, by) = (a[0] - ox, a[1] - oy, b[0] - ox, b[1] - oy);
-    let h = from_index(acc.h);
-    if by <= 0.0 || ay >= h {
-        return;
-    }
     let w = acc.w;
     let max_col = from_index(w - 1);
     // A segment inside one row (most chords at a fine tolerance) takes the general loop's
@@ -145,6 +132,29 @@ fn line_local(acc: &mut Cells<f32>, p0: Point, p1: Point) {
         }
     }
     line_rows(acc, [ax, ay], [bx, by], dir);
+}
+
+/// The segment in `acc`'s local coordinates, top end first, with the sign of its
+/// direction (+1 going down); `None` when it is horizontal or lies wholly above or below
+/// the buffer's rows, where it adds nothing.
+#[inline(always)]
+fn downward_local(acc: &Cells<f32>, p0: Point, p1: Point) -> Option<(Point, Point, f64)> {
+    if p0[1] == p1[1] {
+        return None;
+    }
+    let (dir, a, b) = if p0[1] < p1[1] {
+        (1.0, p0, p1)
+    } else {
+        (-1.0, p1, p0)
+    };
+    let ox = acc.x0 as f64;
+    let oy = acc.y0 as f64;
+    let (a, b) = ([a[0] - ox, a[1] - oy], [b[0] - ox, b[1] - oy]);
+    // Written as the test for nothing to do, so that NaN ends go on as they always did.
+    if b[1] <= 0.0 || a[1] >= from_index(acc.h) {
+        return None;
+    }
+    Some((a, b, dir))
 }
 
 /// [`line_local`]'s general case: `a` above `b` (`ay < by`, local coordinates), `dir` the
@@ -803,20 +813,9 @@ mod tests {
 
     /// [`line_local`] without its one-row shortcut: the general row loop for every segment.
     fn line_local_by_rows(acc: &mut Cells<f32>, p0: Point, p1: Point) {
-        if p0[1] == p1[1] {
-            return;
+        if let Some((a, b, dir)) = downward_local(acc, p0, p1) {
+            line_rows(acc, a, b, dir);
         }
-        let (dir, a, b) = if p0[1] < p1[1] {
-            (1.0, p0, p1)
-        } else {
-            (-1.0, p1, p0)
-        };
-        let (ox, oy) = (acc.x0 as f64, acc.y0 as f64);
-        let (a, b) = ([a[0] - ox, a[1] - oy], [b[0] - ox, b[1] - oy]);
-        if b[1] <= 0.0 || a[1] >= from_index(acc.h) {
-            return;
-        }
-        line_rows(acc, a, b, dir);
     }
 
     #[test]
