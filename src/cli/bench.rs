@@ -166,7 +166,10 @@ pub fn run(a: Args) -> Result<()> {
         .iter()
         .map(|&n| Ok((n, rayon::ThreadPoolBuilder::new().num_threads(n).build()?)))
         .collect::<Result<_>>()?;
-    anyhow::ensure!(!pools.is_empty(), "--threads: give at least one thread count");
+    anyhow::ensure!(
+        !pools.is_empty(),
+        "--threads: give at least one thread count"
+    );
     let mut table = String::from("| case | resvg (ms) |");
     for (n, _) in &pools {
         table += &format!(" diffsvg {n} thr (ms) | ratio |");
