@@ -131,6 +131,21 @@ pub(crate) struct BandRenderer<'a> {
     scratch: RowScratch,
 }
 
+/// A band renderer's buffers, kept on each thread from one band to the next: a small
+/// drawing's bands each allocated them afresh (seven allocations a band).
+#[derive(Default)]
+struct BandBuffers {
+    /// [`BandRenderer::acc`]'s values, all zero.
+    acc: Vec<f32>,
+    row: Vec<f32>,
+    scratch: RowScratch,
+}
+
+thread_local! {
+    static BAND_BUFFERS: std::cell::RefCell<BandBuffers> =
+        std::cell::RefCell::new(BandBuffers::default());
+}
+
 /// Scratch values along one row of an item's box.
 #[derive(Default)]
 pub(crate) struct RowScratch {
@@ -145,14 +160,18 @@ pub(crate) struct RowScratch {
 
 impl<'a> BandRenderer<'a> {
     pub(crate) fn new(p: &'a Prepared, y0: usize, rows: usize) -> Self {
+        let b = BAND_BUFFERS.with(|b| std::mem::take(&mut *b.borrow_mut()));
         BandRenderer {
             p,
             y0,
             rows,
-            acc: Cells::default(),
+            acc: Cells {
+                data: b.acc,
+                ..Cells::default()
+            },
             clean: true,
-            row: Vec::new(),
-            scratch: RowScratch::default(),
+            row: b.row,
+            scratch: b.scratch,
         }
     }
 
@@ -307,6 +326,23 @@ impl<'a> BandRenderer<'a> {
             let dst = &mut target[area.index(x0, y)..][..row.len()];
             composite_row(item, row, &mut sc.covs, &mut sc.colors, dst, x0, y);
         }
+    }
+}
+
+impl Drop for BandRenderer<'_> {
+    /// Leaves the buffers to the thread's next band renderer; the values of `acc` only
+    /// when they are all zero again (as drawing an item leaves them), else none.
+    fn drop(&mut self) {
+        let mut acc = std::mem::take(&mut self.acc.data);
+        if !all_zero(&acc) {
+            acc.clear();
+        }
+        let kept = BandBuffers {
+            acc,
+            row: std::mem::take(&mut self.row),
+            scratch: std::mem::take(&mut self.scratch),
+        };
+        BAND_BUFFERS.with(|b| *b.borrow_mut() = kept);
     }
 }
 
