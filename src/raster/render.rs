@@ -653,6 +653,44 @@ mod tests {
     }
 
     #[test]
+    fn band_buffers_left_by_earlier_bands_change_no_bits() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("svg-samples");
+        let scenes: Vec<Scene> = [
+            "07-glyph.svg",
+            "03-linear-gradient.svg",
+            "09-transforms.svg",
+        ]
+        .iter()
+        .map(|f| Scene::load(dir.join(f), crate::Sizing::Natural).unwrap())
+        .collect();
+        let opts = RenderOptions::default();
+        // Each scene on a thread of its own, whose buffers start empty.
+        let fresh: Vec<Vec<u32>> = scenes
+            .iter()
+            .map(|s| std::thread::scope(|t| t.spawn(|| bits(&render(s, &opts))).join().unwrap()))
+            .collect();
+        // On one thread, after each other, and after a renderer left its winding cells
+        // integrated (not zero) when it was dropped.
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            for _ in 0..2 {
+                for (s, want) in scenes.iter().zip(&fresh) {
+                    let p = prepare_forward(s, 0.02);
+                    let item = &p.items[0];
+                    let mut r = BandRenderer::new(&p, item.bbox[1].max(0.0) as usize, BAND_ROWS);
+                    assert!(r.winding(item));
+                    assert!(!all_zero(&r.acc.data));
+                    drop(r);
+                    assert_eq!(&bits(&render(s, &opts)), want);
+                }
+            }
+        });
+    }
+
+    #[test]
     fn pixel_aligned_rect_is_crisp() {
         let img = render(
             &rect_scene(5.0, 5.0, 15.0, 25.0, FillRule::NonZero),
