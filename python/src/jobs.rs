@@ -396,7 +396,7 @@ pub(crate) fn digit<'py>(
         ..DigitOptions::default()
     };
     let (h, w) = (shape[0], shape[1]);
-    let f = py.detach(|| fit_digit(&v, w, h, &opts));
+    let f = py.detach(|| crate::on_pool(|| fit_digit(&v, w, h, &opts)));
     let info = dict! {py;
         "iou" => f.iou,
         "mse" => f.mse,
@@ -430,7 +430,7 @@ pub(crate) fn glyph<'py>(
         iters,
         ..GlyphOptions::default()
     };
-    let out = py.detach(|| fit_glyph(&t, &opts));
+    let out = py.detach(|| crate::on_pool(|| fit_glyph(&t, &opts)));
     let info = dict! {py;
         "iou" => out.iou,
         "mse" => out.mse,

@@ -16,6 +16,14 @@ mod scene;
 
 use pyo3::prelude::*;
 
+/// Runs `f` on a worker of rayon's pool: its parallel parts then start inside the pool
+/// instead of each being handed over from this thread and waited for (a wake-up each,
+/// most of the time of a small scene's call). Only for calls without Python callbacks,
+/// which must stay on the calling thread (signals reach the main thread only).
+pub(crate) fn on_pool<R: Send>(f: impl FnOnce() -> R + Send) -> R {
+    rayon::scope(|_| f())
+}
+
 /// The native half of the `diffsvg` package.
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {

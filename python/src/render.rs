@@ -10,6 +10,7 @@ use pyo3::prelude::*;
 
 use crate::array::{color_in, image_in, image_out, vec_out};
 use crate::error::{bad, to_py};
+use crate::on_pool;
 use crate::scene::PyScene;
 
 /// Rasterizer settings from the keyword `tolerance` (pixels between a curve and its
@@ -21,14 +22,6 @@ pub(crate) fn options(tolerance: f64) -> PyResult<RenderOptions> {
         )));
     }
     Ok(RenderOptions { tolerance })
-}
-
-/// Runs `f` on a worker of rayon's pool: its parallel parts then start inside the pool
-/// instead of each being handed over from this thread and waited for (a wake-up each,
-/// most of the time of a small scene's call). Only for calls without Python callbacks,
-/// which must stay on the calling thread (signals reach the main thread only).
-fn on_pool<R: Send>(f: impl FnOnce() -> R + Send) -> R {
-    rayon::scope(|_| f())
 }
 
 /// Renders `scene` into a `(height, width, 4)` `float32` array of **premultiplied** RGBA
