@@ -185,13 +185,18 @@ proptest! {
     fn polygons_with_holes_match_supersampling(
         c in (4.0f64..8.0, 4.0f64..8.0),
         outer in prop::collection::vec(4.5f64..7.0, 6..9),
-        inner in prop::collection::vec(0.8f64..3.5, 3..7),
+        inner in prop::collection::vec(0.8f64..2.0, 3..7),
         jitter in prop::collection::vec(0.0f64..1.0, 8),
         reversed in any::<bool>(),
         evenodd in any::<bool>(),
     ) {
         // With ≥ 6 vertices at radius ≥ 4.5, slots moved by at most 0.2, the outer ring's
-        // edges stay ≥ 4.5·cos(36°) > 3.5 from the center: the hole never crosses it.
+        // edges stay ≥ 4.5·cos(36°) > 3.64 from the center, and the hole's vertices at
+        // most 2.0: more than a pixel's diagonal (√2) apart, so no pixel holds both
+        // boundaries. (Where one does, with winding 2 in the hole, the pixel's winding
+        // integral no longer tells its coverage — the exactness is per pixel, "wherever
+        // edges do not overlap inside a pixel", see `raster::coverage` — and a hole
+        // radius of up to 3.5 let a seed find a pixel 0.066 off.)
         let outer_ring = star_polygon([c.0, c.1], &outer, &jitter, 0.2);
         let mut hole = star_polygon([c.0, c.1], &inner, &jitter, 0.8);
         if reversed {
