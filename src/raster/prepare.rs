@@ -48,9 +48,12 @@ pub(crate) struct Item {
     pub(crate) grid_aligned: bool,
 }
 
+/// Edges per run of [`Item::runs`].
+const RUN_EDGES: usize = 16;
+
 /// [`Prepared::work`] below which a scene is drawn on the calling thread alone: the
-/// bundled 64×64 glyphs (about 24 000) took longer on two threads than on one, drawings
-/// from 56 000 up gained from the second thread (`diffsvg bench`, 2 cores).
+/// bundled 128×128 glyph outlines (about 24 000) took longer on two threads than on one,
+/// drawings from 56 000 up gained from the second thread (`diffsvg bench`, 2 cores).
 pub(crate) const SERIAL_WORK: f64 = 40_000.0;
 
 impl Item {
@@ -85,12 +88,7 @@ impl Item {
             && b.iter().all(|v| v.is_finite());
         (rectangle && contains).then_some(c.premul)
     }
-}
 
-/// Edges per run of [`Item::runs`].
-const RUN_EDGES: usize = 16;
-
-impl Item {
     /// Calls `f(a, b)`, indices into `pts` of an edge's two ends, for every edge in ring
     /// order, except the runs of edges lying wholly above `ylo` or wholly below `yhi`
     /// (device pixels). An edge touching either line is passed; callers test each edge
