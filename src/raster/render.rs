@@ -420,7 +420,9 @@ pub(crate) fn composite_row(
         // stores (`over` gives `s·1 + d·0`, the same bits).
         let s = solid.premul;
         let opaque = s[3] == 1.0;
-        let run = [s; 8];
+        // Hidden from the optimizer: knowing the alpha is 1 (from `opaque`), it would
+        // store each pixel as three pieces around that constant instead of one.
+        let run = std::hint::black_box([s; 8]);
         let mut cc = covs.chunks_exact(8);
         let mut dd = dst.chunks_exact_mut(8);
         for (c, d) in (&mut cc).zip(&mut dd) {
