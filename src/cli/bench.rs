@@ -55,6 +55,7 @@ fn run_backward(a: &Args) -> Result<()> {
         "Painterly case, 256×256, {threads} thread(s), medians of {} runs.\n\n| shapes | forward (ms) | forward+backward (ms) | ratio | backward record memory (MiB) | ×(canvas RGBA f32) |\n|---:|---:|---:|---:|---:|---:|\n",
         a.runs
     );
+    print!("{table}");
     for &n in &a.shapes {
         let scene = curved_paths(n, 256, 1);
         let target = diffsvg::raster::render(&curved_paths(n, 256, 2), &RenderOptions::default());
@@ -179,6 +180,8 @@ pub fn run(a: Args) -> Result<()> {
         table += "---:|---:|";
     }
     table += "\n";
+    // The header goes to the terminal too: rows without it do not say which is which.
+    print!("{table}");
     let mut ratios: Vec<Vec<f64>> = vec![Vec::new(); pools.len()];
     for (name, tree, sizing) in &cases {
         let path = std::path::Path::new(name);

@@ -269,6 +269,11 @@ fn bench_times_the_given_files_only() {
     let out = String::from_utf8_lossy(&r.stdout);
     assert!(out.contains("| 0.svg |"), "{out}");
     assert!(!out.contains("random paths"), "{out}");
+    // The table's header comes first, so the columns are named on the terminal too.
+    assert!(
+        out.starts_with("| case | resvg (ms) | diffsvg 1 thr (ms) | ratio |\n|---|"),
+        "{out}"
+    );
     let r = diffsvg(&[
         "bench",
         s(&glyph),
