@@ -292,21 +292,40 @@ fn line_weights(g: &Cells<[f32; 2]>, p0: Point, p1: Point, dx: f64, dy: f64) -> 
             (0.0, 0.0)
         };
     }
-    line_walk(g, p0, dx, dy)
+    line_walk(g, p0, p1, dx, dy)
 }
 
-/// [`line_weights`]'s general case: the segment from `p0` along `(dx, dy)` (not both zero)
-/// clipped to `g`'s box and walked piece by piece between grid lines.
-fn line_walk(g: &Cells<[f32; 2]>, p0: Point, dx: f64, dy: f64) -> (f64, f64) {
+/// [`line_weights`]'s general case: the segment from `p0` to `p1` (`(dx, dy)` apart, not
+/// both zero) clipped to `g`'s box and walked piece by piece between grid lines.
+fn line_walk(g: &Cells<[f32; 2]>, p0: Point, p1: Point, dx: f64, dy: f64) -> (f64, f64) {
     let (xlo, ylo) = (g.x0 as f64, g.y0 as f64);
     let (xhi, yhi) = (xlo + from_index(g.w), ylo + from_index(g.h));
-    // Parameter range inside the closed box of g (boundary lines count: the cell inside
-    // may see a piece lying on them).
+    // Both ends inside the closed box (most segments): the clipping gives exactly `[0, 1]`.
+    // Along an axis with `d > 0`, `lo ≤ o` makes `(lo − o) / d ≤ 0` and `hi ≥ e` makes
+    // `hi − o ≥ e − o = d` after rounding (rounding is monotonic, and `d` was computed as
+    // `e − o`), so `(hi − o) / d ≥ 1`; mirrored for `d < 0`. The only difference is the
+    // sign of a zero `t0`, which no value below can tell (tested).
+    let inside = |o: f64, e: f64, lo: f64, hi: f64| lo <= o.min(e) && o.max(e) <= hi;
+    let (t0, t1) = if inside(p0[0], p1[0], xlo, xhi) && inside(p0[1], p1[1], ylo, yhi) {
+        (0.0, 1.0)
+    } else {
+        match clip_to_box(p0, dx, dy, [xlo, ylo, xhi, yhi]) {
+            Some(range) => range,
+            None => return (0.0, 0.0),
+        }
+    };
+    walk_pieces(g, p0, dx, dy, t0, t1)
+}
+
+/// The parameter range `[t0, t1] ⊆ [0, 1]` of the segment from `p0` along `(dx, dy)` inside
+/// the closed box `[xlo, ylo, xhi, yhi]` (boundary lines count: the cell inside may see a
+/// piece lying on them); `None` when it has no length there.
+fn clip_to_box(p0: Point, dx: f64, dy: f64, [xlo, ylo, xhi, yhi]: [f64; 4]) -> Option<(f64, f64)> {
     let (mut t0, mut t1) = (0.0f64, 1.0f64);
     for (o, d, lo, hi) in [(p0[0], dx, xlo, xhi), (p0[1], dy, ylo, yhi)] {
         if d == 0.0 {
             if o < lo || o > hi {
-                return (0.0, 0.0);
+                return None;
             }
         } else {
             let (a, b) = ((lo - o) / d, (hi - o) / d);
@@ -314,9 +333,12 @@ fn line_walk(g: &Cells<[f32; 2]>, p0: Point, dx: f64, dy: f64) -> (f64, f64) {
             t1 = t1.min(a.max(b));
         }
     }
-    if t1 <= t0 {
-        return (0.0, 0.0);
-    }
+    (t1 > t0).then_some((t0, t1))
+}
+
+/// `(Σ G ∫(1 − t), Σ G ∫ t)` over the pieces between grid lines of the segment from `p0`
+/// along `(dx, dy)` for `t ∈ [t0, t1]`.
+fn walk_pieces(g: &Cells<[f32; 2]>, p0: Point, dx: f64, dy: f64, t0: f64, t1: f64) -> (f64, f64) {
     let at = |t: f64| [p0[0] + dx * t, p0[1] + dy * t];
     // Next integer grid line strictly after `v` in the direction of `d`, as a parameter.
     let next = |v: f64, o: f64, d: f64| -> f64 {
@@ -860,7 +882,7 @@ mod tests {
     }
 
     #[test]
-    fn one_cell_shortcut_has_the_bits_of_the_walk() {
+    fn shortcuts_have_the_bits_of_the_clipped_walk() {
         let mut rng = crate::scene::random::Rng::new(5);
         let mut g: Cells<[f32; 2]> = Cells::default();
         g.reset(-1, 2, 6, 5);
@@ -896,7 +918,17 @@ mod tests {
                 continue;
             }
             let fast = line_weights(&g, p0, p1, dx, dy);
-            let walk = line_walk(&g, p0, dx, dy);
+            // The walk with the clipping always done, as it was before the box shortcut.
+            let bx = [
+                g.x0 as f64,
+                g.y0 as f64,
+                (g.x0 + 6) as f64,
+                (g.y0 + 5) as f64,
+            ];
+            let walk = match clip_to_box(p0, dx, dy, bx) {
+                Some((t0, t1)) => walk_pieces(&g, p0, dx, dy, t0, t1),
+                None => (0.0, 0.0),
+            };
             assert_eq!(
                 (fast.0.to_bits(), fast.1.to_bits()),
                 (walk.0.to_bits(), walk.1.to_bits()),
