@@ -905,7 +905,13 @@ mod tests {
                 _ => v,
             }
         };
-        let mut shortcuts = 0;
+        let (mut shortcuts, mut unclipped) = (0, 0);
+        let bx = [
+            g.x0 as f64,
+            g.y0 as f64,
+            (g.x0 + 6) as f64,
+            (g.y0 + 5) as f64,
+        ];
         for case in 0..100_000 {
             let p0 = [coord(-2.0, 6.0), coord(1.0, 8.0)];
             let p1 = match case % 3 {
@@ -919,12 +925,6 @@ mod tests {
             }
             let fast = line_weights(&g, p0, p1, dx, dy);
             // The walk with the clipping always done, as it was before the box shortcut.
-            let bx = [
-                g.x0 as f64,
-                g.y0 as f64,
-                (g.x0 + 6) as f64,
-                (g.y0 + 5) as f64,
-            ];
             let walk = match clip_to_box(p0, dx, dy, bx) {
                 Some((t0, t1)) => walk_pieces(&g, p0, dx, dy, t0, t1),
                 None => (0.0, 0.0),
@@ -935,11 +935,15 @@ mod tests {
                 "{p0:?} → {p1:?}"
             );
             let same_cell = |a: f64, b: f64| a.floor() == b.floor() || a.ceil() == b.ceil();
+            let within = |a: f64, b: f64, lo: f64, hi: f64| lo <= a.min(b) && a.max(b) <= hi;
             if same_cell(p0[0], p1[0]) && same_cell(p0[1], p1[1]) {
                 shortcuts += 1;
+            } else if within(p0[0], p1[0], bx[0], bx[2]) && within(p0[1], p1[1], bx[1], bx[3]) {
+                unclipped += 1;
             }
         }
         assert!(shortcuts > 10_000, "only {shortcuts} one-cell segments");
+        assert!(unclipped > 10_000, "only {unclipped} unclipped walks");
     }
 
     #[test]
