@@ -267,24 +267,30 @@ fn line_weights(g: &Cells<[f32; 2]>, p0: Point, p1: Point, dx: f64, dy: f64) -> 
     if (dx == 0.0 && dy == 0.0) || g.w == 0 || g.h == 0 {
         return (0.0, 0.0);
     }
-    let ylo = g.y0 as f64;
-    let yhi = ylo + from_index(g.h);
-    let xlo = g.x0 as f64;
-    let xhi = xlo + from_index(g.w);
-    // A segment inside one cell of `g` (most chords at a fine tolerance): the walk below
-    // clips it to `t ∈ [0, 1]` and finds no grid line before `t = 1` (rounding is
-    // monotonic, so an end point short of the next line gives a parameter of at least 1),
-    // so it takes one piece with `∫ t = ∫ (1 − t) = 0.5` around the midpoint. The same
-    // bits without the walk's eight divisions (tested). The bounds are checked on the end
-    // point itself, not on `p0 + dx`, which may round across a line the point is short of.
-    let within = |o: f64, d: f64, e: f64, lo: f64, hi: f64| {
-        lo <= o.min(e)
-            && o.max(e) <= hi
-            && (d == 0.0
-                || (d > 0.0 && e <= floor_f64(o) + 1.0)
-                || (d < 0.0 && e >= ceil_f64(o) - 1.0))
+    let (xlo, ylo) = (g.x0 as f64, g.y0 as f64);
+    let (xhi, yhi) = (xlo + from_index(g.w), ylo + from_index(g.h));
+    // Both ends inside the closed box (most segments): clipping would give exactly
+    // `t ∈ [0, 1]`. Along an axis with `d > 0`, `lo ≤ o` makes `(lo − o) / d ≤ 0` and
+    // `hi ≥ e` makes `hi − o ≥ e − o = d` after rounding (rounding is monotonic, and `d`
+    // was computed as `e − o`), so `(hi − o) / d ≥ 1`; mirrored for `d < 0`. The only
+    // difference is the sign of a zero `t0`, which no value below can tell (tested).
+    let inside = |o: f64, e: f64, lo: f64, hi: f64| lo <= o.min(e) && o.max(e) <= hi;
+    if !(inside(p0[0], p1[0], xlo, xhi) && inside(p0[1], p1[1], ylo, yhi)) {
+        return match clip_to_box(p0, dx, dy, [xlo, ylo, xhi, yhi]) {
+            Some((t0, t1)) => walk_pieces(g, p0, dx, dy, t0, t1),
+            None => (0.0, 0.0),
+        };
+    }
+    // Inside one cell of `g` as well (most chords at a fine tolerance): the walk finds no
+    // grid line before `t = 1` (rounding is monotonic, so an end point short of the next
+    // line gives a parameter of at least 1), so it takes one piece with
+    // `∫ t = ∫ (1 − t) = 0.5` around the midpoint. The same bits without the walk's four
+    // divisions (tested). Checked on the end point itself, not on `p0 + dx`, which may
+    // round across a line the point is short of.
+    let one_cell = |o: f64, d: f64, e: f64| {
+        d == 0.0 || (d > 0.0 && e <= floor_f64(o) + 1.0) || (d < 0.0 && e >= ceil_f64(o) - 1.0)
     };
-    if within(p0[0], dx, p1[0], xlo, xhi) && within(p0[1], dy, p1[1], ylo, yhi) {
+    if one_cell(p0[0], dx, p1[0]) && one_cell(p0[1], dy, p1[1]) {
         let gv = piece_gradient(g, [p0[0] + dx * 0.5, p0[1] + dy * 0.5], dx, dy);
         return if gv != 0.0 {
             (0.0 + gv * 0.5, 0.0 + gv * 0.5)
@@ -292,29 +298,7 @@ fn line_weights(g: &Cells<[f32; 2]>, p0: Point, p1: Point, dx: f64, dy: f64) -> 
             (0.0, 0.0)
         };
     }
-    line_walk(g, p0, p1, dx, dy)
-}
-
-/// [`line_weights`]'s general case: the segment from `p0` to `p1` (`(dx, dy)` apart, not
-/// both zero) clipped to `g`'s box and walked piece by piece between grid lines.
-fn line_walk(g: &Cells<[f32; 2]>, p0: Point, p1: Point, dx: f64, dy: f64) -> (f64, f64) {
-    let (xlo, ylo) = (g.x0 as f64, g.y0 as f64);
-    let (xhi, yhi) = (xlo + from_index(g.w), ylo + from_index(g.h));
-    // Both ends inside the closed box (most segments): the clipping gives exactly `[0, 1]`.
-    // Along an axis with `d > 0`, `lo ≤ o` makes `(lo − o) / d ≤ 0` and `hi ≥ e` makes
-    // `hi − o ≥ e − o = d` after rounding (rounding is monotonic, and `d` was computed as
-    // `e − o`), so `(hi − o) / d ≥ 1`; mirrored for `d < 0`. The only difference is the
-    // sign of a zero `t0`, which no value below can tell (tested).
-    let inside = |o: f64, e: f64, lo: f64, hi: f64| lo <= o.min(e) && o.max(e) <= hi;
-    let (t0, t1) = if inside(p0[0], p1[0], xlo, xhi) && inside(p0[1], p1[1], ylo, yhi) {
-        (0.0, 1.0)
-    } else {
-        match clip_to_box(p0, dx, dy, [xlo, ylo, xhi, yhi]) {
-            Some(range) => range,
-            None => return (0.0, 0.0),
-        }
-    };
-    walk_pieces(g, p0, dx, dy, t0, t1)
+    walk_pieces(g, p0, dx, dy, 0.0, 1.0)
 }
 
 /// The parameter range `[t0, t1] ⊆ [0, 1]` of the segment from `p0` along `(dx, dy)` inside
