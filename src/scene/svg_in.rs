@@ -68,8 +68,8 @@ pub fn parse_tree(data: &[u8], name: &FsPath) -> Result<usvg::Tree> {
     })
 }
 
-/// usvg silently drops some elements (text without fonts); refuse them instead of
-/// rendering something else than the file says.
+/// usvg silently drops some elements (text without fonts, images it cannot load); refuse
+/// them instead of rendering something else than the file says.
 fn reject_unsupported_xml(text: &str, name: &FsPath) -> Result<()> {
     let Ok(doc) = usvg::roxmltree::Document::parse_with_options(
         text,
@@ -83,7 +83,7 @@ fn reject_unsupported_xml(text: &str, name: &FsPath) -> Result<()> {
     check_selector_work(&doc, name)?;
     for n in doc.descendants().filter(|n| n.is_element()) {
         let tag = n.tag_name().name();
-        if matches!(tag, "text" | "foreignObject") {
+        if matches!(tag, "text" | "foreignObject" | "image") {
             return Err(Error::Unsupported {
                 path: name.to_path_buf(),
                 what: describe(tag, n.attribute("id")),
