@@ -107,7 +107,16 @@ fn main() {
     let t0 = Instant::now();
     let deadline = t0 + Duration::from_secs_f64(minutes * 60.0);
     let mut last = Instant::now();
-    let (run, failures) = campaign(&mut fz, first, cases, Some(deadline), |n, f| {
+    // The directed cases first (issue 27's regions, far arcs and tiny pictures), then
+    // random ones until the deadline.
+    let directed = fz.directed().len();
+    let mut failures = fz.run_directed();
+    println!(
+        "  {directed} directed cases in {:.0} s, {} failures",
+        t0.elapsed().as_secs_f64(),
+        failures.len()
+    );
+    let (run, random_failures) = campaign(&mut fz, first, cases, Some(deadline), |n, f| {
         if last.elapsed() > Duration::from_secs(30) {
             last = Instant::now();
             println!(
@@ -118,9 +127,10 @@ fn main() {
             );
         }
     });
+    failures.extend(random_failures);
     let kinds = distinct(&failures);
     println!(
-        "fuzz: {run} cases (seed {seed}, cases {first}..{}) in {:.0} s: {} failures, {} distinct",
+        "fuzz: {directed} directed and {run} random cases (seed {seed}, cases {first}..{}) in {:.0} s: {} failures, {} distinct",
         first + run,
         t0.elapsed().as_secs_f64(),
         failures.len(),

@@ -72,6 +72,7 @@
 mod error;
 pub mod fit;
 pub mod gradcheck;
+mod guard;
 pub mod image_io;
 pub mod limits;
 pub mod loss;

@@ -83,6 +83,13 @@ pub const MAX_GROUP_DEPTH: usize = 256;
 /// below it (10,000 elements, depth 20, four parts: 8e7); past it the file is refused.
 pub const MAX_SELECTOR_WORK: f64 = 1e9;
 
+/// Largest replay record the backward pass may need for one row band of 16 rows, bytes,
+/// by its upper estimate (every cell of every shape's box in the band, 32 bytes each):
+/// checked by `raster::check_backward_memory` before `fit`, `grad` and Python's fits.
+/// About 16,000 shapes stacked across a 512-wide band; the 2048-blob painterly workload at
+/// 2048² needs under a tenth of it.
+pub const MAX_BAND_RECORD_BYTES: usize = 256 << 20;
+
 /// Largest radius of an elliptical arc in path data, in the file's units. usvg converts an
 /// arc to about `(radius / 0.1)^(1/6)` cubics and takes them from the front of a list, a
 /// cost quadratic in their number: 3,000 cubics here, 150,000 (12 s) at 1e30.

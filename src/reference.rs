@@ -72,7 +72,7 @@ pub fn render_resvg_pixmap(
         t[4] as f32,
         t[5] as f32,
     );
-    quietly(|| resvg::render(tree, ts, &mut pixmap.as_mut()))
+    crate::guard::quietly(|| resvg::render(tree, ts, &mut pixmap.as_mut()))
         .map_err(|why| cannot(format!("it panicked ({why})")))?;
     Ok(pixmap)
 }
@@ -110,36 +110,6 @@ fn device_reach(tree: &usvg::Tree, t: &crate::scene::Affine) -> f64 {
     let mut reach = 0.0;
     visit(tree.root(), t, &mut reach);
     reach
-}
-
-thread_local! {
-    /// Set while this thread runs resvg under [`quietly`]: its panic message is dropped.
-    static QUIET: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
-}
-
-/// Runs `f`, catching a panic and returning its message instead. While `f` runs, the panic
-/// hook (installed once, passing every other panic to the previous hook) prints nothing
-/// for this thread, so a caught panic costs no stray lines on stderr.
-fn quietly<R>(f: impl FnOnce() -> R) -> std::result::Result<R, String> {
-    static HOOK: std::sync::Once = std::sync::Once::new();
-    HOOK.call_once(|| {
-        let previous = std::panic::take_hook();
-        std::panic::set_hook(Box::new(move |info| {
-            if !QUIET.with(|q| q.get()) {
-                previous(info);
-            }
-        }));
-    });
-    let was = QUIET.with(|q| q.replace(true));
-    let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(f));
-    QUIET.with(|q| q.set(was));
-    r.map_err(|payload| {
-        payload
-            .downcast_ref::<&str>()
-            .map(|s| s.to_string())
-            .or_else(|| payload.downcast_ref::<String>().cloned())
-            .unwrap_or_else(|| "no message".to_string())
-    })
 }
 
 /// Largest mean absolute difference (0–255 levels) for a file to count as matching resvg.
@@ -240,12 +210,9 @@ mod tests {
         let t = tree(&LINE_1E9.replace("1e9", "1e12"));
         let mut pixmap = tiny_skia::Pixmap::new(128, 128).unwrap();
         let ts = tiny_skia::Transform::from_scale(1.28, 1.28);
-        let r = quietly(|| resvg::render(&t, ts, &mut pixmap.as_mut()));
+        let r = crate::guard::quietly(|| resvg::render(&t, ts, &mut pixmap.as_mut()));
         let why = r.expect_err("tiny-skia panics on this line");
         assert!(!why.is_empty());
-        // The hook is back to normal for everything else.
-        assert!(!QUIET.with(|q| q.get()));
-        assert_eq!(quietly(|| 7), Ok(7));
     }
 
     #[test]

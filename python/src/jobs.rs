@@ -216,6 +216,8 @@ pub(crate) fn fit<'py>(
             t.width, t.height, s.width, s.height
         )));
     }
+    diffsvg::raster::check_backward_memory(&s, &opts.render, std::path::Path::new("scene"))
+        .map_err(to_py)?;
     let mut prog = Progress::new(progress);
     let out = py.detach(|| {
         refine(s, &objective, &opts, &mut |step, _| {

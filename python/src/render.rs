@@ -4,7 +4,9 @@ use std::path::PathBuf;
 
 use diffsvg::Image;
 use diffsvg::loss::Loss;
-use diffsvg::raster::{RenderOptions, render as raster_render, render_backward as raster_backward};
+use diffsvg::raster::{
+    RenderOptions, render as raster_render, render_backward_checked as raster_backward_checked,
+};
 use numpy::{PyArray1, PyArray3, PyReadonlyArrayDyn};
 use pyo3::prelude::*;
 
@@ -98,10 +100,10 @@ pub(crate) fn render_backward<'py>(
             if let Some(bg) = bg {
                 d.over_background_backward(bg);
             }
-            raster_backward(s, &opts, &d)
+            raster_backward_checked(s, &opts, &d, std::path::Path::new("scene"))
         })
     });
-    Ok(vec_out(py, g))
+    Ok(vec_out(py, g.map_err(to_py)?))
 }
 
 /// Loss of `image` against `target` (same shape, premultiplied RGBA), the mean over

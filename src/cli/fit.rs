@@ -184,6 +184,7 @@ pub fn run(a: Args) -> Result<()> {
     let objective = a.optim.objective(&target)?;
     let scene = Scene::load(&a.init, Sizing::Exact(target.width, target.height))?;
     super::util::warn_about(&scene, &a.init, &diffsvg::raster::RenderOptions::default());
+    diffsvg::raster::check_backward_memory(&scene, &opts.render, &a.init)?;
     let layout = ParamLayout::new(&scene);
     if scene.path_count() == 0 || layout.is_empty() {
         bail!(

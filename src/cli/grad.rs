@@ -123,6 +123,7 @@ pub fn run_grad(a: GradArgs) -> Result<GradOutcome> {
     }
     let job = load(&a.common)?;
     let opts = RenderOptions::default();
+    diffsvg::raster::check_backward_memory(&job.scene, &opts, &a.common.input)?;
     let (loss, mut grad) = analytic(&job.scene, &job.target, job.loss, &opts, job.background);
     if let Some(i) = a.corrupt {
         if i >= grad.len() {

@@ -312,7 +312,10 @@ fn add_paths(
                 .push(Node::Path(rectangle(id, b, segments, color)));
             continue;
         }
-        let radius = (0.5 * (n / std::f64::consts::PI).sqrt()).clamp(1.5, 0.25 * w.min(h) as f64);
+        // At most a quarter of the smaller side, but never under 1.5 px: on a picture of
+        // one to five pixels across the floor wins (the circle may overhang the canvas).
+        let largest = (0.25 * w.min(h) as f64).max(1.5);
+        let radius = (0.5 * (n / std::f64::consts::PI).sqrt()).clamp(1.5, largest);
         let c = [(center % w) as f64 + 0.5, (center / w) as f64 + 0.5];
         scene
             .nodes

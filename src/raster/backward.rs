@@ -61,9 +61,57 @@ pub fn render_backward(scene: &Scene, opts: &RenderOptions, d_image: &Image) -> 
     backward_prepared(scene, &prepare(scene, opts.tolerance, None), d_image)
 }
 
+/// [`render_backward`] after [`check_backward_memory`], preparing the scene once for both:
+/// an error naming `name` instead of an allocation the machine may not have.
+pub fn render_backward_checked(
+    scene: &Scene,
+    opts: &RenderOptions,
+    d_image: &Image,
+    name: &std::path::Path,
+) -> crate::Result<Vec<f64>> {
+    let p = prepare(scene, opts.tolerance, None);
+    check_prepared(&p, name)?;
+    Ok(backward_prepared(scene, &p, d_image))
+}
+
 /// Replay records the bands computed at once may hold together, in bytes, by an upper
 /// estimate from the boxes of the items and layers in each band; one band always runs.
 pub(crate) const TAPE_BUDGET_BYTES: usize = 256 << 20;
+
+/// Refuses a scene whose backward pass would record more than
+/// [`MAX_BAND_RECORD_BYTES`](crate::limits::MAX_BAND_RECORD_BYTES) for a single row band,
+/// by the same upper estimate the pass uses to schedule its bands (every cell of every
+/// item's box in the band). Bands run one at a time at worst, so this bounds the pass's
+/// memory by the work one band asks for: 20,000 copies of one shape stacked at 128² ask
+/// for gigabytes. Call it before fitting or differentiating; rendering alone needs no
+/// record. `name` is the file named in the error.
+pub fn check_backward_memory(
+    scene: &Scene,
+    opts: &RenderOptions,
+    name: &std::path::Path,
+) -> crate::Result<()> {
+    check_prepared(&prepare(scene, opts.tolerance, None), name)
+}
+
+/// [`check_backward_memory`] on a prepared scene.
+fn check_prepared(p: &Prepared, name: &std::path::Path) -> crate::Result<()> {
+    use crate::limits::MAX_BAND_RECORD_BYTES;
+    let bands = (p.height as usize).div_ceil(BAND_ROWS);
+    let worst = tape_estimates(p, bands).into_iter().max().unwrap_or(0);
+    if worst > MAX_BAND_RECORD_BYTES {
+        return Err(crate::Error::Unsupported {
+            path: name.to_path_buf(),
+            what: format!(
+                "too complex to differentiate: the backward pass would record about {} MiB \
+                 for one band of {BAND_ROWS} rows (shapes stacked deep there), above the \
+                 limit of {} MiB",
+                worst >> 20,
+                MAX_BAND_RECORD_BYTES >> 20
+            ),
+        });
+    }
+    Ok(())
+}
 
 /// Upper estimate of each band's replay record, in bytes: every cell of every item's box
 /// in the band, and two colors per pixel of every layer's box.
@@ -1018,5 +1066,60 @@ mod tests {
                 g[slot]
             );
         }
+    }
+}
+
+#[cfg(test)]
+mod memory_check_tests {
+    use super::*;
+    use crate::scene::Sizing;
+
+    /// Issue 27's fuzz finding: copies of one shape stacked thousands deep are refused
+    /// before the backward pass allocates; DiffVG's painterly workload at its largest is not.
+    #[test]
+    fn stacked_copies_are_refused_and_painterly_passes() {
+        let one = r#"<path d="M10 10H100V120H10Z"/>"#;
+        let svg = format!(
+            r#"<svg xmlns="http://www.w3.org/2000/svg" width="128" height="128">{}</svg>"#,
+            one.repeat(20_000)
+        );
+        let s = Scene::from_svg_str(&svg, "stack.svg", Sizing::Natural).unwrap();
+        let opts = RenderOptions::default();
+        let e = check_backward_memory(&s, &opts, std::path::Path::new("stack.svg"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("stack.svg: unsupported: too complex to differentiate"),
+            "{e}"
+        );
+        let d = Image::new(128, 128);
+        let e = render_backward_checked(&s, &opts, &d, std::path::Path::new("stack.svg"));
+        assert!(e.is_err());
+        // A hundred copies pass, with the same gradient as the unchecked pass.
+        let svg = svg.replace(&one.repeat(19_900), "");
+        let s = Scene::from_svg_str(&svg, "stack.svg", Sizing::Natural).unwrap();
+        let d = Image::filled(128, 128, [0.1, 0.2, 0.3, 0.4]);
+        let g = render_backward_checked(&s, &opts, &d, std::path::Path::new("s")).unwrap();
+        assert_eq!(g, render_backward(&s, &opts, &d));
+        // The painterly benchmark's largest setting: 2048 blobs at 2048² (as circles of
+        // DiffVG's blob radii, 2% to 7% of the canvas, where a hash puts them).
+        let circles: String = (0..2048u64)
+            .map(|i| {
+                let h = i.wrapping_mul(0x9e37_79b9_7f4a_7c15);
+                let (x, y, r) = (h % 2048, (h >> 16) % 2048, 41 + (h >> 32) % 103);
+                format!(r#"<circle cx="{x}" cy="{y}" r="{r}" fill="red"/>"#)
+            })
+            .collect();
+        let svg = format!(
+            r#"<svg xmlns="http://www.w3.org/2000/svg" width="2048" height="2048">{circles}</svg>"#
+        );
+        let blobs = Scene::from_svg_str(&svg, "blobs.svg", Sizing::Natural).unwrap();
+        let p = prepare(&blobs, opts.tolerance, None);
+        let worst = tape_estimates(&p, 2048 / BAND_ROWS)
+            .into_iter()
+            .max()
+            .unwrap();
+        println!("painterly 2048: worst band estimate {} MiB", worst >> 20);
+        assert!(worst < crate::limits::MAX_BAND_RECORD_BYTES / 4, "{worst}");
     }
 }

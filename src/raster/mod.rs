@@ -39,8 +39,8 @@ pub(crate) mod stroke;
 
 pub(crate) use backward::backward_prepared;
 pub use backward::{
-    BackwardStats, BandLoss, Fused, backward_with_stats, render_and_backward,
-    render_and_backward_fused, render_backward,
+    BackwardStats, BandLoss, Fused, backward_with_stats, check_backward_memory,
+    render_and_backward, render_and_backward_fused, render_backward, render_backward_checked,
 };
 pub(crate) use prepare::prepare;
 pub use prepare::{Prepared, warnings};

@@ -49,7 +49,8 @@ impl Scene {
 }
 
 /// Parses SVG bytes with usvg, refusing elements usvg would silently drop. Gzip-compressed
-/// bytes (`.svgz`) are decompressed first, to at most [`MAX_DECOMPRESSED_BYTES`].
+/// bytes (`.svgz`) are decompressed first, to at most [`MAX_DECOMPRESSED_BYTES`]. A panic
+/// inside usvg is caught and reported as an [`Error::Svg`] naming the file.
 pub fn parse_tree(data: &[u8], name: &FsPath) -> Result<usvg::Tree> {
     let unzipped;
     let data = if is_gzip(data) {
@@ -62,7 +63,14 @@ pub fn parse_tree(data: &[u8], name: &FsPath) -> Result<usvg::Tree> {
         reject_unsupported_xml(text, name)?;
     }
     let opt = usvg::Options::default();
-    usvg::Tree::from_data(data, &opt).map_err(|e| Error::Svg {
+    // usvg's geometry unwraps rectangles it cannot build (a filter or image region of
+    // width 3.4e38): behind the guard such a panic is one more parse error.
+    let parsed =
+        crate::guard::quietly(|| usvg::Tree::from_data(data, &opt)).map_err(|why| Error::Svg {
+            path: name.to_path_buf(),
+            message: format!("the SVG parser (usvg) failed on this file: {why}"),
+        })?;
+    parsed.map_err(|e| Error::Svg {
         path: name.to_path_buf(),
         message: e.to_string(),
     })
@@ -199,29 +207,92 @@ fn most_selector_parts(css: &str) -> u32 {
     most
 }
 
-/// Describes the first elliptical arc in path data whose radius exceeds [`MAX_ARC_RADIUS`].
-/// usvg turns an arc into cubics at a fixed tolerance, about `(radius / 0.1)^(1/6)` of
-/// them, and takes them one by one from the front of a list: quadratic in their number.
-/// An arc of radius 1e30 spent 12 s there.
+/// Describes the first elliptical arc in path data whose radius exceeds [`MAX_ARC_RADIUS`]:
+/// the radius as written or, where the endpoint lies beyond the ellipse's reach, the radius
+/// SVG scales it up to (the implementation notes, F.6.6). usvg turns an arc into cubics at
+/// a fixed tolerance, about `(radius / 0.1)^(1/6)` of them, and takes them one by one from
+/// the front of a list: quadratic in their number. An arc of radius 1e30 spent 12 s there,
+/// and `a48 48 0 0 0 7.1 1e38`, whose radius grows to 5e37, ran past 20 s.
 fn huge_arc(d: &str) -> Option<String> {
     if !d.contains(['a', 'A']) {
         return None;
     }
+    use svgtypes::PathSegment as S;
+    // The current point and the start of the subpath, in the path's absolute units.
+    let (mut cur, mut start) = ([0.0f64; 2], [0.0f64; 2]);
     for seg in svgtypes::PathParser::from(d) {
-        match seg {
-            Ok(svgtypes::PathSegment::EllipticalArc { rx, ry, .. })
-                if !(rx.abs().max(ry.abs()) <= MAX_ARC_RADIUS) =>
-            {
-                return Some(format!(
-                    "arc radius {:e} above the limit of {MAX_ARC_RADIUS:e}",
-                    rx.abs().max(ry.abs())
-                ));
+        let Ok(seg) = seg else {
+            break; // usvg reports (or drops) malformed data itself
+        };
+        let abs = match seg {
+            S::MoveTo { abs, .. }
+            | S::LineTo { abs, .. }
+            | S::HorizontalLineTo { abs, .. }
+            | S::VerticalLineTo { abs, .. }
+            | S::CurveTo { abs, .. }
+            | S::SmoothCurveTo { abs, .. }
+            | S::Quadratic { abs, .. }
+            | S::SmoothQuadratic { abs, .. }
+            | S::EllipticalArc { abs, .. }
+            | S::ClosePath { abs } => abs,
+        };
+        let base = if abs { [0.0; 2] } else { cur };
+        let to = |x: f64, y: f64| [base[0] + x, base[1] + y];
+        let end = match seg {
+            S::MoveTo { x, y, .. } => {
+                start = to(x, y);
+                start
             }
-            Err(_) => break, // usvg reports (or drops) malformed data itself
-            _ => {}
-        }
+            S::LineTo { x, y, .. }
+            | S::CurveTo { x, y, .. }
+            | S::SmoothCurveTo { x, y, .. }
+            | S::Quadratic { x, y, .. }
+            | S::SmoothQuadratic { x, y, .. } => to(x, y),
+            S::HorizontalLineTo { x, .. } => [base[0] + x, cur[1]],
+            S::VerticalLineTo { y, .. } => [cur[0], base[1] + y],
+            S::ClosePath { .. } => start,
+            S::EllipticalArc {
+                rx,
+                ry,
+                x_axis_rotation,
+                x,
+                y,
+                ..
+            } => {
+                let end = to(x, y);
+                let r = arc_radius(cur, end, rx, ry, x_axis_rotation);
+                if !(r <= MAX_ARC_RADIUS) {
+                    return Some(format!(
+                        "arc radius {r:e} above the limit of {MAX_ARC_RADIUS:e}"
+                    ));
+                }
+                end
+            }
+        };
+        cur = end;
     }
     None
+}
+
+/// The larger radius an SVG arc from `from` to `to` is drawn with: `max(|rx|, |ry|)`, scaled
+/// up by `√Λ` when the radii are too small to reach the endpoint (SVG 1.1, F.6.6). Zero
+/// where either radius is zero (the arc is a straight line); NaN where an input is NaN.
+fn arc_radius(from: [f64; 2], to: [f64; 2], rx: f64, ry: f64, rotation_deg: f64) -> f64 {
+    let (rx, ry) = (rx.abs(), ry.abs());
+    if rx == 0.0 || ry == 0.0 {
+        return 0.0;
+    }
+    let (sin, cos) = rotation_deg.to_radians().sin_cos();
+    let (dx, dy) = (0.5 * (from[0] - to[0]), 0.5 * (from[1] - to[1]));
+    let (x1, y1) = (cos * dx + sin * dy, -sin * dx + cos * dy);
+    let lambda = (x1 / rx).powi(2) + (y1 / ry).powi(2);
+    // `max` would turn a NaN into 1.
+    let scale = if lambda.is_nan() {
+        f64::NAN
+    } else {
+        lambda.sqrt().max(1.0)
+    };
+    rx.max(ry) * scale
 }
 
 /// Attributes holding numbers that usvg would silently drop a shape (or a property) for
@@ -757,5 +828,31 @@ mod tests {
         let ok = r#"<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 200 200">
             <path d="M 100 100 h -25 a 25 25 0 1 1 25 25 z" fill="red"/></svg>"#;
         assert!(load(ok).is_ok());
+    }
+
+    #[test]
+    fn arc_radius_is_scaled_up_to_reach_the_endpoint() {
+        // Reachable: the radius as written, whatever the rotation.
+        assert_eq!(arc_radius([0.0; 2], [10.0, 0.0], 48.0, 20.0, 30.0), 48.0);
+        // A circle of radius 1 to a point 10 away: scaled to half the chord.
+        let r = arc_radius([0.0; 2], [10.0, 0.0], 1.0, 1.0, 0.0);
+        assert!((r - 5.0).abs() < 1e-12, "{r}");
+        // An ellipse 2:1 rotated 90°: the chord along x meets the short axis.
+        let r = arc_radius([0.0; 2], [8.0, 0.0], 2.0, 1.0, 90.0);
+        assert!((r - 8.0).abs() < 1e-9, "{r}");
+        assert_eq!(arc_radius([0.0; 2], [1e38, 0.0], 0.0, 5.0, 0.0), 0.0);
+        assert!(arc_radius([0.0; 2], [f64::NAN, 0.0], 1.0, 1.0, 0.0).is_nan());
+        // Relative segments, H/V and Z move the current point: each of these ends far.
+        for d in [
+            "M10 10 a48 48 0 0 0 7.1 1e38z",
+            "M0 0 h1e30 A1 1 0 0 0 0 1",
+            "M0 0 V1e30 Z a1 1 0 0 0 0 1e30",
+            "M0 0 m1e25 0 A1 1 0 0 0 0 0",
+        ] {
+            assert!(huge_arc(d).is_some(), "{d}");
+        }
+        for d in ["M0 0 h1e30 Z a1 1 0 0 0 3 4", "M0 0 A1e19 1e19 0 0 0 5 5"] {
+            assert_eq!(huge_arc(d), None, "{d}");
+        }
     }
 }

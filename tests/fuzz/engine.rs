@@ -211,8 +211,9 @@ pub struct Fuzzer {
     pub stats: BTreeMap<&'static str, [u64; 4]>,
 }
 
-/// Numbers put in place of a number of the input.
-const EXTREMES: [&str; 22] = [
+/// Numbers put in place of a number of the input. `3.4e38` and its kin are finite in
+/// `f32` (so no NaN/overflow check refuses them) but overflow as soon as two are added.
+const EXTREMES: [&str; 25] = [
     "1e-30",
     "1e30",
     "-1e30",
@@ -232,6 +233,9 @@ const EXTREMES: [&str; 22] = [
     "18446744073709551616",
     "99999999",
     "1e38",
+    "3.4e38",
+    "-3.4e38",
+    "3.4028234e38",
     "3.4e39",
     "0.000000000000000000000000000000000000000000001",
     "123456789012345678901234567890",
@@ -306,6 +310,35 @@ const SVG_SNIPPETS: [&str; 20] = [
     "<image href=\"data:image/png;base64,AAAA\"/>",
     "<rect width=\"198\" height=\"198\" fill=\"none\" stroke=\"black\" stroke-dasharray=\"1e-5\"/>",
 ];
+
+/// Whole elements appended at the end of an SVG, each with `{X}` replaced by an extreme
+/// number: the regions usvg computes while parsing (filters, images, masks, clip paths,
+/// patterns, markers) and arcs whose endpoint, not their radius, is far (issue 27: a
+/// filter or `<image>` 3.4e38 wide panicked inside usvg, `a48 48 0 0 0 7.1 1e38` hung).
+pub const REGION_SNIPPETS: [&str; 16] = [
+    r#"<filter id="zf" width="{X}"><feGaussianBlur stdDeviation="2"/></filter><rect width="50" height="50" filter="url(#zf)"/>"#,
+    r#"<filter id="zf" x="{X}" y="-{X}"><feOffset dx="3"/></filter><rect width="50" height="50" filter="url(#zf)"/>"#,
+    r#"<filter id="zf" filterUnits="userSpaceOnUse" width="{X}" height="{X}"><feFlood flood-color="red"/></filter><g filter="url(#zf)"><rect width="50" height="50"/></g>"#,
+    r#"<filter id="zf"><feGaussianBlur stdDeviation="{X}"/><feMorphology radius="{X}"/></filter><rect width="50" height="50" filter="url(#zf)"/>"#,
+    r#"<filter id="zf" primitiveUnits="objectBoundingBox"><feFlood x="{X}" width="{X}"/></filter><rect width="50" height="50" filter="url(#zf)"/>"#,
+    r#"<image width="{X}" height="20" href="data:image/png;base64,iVBORw0KGgo="/>"#,
+    r#"<image x="{X}" width="20" height="{X}" href="missing.png"/>"#,
+    r#"<mask id="zm" width="{X}" height="{X}"><rect width="50" height="50" fill="white"/></mask><rect width="50" height="50" mask="url(#zm)"/>"#,
+    r#"<mask id="zm" maskContentUnits="objectBoundingBox"><rect width="{X}" height="1" fill="white"/></mask><rect width="50" height="50" mask="url(#zm)"/>"#,
+    r#"<clipPath id="zc" clipPathUnits="objectBoundingBox"><rect width="{X}" height="{X}"/></clipPath><rect width="50" height="50" clip-path="url(#zc)"/>"#,
+    r#"<pattern id="zp" width="{X}" height="{X}" patternUnits="userSpaceOnUse"><rect width="5" height="5"/></pattern><rect width="50" height="50" fill="url(#zp)"/>"#,
+    r#"<marker id="zk" markerWidth="{X}" viewBox="0 0 {X} 10"><path d="M0 0H10"/></marker><path d="M10 10H40" stroke="black" marker-end="url(#zk)"/>"#,
+    r#"<path d="M10 10 a48 48 0 0 0 7.1 {X}z"/>"#,
+    r#"<path d="M10 10 A5 5 0 1 1 {X} -{X}" stroke="black"/>"#,
+    r#"<path d="M{X} 10 a1 1 0 0 0 -{X} {X}" fill="red"/>"#,
+    r#"<svg width="{X}" height="20" viewBox="0 0 {X} {X}"><rect width="9" height="9"/></svg>"#,
+];
+
+/// The first number of the directed cases in reports and reproducer folders.
+pub const DIRECTED_BASE: u64 = 1_000_000_000;
+
+/// The extremes [`REGION_SNIPPETS`] are tried with in [`Fuzzer::directed`].
+pub const REGION_EXTREMES: [&str; 4] = ["3.4e38", "1e38", "1e30", "1e-30"];
 
 /// Fragments inserted into job files.
 const JOB_SNIPPETS: [&str; 14] = [
@@ -481,16 +514,21 @@ impl Fuzzer {
             let (svg, m) = self.mutated_svg(rng);
             ("in.svg", svg, m)
         } else {
-            let (w, h) = (8 + rng.below(64) as u32, 8 + rng.below(64) as u32);
+            // A fifth of the pictures are one to three pixels in one direction or both.
+            let side = |rng: &mut Rng| match rng.chance(0.2) {
+                true => 1 + rng.below(3) as u32,
+                false => 8 + rng.below(64) as u32,
+            };
+            let (w, h) = (side(rng), side(rng));
             let mut png = tiny_png(rng, w, h);
             let m = if rng.chance(0.7) {
                 mutate_png(rng, &mut png)
             } else {
-                "valid PNG".into()
+                format!("valid {w}x{h} PNG")
             };
             ("in.png", png, vec![m])
         };
-        let args = strings(&[
+        let mut args = strings(&[
             "vectorize",
             file,
             "-o",
@@ -499,9 +537,18 @@ impl Fuzzer {
             "2",
             "--iters",
             "2",
-            "--width",
-            "64",
         ]);
+        // SVGs are drawn 64 wide; pictures are taken as they are (tiny ones stay tiny).
+        if file == "in.svg" || rng.chance(0.3) {
+            args.extend(strings(&["--width", "64"]));
+        }
+        if rng.chance(0.4) {
+            let mode = *rng.pick(&["fixed", "painterly", "adaptive"]);
+            args.extend(strings(&["--mode", mode]));
+        }
+        if rng.chance(0.2) {
+            args.extend(strings(&["--pyramid", "3"]));
+        }
         Case {
             target: Target::Vectorize,
             files: vec![(file.into(), bytes)],
@@ -788,10 +835,101 @@ max_segments = 1
         }
     }
 
+    /// The fixed cases of issue 27, run before any random one: every [`REGION_SNIPPETS`]
+    /// entry with every [`REGION_EXTREMES`] value through `render` (and once through
+    /// `fit`), and pictures of one to three pixels a side through `vectorize` in each
+    /// mode. A random campaign reaches the same inputs by chance; these reach them always.
+    pub fn directed(&self) -> Vec<Case> {
+        let mut cases = Vec::new();
+        let svg = |body: &str| {
+            format!(
+                r#"<svg xmlns="http://www.w3.org/2000/svg" width="64" height="64"><rect width="30" height="20" fill="teal"/>{body}</svg>"#
+            )
+            .into_bytes()
+        };
+        for snippet in REGION_SNIPPETS {
+            for (k, x) in REGION_EXTREMES.iter().enumerate() {
+                let body = snippet.replace("{X}", x);
+                let mutations = vec![format!("directed: {body}")];
+                let file = vec![("in.svg".to_string(), svg(&body))];
+                cases.push(Case {
+                    target: Target::Render,
+                    files: file.clone(),
+                    args: strings(&["render", "in.svg", "-o", "out/r.png", "--width", "64"]),
+                    output: "out/r.png".into(),
+                    mutations: mutations.clone(),
+                });
+                if k == 0 {
+                    cases.push(Case {
+                        target: Target::Fit,
+                        files: file,
+                        args: strings(&[
+                            "fit",
+                            "in.svg",
+                            "in.svg",
+                            "-o",
+                            "out/f.svg",
+                            "--iters",
+                            "2",
+                        ]),
+                        output: "out/f.svg".into(),
+                        mutations,
+                    });
+                }
+            }
+        }
+        let mut rng = Rng::new(27);
+        for (w, h) in [
+            (1, 1),
+            (1, 2),
+            (2, 1),
+            (2, 2),
+            (2, 40),
+            (40, 2),
+            (3, 3),
+            (1, 40),
+        ] {
+            let png = tiny_png(&mut rng, w, h);
+            for mode in [
+                &["--mode", "adaptive"][..],
+                &["--mode", "fixed"],
+                &["--mode", "painterly"],
+                &["--target-psnr", "30", "--max-paths", "4", "--pyramid", "2"],
+            ] {
+                let mut args = strings(&["vectorize", "in.png", "-o", "out/v.svg", "--iters", "4"]);
+                args.extend(strings(mode));
+                cases.push(Case {
+                    target: Target::Vectorize,
+                    files: vec![("in.png".into(), png.clone())],
+                    args,
+                    output: "out/v.svg".into(),
+                    mutations: vec![format!("directed: a {w}x{h} picture")],
+                });
+            }
+        }
+        cases
+    }
+
+    /// Runs every [`Fuzzer::directed`] case; they are numbered from [`DIRECTED_BASE`] in
+    /// reports, apart from the random cases.
+    pub fn run_directed(&mut self) -> Vec<Failure> {
+        let cases = self.directed();
+        cases
+            .into_iter()
+            .enumerate()
+            .filter_map(|(k, case)| self.run(DIRECTED_BASE + k as u64, case))
+            .collect()
+    }
+
     /// Runs case `i`: `Some` when it broke the oracle (the reproducer saved when a
     /// folder was configured).
     pub fn run_case(&mut self, i: u64) -> Option<Failure> {
         let case = self.generate(i);
+        self.run(i, case)
+    }
+
+    /// Runs one case, numbered `i` in the report.
+    fn run(&mut self, i: u64, case: Case) -> Option<Failure> {
         let dir = self.cfg.work.join("case");
         let _ = std::fs::remove_dir_all(&dir);
         if let Err(e) = write_files(&dir, &case.files) {
@@ -1470,8 +1608,38 @@ fn mutate_svg(rng: &mut Rng, svg: &mut Vec<u8>, donor: &[u8]) -> String {
                 && !text[i + 1..].starts_with("svg")
         })
         .collect();
-    match rng.below(12) {
+    match rng.below(14) {
         0..=4 => mutate_text(rng, svg, donor, &SVG_SNIPPETS),
+        12 if !starts.is_empty() => {
+            // Every number of one element (all its attributes) replaced by one extreme.
+            let s = *rng.pick(&starts);
+            let e = text[s..].find('>').map_or(text.len(), |k| s + k);
+            let extreme = *rng.pick(&EXTREMES);
+            let el = text[s..e].as_bytes();
+            let mut out = Vec::with_capacity(el.len());
+            let mut last = 0;
+            for (a, b) in numbers(el) {
+                out.extend_from_slice(&el[last..a]);
+                out.extend_from_slice(extreme.as_bytes());
+                last = b;
+            }
+            out.extend_from_slice(&el[last..]);
+            let mut bytes = text.as_bytes()[..s].to_vec();
+            bytes.extend_from_slice(&out);
+            bytes.extend_from_slice(&text.as_bytes()[e..]);
+            *svg = bytes;
+            let name: String = text[s..e].chars().take(24).collect();
+            format!("every number of {name:?} → {extreme}")
+        }
+        13 => {
+            // A region or far arc appended before the closing tag.
+            let snippet = *rng.pick(&REGION_SNIPPETS);
+            let extreme = *rng.pick(&EXTREMES);
+            let el = snippet.replace("{X}", extreme);
+            let at = text.rfind("</svg>").unwrap_or(text.len());
+            *svg = format!("{}{el}{}", &text[..at], &text[at..]).into_bytes();
+            format!("append {el:?}")
+        }
         5 if !starts.is_empty() => {
             // Duplicate a self-closing element N times.
             let s = *rng.pick(&starts);

@@ -91,7 +91,11 @@ fn check_all(files: &[(PathBuf, String, Sizing)], skip: &HashMap<String, (String
             .collect();
         rewritten.sort();
         std::fs::write(&path, header + &rewritten.join("\n") + "\n").unwrap();
-        println!("{WRITE_SKIP}: wrote {} entries to {}", rewritten.len(), path.display());
+        println!(
+            "{WRITE_SKIP}: wrote {} entries to {}",
+            rewritten.len(),
+            path.display()
+        );
     }
     assert!(
         failures.is_empty(),

@@ -6,7 +6,7 @@ use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use diffsvg::{Scene, Sizing};
+use diffsvg::{Image, Scene, Sizing};
 
 use crate::common::{assert_fails, diffsvg, s, scratch, write};
 
@@ -378,4 +378,157 @@ fn svgz_input_renders_like_the_plain_file() {
         "128",
     ]));
     assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
+}
+
+// ---- issue 27: reliability, round two -------------------------------------------------
+
+/// Kind 1: a filter or `<image>` region of width 3.4e38 made usvg's geometry unwrap a
+/// `None` while parsing (exit 101 with a panic trace) in `render` and `fit` alike; other
+/// regions usvg computes (masks, clip paths, patterns, markers) get the same sizes.
+#[test]
+fn huge_regions_inside_svg_parsing_are_one_line_errors() {
+    let dir = scratch("regress-27-regions");
+    let cases = [
+        r#"<filter id="f" width="3.4e38"><feGaussianBlur stdDeviation="2"/></filter><rect width="30" height="30" filter="url(#f)"/>"#,
+        r#"<image width="3.4e38" height="10" href="data:image/png;base64,iVBORw0KGgo="/><rect width="30" height="30"/>"#,
+        r#"<mask id="m" width="3.4e38" height="3.4e38"><rect width="9" height="9" fill="white"/></mask><rect width="30" height="30" mask="url(#m)"/>"#,
+        r#"<pattern id="p" width="3.4e38" height="3.4e38" patternUnits="userSpaceOnUse"><rect width="5" height="5"/></pattern><rect width="30" height="30" fill="url(#p)"/>"#,
+    ];
+    for (k, body) in cases.iter().enumerate() {
+        let svg = write(
+            &dir,
+            &format!("r{k}.svg"),
+            &format!(
+                r#"<svg xmlns="http://www.w3.org/2000/svg" width="64" height="64">{body}</svg>"#
+            ),
+        );
+        let png = dir.join(format!("r{k}.png"));
+        let o = diffsvg(&["render", s(&svg), "-o", s(&png)]);
+        assert_fails(&o, &format!("r{k}.svg"), "", &png);
+        let fitted = dir.join(format!("r{k}.fit.svg"));
+        let o = diffsvg(&["fit", s(&svg), s(&svg), "-o", s(&fitted), "--iters", "1"]);
+        assert_fails(&o, &format!("r{k}.svg"), "", &fitted);
+    }
+    // The filter's panic itself, caught: the error says the parser failed on the file.
+    let o = diffsvg(&[
+        "render",
+        s(&dir.join("r0.svg")),
+        "-o",
+        s(&dir.join("x.png")),
+    ]);
+    assert!(stderr(&o).contains("usvg"), "{}", stderr(&o));
+}
+
+/// Kind 2: `a48 48 0 0 0 7.1 1e38` has a modest radius, but SVG scales it up to reach
+/// the far endpoint (to 5e37), and usvg spent minutes cutting that arc into cubics.
+#[test]
+fn arc_to_a_far_endpoint_is_refused_in_time() {
+    let dir = scratch("regress-27-arc");
+    for (k, d) in [
+        "M10 10 a48 48 0 0 0 7.1 1e38 z",
+        "M10 10 A5 5 0 1 1 3.4e38 -3.4e38",
+        "M1e25 10 a1 1 0 0 0 -1e25 1e25",
+    ]
+    .iter()
+    .enumerate()
+    {
+        let svg = write(
+            &dir,
+            &format!("a{k}.svg"),
+            &format!(
+                r#"<svg xmlns="http://www.w3.org/2000/svg" width="64" height="64"><path d="{d}"/></svg>"#
+            ),
+        );
+        let png = dir.join(format!("a{k}.png"));
+        let t = std::time::Instant::now();
+        let o = diffsvg_bounded(&["render", s(&svg), "-o", s(&png)]);
+        assert_fails(&o, &format!("a{k}.svg"), "arc radius", &png);
+        assert!(t.elapsed().as_secs() < 20, "{d}: {:?}", t.elapsed());
+    }
+    // An arc whose endpoint is near stays drawn.
+    let svg = write(
+        &dir,
+        "near.svg",
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="64" height="64"><path d="M10 10 a48 48 0 0 0 40 40 z"/></svg>"#,
+    );
+    assert_ok(&diffsvg(&[
+        "render",
+        s(&svg),
+        "-o",
+        s(&dir.join("near.png")),
+    ]));
+}
+
+/// Kind 3: a picture two pixels wide panicked in `vectorize` (`min > max` in the clamp of
+/// a starting circle's radius). Every picture of one to three pixels in either direction
+/// vectorizes, in every mode, to an SVG that reads back at the picture's size.
+#[test]
+fn vectorize_pictures_one_and_two_pixels_wide() {
+    let dir = scratch("regress-27-tiny");
+    for (w, h) in [(1, 1), (2, 2), (2, 40), (40, 2), (1, 40), (3, 3)] {
+        let img = Image {
+            width: w,
+            height: h,
+            data: (0..w * h)
+                .map(|i| {
+                    let v = ((i * 37) % 11) as f32 / 10.0;
+                    [v, 1.0 - v, 0.5, 1.0]
+                })
+                .collect(),
+        };
+        let png = dir.join(format!("p{w}x{h}.png"));
+        img.save_png(&png).unwrap();
+        for mode in ["adaptive", "fixed", "painterly"] {
+            let out = dir.join(format!("p{w}x{h}-{mode}.svg"));
+            let o = diffsvg(&[
+                "vectorize",
+                s(&png),
+                "-o",
+                s(&out),
+                "--mode",
+                mode,
+                "--iters",
+                "4",
+            ]);
+            assert_ok(&o);
+            let back = Scene::load(&out, Sizing::Natural).unwrap();
+            assert_eq!((back.width, back.height), (w, h), "{mode} {w}x{h}");
+        }
+    }
+}
+
+/// Found by issue 27's fuzzer: 200,000 copies of a glyph stacked at 128² made `fit`'s
+/// backward pass allocate gigabytes (the record of one band grows with the stacked
+/// shapes). It is refused before the run, in one line, under the 1 GiB ceiling.
+#[test]
+fn fit_on_thousands_of_stacked_copies_is_refused_before_allocating() {
+    let dir = scratch("regress-27-stack");
+    let one = r#"<path d="M10 10H100V120H10Z"/>"#;
+    let svg = write(
+        &dir,
+        "stack.svg",
+        &format!(
+            r#"<svg xmlns="http://www.w3.org/2000/svg" width="128" height="128">{}</svg>"#,
+            one.repeat(20_000)
+        ),
+    );
+    let out = dir.join("f.svg");
+    let o = diffsvg_bounded(&["fit", s(&svg), s(&svg), "-o", s(&out), "--iters", "2"]);
+    assert_fails(&o, "stack.svg", "too complex to differentiate", &out);
+    let target = dir.join("t.png");
+    Image::filled(128, 128, [1.0; 4]).save_png(&target).unwrap();
+    let o = diffsvg_bounded(&["grad", s(&svg), s(&target)]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("too complex to differentiate"),
+        "{}",
+        stderr(&o)
+    );
+    // Rendering needs no record: it still draws.
+    assert_ok(&diffsvg_bounded(&[
+        "render",
+        s(&svg),
+        "-o",
+        s(&dir.join("r.png")),
+    ]));
 }
