@@ -69,6 +69,7 @@
 
 #![warn(unreachable_pub)]
 
+pub mod choice;
 mod error;
 pub mod fit;
 pub mod gradcheck;

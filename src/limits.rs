@@ -100,3 +100,64 @@ pub const MAX_ARC_RADIUS: f64 = 1e20;
 /// SVG writer apply the same check, and the optimizer's projection keeps every parameter
 /// inside it, so diffsvg never writes a file it would refuse to read.
 pub const MAX_COORDINATE: f64 = 1e30;
+
+// ---- options of the jobs ------------------------------------------------------------
+//
+// One bound per option, shared by the command line, batch files and Python (each front
+// end names the option its own way: `--max-segments`, `max_segments`). Where the front
+// ends once disagreed, the note says which bound was kept and why.
+
+/// Most optimizer steps (or iterations) a job may ask for: 10⁶ steps of even a 28 × 28
+/// digit take minutes, of a painting hours; a count beyond it is a typo, not a request
+/// (the fuzzer's `4294967296` ran until killed).
+pub const MAX_ITERS: usize = 1_000_000;
+
+/// Most paths a vectorization may use (its budget, `--paths`/`--max-paths`/`paths`):
+/// memory and time grow with it. Kept from Python's bound; the command line had none.
+pub const MAX_PATHS: usize = 100_000;
+
+/// Most levels of the loss's image pyramid (each halves the picture: 16 levels reach one
+/// pixel from the largest canvas). Kept from Python's `1..=16`; the command line had no
+/// upper bound.
+pub const MAX_PYRAMID_LEVELS: usize = 16;
+
+/// Fewest and most cubic segments of each closed path that adaptive vectorization adds.
+/// The command line's `2..=64` is kept: one segment closes on itself as a teardrop with
+/// a corner, not a blob (Python accepted 1).
+pub const PATH_SEGMENTS: std::ops::RangeInclusive<usize> = 2..=64;
+
+/// Largest magnification of a digit for fitting (`--scale`/`scale`): a 28 × 28 digit
+/// becomes 448 × 448. The command line's 16 is kept (Python stopped at 8).
+pub const MAX_DIGIT_SCALE: u32 = 16;
+
+/// Most strokes, and most cubic segments per stroke, of a fitted digit.
+pub const MAX_DIGIT_CURVES: usize = 16;
+
+/// Most cubic segments of a fitted glyph outline: Python's 1024 is kept (the command
+/// line had no upper bound; the fit grows segment by segment, each round a refinement).
+pub const MAX_GLYPH_SEGMENTS: usize = 1024;
+
+/// Refuses `value` outside `range` as an [`Error::Setting`](crate::Error::Setting) naming
+/// the option as the library names it (`max_segments`).
+pub(crate) fn check_count(
+    name: &str,
+    value: usize,
+    range: std::ops::RangeInclusive<usize>,
+) -> crate::Result<()> {
+    if range.contains(&value) {
+        return Ok(());
+    }
+    let message = if *range.end() == usize::MAX {
+        format!("{value} must be at least {}", range.start())
+    } else {
+        format!(
+            "{value} must be between {} and {}",
+            range.start(),
+            range.end()
+        )
+    };
+    Err(crate::Error::Setting {
+        name: name.into(),
+        message,
+    })
+}

@@ -106,6 +106,31 @@ impl Loss {
 /// height.
 pub const SUM_ROWS: usize = 16;
 
+impl crate::choice::Choice for Loss {
+    const WHAT: &'static str = "loss";
+    const ALL: &'static [Self] = &[Self::Mse, Self::L1];
+    fn name(self) -> &'static str {
+        match self {
+            Self::Mse => "mse",
+            Self::L1 => "l1",
+        }
+    }
+    fn aliases(self) -> &'static [&'static str] {
+        match self {
+            Self::Mse => &["l2"],
+            Self::L1 => &["mae"],
+        }
+    }
+}
+
+impl std::str::FromStr for Loss {
+    type Err = String;
+    /// By name or alias, any case ([`crate::choice::parse`]).
+    fn from_str(s: &str) -> Result<Self, String> {
+        crate::choice::parse(s)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -119,5 +144,10 @@ mod tests {
         let (_, g) = Loss::Mse.grad(&a, &b);
         assert!((g.data[0][0] - 2.0 * 0.25 / 8.0).abs() < 1e-7);
         assert_eq!(g.data[0][1], 0.0);
+    }
+
+    #[test]
+    fn loss_names_round_trip() {
+        crate::choice::tests::round_trip::<Loss>();
     }
 }

@@ -4,7 +4,8 @@
 use diffsvg::fit::digit::{DigitOptions, fit_digit};
 use diffsvg::fit::glyph::{GlyphOptions, fit_glyph};
 use diffsvg::fit::vectorize::{Event, Mode, VectorizeOptions, vectorize as lib_vectorize};
-use diffsvg::fit::{Control, FitOptions, Step, StopReason, refine};
+use diffsvg::fit::{Control, FitOptions, ObjectiveOptions, Step, StopReason, refine};
+use diffsvg::limits::MAX_PATHS;
 use diffsvg::loss::Loss;
 use diffsvg::optim::{LearningRates, Objective, Schedule};
 use numpy::{PyArray2, PyReadonlyArrayDyn, PyUntypedArrayMethods};
@@ -24,10 +25,6 @@ macro_rules! dict {
         d
     }};
 }
-
-/// Most paths a job may ask for: memory and time grow with it, so a mistyped count is
-/// refused rather than attempted.
-const MAX_PATHS: usize = 100_000;
 
 /// Calls a Python progress callback (and checks for Ctrl-C) from inside a job that runs
 /// without the GIL; the first exception stops the job and is raised once it returns.
@@ -88,25 +85,6 @@ fn step_dict(d: &Bound<'_, PyDict>, s: &Step) -> PyResult<()> {
     Ok(())
 }
 
-fn parse_loss(kind: &str) -> PyResult<Loss> {
-    match kind {
-        "mse" => Ok(Loss::Mse),
-        "l1" => Ok(Loss::L1),
-        k => Err(bad(format!("loss {k:?}: expected \"mse\" or \"l1\""))),
-    }
-}
-
-fn parse_schedule(s: &str) -> PyResult<Schedule> {
-    match s {
-        "constant" => Ok(Schedule::Constant),
-        "cosine" => Ok(Schedule::Cosine),
-        "linear" => Ok(Schedule::Linear),
-        s => Err(bad(format!(
-            "schedule {s:?}: expected \"constant\", \"cosine\" or \"linear\""
-        ))),
-    }
-}
-
 /// The options shared by `fit` and `vectorize`, from a dict (unknown keys refused):
 /// `lr_points`, `lr_color`, `lr_opacity`, `lr_width`, `lr_paint`, `lr_stops` (finite,
 /// ≥ 0), `schedule`, `loss`, `background` (straight RGBA), `pyramid`, `tolerance`.
@@ -155,11 +133,7 @@ fn fit_setup(
         &mut rates.stops,
     ]) {
         if let Some(v) = get(k)? {
-            let v: f64 = v.extract()?;
-            if !(v >= 0.0 && v.is_finite()) {
-                return Err(bad(format!("{k} {v} must be a finite number ≥ 0")));
-            }
-            *r = v;
+            *r = v.extract()?;
         }
     }
     let schedule: String = get("schedule")?.map_or(Ok("constant".into()), |v| v.extract())?;
@@ -172,23 +146,22 @@ fn fit_setup(
         return Err(bad("target: the image is empty"));
     }
     let bg = color_in(background, "background")?;
-    if let Some(p) = until_psnr
-        && !p.is_finite()
-    {
-        return Err(bad(format!("until_psnr {p} must be finite")));
-    }
-    if !(1..=16).contains(&pyramid) {
-        return Err(bad(format!("pyramid {pyramid} must be in 1..=16")));
-    }
-    let objective = Objective::new(&target, parse_loss(&loss)?, bg, pyramid);
     let opts = FitOptions {
         iters,
         rates,
-        schedule: parse_schedule(&schedule)?,
+        schedule: schedule.parse::<Schedule>().map_err(bad)?,
         until_psnr,
         render: options_for(tolerance)?,
         ..FitOptions::default()
     };
+    opts.validate().map_err(to_py)?;
+    let objective = ObjectiveOptions {
+        loss: loss.parse::<Loss>().map_err(bad)?,
+        pyramid,
+        background: bg,
+    }
+    .objective(&target)
+    .map_err(to_py)?;
     Ok((objective, opts))
 }
 
@@ -274,23 +247,7 @@ pub(crate) fn vectorize<'py>(
     progress: Option<Py<PyAny>>,
 ) -> PyResult<(PyScene, Bound<'py, PyDict>)> {
     let (objective, fit) = fit_setup(&target, iters, None, options.as_ref())?;
-    let mode = match mode {
-        "adaptive" => Mode::Adaptive,
-        "fixed" => Mode::Fixed,
-        "painterly" => Mode::Painterly,
-        "trace" => Mode::Trace,
-        m => {
-            return Err(bad(format!(
-                "mode {m:?}: expected \"adaptive\", \"fixed\", \"painterly\" or \"trace\""
-            )));
-        }
-    };
-    if paths == 0 || paths > MAX_PATHS {
-        return Err(bad(format!("paths {paths} must be in 1..={MAX_PATHS}")));
-    }
-    if !(1..=64).contains(&segments) {
-        return Err(bad(format!("segments {segments} must be in 1..=64")));
-    }
+    let mode: Mode = mode.parse().map_err(bad)?;
     let opts = VectorizeOptions {
         mode,
         paths,
@@ -300,6 +257,7 @@ pub(crate) fn vectorize<'py>(
         fit,
         seed,
     };
+    opts.validate().map_err(to_py)?;
     let mut prog = Progress::new(progress);
     let out = py.detach(|| {
         lib_vectorize(&objective, &opts, &mut |e| match e {
@@ -382,14 +340,6 @@ pub(crate) fn digit<'py>(
             v[i]
         )));
     }
-    if !(0.0..=1.0).contains(&target_iou) || !(1..=8).contains(&scale) {
-        return Err(bad(format!(
-            "target_iou {target_iou} must be in [0, 1] and scale {scale} in 1..=8"
-        )));
-    }
-    if !(1..=16).contains(&max_strokes) || !(1..=16).contains(&max_segments) {
-        return Err(bad("max_strokes and max_segments must be in 1..=16"));
-    }
     let opts = DigitOptions {
         scale,
         target_iou,
@@ -397,6 +347,7 @@ pub(crate) fn digit<'py>(
         max_segments,
         ..DigitOptions::default()
     };
+    opts.validate().map_err(to_py)?;
     let (h, w) = (shape[0], shape[1]);
     let f = py.detach(|| crate::on_pool(|| fit_digit(&v, w, h, &opts)));
     let info = dict! {py;
@@ -421,17 +372,13 @@ pub(crate) fn glyph<'py>(
     iters: usize,
 ) -> PyResult<(PyScene, Bound<'py, PyDict>)> {
     let t = image_in(&target, "target")?;
-    if !(0.0..=1.0).contains(&iou) || !(1..=1024).contains(&max_segments) {
-        return Err(bad(format!(
-            "iou {iou} must be in [0, 1] and max_segments {max_segments} in 1..=1024"
-        )));
-    }
     let opts = GlyphOptions {
         iou_goal: iou,
         max_segments,
         iters,
         ..GlyphOptions::default()
     };
+    opts.validate().map_err(to_py)?;
     let out = py.detach(|| crate::on_pool(|| fit_glyph(&t, &opts)));
     let info = dict! {py;
         "iou" => out.iou,

@@ -117,11 +117,7 @@ pub(crate) fn loss<'py>(
     kind: &str,
     grad: bool,
 ) -> PyResult<(f64, Option<Bound<'py, PyArray3<f32>>>)> {
-    let l = match kind {
-        "mse" => Loss::Mse,
-        "l1" => Loss::L1,
-        k => return Err(bad(format!("loss kind {k:?}: expected \"mse\" or \"l1\""))),
-    };
+    let l: Loss = kind.parse().map_err(bad)?;
     let a = image_in(&image, "image")?;
     let b = image_in(&target, "target")?;
     if (a.width, a.height) != (b.width, b.height) {
@@ -141,8 +137,8 @@ pub(crate) fn load_image(py: Python<'_>, path: PathBuf) -> PyResult<Bound<'_, Py
     Ok(image_out(py, img))
 }
 
-/// A fitting target: a PNG or JPEG, or an SVG rendered at its own size; resized to
-/// `width × height` when given (both or neither).
+/// A fitting target: a PNG or JPEG, or an SVG or SVGZ rendered at its own size; resized
+/// to `width × height` when given (both or neither: one alone is refused).
 #[pyfunction]
 #[pyo3(signature = (path, width=None, height=None))]
 pub(crate) fn load_target(
@@ -151,26 +147,14 @@ pub(crate) fn load_target(
     width: Option<u32>,
     height: Option<u32>,
 ) -> PyResult<Bound<'_, PyArray3<f32>>> {
-    let img = py.detach(|| -> diffsvg::Result<Image> {
-        let is_svg = path
-            .extension()
-            .and_then(|e| e.to_str())
-            .is_some_and(|e| e.eq_ignore_ascii_case("svg") || e.eq_ignore_ascii_case("svgz"));
-        let t = if is_svg {
-            let s = diffsvg::Scene::load(&path, diffsvg::Sizing::Natural)?;
-            raster_render(&s, &RenderOptions::default())
-        } else {
-            Image::load(&path)?
-        };
-        match (width, height) {
-            (Some(w), Some(h)) => t.resized_checked(w, h, &path),
-            _ => Ok(t),
-        }
-    });
-    let img = img.map_err(to_py)?;
-    if img.width == 0 || img.height == 0 {
-        return Err(bad(format!("{}: image is empty", path.display())));
-    }
+    let size = match (width, height) {
+        (Some(w), Some(h)) => Some((w, h)),
+        (None, None) => None,
+        _ => return Err(bad("width and height: give both (or neither)")),
+    };
+    let img = py
+        .detach(|| diffsvg::fit::load_target(&path, size))
+        .map_err(to_py)?;
     Ok(image_out(py, img))
 }
 

@@ -89,3 +89,35 @@ def test_fit_target_file_errors_name_it(scene, tmp_path):
     (tmp_path / "junk.png").write_bytes(b"not a png")
     with pytest.raises(diffsvg.DiffsvgError, match="junk.png"):
         diffsvg.fit(scene, tmp_path / "junk.png", iters=1)
+
+
+def _drifted_options():
+    """`(command, option, value, message)` rows of tests/drifted-options.tsv, which the
+    command line's test reads too (issue 28: each bound is the library's)."""
+    from conftest import ROOT
+    rows = []
+    for line in (ROOT / "tests" / "drifted-options.tsv").read_text().splitlines():
+        if line.strip() and not line.startswith("#"):
+            rows.append(line.split("\t"))
+    return rows
+
+
+@pytest.mark.parametrize("command,option,value,message", _drifted_options())
+def test_drifted_options_are_refused_with_the_librarys_message(command, option, value,
+                                                               message):
+    img = np.zeros((16, 16, 4), np.float32)
+    img[..., 3] = 1
+    v = float(value) if "." in value or option == "iou" else int(value)
+    expected = f"{option} {value} {message}"
+    with pytest.raises(diffsvg.DiffsvgError) as e:
+        if command == "vectorize" and option == "pyramid":
+            diffsvg.vectorize(img, iters=1, options={option: v})
+        elif command == "vectorize":
+            diffsvg.vectorize(img, iters=1, **{option: v})
+        elif command == "digits":
+            diffsvg.digit(np.zeros((28, 28), np.float32), **{option: v})
+        elif command == "glyphs":
+            diffsvg.glyph(img, **{option: v})
+        else:
+            raise AssertionError(command)
+    assert str(e.value) == expected

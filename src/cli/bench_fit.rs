@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Result, bail};
 
-use super::fit::load_target;
+use diffsvg::fit::load_target;
 use diffsvg::fit::random_blobs;
 use diffsvg::fit::{Control, FitOptions, refine};
 use diffsvg::loss::Loss;
@@ -85,7 +85,7 @@ fn pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
 
 /// Loads an image and resizes it to `w × h` (or `w` wide when `h` is 0).
 fn photo(path: &Path, w: u32, h: u32) -> Result<diffsvg::Image> {
-    let t = load_target(path)?;
+    let t = load_target(path, None)?;
     let h = if h == 0 {
         ((t.height as f64 * w as f64 / t.width as f64).round() as u32).max(1)
     } else {

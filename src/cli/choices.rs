@@ -3,79 +3,27 @@
 //! library stays free of clap; these are the only places the spellings live.
 
 use clap::ValueEnum;
+use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
 
-use diffsvg::fit::vectorize::Mode;
-use diffsvg::loss::Loss;
-use diffsvg::optim::Schedule;
-use diffsvg::scene::ParamGroup;
+use diffsvg::choice::{Choice, parse_among};
 
-/// `--loss`.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ValueEnum)]
-pub enum LossArg {
-    /// Mean squared error.
-    #[default]
-    #[value(alias = "l2")]
-    Mse,
-    /// Mean absolute error.
-    #[value(alias = "mae")]
-    L1,
+/// A flag's parser over the library's names of `values` (a [`Choice`]): `--help` lists
+/// them, aliases are accepted, case is ignored where the flag says `ignore_case`. The
+/// spellings live in the library, beside each type.
+pub fn among<T: Choice + Clone + Send + Sync>(
+    values: &'static [T],
+) -> impl TypedValueParser<Value = T> {
+    PossibleValuesParser::new(
+        values
+            .iter()
+            .map(|v| PossibleValue::new(v.name()).aliases(v.aliases().iter().copied())),
+    )
+    .map(move |s| parse_among(&s, values).expect("clap matched one of these names"))
 }
 
-impl From<LossArg> for Loss {
-    fn from(l: LossArg) -> Loss {
-        match l {
-            LossArg::Mse => Loss::Mse,
-            LossArg::L1 => Loss::L1,
-        }
-    }
-}
-
-/// `--schedule`.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ValueEnum)]
-pub enum ScheduleArg {
-    /// The same rate throughout.
-    #[default]
-    #[value(alias = "const")]
-    Constant,
-    /// Half a cosine down to 5% of the rate at the last step.
-    #[value(alias = "cos")]
-    Cosine,
-    /// A straight line down to 5% of the rate at the last step.
-    Linear,
-}
-
-impl From<ScheduleArg> for Schedule {
-    fn from(s: ScheduleArg) -> Schedule {
-        match s {
-            ScheduleArg::Constant => Schedule::Constant,
-            ScheduleArg::Cosine => Schedule::Cosine,
-            ScheduleArg::Linear => Schedule::Linear,
-        }
-    }
-}
-
-/// `vectorize --mode`.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ValueEnum)]
-pub enum ModeArg {
-    /// Add paths where the error is largest, prune the useless ones.
-    #[default]
-    Adaptive,
-    /// DiffVG's random closed blobs, all at once.
-    #[value(alias = "blobs")]
-    Fixed,
-    /// DiffVG's random open strokes with widths.
-    #[value(alias = "strokes")]
-    Painterly,
-}
-
-impl From<ModeArg> for Mode {
-    fn from(m: ModeArg) -> Mode {
-        match m {
-            ModeArg::Adaptive => Mode::Adaptive,
-            ModeArg::Fixed => Mode::Fixed,
-            ModeArg::Painterly => Mode::Painterly,
-        }
-    }
+/// [`among`] every value of `T`.
+pub fn choice<T: Choice + Clone + Send + Sync>() -> impl TypedValueParser<Value = T> {
+    among(T::ALL)
 }
 
 /// `vectorize --init`.
@@ -83,41 +31,6 @@ impl From<ModeArg> for Mode {
 pub enum InitArg {
     /// vtracer's photo preset, pruned to the path budget, then refined.
     Trace,
-}
-
-/// `--freeze`: a parameter group held fixed.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum GroupArg {
-    /// Control points.
-    #[value(alias = "point")]
-    Points,
-    /// Solid and stop colors.
-    #[value(alias = "color")]
-    Colors,
-    /// Fill, stroke, stop and group opacities.
-    #[value(alias = "opacity")]
-    Opacities,
-    /// Stroke widths.
-    #[value(alias = "width")]
-    Widths,
-    /// Gradient geometry (end points, centers, radii).
-    Paint,
-    /// Gradient stop offsets.
-    #[value(alias = "stop")]
-    Stops,
-}
-
-impl From<GroupArg> for ParamGroup {
-    fn from(g: GroupArg) -> ParamGroup {
-        match g {
-            GroupArg::Points => ParamGroup::Points,
-            GroupArg::Colors => ParamGroup::Color,
-            GroupArg::Opacities => ParamGroup::Opacity,
-            GroupArg::Widths => ParamGroup::StrokeWidth,
-            GroupArg::Paint => ParamGroup::PaintGeometry,
-            GroupArg::Stops => ParamGroup::StopOffset,
-        }
-    }
 }
 
 /// `view --split`.
@@ -165,17 +78,25 @@ mod tests {
 
     #[test]
     fn aliases_and_case() {
-        assert_eq!(LossArg::from_str("L2", true), Ok(LossArg::Mse));
-        assert_eq!(LossArg::from_str("mae", true), Ok(LossArg::L1));
-        assert_eq!(ScheduleArg::from_str("cos", true), Ok(ScheduleArg::Cosine));
-        assert!(ScheduleArg::from_str("step", true).is_err());
+        use clap::Parser;
+        use diffsvg::loss::Loss;
+        use diffsvg::scene::ParamGroup;
+        #[derive(Parser, Debug)]
+        struct T {
+            #[arg(long, ignore_case = true, value_parser = choice::<Loss>())]
+            loss: Loss,
+            #[arg(long, ignore_case = true, value_parser = choice::<ParamGroup>(), value_delimiter = ',')]
+            freeze: Vec<ParamGroup>,
+        }
+        let t = T::try_parse_from(["t", "--loss", "L2", "--freeze", "point,Colors"]).unwrap();
+        assert_eq!(t.loss, Loss::Mse);
+        assert_eq!(t.freeze, [ParamGroup::Points, ParamGroup::Color]);
+        let e = T::try_parse_from(["t", "--loss", "huber"])
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("possible values: mse, l1"), "{e}");
         assert_eq!(parse_background("AUTO"), Ok(Background::Auto));
         assert_eq!(parse_background("none"), Ok(Background::Color([0.0; 4])));
         assert!(parse_background("bluish").is_err());
-        // Every group has a spelling, and the spelling is the group's own name.
-        for g in GroupArg::value_variants() {
-            let name = g.to_possible_value().unwrap().get_name().to_string();
-            assert_eq!(ParamGroup::from(*g).name(), name);
-        }
     }
 }

@@ -175,16 +175,7 @@ pub fn run(a: Args) -> Result<()> {
 }
 
 fn options(a: &Args) -> Result<DigitOptions> {
-    if !(1..=16).contains(&a.scale) {
-        bail!("--scale {} must be between 1 and 16", a.scale);
-    }
-    if !(0.0..=1.0).contains(&a.target_iou) {
-        bail!("--target-iou {} must be in [0, 1]", a.target_iou);
-    }
-    if a.max_strokes == 0 || a.max_segments == 0 {
-        bail!("--max-strokes and --max-segments must be at least 1");
-    }
-    Ok(DigitOptions {
+    let opts = DigitOptions {
         scale: a.scale,
         target_iou: a.target_iou,
         max_strokes: a.max_strokes,
@@ -192,7 +183,9 @@ fn options(a: &Args) -> Result<DigitOptions> {
         steps: a.steps,
         stage_steps: a.stage_steps,
         ..DigitOptions::default()
-    })
+    };
+    opts.validate().map_err(super::util::flag_error)?;
+    Ok(opts)
 }
 
 /// `v` without repeats, in first-seen order, and how many repeats were dropped.

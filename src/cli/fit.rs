@@ -6,11 +6,12 @@ use std::time::Instant;
 use anyhow::{Result, bail};
 use serde_json::json;
 
-use super::choices::{Background, GroupArg, LossArg, ScheduleArg, parse_background};
+use super::choices::{Background, choice, parse_background};
 use super::progress::{ReportArgs, Reporter};
-use super::util::{check_output, sibling};
+use super::util::{check_output, flag_error, sibling};
 use diffsvg::Sizing;
-use diffsvg::fit::{FitOptions, StopReason, refine};
+use diffsvg::choice::Choice as _;
+use diffsvg::fit::{FitOptions, ObjectiveOptions, StopReason, load_target, refine};
 use diffsvg::image_io::{Image, side_by_side};
 use diffsvg::loss::Loss;
 use diffsvg::optim::{LearningRates, Objective, Schedule};
@@ -39,17 +40,17 @@ pub struct OptimArgs {
     #[arg(long, default_value_t = LearningRates::default().stops)]
     pub lr_stops: f64,
     /// Learning-rate schedule.
-    #[arg(long, value_enum, ignore_case = true, default_value_t)]
-    pub schedule: ScheduleArg,
+    #[arg(long, ignore_case = true, value_parser = choice::<Schedule>(), default_value = Schedule::default().name())]
+    pub schedule: Schedule,
     /// Loss, over the target's channels.
-    #[arg(long, value_enum, ignore_case = true, default_value_t)]
-    pub loss: LossArg,
+    #[arg(long, ignore_case = true, value_parser = choice::<Loss>(), default_value = Loss::default().name())]
+    pub loss: Loss,
     /// Image pyramid levels in the loss (1 = full resolution only).
     #[arg(long, default_value_t = 1)]
     pub pyramid: usize,
     /// Parameter groups to hold fixed (comma-separated).
-    #[arg(long, value_enum, ignore_case = true, value_delimiter = ',')]
-    pub freeze: Vec<GroupArg>,
+    #[arg(long, ignore_case = true, value_parser = choice::<ParamGroup>(), value_delimiter = ',')]
+    pub freeze: Vec<ParamGroup>,
     /// Stop as soon as the PSNR reaches this many dB.
     #[arg(long, value_name = "DB")]
     pub until_psnr: Option<f64>,
@@ -60,72 +61,49 @@ pub struct OptimArgs {
 }
 
 impl OptimArgs {
-    /// Learning rates with frozen groups set to 0; refuses NaN, infinite or negative rates.
-    pub fn rates(&self) -> Result<LearningRates> {
-        let r = LearningRates {
-            points: self.lr_points,
-            color: self.lr_color,
-            opacity: self.lr_opacity,
-            width: self.lr_width,
-            paint: self.lr_paint,
-            stops: self.lr_stops,
-        };
-        for g in ParamGroup::ALL {
-            let v = r.get(g);
-            if !(v.is_finite() && v >= 0.0) {
-                bail!(
-                    "learning rate of {} is {v}: must be a finite number ≥ 0",
-                    g.name()
-                );
-            }
-        }
-        let mut r = r;
-        r.freeze(&self.frozen());
-        Ok(r)
-    }
-
     /// The groups named by `--freeze`.
     pub fn frozen(&self) -> Vec<ParamGroup> {
-        self.freeze.iter().map(|&g| g.into()).collect()
+        self.freeze.clone()
     }
 
     /// The background for `target`.
-    pub fn background(&self, target: &Image) -> Result<Option<[f32; 4]>> {
-        Ok(match self.background {
+    pub fn background(&self, target: &Image) -> Option<[f32; 4]> {
+        match self.background {
             Background::Auto => target.data.iter().all(|p| p[3] >= 1.0).then_some([1.0; 4]),
             Background::Color(c) => (c[3] > 0.0).then_some(c),
-        })
+        }
     }
 
-    /// The objective against `target`.
+    /// The objective against `target` (the library checks the settings).
     pub fn objective(&self, target: &Image) -> Result<Objective> {
-        let loss = Loss::from(self.loss);
-        if self.pyramid == 0 {
-            bail!("--pyramid must be at least 1");
-        }
-        Ok(Objective::new(
-            target,
-            loss,
-            self.background(target)?,
-            self.pyramid,
-        ))
+        let o = ObjectiveOptions {
+            loss: self.loss,
+            pyramid: self.pyramid,
+            background: self.background(target),
+        };
+        o.objective(target).map_err(flag_error)
     }
 
-    /// Fit options for `iters` steps.
+    /// Fit options for `iters` steps, checked by the library, with frozen groups' rates
+    /// set to 0 afterwards (a frozen group's rate is still checked).
     pub fn fit_options(&self, iters: usize) -> Result<FitOptions> {
-        let schedule = Schedule::from(self.schedule);
-        if let Some(p) = self.until_psnr
-            && p.is_nan()
-        {
-            bail!("--until-psnr must be a number");
-        }
-        Ok(FitOptions {
+        let mut opts = FitOptions {
             iters,
-            rates: self.rates()?,
-            schedule,
+            rates: LearningRates {
+                points: self.lr_points,
+                color: self.lr_color,
+                opacity: self.lr_opacity,
+                width: self.lr_width,
+                paint: self.lr_paint,
+                stops: self.lr_stops,
+            },
+            schedule: self.schedule,
             until_psnr: self.until_psnr,
             ..FitOptions::default()
-        })
+        };
+        opts.validate().map_err(flag_error)?;
+        opts.rates.freeze(&self.frozen());
+        Ok(opts)
     }
 }
 
@@ -151,27 +129,6 @@ pub struct Args {
     report: ReportArgs,
 }
 
-/// Loads a target picture, refusing empty ones. An `.svg` target is rendered by diffsvg at
-/// its own size (handy to rebuild a drawing from its rendering).
-pub fn load_target(path: &std::path::Path) -> Result<Image> {
-    let is_svg = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .is_some_and(|e| e.eq_ignore_ascii_case("svg"));
-    let t = if is_svg {
-        render(
-            &Scene::load(path, Sizing::Natural)?,
-            &RenderOptions::default(),
-        )
-    } else {
-        Image::load(path)?
-    };
-    if t.width == 0 || t.height == 0 {
-        bail!("{}: image is empty", path.display());
-    }
-    Ok(t)
-}
-
 /// Runs `diffsvg fit`.
 pub fn run(a: Args) -> Result<()> {
     check_output(&a.output, "svg")?;
@@ -180,7 +137,7 @@ pub fn run(a: Args) -> Result<()> {
         check_output(&compare_path, "png")?;
     }
     let opts = a.optim.fit_options(a.iters)?;
-    let target = load_target(&a.target)?;
+    let target = load_target(&a.target, None)?;
     let objective = a.optim.objective(&target)?;
     let scene = Scene::load(&a.init, Sizing::Exact(target.width, target.height))?;
     super::util::warn_about(&scene, &a.init, &diffsvg::raster::RenderOptions::default());

@@ -60,15 +60,18 @@ pub fn run(a: Args) -> Result<()> {
     if a.size < 8 {
         bail!("--size {} must be at least 8 pixels", a.size);
     }
-    if !(a.iou > 0.0 && a.iou <= 1.0) {
-        bail!("--iou {} must be in (0, 1]", a.iou);
-    }
-    if a.max_segments == 0 {
-        bail!("--max-segments must be at least 1");
-    }
-    if a.iters == 0 {
-        bail!("--iters must be at least 1");
-    }
+    let opts = GlyphOptions {
+        iou_goal: a.iou,
+        max_segments: a.max_segments,
+        iters: a.iters,
+        rule: if a.evenodd {
+            FillRule::EvenOdd
+        } else {
+            FillRule::NonZero
+        },
+        ..GlyphOptions::default()
+    };
+    opts.validate().map_err(super::util::flag_error)?;
     let inputs = if a.inputs.is_empty() {
         vec![PathBuf::from("svg-samples/glyphs")]
     } else {
@@ -113,17 +116,6 @@ pub fn run(a: Args) -> Result<()> {
         }
         targets.push((name, font, target));
     }
-    let opts = GlyphOptions {
-        iou_goal: a.iou,
-        max_segments: a.max_segments,
-        iters: a.iters,
-        rule: if a.evenodd {
-            FillRule::EvenOdd
-        } else {
-            FillRule::NonZero
-        },
-        ..GlyphOptions::default()
-    };
     let table = !a.json && !a.quiet;
     if table {
         println!("{}", header());

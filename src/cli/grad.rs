@@ -5,8 +5,9 @@ use std::path::PathBuf;
 use anyhow::{Result, bail};
 use serde_json::{Value, json};
 
-use super::choices::LossArg;
+use super::choices::choice;
 use super::util::{SizeArgs, parse_color};
+use diffsvg::choice::Choice as _;
 use diffsvg::gradcheck::{analytic, compare, numeric};
 use diffsvg::image_io::Image;
 use diffsvg::loss::Loss;
@@ -21,8 +22,8 @@ pub struct Common {
     /// Target image (PNG or JPEG; straight alpha in the file).
     target: PathBuf,
     /// Loss (mean over pixels and premultiplied RGBA channels).
-    #[arg(long, value_enum, ignore_case = true, default_value_t)]
-    loss: LossArg,
+    #[arg(long, ignore_case = true, value_parser = choice::<Loss>(), default_value = Loss::default().name())]
+    loss: Loss,
     /// Resize the target to the render size instead of refusing a size mismatch.
     #[arg(long)]
     resize: bool,
@@ -78,7 +79,7 @@ struct Job {
 }
 
 fn load(c: &Common) -> Result<Job> {
-    let loss = Loss::from(c.loss);
+    let loss = c.loss;
     let background = c.background;
     let scene = Scene::load(&c.input, c.size.sizing()?)?;
     super::util::warn_about(&scene, &c.input, &RenderOptions::default());

@@ -5,10 +5,12 @@ use std::path::PathBuf;
 use anyhow::{Result, bail};
 use serde_json::json;
 
-use super::choices::{InitArg, ModeArg};
-use super::fit::{OptimArgs, load_target};
+use super::choices::{InitArg, among};
+use super::fit::OptimArgs;
 use super::progress::{ReportArgs, Reporter};
-use super::util::{check_output, sibling};
+use super::util::{check_output, flag_error, sibling};
+use diffsvg::choice::Choice as _;
+use diffsvg::fit::load_target;
 use diffsvg::fit::vectorize::{Event, Mode, VectorizeOptions, vectorize};
 use diffsvg::image_io::side_by_side;
 use diffsvg::raster::{RenderOptions, render};
@@ -22,8 +24,8 @@ pub struct Args {
     #[arg(short, long)]
     output: PathBuf,
     /// How paths are found [default: adaptive].
-    #[arg(long, value_enum, ignore_case = true)]
-    mode: Option<ModeArg>,
+    #[arg(long, ignore_case = true, value_parser = among(&[Mode::Adaptive, Mode::Fixed, Mode::Painterly]))]
+    mode: Option<Mode>,
     /// Start from a classical tracing instead of from nothing (not with `--mode`).
     #[arg(long, value_enum, ignore_case = true)]
     init: Option<InitArg>,
@@ -68,20 +70,16 @@ pub fn run(a: Args) -> Result<()> {
     let mode = match (a.init, a.mode) {
         (Some(_), Some(m)) => bail!(
             "--init trace and --mode {} cannot be combined: tracing is a mode of its own",
-            format!("{m:?}").to_lowercase()
+            m.name()
         ),
         (Some(InitArg::Trace), None) => Mode::Trace,
-        (None, m) => Mode::from(m.unwrap_or_default()),
+        (None, m) => m.unwrap_or_default(),
     };
     if a.segments.is_some() && mode != Mode::Adaptive {
         bail!("--segments applies to --mode adaptive only (the paths it adds)");
     }
     if a.seed.is_some() && !matches!(mode, Mode::Fixed | Mode::Painterly) {
         bail!("--seed applies to --mode fixed and painterly only (their random shapes)");
-    }
-    let segments = a.segments.unwrap_or(4);
-    if !(2..=64).contains(&segments) {
-        bail!("--segments {segments} must be between 2 and 64");
     }
     if a.target_psnr.is_some() && a.optim.until_psnr.is_some() {
         bail!(
@@ -95,14 +93,28 @@ pub fn run(a: Args) -> Result<()> {
         (Some(_), None) => a.max_paths.unwrap_or(512),
         (None, p) => p.unwrap_or(64),
     };
-    if paths == 0 {
-        bail!("the path budget must be at least 1");
-    }
-    if a.target_psnr.is_some_and(|p| !p.is_finite()) {
-        bail!("--target-psnr must be a finite number");
-    }
     let fit = a.optim.fit_options(a.iters)?;
-    let mut target = load_target(&a.target)?;
+    let defaults = VectorizeOptions::default();
+    let opts = VectorizeOptions {
+        mode,
+        paths,
+        target_psnr: a.target_psnr.or(a.optim.until_psnr),
+        segments: a.segments.unwrap_or(defaults.segments),
+        iters: a.iters,
+        fit,
+        seed: a.seed.unwrap_or(defaults.seed),
+    };
+    // The budget is `--max-paths` with `--target-psnr`, and `--paths` otherwise.
+    opts.validate().map_err(|e| match e {
+        diffsvg::Error::Setting { name, message } if name == "paths" && a.target_psnr.is_some() => {
+            flag_error(diffsvg::Error::Setting {
+                name: "max_paths".into(),
+                message,
+            })
+        }
+        e => flag_error(e),
+    })?;
+    let mut target = load_target(&a.target, None)?;
     if let Some(w) = a.width {
         if w == 0 {
             bail!("--width must be at least 1 pixel");
@@ -111,15 +123,6 @@ pub fn run(a: Args) -> Result<()> {
         target = target.resized_checked(w, h, std::path::Path::new("--width"))?;
     }
     let objective = a.optim.objective(&target)?;
-    let opts = VectorizeOptions {
-        mode,
-        paths,
-        target_psnr: a.target_psnr.or(a.optim.until_psnr),
-        segments,
-        iters: a.iters,
-        fit,
-        seed: a.seed.unwrap_or(0),
-    };
     // Last of the checks, as it creates the snapshots folder: inputs were good.
     a.report.check_outputs()?;
     let mut reporter = Reporter::new(&a.report, a.iters + 1, objective.background());
@@ -148,7 +151,7 @@ pub fn run(a: Args) -> Result<()> {
     if a.report.json {
         println!(
             "{}",
-            json!({"done": true, "output": a.output, "mode": format!("{mode:?}").to_lowercase(),
+            json!({"done": true, "output": a.output, "mode": mode.name(),
                 "paths": n, "psnr": out.psnr, "mse": out.mse, "steps": out.steps,
                 "rounds": out.rounds, "pruned": out.pruned, "seconds": secs,
                 "step_ms": out.median_step_ms})
@@ -156,7 +159,7 @@ pub fn run(a: Args) -> Result<()> {
     } else {
         println!(
             "vectorize ({}): {n} paths, PSNR {:.2} dB, MSE {:.5}, {} steps in {} round(s), {} pruned, {secs:.2} s; wrote {}",
-            format!("{mode:?}").to_lowercase(),
+            mode.name(),
             out.psnr,
             out.mse,
             out.steps,

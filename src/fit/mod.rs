@@ -19,11 +19,13 @@
 
 pub mod digit;
 pub mod glyph;
+pub mod job;
 pub(crate) mod refine;
 pub(crate) mod shapes;
 pub(crate) mod trace;
 pub mod vectorize;
 
+pub use job::{ObjectiveOptions, load_target, rate_name};
 pub use refine::{Control, FitOptions, FitOutcome, Step, StopReason, refine};
 pub use shapes::{random_blobs, random_strokes};
 pub use trace::trace;

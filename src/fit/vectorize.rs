@@ -420,6 +420,34 @@ fn components(hot: &[bool], w: usize, h: usize, err: &[f32]) -> Vec<Region> {
     out
 }
 
+impl crate::choice::Choice for Mode {
+    const WHAT: &'static str = "mode";
+    const ALL: &'static [Self] = &[Self::Adaptive, Self::Fixed, Self::Painterly, Self::Trace];
+    fn name(self) -> &'static str {
+        match self {
+            Self::Adaptive => "adaptive",
+            Self::Fixed => "fixed",
+            Self::Painterly => "painterly",
+            Self::Trace => "trace",
+        }
+    }
+    fn aliases(self) -> &'static [&'static str] {
+        match self {
+            Self::Fixed => &["blobs"],
+            Self::Painterly => &["strokes"],
+            _ => &[],
+        }
+    }
+}
+
+impl std::str::FromStr for Mode {
+    type Err = String;
+    /// By name or alias, any case ([`crate::choice::parse`]).
+    fn from_str(s: &str) -> Result<Self, String> {
+        crate::choice::parse(s)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -508,5 +536,10 @@ mod tests {
             );
             assert!(out.scene.path_count() > 0, "{mode:?}");
         }
+    }
+
+    #[test]
+    fn mode_names_round_trip() {
+        crate::choice::tests::round_trip::<Mode>();
     }
 }

@@ -62,6 +62,33 @@ pub fn exponential<T: Float>([start, end]: [T; 2], frac: T) -> T {
     }
 }
 
+impl crate::choice::Choice for Schedule {
+    const WHAT: &'static str = "schedule";
+    const ALL: &'static [Self] = &[Self::Constant, Self::Cosine, Self::Linear];
+    fn name(self) -> &'static str {
+        match self {
+            Self::Constant => "constant",
+            Self::Cosine => "cosine",
+            Self::Linear => "linear",
+        }
+    }
+    fn aliases(self) -> &'static [&'static str] {
+        match self {
+            Self::Constant => &["const"],
+            Self::Cosine => &["cos"],
+            Self::Linear => &[],
+        }
+    }
+}
+
+impl std::str::FromStr for Schedule {
+    type Err = String;
+    /// By name or alias, any case ([`crate::choice::parse`]).
+    fn from_str(s: &str) -> Result<Self, String> {
+        crate::choice::parse(s)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -95,5 +122,10 @@ mod tests {
         assert_eq!(progress::<f64>(2, 5), 0.5);
         assert_eq!(progress::<f32>(4, 5), 1.0);
         assert_eq!(progress::<f32>(9, 5), 1.0);
+    }
+
+    #[test]
+    fn schedule_names_round_trip() {
+        crate::choice::tests::round_trip::<Schedule>();
     }
 }

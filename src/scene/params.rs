@@ -472,6 +472,32 @@ pub(crate) fn clamp_points(p: &mut Path) {
     }
 }
 
+impl crate::choice::Choice for ParamGroup {
+    const WHAT: &'static str = "parameter group";
+    const ALL: &'static [Self] = &ParamGroup::ALL;
+    fn name(self) -> &'static str {
+        ParamGroup::name(self)
+    }
+    fn aliases(self) -> &'static [&'static str] {
+        match self {
+            Self::Points => &["point"],
+            Self::Color => &["color"],
+            Self::Opacity => &["opacity"],
+            Self::StrokeWidth => &["width"],
+            Self::PaintGeometry => &[],
+            Self::StopOffset => &["stop"],
+        }
+    }
+}
+
+impl std::str::FromStr for ParamGroup {
+    type Err = String;
+    /// By name or alias, any case ([`crate::choice::parse`]).
+    fn from_str(s: &str) -> Result<Self, String> {
+        crate::choice::parse(s)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -597,5 +623,10 @@ mod tests {
         }
         s.set_params(&v);
         assert_eq!(s.params(), v);
+    }
+
+    #[test]
+    fn group_names_round_trip() {
+        crate::choice::tests::round_trip::<ParamGroup>();
     }
 }

@@ -201,6 +201,7 @@ impl VoxelJob {
         check_degree(self.degree)?;
         at_least_one("downscale", self.downscale as u64)?;
         at_least_one("iters", self.iters as u64)?;
+        crate::limits::check_count("iters", self.iters, 1..=crate::limits::MAX_ITERS)?;
         at_least_one("batch", self.batch as u64)?;
         if let Some(b) = self.bound {
             check_positive(b)?;
@@ -242,6 +243,7 @@ impl SplatJob {
         check_degree(self.degree)?;
         at_least_one("downscale", self.downscale as u64)?;
         at_least_one("iters", self.iters as u64)?;
+        crate::limits::check_count("iters", self.iters, 1..=crate::limits::MAX_ITERS)?;
         at_least_one("initial", self.initial as u64)?;
         if self.initial > MAX_GAUSSIANS {
             return Err(setting(

@@ -1615,7 +1615,7 @@ fn mutate_svg(rng: &mut Rng, svg: &mut Vec<u8>, donor: &[u8]) -> String {
             let s = *rng.pick(&starts);
             let e = text[s..].find('>').map_or(text.len(), |k| s + k);
             let extreme = *rng.pick(&EXTREMES);
-            let el = text[s..e].as_bytes();
+            let el = &text.as_bytes()[s..e];
             let mut out = Vec::with_capacity(el.len());
             let mut last = 0;
             for (a, b) in numbers(el) {

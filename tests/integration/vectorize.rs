@@ -196,7 +196,7 @@ fn vectorize_bad_inputs_fail_cleanly() {
     let o = diffsvg(&["vectorize", s(&png), "-o", s(&out), "--segments", "1"]);
     assert_fails(&o, "--segments", "between", &out);
     let o = diffsvg(&["vectorize", s(&png), "-o", s(&out), "--paths", "0"]);
-    assert_fails(&o, "budget", "at least 1", &out);
+    assert_fails(&o, "--paths 0", "must be between 1 and 100000", &out);
     let o = diffsvg(&["vectorize", s(&png), "-o", s(&out), "--lr-color", "inf"]);
     assert_fails(&o, "colors", "learning rate", &out);
     let o = diffsvg(&["vectorize", s(&png), "-o", s(&out), "--init", "magic"]);
