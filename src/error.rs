@@ -45,6 +45,15 @@ pub enum Error {
         /// The value and the problem (`"0 must be at least 1"`).
         message: String,
     },
+    /// An output path cannot be written (wrong extension, a folder, an unwritable place),
+    /// found before the work that would write it.
+    #[error("{path}: {message}")]
+    Output {
+        /// The output path.
+        path: PathBuf,
+        /// The problem.
+        message: String,
+    },
     /// An image could not be decoded or encoded, or has the wrong size.
     #[error("{path}: {message}")]
     Image {

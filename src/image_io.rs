@@ -385,6 +385,34 @@ pub(crate) fn describe_bytes(n: u64) -> String {
 /// Distinguishes the temporary files of concurrent writers within one process.
 static TEMP_COUNTER: AtomicU64 = AtomicU64::new(0);
 
+/// Checks before a long run that `path` can take its output, so that a run does not fail
+/// only at its end: the extension is `ext` (any case), the path is not a folder, and its
+/// folder exists (created if missing, as `mkdir -p`) and is writable (probed with an empty
+/// file, removed at once). The one output check of every writer of both front ends.
+pub fn check_output(path: &Path, ext: &str) -> Result<()> {
+    let fail = |message: String| Error::Output {
+        path: path.to_path_buf(),
+        message,
+    };
+    match path.extension().and_then(|e| e.to_str()) {
+        Some(e) if e.eq_ignore_ascii_case(ext) => {}
+        _ => return Err(fail(format!("output must be a .{ext} file"))),
+    }
+    if path.is_dir() {
+        return Err(fail("output is a folder".into()));
+    }
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => std::path::PathBuf::from("."),
+    };
+    std::fs::create_dir_all(&dir)
+        .map_err(|e| fail(format!("cannot create the output folder: {e}")))?;
+    let probe = dir.join(format!(".diffsvg-probe-{}", std::process::id()));
+    std::fs::write(&probe, b"").map_err(|e| fail(format!("output folder is not writable: {e}")))?;
+    let _ = std::fs::remove_file(&probe);
+    Ok(())
+}
+
 /// Writes `bytes` to `path` through a temporary file in the same folder and a rename.
 ///
 /// The temporary name holds the process id, the writing thread and a process-wide

@@ -81,7 +81,9 @@ pub mod metrics;
 pub mod mnist;
 pub mod optim;
 pub mod raster;
+#[cfg(feature = "reference")]
 pub mod reference;
+pub mod rng;
 pub mod scene;
 pub mod volume;
 

@@ -107,10 +107,10 @@ pub const MAX_COORDINATE: f64 = 1e30;
 // end names the option its own way: `--max-segments`, `max_segments`). Where the front
 // ends once disagreed, the note says which bound was kept and why.
 
-/// Most optimizer steps (or iterations) a job may ask for: 10⁶ steps of even a 28 × 28
-/// digit take minutes, of a painting hours; a count beyond it is a typo, not a request
-/// (the fuzzer's `4294967296` ran until killed).
-pub const MAX_ITERS: usize = 1_000_000;
+/// Most optimizer steps (or iterations) a job may ask for: 10⁷ steps of even a 28 × 28
+/// digit take most of an hour, of a painting days; a count beyond it is a typo, not a
+/// request (the fuzzer's `99999999` and `4294967296` ran until killed).
+pub const MAX_ITERS: usize = 10_000_000;
 
 /// Most paths a vectorization may use (its budget, `--paths`/`--max-paths`/`paths`):
 /// memory and time grow with it. Kept from Python's bound; the command line had none.

@@ -16,22 +16,9 @@ use pyo3::types::PyDict;
 use crate::error::{bad, to_py};
 use crate::jobs::Progress;
 
-/// Refuses an output path without the extension `ext` or that is a folder, before a long
-/// run rather than after it.
+/// The library's output check (extension, not a folder, the folder writable).
 fn check_output(path: &Path, ext: &str) -> PyResult<()> {
-    match path.extension().and_then(|e| e.to_str()) {
-        Some(e) if e.eq_ignore_ascii_case(ext) => {}
-        _ => {
-            return Err(bad(format!(
-                "{}: output must be a .{ext} file",
-                path.display()
-            )));
-        }
-    }
-    if path.is_dir() {
-        return Err(bad(format!("{}: output is a folder", path.display())));
-    }
-    Ok(())
+    diffsvg::image_io::check_output(path, ext).map_err(to_py)
 }
 
 /// A log as a `(rows, 6)` `float64` array.

@@ -110,9 +110,7 @@ def test_drifted_options_are_refused_with_the_librarys_message(command, option, 
     v = float(value) if "." in value or option == "iou" else int(value)
     expected = f"{option} {value} {message}"
     with pytest.raises(diffsvg.DiffsvgError) as e:
-        if command == "vectorize" and option == "pyramid":
-            diffsvg.vectorize(img, iters=1, options={option: v})
-        elif command == "vectorize":
+        if command == "vectorize":
             diffsvg.vectorize(img, iters=1, **{option: v})
         elif command == "digits":
             diffsvg.digit(np.zeros((28, 28), np.float32), **{option: v})

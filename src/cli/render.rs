@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 
-use super::util::{SizeArgs, check_png, parse_color, read, sibling};
+use super::util::{SizeArgs, check_output, parse_color, read, sibling};
 use diffsvg::metrics::{compare, difference_image};
 use diffsvg::raster::{RenderOptions, render};
 use diffsvg::reference::render_resvg;
@@ -34,7 +34,7 @@ pub struct Args {
 
 /// Runs `diffsvg render`.
 pub fn run(a: Args) -> Result<()> {
-    check_png(&a.output)?;
+    check_output(&a.output, "png")?;
     let bg = a.background;
     let sizing = a.size.sizing()?;
     if !(a.tolerance.is_finite() && a.tolerance > 0.0) {

@@ -3,7 +3,7 @@
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 
 use diffsvg::Sizing;
 
@@ -84,35 +84,10 @@ pub fn read(path: &Path) -> Result<Vec<u8>> {
     )?)
 }
 
-/// Refuses output paths that are not `.png`.
-pub fn check_png(path: &Path) -> Result<()> {
-    match path.extension().and_then(|e| e.to_str()) {
-        Some(e) if e.eq_ignore_ascii_case("png") => Ok(()),
-        _ => bail!("{}: output must be a .png file", path.display()),
-    }
-}
-
-/// Checks before a long run that `path` has the extension `ext` and that its folder can
-/// be created and written, so that a run does not fail only at the end.
+/// The library's [`check_output`](diffsvg::image_io::check_output): the extension, not a
+/// folder, the folder created and writable.
 pub fn check_output(path: &Path, ext: &str) -> Result<()> {
-    match path.extension().and_then(|e| e.to_str()) {
-        Some(e) if e.eq_ignore_ascii_case(ext) => {}
-        _ => bail!("{}: output must be a .{ext} file", path.display()),
-    }
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    std::fs::create_dir_all(&dir)
-        .with_context(|| format!("{}: cannot create the output folder", path.display()))?;
-    let probe = dir.join(format!(".diffsvg-probe-{}", std::process::id()));
-    std::fs::write(&probe, b"")
-        .with_context(|| format!("{}: output folder is not writable", path.display()))?;
-    let _ = std::fs::remove_file(&probe);
-    if path.is_dir() {
-        bail!("{}: output is a folder", path.display());
-    }
-    Ok(())
+    Ok(diffsvg::image_io::check_output(path, ext)?)
 }
 
 /// Prints the renderer's warnings about `scene` (read from `path`) to stderr, one line

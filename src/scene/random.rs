@@ -12,32 +12,8 @@
 
 use super::{Fill, FillRule, Node, Paint, ParamGroup, ParamLayout, Path, Scene};
 
-/// A small deterministic generator (SplitMix64): the same seed gives the same scene on
-/// every platform.
-#[derive(Clone, Debug)]
-pub struct Rng(u64);
-
-impl Rng {
-    /// A generator from a seed.
-    pub fn new(seed: u64) -> Self {
-        Rng(seed)
-    }
-
-    /// Next 64 random bits.
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in `[lo, hi)`.
-    pub fn range(&mut self, lo: f64, hi: f64) -> f64 {
-        let u = (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64;
-        lo + (hi - lo) * u
-    }
-}
+/// The crate's seeded generator (SplitMix64), re-exported where the random scenes are.
+pub use crate::rng::Rng;
 
 /// `n` closed paths of three random cubics each, translucent solid fills, on a
 /// `size × size` canvas; each path spans up to a quarter of the canvas.

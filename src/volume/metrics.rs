@@ -155,7 +155,7 @@ mod tests {
 
     /// Values in `[0, 1)` from the crate's one seeded generator.
     fn noise(seed: u64) -> impl FnMut() -> f32 {
-        let mut rng = crate::volume::rng::Rng(seed);
+        let mut rng = crate::rng::Rng::new(seed);
         move || rng.uniform()
     }
 

@@ -26,7 +26,6 @@ pub mod metrics;
 use glam::Vec3;
 
 pub mod recon;
-pub(crate) mod rng;
 pub(crate) mod sh;
 pub mod splat;
 pub mod undistort;

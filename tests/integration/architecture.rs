@@ -9,28 +9,32 @@ use super::common::root;
 /// The library modules each top-level module may name through `crate::`.
 fn allowed(module: &str) -> &'static [&'static str] {
     const BASE: &[&str] = &[
-        "error", "limits", "guard", "choice", "image_io", "Error", "Result", "Image",
+        "error", "limits", "guard", "choice", "rng", "image_io", "Error", "Result", "Image",
     ];
     match module {
-        "error" | "limits" => &["error", "limits", "guard", "choice", "Error", "Result"],
+        "error" | "limits" => &[
+            "error", "limits", "guard", "choice", "rng", "Error", "Result",
+        ],
         "image_io" | "metrics" | "loss" | "mnist" => &[
-            "error", "limits", "guard", "choice", "image_io", "metrics", "Error", "Result", "Image",
+            "error", "limits", "guard", "choice", "rng", "image_io", "metrics", "Error", "Result",
+            "Image",
         ],
         "scene" => &[
-            "error", "limits", "guard", "choice", "image_io", "metrics", "scene", "Error",
+            "error", "limits", "guard", "choice", "rng", "image_io", "metrics", "scene", "Error",
             "Result", "Image", "Scene", "Sizing", "Node",
             "Path", // scene/check.rs only (see the test below).
             "raster",
         ],
         "raster" => &[
-            "error", "limits", "guard", "choice", "image_io", "metrics", "loss", "scene", "raster",
-            "Error", "Result", "Image", "Scene", "Sizing", "Node", "Path",
+            "error", "limits", "guard", "choice", "rng", "image_io", "metrics", "loss", "scene",
+            "raster", "Error", "Result", "Image", "Scene", "Sizing", "Node", "Path",
         ],
         "optim" | "fit" | "gradcheck" | "reference" => &[
             "error",
             "limits",
             "guard",
             "choice",
+            "rng",
             "image_io",
             "metrics",
             "loss",
@@ -49,7 +53,7 @@ fn allowed(module: &str) -> &'static [&'static str] {
             "Path",
         ],
         "volume" => &[
-            "error", "limits", "guard", "choice", "image_io", "metrics", "optim", "volume",
+            "error", "limits", "guard", "choice", "rng", "image_io", "metrics", "optim", "volume",
             "Error", "Result", "Image",
         ],
         _ => BASE,

@@ -311,8 +311,8 @@ mod tests {
 
     /// Values in `[0, 1)` from the crate's one seeded generator.
     fn noise(seed: u64) -> impl FnMut() -> f64 {
-        let mut rng = crate::volume::rng::Rng(seed);
-        move || (rng.next() >> 11) as f64 / (1u64 << 53) as f64
+        let mut rng = crate::rng::Rng::new(seed);
+        move || (rng.next_u64() >> 11) as f64 / (1u64 << 53) as f64
     }
 
     /// A random image pair whose channels differ by at least 0.05 everywhere, so that

@@ -36,8 +36,8 @@ use super::render::{RenderSettings, render};
 use crate::error::{Error, Result};
 use crate::limits::MAX_GAUSSIANS;
 use crate::optim::{Moments, Rule, exponential, progress};
+use crate::rng::Rng;
 use crate::volume::dataset::View;
-use crate::volume::rng::Rng;
 use crate::volume::sh;
 
 /// Adaptive density control (see the module documentation). Iteration counts are of
@@ -190,7 +190,7 @@ pub struct TrainOutcome {
 /// # Panics
 /// If `sh_degree > 3`.
 pub fn random_init(center: Vec3, half: f32, count: usize, sh_degree: u32, seed: u64) -> Gaussians {
-    let mut rng = Rng(seed);
+    let mut rng = Rng::new(seed);
     let mut g = Gaussians::new(sh_degree);
     let k = g.coeffs_per_channel();
     // Poisson points of density ρ: E[d_k] = Γ(k + 1/3)/Γ(k)·(3/(4πρ))^(1/3); the mean of
@@ -365,7 +365,7 @@ pub fn train(
     };
     validate(gaussians, views, opts).map_err(invalid)?;
     let mut state = State::new(gaussians);
-    let mut rng = Rng(opts.seed);
+    let mut rng = Rng::new(opts.seed);
     let mut order: Vec<usize> = Vec::new();
     let mut grads = Gradients::default();
     let mut d_img: Vec<[f32; 3]> = Vec::new();

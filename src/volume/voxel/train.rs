@@ -17,7 +17,7 @@ use super::grid::{Grid, MAX_RES};
 use super::render::{RenderSettings, Sink, backward, forward, max_weights, scatter, with_k};
 use crate::error::{Error, Result};
 use crate::optim::{LazyStep, Moments, Rule, exponential, progress};
-use crate::volume::rng::Rng;
+use crate::rng::Rng;
 use crate::volume::{Ray, sh};
 
 /// Everything [`train`] needs besides the grid and the rays.
@@ -169,7 +169,7 @@ pub fn train(
     let mut schedule = opts.upsample.clone();
     schedule.sort_by_key(|u| u.0);
     let mut sched = schedule.into_iter().peekable();
-    let mut rng = Rng(opts.seed);
+    let mut rng = Rng::new(opts.seed);
     let mut state = State::new(grid, threads, opts);
     let start = Instant::now();
     // Time spent inside `observe` (evaluations, logging) is not training time.
@@ -598,7 +598,7 @@ mod tests {
             *v = ((i * 37 % 11) as f32 * 0.3).sin();
         }
         let n = g.allocated();
-        let mut rng = Rng(7);
+        let mut rng = Rng::new(7);
         let slots: Vec<usize> = (0..40).map(|_| rng.below(n)).collect();
         let mut acc = Accum {
             gd: vec![0.0; n],
