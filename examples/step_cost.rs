@@ -17,10 +17,10 @@
 
 use std::time::Instant;
 
+use diffsvg::fit::Objective;
 use diffsvg::image_io::Image;
 use diffsvg::loss::Loss;
 use diffsvg::metrics::median;
-use diffsvg::optim::Objective;
 use diffsvg::raster::{self, Prepared, RenderOptions};
 use diffsvg::{Scene, Sizing};
 

@@ -25,7 +25,7 @@
 //!
 //! // A per-pixel objective renders, scores and differentiates each row band at once
 //! // (the fit loops' path): the same bits as the three steps above.
-//! let objective = diffsvg::optim::Objective::new(&target, Loss::Mse, None, 1);
+//! let objective = diffsvg::fit::Objective::new(&target, Loss::Mse, None, 1);
 //! let prepared = raster::Prepared::new(&scene, &opts);
 //! let (_img, fused_loss, _mse, fused_grad) = objective.render_and_backward(&scene, &prepared);
 //! assert_eq!((fused_loss, &fused_grad), (loss, &grad));
@@ -68,6 +68,9 @@
 //! Gaussian-splatting viewers.
 
 #![warn(unreachable_pub)]
+// The library never prints: it returns errors and reports progress through callbacks;
+// the command line (src/main.rs, src/cli/) and tests print.
+#![cfg_attr(not(test), deny(clippy::print_stdout, clippy::print_stderr))]
 
 pub mod choice;
 mod error;

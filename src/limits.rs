@@ -83,6 +83,9 @@ pub const MAX_GROUP_DEPTH: usize = 256;
 /// below it (10,000 elements, depth 20, four parts: 8e7); past it the file is refused.
 pub const MAX_SELECTOR_WORK: f64 = 1e9;
 
+/// Most chords one cubic is flattened into (a huge curve gets coarser chords, not more).
+pub const MAX_CHORDS: u32 = 4096;
+
 /// Largest replay record the backward pass may need for one row band of 16 rows, bytes,
 /// by its upper estimate (every cell of every shape's box in the band, 32 bytes each):
 /// checked by `raster::check_backward_memory` before `fit`, `grad` and Python's fits.

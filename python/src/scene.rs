@@ -2,8 +2,8 @@
 
 use std::path::PathBuf;
 
-use diffsvg::optim::project;
 use diffsvg::scene::params::{PaintOffsets, written_point_gradient};
+use diffsvg::scene::project;
 use diffsvg::scene::{GradientKind, Paint, ParamGroup, ParamLayout, SegmentKind};
 use diffsvg::{Scene, Sizing};
 use numpy::{PyArray1, PyArray2, PyReadonlyArray1};

@@ -44,8 +44,8 @@ pub struct Args {
 }
 
 fn run_backward(a: &Args) -> Result<()> {
+    use diffsvg::fit::Objective;
     use diffsvg::loss::Loss;
-    use diffsvg::optim::Objective;
     use diffsvg::raster::render_and_backward_fused;
     let threads = a.threads.iter().copied().max().unwrap_or(1);
     let pool = rayon::ThreadPoolBuilder::new()

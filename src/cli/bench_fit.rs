@@ -8,8 +8,8 @@ use anyhow::{Result, bail};
 use diffsvg::fit::load_target;
 use diffsvg::fit::random_blobs;
 use diffsvg::fit::{Control, FitOptions, refine};
+use diffsvg::fit::{LearningRates, Objective};
 use diffsvg::loss::Loss;
-use diffsvg::optim::{LearningRates, Objective};
 
 /// Benchmarks of optimization.
 #[derive(clap::Subcommand, Debug)]

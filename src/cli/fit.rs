@@ -12,9 +12,10 @@ use super::util::{check_output, flag_error, sibling};
 use diffsvg::Sizing;
 use diffsvg::choice::Choice as _;
 use diffsvg::fit::{FitOptions, ObjectiveOptions, StopReason, load_target, refine};
+use diffsvg::fit::{LearningRates, Objective};
 use diffsvg::image_io::{Image, side_by_side};
 use diffsvg::loss::Loss;
-use diffsvg::optim::{LearningRates, Objective, Schedule};
+use diffsvg::optim::Schedule;
 use diffsvg::raster::{RenderOptions, render};
 use diffsvg::scene::{ParamGroup, ParamLayout, Scene};
 

@@ -101,6 +101,7 @@ pub fn run(a: SplatArgs) -> Result<()> {
     if let Some(outside) = out.undistorted {
         undistortion_note(&a.scene, outside);
     }
+    super::util::print_warnings(&out.warnings);
     let (model, outcome) = (&out.model, out.outcome);
     splat::save(model, &a.output)?;
     write_log(

@@ -90,6 +90,13 @@ pub fn check_output(path: &Path, ext: &str) -> Result<()> {
     Ok(diffsvg::image_io::check_output(path, ext)?)
 }
 
+/// Prints the library's warnings (one line each, already naming their file) to stderr.
+pub fn print_warnings(warnings: &[String]) {
+    for w in warnings {
+        eprintln!("warning: {w}");
+    }
+}
+
 /// Prints the renderer's warnings about `scene` (read from `path`) to stderr, one line
 /// each: strokes drawn other than the file says because a limit was reached.
 pub fn warn_about(scene: &diffsvg::Scene, path: &Path, opts: &diffsvg::raster::RenderOptions) {

@@ -208,6 +208,7 @@ fn run_voxel(a: VoxelArgs) -> Result<()> {
             a.batch, out.batch, out.batch
         );
     }
+    super::util::print_warnings(&out.warnings);
     let grid = &out.grid;
     voxel::save(grid, &a.output)?;
     write_log(&a.output, &out.log)?;
@@ -410,6 +411,9 @@ pub fn run_view(a: ViewArgs) -> Result<()> {
         (Some(d), Model::Voxel(..)) => Some(Dataset::load(d, a.downscale)?),
         (None, _) => None,
     };
+    if let Some(d) = &data {
+        super::util::print_warnings(&d.warnings);
+    }
     if let (Model::Splat(_, s), Some(d)) = (&mut model, &data) {
         s.background = diffsvg::volume::recon::background(d);
     }

@@ -27,11 +27,12 @@
 //! assert!(fit.iou > 0.7, "{}", fit.iou);
 //! ```
 
+use super::{LearningRates, Objective};
 use crate::fit::refine::{Control, FitOptions, refine};
 use crate::image_io::Image;
 use crate::loss::Loss;
 use crate::metrics::iou;
-use crate::optim::{LearningRates, Objective, Schedule};
+use crate::optim::Schedule;
 use crate::raster::{RenderOptions, render};
 use crate::scene::geom::{dist, split_half};
 use crate::scene::{LineCap, LineJoin, Node, Paint, Path, Point, Scene, Stroke};

@@ -48,10 +48,11 @@
 use std::time::{Duration, Instant};
 
 use super::refine::{Control, FitOptions, refine};
+use super::{LearningRates, Objective};
 use crate::image_io::Image;
 use crate::loss::Loss;
 use crate::metrics::iou;
-use crate::optim::{LearningRates, Objective, Schedule};
+use crate::optim::Schedule;
 use crate::raster::{RenderOptions, render};
 use crate::scene::geom::{Cubic, dist, eval, lerp, split, sub};
 use crate::scene::{Fill, FillRule, Node, Paint, Path, Point, Scene, SegmentKind};

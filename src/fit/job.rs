@@ -14,6 +14,7 @@
 use std::path::Path;
 
 use super::FitOptions;
+use super::Objective;
 use super::digit::DigitOptions;
 use super::glyph::GlyphOptions;
 use super::vectorize::VectorizeOptions;
@@ -24,7 +25,6 @@ use crate::limits::{
     MAX_PYRAMID_LEVELS, PATH_SEGMENTS, check_count,
 };
 use crate::loss::Loss;
-use crate::optim::Objective;
 use crate::raster::{RenderOptions, render};
 use crate::scene::{ParamGroup, Scene, Sizing};
 

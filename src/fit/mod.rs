@@ -3,7 +3,7 @@
 //!
 //! ```
 //! use diffsvg::fit::{Control, FitOptions, refine};
-//! use diffsvg::{Scene, Sizing, loss::Loss, optim::Objective, raster};
+//! use diffsvg::{Scene, Sizing, fit::Objective, loss::Loss, raster};
 //! let draw = |x: f64| {
 //!     let svg = format!(r#"<svg xmlns="http://www.w3.org/2000/svg" width="24" height="24">
 //!       <rect x="{x}" y="6" width="10" height="10" fill="navy"/></svg>"#);
@@ -17,15 +17,19 @@
 //! # Ok::<(), diffsvg::Error>(())
 //! ```
 
+mod adam;
 pub mod digit;
 pub mod glyph;
 pub mod job;
+mod objective;
 pub(crate) mod refine;
 pub(crate) mod shapes;
 pub(crate) mod trace;
 pub mod vectorize;
 
+pub use adam::{Adam, AdamConfig, LearningRates};
 pub use job::{ObjectiveOptions, load_target, rate_name};
+pub use objective::Objective;
 pub use refine::{Control, FitOptions, FitOutcome, Step, StopReason, refine};
 pub use shapes::{random_blobs, random_strokes};
 pub use trace::trace;

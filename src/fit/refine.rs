@@ -2,11 +2,13 @@
 
 use std::time::{Duration, Instant};
 
+use super::{Adam, AdamConfig, LearningRates, Objective};
 use crate::metrics::{median, psnr_from_mse};
-use crate::optim::{Adam, AdamConfig, LearningRates, Objective, Schedule, project};
+use crate::optim::Schedule;
 use crate::raster::prepare::prepare_forward;
 use crate::raster::{RenderOptions, prepare, render_prepared};
 use crate::scene::Scene;
+use crate::scene::project;
 
 /// Settings of one refinement run.
 #[derive(Clone, Debug)]

@@ -15,7 +15,7 @@
 //! ```
 //! use diffsvg::fit::Control;
 //! use diffsvg::fit::vectorize::{Event, Mode, VectorizeOptions, vectorize};
-//! use diffsvg::{Scene, Sizing, loss::Loss, optim::Objective, raster};
+//! use diffsvg::{Scene, Sizing, fit::Objective, loss::Loss, raster};
 //! let svg = r#"<svg xmlns="http://www.w3.org/2000/svg" width="32" height="32">
 //!   <rect width="32" height="32" fill="white"/>
 //!   <circle cx="12" cy="14" r="7" fill="teal"/><rect x="18" y="18" width="10" height="9" fill="orange"/></svg>"#;
@@ -29,13 +29,13 @@
 
 use std::time::{Duration, Instant};
 
+use super::Objective;
 use super::refine::{Control, FitOptions, Step, refine};
 use super::shapes::{circle, random_blobs, random_strokes};
 use super::trace::{prune_to_budget, prune_unneeded, trace};
 use crate::Result;
 use crate::image_io::Image;
 use crate::metrics::median;
-use crate::optim::Objective;
 use crate::raster::render;
 use crate::scene::geom::lerp;
 use crate::scene::{Node, Scene};

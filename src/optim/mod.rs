@@ -1,6 +1,7 @@
-//! Optimization, shared by the 2D fitter and the 3D voxel trainer: update rules with
-//! per-group learning rates and schedules, projection back onto valid scenes after every
-//! 2D step, and the 2D image objective (loss, background, pyramid).
+//! Optimization over slices of numbers, shared by the 2D fitter and the 3D trainers:
+//! update rules, per-group state with dense and lazy steps, schedules. It knows nothing of
+//! scenes, images or losses: the 2D scene's Adam, learning rates and image objective are
+//! in [`crate::fit`], the projection onto valid scenes in [`crate::scene`].
 //!
 //! **The optimizer.** A [`Rule`] (Adam or RMSProp, in `f32` or `f64`) says how one slot
 //! moves given its gradient; [`Moments`] holds one parameter group's state under that rule
@@ -46,22 +47,11 @@
 //! }
 //! assert!((y[1] - 3.0).abs() < 0.1 && y[0] == 0.0);
 //! ```
-//!
-//! **2D refinement.** One step is: render, [`Objective::eval`] for the loss and
-//! `∂L/∂image`, backward pass for `∂L/∂params`, [`Adam::step`] with per-slot learning
-//! rates from [`LearningRates::per_slot`] scaled by [`Schedule::factor`], then
-//! [`project`].
 
-mod adam;
 mod moments;
-mod objective;
-mod project;
 mod rule;
 mod schedule;
 
-pub use adam::{Adam, AdamConfig, LearningRates};
 pub use moments::{LazyStep, Moments};
-pub use objective::Objective;
-pub use project::project;
 pub use rule::{Rule, Update};
 pub use schedule::{Schedule, exponential, progress};

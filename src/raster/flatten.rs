@@ -12,8 +12,7 @@
 use crate::scene::geom::{bernstein, eval};
 use crate::scene::{Path, Point};
 
-/// Largest number of chords per cubic; bounds work on huge curves.
-pub(crate) const MAX_CHORDS: u32 = 4096;
+pub(crate) use crate::scene::geom::chord_count;
 
 /// Where a flattened vertex comes from: `Σ B_k(t) · points[first + k]`, `k = 0..4`.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -62,32 +61,6 @@ pub(crate) struct Flattened {
 /// Chord counts of every segment of a path, in order; fixed counts make the rendering a
 /// smooth function of the control points (used by gradient checks).
 pub(crate) type ChordCounts = Vec<u32>;
-
-/// Chord count for one cubic under `tolerance` (pixels). `visible` is the canvas grown by
-/// any stroke margin, `[xmin, ymin, xmax, ymax]`: a cubic wholly to its left, right, top or
-/// bottom only needs one chord (its net crossing of each row is set by its end points).
-pub(crate) fn chord_count(p: &[Point; 4], tolerance: f64, visible: [f64; 4]) -> u32 {
-    let all = |f: &dyn Fn(&Point) -> bool| p.iter().all(f);
-    if all(&|q| q[0] <= visible[0])
-        || all(&|q| q[0] >= visible[2])
-        || all(&|q| q[1] <= visible[1])
-        || all(&|q| q[1] >= visible[3])
-    {
-        return 1;
-    }
-    let dd = |a: &Point, b: &Point, c: &Point| {
-        let x = a[0] - 2.0 * b[0] + c[0];
-        let y = a[1] - 2.0 * b[1] + c[1];
-        x.hypot(y)
-    };
-    let d = dd(&p[0], &p[1], &p[2]).max(dd(&p[1], &p[2], &p[3]));
-    let n = (0.75 * d / tolerance.max(1e-6)).sqrt().ceil();
-    if n.is_finite() {
-        (n as u32).clamp(1, MAX_CHORDS)
-    } else {
-        1
-    }
-}
 
 /// Flattens `path`. With `counts`, uses those chord counts (one per segment, as returned
 /// in the second value) instead of computing them.
@@ -183,7 +156,7 @@ mod tests {
         let left = [[-50.0, 0.0], [-10.0, 80.0], [-90.0, 10.0], [-5.0, 50.0]];
         assert_eq!(chord_count(&left, 0.02, CANVAS), 1);
         let huge = [[0.0, 0.0], [1e9, 0.0], [0.0, 1e9], [50.0, 50.0]];
-        assert_eq!(chord_count(&huge, 0.02, CANVAS), MAX_CHORDS);
+        assert_eq!(chord_count(&huge, 0.02, CANVAS), crate::limits::MAX_CHORDS);
     }
 
     #[test]

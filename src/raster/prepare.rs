@@ -6,6 +6,7 @@ use super::flatten::{ChordCounts, Flattened, flatten};
 use super::paint::PaintEval;
 use super::stroke::{Style, outline};
 use crate::limits::MAX_DASHES_PER_PATH;
+use crate::scene::geom::{flatten_rect, frame_tolerance};
 use crate::scene::{FillRule, Node, Path, Point, Scene, Stroke};
 use rayon::prelude::*;
 
@@ -358,14 +359,12 @@ pub(crate) fn stroke_outline(
 
 /// The stroke's style in its frame; `for_backward` keeps recipes instead of points.
 pub(crate) fn stroke_style(s: &Stroke, tolerance: f64, for_backward: bool) -> Style {
-    let [a, b, c, d] = s.frame;
-    let det = a * d - b * c;
     Style {
         half_width: 0.5 * s.width,
         join: s.join,
         cap: s.cap,
         miter_limit: s.miter_limit,
-        tolerance: tolerance / det.abs().sqrt(),
+        tolerance: frame_tolerance(s, tolerance),
         keep_recipes: for_backward,
         keep_points: !for_backward,
     }
@@ -436,18 +435,6 @@ fn dash_warning(path: &Path, index: usize, cost: f64) -> String {
     format!(
         "{name}: stroke-dasharray would cut {about} dashes (limit {MAX_DASHES_PER_PATH}); stroked solid"
     )
-}
-
-/// The region where `path` is flattened finely: the canvas grown by the stroke's reach.
-pub(crate) fn flatten_rect(path: &Path, width: u32, height: u32) -> [f64; 4] {
-    let (w, h) = (width as f64, height as f64);
-    // Strokes reach beyond the centerline; flatten generously near the canvas.
-    let margin = path.stroke.as_ref().map_or(1.0, |s| {
-        let [a, b, c, d] = s.frame;
-        let norm = a.hypot(b).max(c.hypot(d));
-        1.0 + 0.5 * s.width.abs() * s.miter_limit.max(1.0) * norm
-    });
-    [-margin, -margin, w + margin, h + margin]
 }
 
 struct Builder<'a> {
@@ -683,6 +670,25 @@ fn item(
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    /// The load-time chord limit (`Scene::chord_estimate`) counts what the flattener makes.
+    fn chord_estimate_matches_the_flattener() {
+        use crate::scene::{Paint, Stroke};
+        let mut p = Path::new("c");
+        p.move_to([0.0, 0.0]);
+        p.cubic_to([90.0, 0.0], [0.0, 90.0], [90.0, 90.0]);
+        p.line_to([10.0, 50.0]);
+        p.close();
+        p.stroke = Some(Stroke::new(Paint::Solid([0.0; 3]), 2.0));
+        let mut s = Scene::new(100, 100);
+        s.nodes.push(Node::Path(p));
+        let tol = crate::raster::RenderOptions::default().tolerance;
+        let prepared = prepare(&s, tol, None);
+        let flat = prepared.geoms[0].counts.iter().sum::<u32>() as u64;
+        // Every chord plus one start point per subpath.
+        assert_eq!(s.chord_estimate(tol), flat + 1);
+    }
+
     use super::*;
     use crate::Sizing;
     use crate::raster::{RenderOptions, render, render_backward};

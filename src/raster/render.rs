@@ -17,7 +17,9 @@ pub struct RenderOptions {
 
 impl Default for RenderOptions {
     fn default() -> Self {
-        RenderOptions { tolerance: 0.02 }
+        RenderOptions {
+            tolerance: crate::scene::geom::DEFAULT_TOLERANCE,
+        }
     }
 }
 

@@ -286,21 +286,12 @@ pub(crate) struct Style {
 impl Style {
     /// Chords of a round join or cap sweeping `angle` radians (1 to 256).
     pub(crate) fn arc_steps(&self, angle: f64) -> usize {
-        let h = self.half_width;
-        if h <= self.tolerance {
-            return 1;
-        }
-        let step = 2.0 * (1.0 - self.tolerance / h).clamp(-1.0, 1.0).acos();
-        ((angle.abs() / step.max(1e-3)).ceil() as usize).clamp(1, 256)
+        crate::scene::geom::arc_steps(self.half_width, self.tolerance, angle)
     }
 
     /// Vertices one end cap adds to an outline (0 for butt caps).
     pub(crate) fn cap_vertices(&self) -> usize {
-        match self.cap {
-            LineCap::Butt => 0,
-            LineCap::Square => 2,
-            LineCap::Round => self.arc_steps(std::f64::consts::PI).max(2) - 1,
-        }
+        crate::scene::geom::cap_vertices(self.cap, self.half_width, self.tolerance)
     }
 }
 

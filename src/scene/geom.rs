@@ -8,6 +8,77 @@
 
 use super::Point;
 
+// ---- how finely the rasterizer flattens and strokes (also counted at load) ----------
+
+/// The rasterizer's default flattening tolerance, device pixels
+/// (`raster::RenderOptions::default`); the load-time chord limit counts at it.
+pub(crate) const DEFAULT_TOLERANCE: f64 = 0.02;
+
+/// Chord count for one cubic under `tolerance` (pixels). `visible` is the canvas grown by
+/// any stroke margin, `[xmin, ymin, xmax, ymax]`: a cubic wholly to its left, right, top or
+/// bottom only needs one chord (its net crossing of each row is set by its end points).
+pub(crate) fn chord_count(p: &[Point; 4], tolerance: f64, visible: [f64; 4]) -> u32 {
+    let all = |f: &dyn Fn(&Point) -> bool| p.iter().all(f);
+    if all(&|q| q[0] <= visible[0])
+        || all(&|q| q[0] >= visible[2])
+        || all(&|q| q[1] <= visible[1])
+        || all(&|q| q[1] >= visible[3])
+    {
+        return 1;
+    }
+    let dd = |a: &Point, b: &Point, c: &Point| {
+        let x = a[0] - 2.0 * b[0] + c[0];
+        let y = a[1] - 2.0 * b[1] + c[1];
+        x.hypot(y)
+    };
+    let d = dd(&p[0], &p[1], &p[2]).max(dd(&p[1], &p[2], &p[3]));
+    let n = (0.75 * d / tolerance.max(1e-6)).sqrt().ceil();
+    if n.is_finite() {
+        (n as u32).clamp(1, crate::limits::MAX_CHORDS)
+    } else {
+        1
+    }
+}
+
+/// The region where `path` is flattened finely: the canvas grown by the stroke's reach.
+pub(crate) fn flatten_rect(path: &super::Path, width: u32, height: u32) -> [f64; 4] {
+    let (w, h) = (width as f64, height as f64);
+    // Strokes reach beyond the centerline; flatten generously near the canvas.
+    let margin = path.stroke.as_ref().map_or(1.0, |s| {
+        let [a, b, c, d] = s.frame;
+        let norm = a.hypot(b).max(c.hypot(d));
+        1.0 + 0.5 * s.width.abs() * s.miter_limit.max(1.0) * norm
+    });
+    [-margin, -margin, w + margin, h + margin]
+}
+
+/// The flattening tolerance in a stroke's own frame: `tolerance` device pixels divided by
+/// the square root of the frame's area scale.
+pub(crate) fn frame_tolerance(s: &super::Stroke, tolerance: f64) -> f64 {
+    let [a, b, c, d] = s.frame;
+    let det = a * d - b * c;
+    tolerance / det.abs().sqrt()
+}
+
+/// Chords of a round join or cap of half width `h` sweeping `angle` radians at `tolerance`
+/// (both in the stroke's frame): 1 to 256.
+pub(crate) fn arc_steps(h: f64, tolerance: f64, angle: f64) -> usize {
+    if h <= tolerance {
+        return 1;
+    }
+    let step = 2.0 * (1.0 - tolerance / h).clamp(-1.0, 1.0).acos();
+    ((angle.abs() / step.max(1e-3)).ceil() as usize).clamp(1, 256)
+}
+
+/// Vertices one end cap adds to an outline (0 for butt caps).
+pub(crate) fn cap_vertices(cap: super::LineCap, h: f64, tolerance: f64) -> usize {
+    match cap {
+        super::LineCap::Butt => 0,
+        super::LineCap::Square => 2,
+        super::LineCap::Round => arc_steps(h, tolerance, std::f64::consts::PI).max(2) - 1,
+    }
+}
+
 /// A cubic Bézier segment: start, two control points, end.
 pub(crate) type Cubic = [Point; 4];
 

@@ -463,7 +463,7 @@ pub(crate) fn point_bound(p: &Path) -> f64 {
     crate::limits::MAX_COORDINATE / gain.max(1.0)
 }
 
-/// Clamps the control points of `p` into the readable range (see [`crate::optim::project`]).
+/// Clamps the control points of `p` into the readable range (see [`crate::scene::project`]).
 pub(crate) fn clamp_points(p: &mut Path) {
     let bound = point_bound(p);
     for q in &mut p.points {

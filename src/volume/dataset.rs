@@ -103,6 +103,9 @@ pub struct Dataset {
     /// a ray leaving the scene sees white; false for real photos (instant-ngp), whose
     /// surroundings fill every pixel and must be inside the model.
     pub white_background: bool,
+    /// What was read other than the folder says, one line each, for the caller to show
+    /// (the library prints nothing): frames skipped because their image is missing.
+    pub warnings: Vec<String>,
 }
 
 impl Dataset {
@@ -187,6 +190,7 @@ pub fn load(dir: &Path, downscale: u32) -> Result<Dataset> {
     let ngp = dir.join("transforms.json");
     // Frames to load, each with its split (true = test).
     let mut frames: Vec<(Frame, bool)> = Vec::new();
+    let mut warnings = Vec::new();
     if synthetic.is_file() {
         let train = parse_transforms(&synthetic)?;
         require_images(&synthetic, &train)?;
@@ -219,12 +223,12 @@ pub fn load(dir: &Path, downscale: u32) -> Result<Dataset> {
         }
         if !missing.is_empty() {
             let names: Vec<&str> = missing.iter().map(|f| f.file_path.as_str()).collect();
-            eprintln!(
-                "warning: {}: skipping {} of {total} frames whose image is missing: {}",
+            warnings.push(format!(
+                "{}: skipping {} of {total} frames whose image is missing: {}",
                 ngp.display(),
                 missing.len(),
                 names.join(", ")
-            );
+            ));
         }
         frames.extend(
             present
@@ -310,6 +314,7 @@ pub fn load(dir: &Path, downscale: u32) -> Result<Dataset> {
         test,
         name,
         white_background: synthetic.is_file(),
+        warnings,
     })
 }
 

@@ -133,6 +133,8 @@ impl Default for SplatJob {
 pub struct VoxelResult {
     /// The grid after training and the final prune.
     pub grid: Grid,
+    /// The dataset's warnings ([`Dataset::warnings`]), for the caller to show.
+    pub warnings: Vec<String>,
     /// How training ended.
     pub outcome: voxel::TrainOutcome,
     /// One row per 50 iterations and per evaluation: the step and, where evaluated, the
@@ -153,6 +155,8 @@ pub struct VoxelResult {
 pub struct SplatResult {
     /// The model after training.
     pub model: Gaussians,
+    /// The dataset's warnings ([`Dataset::warnings`]), for the caller to show.
+    pub warnings: Vec<String>,
     /// How training ended.
     pub outcome: splat::TrainOutcome,
     /// One row per 50 iterations and per evaluation, as in [`VoxelResult::log`]; the
@@ -347,6 +351,7 @@ pub fn recon_voxel(
         log.push((s, test_psnr));
     }
     Ok(VoxelResult {
+        warnings: data.warnings.clone(),
         grid,
         outcome,
         log,
@@ -439,6 +444,7 @@ pub fn recon_splat(
     };
     log.retain(|r| r.0.iteration != outcome.iterations);
     Ok(SplatResult {
+        warnings: data.warnings.clone(),
         model,
         outcome,
         log,

@@ -73,6 +73,7 @@ pub fn undistort_dataset(data: &Dataset) -> (Dataset, usize) {
             test,
             name: data.name.clone(),
             white_background: data.white_background,
+            warnings: data.warnings.clone(),
         },
         a + b,
     )
@@ -271,6 +272,7 @@ mod tests {
             test: vec![view(bent, img(0.3))],
             name: "d".into(),
             white_background: false,
+            warnings: Vec::new(),
         };
         let (u, outside) = undistort_dataset(&data);
         assert_eq!((u.train.len(), u.test.len()), (2, 1));

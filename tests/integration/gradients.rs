@@ -277,7 +277,7 @@ fn backward_has_the_same_bits_for_any_thread_count() {
 /// thread count: image, loss, MSE and every gradient entry.
 #[test]
 fn fused_pass_has_the_bits_of_the_separate_passes() {
-    use diffsvg::optim::Objective;
+    use diffsvg::fit::Objective;
     use diffsvg::raster::{Prepared, backward_with_stats, render_prepared};
     let opts = RenderOptions::default();
     let mut scenes: Vec<(String, Scene)> = (0..4u64)

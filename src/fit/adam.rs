@@ -1,8 +1,7 @@
 //! The 2D fitter's optimizer: Adam with bias correction in `f64`, one learning rate per
 //! parameter slot from per-group rates.
 
-use super::moments::Moments;
-use super::rule::Rule;
+use crate::optim::{Moments, Rule};
 use crate::scene::{Paint, ParamGroup, ParamLayout, Scene};
 
 /// Adam's constants.
