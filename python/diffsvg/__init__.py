@@ -50,6 +50,7 @@ __all__ = [
     "glyphs",
     "recon_voxel",
     "recon_splat",
+    "view",
 ]
 
 Color = Optional[Sequence[float]]
@@ -562,3 +563,18 @@ def recon_splat(scene, output, *, iters: int = 5000, downscale: int = 1,
     return _native.recon_splat(
         os.fspath(scene), os.fspath(output), iters, downscale, max_gaussians, initial,
         degree, bound, seed, eval_every, progress)
+
+
+def view(model, scene=None, *, split: str = "test", orbit: int = 0, elevation: float = 30.0,
+         downscale: int = 1, step: float = 0.5) -> dict:
+    """Renders a trained model (``.vox`` or Gaussian ``.ply``, told apart by its header)
+    as ``diffsvg view`` does, into arrays: from the cameras of the dataset ``scene``'s
+    ``split`` views ("test" or "train"), and from ``orbit`` new cameras around the model
+    (a circle raised by ``elevation`` degrees; for real photos, the arc their cameras
+    span). ``step``: sample spacing in voxels (voxel models).
+
+    Returns a dict: ``views``, a list of ``(name, rendering, photo)``, and ``orbit``, a
+    list of renderings; each an ``(h, w, 3)`` ``float32`` array of linear RGB, unclamped.
+    """
+    return _native.view(os.fspath(model), None if scene is None else os.fspath(scene),
+                        split, orbit, elevation, downscale, step)

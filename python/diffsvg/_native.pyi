@@ -70,3 +70,6 @@ def recon_splat(scene: str | PathLike, output: str | PathLike, iters: int = 5000
                 downscale: int = 1, max_gaussians: int = 300000, initial: int = 50000,
                 degree: int = 3, bound: Optional[float] = None, seed: int = 0,
                 eval_every: int = 0, progress: Progress = None) -> dict: ...
+def view(model: str | PathLike, scene: Optional[str | PathLike] = None, split: str = "test",
+         orbit: int = 0, elevation: float = 30.0, downscale: int = 1,
+         step: float = 0.5) -> dict: ...

@@ -43,5 +43,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(jobs::glyph, m)?)?;
     m.add_function(wrap_pyfunction!(recon::recon_voxel, m)?)?;
     m.add_function(wrap_pyfunction!(recon::recon_splat, m)?)?;
+    m.add_function(wrap_pyfunction!(recon::view, m)?)?;
     Ok(())
 }

@@ -207,3 +207,89 @@ pub(crate) fn recon_splat<'py>(
     d.set_item("undistorted", out.undistorted)?;
     Ok(d)
 }
+
+/// Renders a trained model (`.vox` or Gaussian PLY, told apart by its header) as
+/// `diffsvg view` does: from the cameras of the `split` ("test" or "train") views of the
+/// dataset `scene` (when given), and from `orbit` new cameras around the model raised by
+/// `elevation` degrees. Returns a dict: `views`, a list of `(name, rendering, photo)`
+/// with `(h, w, 3)` `float32` linear RGB arrays (unclamped), and `orbit`, a list of
+/// `(h, w, 3)` renderings. The GIL is released while it renders.
+#[pyfunction]
+#[pyo3(signature = (model, scene=None, split="test", orbit=0, elevation=30.0, downscale=1,
+    step=0.5))]
+#[allow(clippy::too_many_arguments, clippy::type_complexity)]
+pub(crate) fn view<'py>(
+    py: Python<'py>,
+    model: PathBuf,
+    scene: Option<PathBuf>,
+    split: &str,
+    orbit: usize,
+    elevation: f32,
+    downscale: u32,
+    step: f32,
+) -> PyResult<Bound<'py, PyDict>> {
+    use diffsvg::volume::view::{Model, orbit_cameras};
+    use numpy::PyArrayMethods as _;
+    let test = match split {
+        "test" => true,
+        "train" => false,
+        s => return Err(bad(format!("split {s:?}: expected \"test\" or \"train\""))),
+    };
+    if downscale == 0 {
+        return Err(bad("downscale 0 must be at least 1"));
+    }
+    if scene.is_none() && orbit == 0 {
+        return Err(bad("nothing to render: give scene and/or orbit"));
+    }
+    type Rgb = (u32, u32, Vec<[f32; 3]>);
+    let (views, orbits) = py
+        .detach(|| -> diffsvg::Result<(Vec<(String, Rgb, Rgb)>, Vec<Rgb>)> {
+            crate::on_pool(|| {
+                let mut m = Model::load(&model, step)?;
+                let data = match &scene {
+                    Some(d) => Some(m.load_dataset(d, downscale)?.0),
+                    None => None,
+                };
+                let mut views = Vec::new();
+                if let Some(d) = &data {
+                    for v in if test { &d.test } else { &d.train } {
+                        let out = m.render(&v.camera)?;
+                        views.push((
+                            v.name.clone(),
+                            (v.width, v.height, out),
+                            (v.width, v.height, v.rgb.clone()),
+                        ));
+                    }
+                }
+                let cams = if orbit > 0 {
+                    orbit_cameras(m.bounds(), data.as_ref(), orbit, elevation)?
+                } else {
+                    Vec::new()
+                };
+                let mut orbits = Vec::new();
+                for c in &cams {
+                    orbits.push((c.width, c.height, m.render(c)?));
+                }
+                Ok((views, orbits))
+            })
+        })
+        .map_err(to_py)?;
+    let array = |(w, h, rgb): Rgb| -> PyResult<Bound<'py, numpy::PyArray3<f32>>> {
+        let flat: Vec<f32> = rgb.into_iter().flatten().collect();
+        numpy::PyArray1::from_vec(py, flat)
+            .reshape([h as usize, w as usize, 3])
+            .map_err(|e| bad(e.to_string()))
+    };
+    let out = PyDict::new(py);
+    let list = pyo3::types::PyList::empty(py);
+    for (name, a, b) in views {
+        list.append((name, array(a)?, array(b)?))?;
+    }
+    out.set_item("views", list)?;
+    let list = pyo3::types::PyList::empty(py);
+    for o in orbits {
+        list.append(array(o)?)?;
+    }
+    out.set_item("orbit", list)?;
+    Ok(out)
+}

@@ -123,3 +123,36 @@ def test_recon_progress_exception_is_raised(tmp_path):
     with pytest.raises(Boom, match="stop at 3"):
         diffsvg.recon_voxel(scene, tmp_path / "m.vox", res=8, iters=10, batch=16, progress=cb)
     assert not (tmp_path / "m.vox").exists()
+
+
+@pytest.mark.parametrize("kind", ["vox", "ply"])
+def test_view_renders_the_pixels_of_the_cli(tmp_path, kind):
+    """diffsvg.view renders a trained voxel grid and Gaussians from the dataset's cameras
+    and from orbit cameras: the pixels `diffsvg view` writes (its PNGs are 8-bit)."""
+    scene = write_scene(tmp_path / "scene")
+    model = tmp_path / f"m.{kind}"
+    if kind == "vox":
+        diffsvg.recon_voxel(scene, model, res=16, iters=30, batch=256)
+    else:
+        diffsvg.recon_splat(scene, model, iters=20, initial=200, seed=3)
+    out = diffsvg.view(model, scene, orbit=4, elevation=20.0)
+    run_cli("view", model, "--scene", scene, "--orbit", 4, "--elevation", 20, "-o",
+            tmp_path / "cli")
+    assert len(out["orbit"]) == 4 and len(out["views"]) == 2
+
+    def eight_bit(rgb):
+        return np.round(np.clip(rgb, 0, 1) * 255)
+
+    for i, rgb in enumerate(out["orbit"]):
+        png = diffsvg.load_image(tmp_path / "cli" / f"orbit-{i:03}.png")
+        assert png.shape[:2] == rgb.shape[:2]
+        assert np.abs(eight_bit(rgb) - np.round(png[..., :3] * 255)).max() <= 1
+    for name, rgb, photo in out["views"]:
+        pair = diffsvg.load_image(tmp_path / "cli" / f"{name.split('/')[-1]}.png")
+        w = rgb.shape[1]
+        assert np.abs(eight_bit(rgb) - np.round(pair[:, :w, :3] * 255)).max() <= 1
+        assert np.abs(eight_bit(photo) - np.round(pair[:, -w:, :3] * 255)).max() <= 1
+    # Rendering alone (no dataset), and bad input by name.
+    assert len(diffsvg.view(model, orbit=2)["orbit"]) == 2
+    with pytest.raises(diffsvg.DiffsvgError, match="split"):
+        diffsvg.view(model, scene, split="val")

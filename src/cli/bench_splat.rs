@@ -187,8 +187,8 @@ pub fn run(a: SplatBenchArgs) -> Result<()> {
         let (views, background) = match &scene {
             Some((views, background)) => (views.clone(), *background),
             None => {
-                let cams = super::volume::orbit_cameras(
-                    super::volume::splat_bounds(&gaussians),
+                let cams = diffsvg::volume::view::orbit_cameras(
+                    diffsvg::volume::view::splat_bounds(&gaussians),
                     None,
                     MODEL_VIEWS,
                     ORBIT_ELEVATION,

@@ -154,7 +154,7 @@ pub(super) fn load_dataset(dir: &Path, downscale: u32) -> Result<Dataset> {
     Ok(data)
 }
 
-fn undistortion_note(dir: &Path, outside: f64) {
+pub(super) fn undistortion_note(dir: &Path, outside: f64) {
     eprintln!(
         "note: {}: the photos have lens distortion; undistorted to pinhole views ({:.2}% of \
          pixels fell outside the photos and repeat its edge)",

@@ -12,14 +12,11 @@ use super::choices::SplitArg;
 use super::plot::{PlotSpec, Series, write_plot};
 use super::progress::{install_interrupt_handler, interrupted};
 use super::util::flag_error;
-use diffsvg::glam::Vec3;
 use diffsvg::image_io::{Image, contact_sheet, write_atomic};
-use diffsvg::volume::camera::{Camera, orbit};
-use diffsvg::volume::dataset::{Dataset, View};
 use diffsvg::volume::metrics::{psnr, ssim};
 use diffsvg::volume::recon::{VoxelJob, recon_voxel};
-use diffsvg::volume::splat;
-use diffsvg::volume::voxel::{self, Grid, RenderSettings, TrainStep};
+use diffsvg::volume::view::{Model, orbit_cameras};
+use diffsvg::volume::voxel::{self, TrainStep};
 
 /// Arguments of `diffsvg recon`.
 #[derive(clap::Args, Debug)]
@@ -317,11 +314,6 @@ pub(super) fn write_psnr_plot(
     Ok(())
 }
 
-/// Rendering with `step` voxels between samples, or an error naming the flag.
-fn render_settings(step: f32) -> Result<RenderSettings> {
-    RenderSettings::with_step(step).map_err(|e| anyhow::anyhow!("--step: {e}"))
-}
-
 fn to_image(rgb: &[[f32; 3]], w: u32, h: u32) -> Image {
     let mut img = Image::new(w, h);
     for (d, c) in img.data.iter_mut().zip(rgb) {
@@ -335,91 +327,29 @@ fn to_image(rgb: &[[f32; 3]], w: u32, h: u32) -> Image {
     img
 }
 
-/// A fitted model of either kind, with what rendering it needs.
-enum Model {
-    Voxel(Grid, RenderSettings),
-    Splat(splat::Gaussians, splat::RenderSettings),
-}
-
-impl Model {
-    /// Reads a model file, choosing the kind by its first bytes (a `ply` line, ending in
-    /// `\n` or `\r\n` as the PLY reader accepts, for Gaussians).
-    fn load(path: &Path, step: f32) -> Result<Model> {
-        use std::io::Read as _;
-        let mut head = Vec::with_capacity(5);
-        std::fs::File::open(path)
-            .and_then(|f| f.take(5).read_to_end(&mut head))
-            .with_context(|| format!("{}: cannot read the model", path.display()))?;
-        if head.starts_with(b"ply\n") || head.starts_with(b"ply\r\n") {
-            let g = splat::load(path)?;
-            Ok(Model::Splat(g, splat::RenderSettings::default()))
-        } else {
-            Ok(Model::Voxel(voxel::load(path)?, render_settings(step)?))
-        }
-    }
-
-    /// Renders the view of `camera`.
-    fn render(&self, camera: &Camera) -> Result<Vec<[f32; 3]>> {
-        match self {
-            Model::Voxel(g, s) => Ok(voxel::render_rays(g, &camera.rays(), s)),
-            Model::Splat(g, s) => Ok(splat::render(g, camera, s)
-                .map_err(|e| anyhow::anyhow!("rendering: {e}"))?
-                .rgb),
-        }
-    }
-
-    /// The center and half-size of the model's box, world units.
-    fn bounds(&self) -> (Vec3, f32) {
-        match self {
-            Model::Voxel(g, _) => (
-                (g.min() + g.max()) * 0.5,
-                (g.max() - g.min()).max_element() * 0.5,
-            ),
-            Model::Splat(g, _) => splat_bounds(g),
-        }
-    }
-}
-
-/// The center and half-size of the box of the middle 98% of a Gaussian model's means on
-/// each axis (a few far floaters aside); the unit box when there are none.
-pub(super) fn splat_bounds(g: &splat::Gaussians) -> (Vec3, f32) {
-    if g.is_empty() {
-        return (Vec3::ZERO, 1.0);
-    }
-    let mut lo = Vec3::ZERO;
-    let mut hi = Vec3::ZERO;
-    for axis in 0..3 {
-        let mut v: Vec<f32> = g.means.iter().map(|m| m[axis]).collect();
-        v.sort_by(|a, b| a.total_cmp(b));
-        lo[axis] = v[v.len() / 100];
-        hi[axis] = v[v.len() - 1 - v.len() / 100];
-    }
-    ((lo + hi) * 0.5, ((hi - lo).max_element() * 0.5).max(1e-3))
-}
-
 /// Runs `diffsvg view`.
 pub fn run_view(a: ViewArgs) -> Result<()> {
-    let mut model = Model::load(&a.model, a.step)?;
+    let mut model = Model::load(&a.model, a.step).map_err(flag_error)?;
     if a.scene.is_none() && a.orbit == 0 {
         bail!("nothing to render: give --scene DIR and/or --orbit N");
     }
     if a.downscale == 0 {
         bail!("--downscale must be at least 1");
     }
-    let data = match (&a.scene, &model) {
-        (Some(d), Model::Splat(..)) => Some(super::splat::load_dataset(d, a.downscale)?),
-        (Some(d), Model::Voxel(..)) => Some(Dataset::load(d, a.downscale)?),
-        (None, _) => None,
+    let data = match &a.scene {
+        Some(d) => {
+            let (data, undistorted) = model.load_dataset(d, a.downscale)?;
+            super::util::print_warnings(&data.warnings);
+            if let Some(outside) = undistorted {
+                super::splat::undistortion_note(d, outside);
+            }
+            Some(data)
+        }
+        None => None,
     };
-    if let Some(d) = &data {
-        super::util::print_warnings(&d.warnings);
-    }
-    if let (Model::Splat(_, s), Some(d)) = (&mut model, &data) {
-        s.background = diffsvg::volume::recon::background(d);
-    }
     // Cameras first, so that a bad orbit fails before anything is written.
     let orbit_cams = if a.orbit > 0 {
-        orbit_cameras(model.bounds(), data.as_ref(), a.orbit, a.elevation)?
+        orbit_cameras(model.bounds(), data.as_ref(), a.orbit, a.elevation).map_err(flag_error)?
     } else {
         Vec::new()
     };
@@ -514,91 +444,6 @@ fn file_stem(name: &str) -> String {
         .unwrap_or_else(|| name.replace(['/', '\\'], "_"))
 }
 
-/// Cameras on a circle around the model, level with the dataset's "up" (the mean of its
-/// cameras' up vectors, or +Z), at the dataset's camera distance and field of view; for
-/// real photos, along the arc their cameras span instead ([`arc_cameras`]). Without a
-/// dataset: 200×200 views at 3 half-sizes from the center, +Z up.
-pub(super) fn orbit_cameras(
-    (center, half): (Vec3, f32),
-    data: Option<&Dataset>,
-    n: usize,
-    elevation_deg: f32,
-) -> Result<Vec<Camera>> {
-    let (radius, up, fov, w, h) =
-        match data.and_then(|d| d.train.first().or(d.test.first()).map(|v| (d, v))) {
-            Some((d, v)) => {
-                let views = if d.train.is_empty() {
-                    &d.test
-                } else {
-                    &d.train
-                };
-                let up: Vec3 = views
-                    .iter()
-                    .map(|v| v.camera.c2w.matrix3.y_axis.into())
-                    .fold(Vec3::ZERO, |a: Vec3, b: Vec3| a + b);
-                let (_, dist) = d.focus();
-                let up = up.try_normalize().unwrap_or(Vec3::Z);
-                let fov = v.camera.fov_x();
-                if !d.white_background {
-                    return arc_cameras(views, center, dist, up, n, fov, v.width, v.height);
-                }
-                (dist, up, fov, v.width, v.height)
-            }
-            None => (3.0 * half, Vec3::Z, 0.69, 200, 200),
-        };
-    orbit(n, center, radius, elevation_deg.to_radians(), up, fov, w, h)
-        .map_err(|e| anyhow::anyhow!("orbit cameras: {e}"))
-}
-
-/// For real photos, which show one side of the scene: `n` cameras looking at `center`
-/// along the arc the training cameras span around `up` (the circle less its largest
-/// empty gap), at their mean elevation and at distance `radius`.
-#[allow(clippy::too_many_arguments)]
-fn arc_cameras(
-    views: &[View],
-    center: Vec3,
-    radius: f32,
-    up: Vec3,
-    n: usize,
-    fov: f32,
-    w: u32,
-    h: u32,
-) -> Result<Vec<Camera>> {
-    use std::f32::consts::TAU;
-    let e1 = up.any_orthonormal_vector();
-    let e2 = up.cross(e1);
-    let mut az = Vec::new();
-    let mut elev = 0.0;
-    for v in views {
-        let p = (v.camera.position() - center).normalize_or_zero();
-        az.push(p.dot(e2).atan2(p.dot(e1)).rem_euclid(TAU));
-        elev += p.dot(up).clamp(-1.0, 1.0).asin();
-    }
-    elev /= views.len().max(1) as f32;
-    az.sort_by(|a, b| a.total_cmp(b));
-    // The largest gap between neighbouring azimuths (the last one wraps around).
-    let (mut start, mut gap) = (az[0], az[0] + TAU - az[az.len() - 1]);
-    for pair in az.windows(2) {
-        if pair[1] - pair[0] > gap {
-            (start, gap) = (pair[1], pair[1] - pair[0]);
-        }
-    }
-    let span = TAU - gap;
-    (0..n)
-        .map(|i| {
-            let t = if n > 1 {
-                i as f32 / (n - 1) as f32
-            } else {
-                0.5
-            };
-            let a = start + span * t;
-            let dir = (e1 * a.cos() + e2 * a.sin()) * elev.cos() + up * elev.sin();
-            Camera::look_at(center + dir * radius, center, up, fov, w, h)
-                .map_err(|e| anyhow::anyhow!("orbit cameras: {e}"))
-        })
-        .collect()
-}
-
 fn write_gif(frames: &[Image], path: &Path) -> Result<()> {
     use image::codecs::gif::{GifEncoder, Repeat};
     let mut buf = Vec::new();
@@ -617,58 +462,4 @@ fn write_gif(frames: &[Image], path: &Path) -> Result<()> {
     }
     write_atomic(path, &buf)?;
     Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::arc_cameras;
-    use diffsvg::glam::Vec3;
-    use diffsvg::volume::camera::Camera;
-    use diffsvg::volume::dataset::View;
-
-    #[test]
-    fn real_photo_orbits_follow_the_cameras_arc() {
-        // Cameras from azimuth 300° through 0° to 60° (wrapping), 20° above the plane.
-        let (center, up) = (Vec3::new(1.0, 2.0, 0.5), Vec3::Z);
-        let at = |deg: f32, elev: f32| {
-            let (a, e) = (deg.to_radians(), elev.to_radians());
-            center + 4.0 * Vec3::new(a.cos() * e.cos(), a.sin() * e.cos(), e.sin())
-        };
-        let views: Vec<View> = [300.0f32, 330.0, 0.0, 20.0, 60.0]
-            .iter()
-            .map(|&d| View {
-                name: format!("{d}"),
-                camera: Camera::look_at(at(d, 20.0), center, up, 0.7, 4, 4).unwrap(),
-                width: 4,
-                height: 4,
-                rgb: vec![[1.0; 3]; 16],
-            })
-            .collect();
-        let cams = arc_cameras(&views, center, 4.0, up, 5, 0.7, 4, 4).unwrap();
-        assert_eq!(cams.len(), 5);
-        for c in &cams {
-            let p = c.position() - center;
-            assert!((p.length() - 4.0).abs() < 1e-4);
-            let elev = (p.z / p.length()).asin().to_degrees();
-            assert!((elev - 20.0).abs() < 1e-2, "elevation {elev}");
-            // Looking at the center.
-            assert!(c.forward().dot(-p.normalize()) > 0.9999);
-        }
-        // Along the arc, from one end to the other, never behind (azimuth 60°..300°).
-        let az: Vec<f32> = cams
-            .iter()
-            .map(|c| {
-                let p = c.position() - center;
-                p.y.atan2(p.x).to_degrees().rem_euclid(360.0)
-            })
-            .collect();
-        let ends = [az[0], az[4]];
-        assert!(ends.iter().any(|a| (a - 300.0).abs() < 0.1), "{az:?}");
-        assert!(ends.iter().any(|a| (a - 60.0).abs() < 0.1), "{az:?}");
-        assert!(
-            (az[2] - 0.0).abs() < 0.1 || (az[2] - 360.0).abs() < 0.1,
-            "{az:?}"
-        );
-        assert!(az.iter().all(|&a| !(60.5..299.5).contains(&a)), "{az:?}");
-    }
 }

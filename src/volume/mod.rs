@@ -29,6 +29,7 @@ pub mod recon;
 pub(crate) mod sh;
 pub mod splat;
 pub mod undistort;
+pub mod view;
 pub mod voxel;
 
 /// A ray `origin + t · dir`, `t ≥ 0`, with `dir` of unit length.
