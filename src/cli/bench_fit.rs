@@ -1,11 +1,12 @@
 //! `diffsvg bench painterly` (DiffVG's painterly workload, timed) and `diffsvg bench fit`
 //! (the speed-vs-error suite written to docs/).
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::{Result, bail};
 
-use diffsvg::fit::load_target;
+use super::bench_suite::{SuiteArgs, default_photo, photo};
+
 use diffsvg::fit::random_blobs;
 use diffsvg::fit::{Control, FitOptions, refine};
 use diffsvg::fit::{LearningRates, Objective};
@@ -66,12 +67,6 @@ const DIFFVG: [(usize, f64, f64, f64); 3] = [
     (512, 314.0, 1226.0, 0.0096),
 ];
 
-fn default_photo(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/data/images")
-        .join(name)
-}
-
 fn pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
     let mut b = rayon::ThreadPoolBuilder::new();
     if let Some(n) = threads {
@@ -81,17 +76,6 @@ fn pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
         b = b.num_threads(n);
     }
     Ok(b.build()?)
-}
-
-/// Loads an image and resizes it to `w × h` (or `w` wide when `h` is 0).
-fn photo(path: &Path, w: u32, h: u32) -> Result<diffsvg::Image> {
-    let t = load_target(path, None)?;
-    let h = if h == 0 {
-        ((t.height as f64 * w as f64 / t.width as f64).round() as u32).max(1)
-    } else {
-        h
-    };
-    Ok(t.resized_checked(w, h, path)?)
 }
 
 /// One painterly run.
@@ -194,23 +178,6 @@ fn run_painterly(a: PainterlyArgs) -> Result<()> {
     Ok(())
 }
 
-/// Arguments of `diffsvg bench fit`.
-#[derive(clap::Args, Debug)]
-pub struct SuiteArgs {
-    /// Where the report and plots go.
-    #[arg(long, default_value = "docs")]
-    out: PathBuf,
-    /// Folder of photos (astronaut.png and chelsea.png are used).
-    #[arg(long)]
-    images: Option<PathBuf>,
-    /// Optimizer steps per vectorization.
-    #[arg(long, default_value_t = 1000)]
-    iters: usize,
-    /// Path counts for the photos.
-    #[arg(long, value_delimiter = ',', default_value = "64,256,512")]
-    paths: Vec<usize>,
-}
-
 /// Runs a benchmark.
 pub fn run(w: Which) -> Result<()> {
     match w {
@@ -219,30 +186,4 @@ pub fn run(w: Which) -> Result<()> {
         Which::Voxel(a) => super::bench_voxel::run(a),
         Which::Splat(a) => super::bench_splat::run(a),
     }
-}
-
-impl SuiteArgs {
-    /// The photo folder.
-    pub fn images(&self) -> PathBuf {
-        self.images
-            .clone()
-            .unwrap_or_else(|| default_photo("").to_path_buf())
-    }
-    /// Output folder.
-    pub fn out(&self) -> &Path {
-        &self.out
-    }
-    /// Steps per vectorization.
-    pub fn iters(&self) -> usize {
-        self.iters
-    }
-    /// Path counts.
-    pub fn paths(&self) -> &[usize] {
-        &self.paths
-    }
-}
-
-/// Loads a photo for the suite.
-pub fn suite_photo(path: &Path, w: u32, h: u32) -> Result<diffsvg::Image> {
-    photo(path, w, h)
 }

@@ -167,7 +167,7 @@ pub fn run(a: SplatBenchArgs) -> Result<()> {
     // The scene's cameras and background, shared by every model.
     let scene = match &a.scene {
         Some(dir) => {
-            let data = super::splat::load_dataset(dir, a.downscale)?;
+            let data = super::recon_report::load_splat_dataset(dir, a.downscale)?;
             let (views, note) = if data.test.is_empty() {
                 (&data.train, " (train)")
             } else {

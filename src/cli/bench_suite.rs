@@ -1,15 +1,15 @@
 //! `diffsvg bench fit`: the speed-vs-error suite behind docs/speed-vs-error.md.
 
 use std::fmt::Write as _;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Result, bail};
 
-use super::bench_fit::{SuiteArgs, suite_photo};
 use super::plot::{PlotSpec, Series, write_plot};
 use diffsvg::Sizing;
 use diffsvg::fit::Objective;
+use diffsvg::fit::load_target;
 use diffsvg::fit::trace;
 use diffsvg::fit::vectorize::{Mode, VectorizeOptions, VectorizeOutcome, vectorize};
 use diffsvg::fit::{Control, FitOptions, refine};
@@ -18,6 +18,62 @@ use diffsvg::loss::Loss;
 use diffsvg::raster::{RenderOptions, render};
 use diffsvg::scene::Scene;
 use diffsvg::scene::random::perturb;
+
+/// Arguments of `diffsvg bench fit`.
+#[derive(clap::Args, Debug)]
+pub struct SuiteArgs {
+    /// Where the report and plots go.
+    #[arg(long, default_value = "docs")]
+    out: PathBuf,
+    /// Folder of photos (astronaut.png and chelsea.png are used).
+    #[arg(long)]
+    images: Option<PathBuf>,
+    /// Optimizer steps per vectorization.
+    #[arg(long, default_value_t = 1000)]
+    iters: usize,
+    /// Path counts for the photos.
+    #[arg(long, value_delimiter = ',', default_value = "64,256,512")]
+    paths: Vec<usize>,
+}
+
+impl SuiteArgs {
+    /// The photo folder.
+    pub fn images(&self) -> PathBuf {
+        self.images
+            .clone()
+            .unwrap_or_else(|| default_photo("").to_path_buf())
+    }
+    /// Output folder.
+    pub fn out(&self) -> &Path {
+        &self.out
+    }
+    /// Steps per vectorization.
+    pub fn iters(&self) -> usize {
+        self.iters
+    }
+    /// Path counts.
+    pub fn paths(&self) -> &[usize] {
+        &self.paths
+    }
+}
+
+/// A photo of `../shared/data/images` beside the checkout.
+pub(super) fn default_photo(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/data/images")
+        .join(name)
+}
+
+/// Loads an image and resizes it to `w × h` (or `w` wide when `h` is 0).
+pub(super) fn photo(path: &Path, w: u32, h: u32) -> Result<diffsvg::Image> {
+    let t = load_target(path, None)?;
+    let h = if h == 0 {
+        ((t.height as f64 * w as f64 / t.width as f64).round() as u32).max(1)
+    } else {
+        h
+    };
+    Ok(t.resized_checked(w, h, path)?)
+}
 
 /// Runs the suite and writes `<out>/speed-vs-error.md` and its plots.
 pub fn run(a: SuiteArgs) -> Result<()> {
@@ -152,7 +208,7 @@ fn photo_section(md: &mut String, img_dir: &Path, path: &Path, a: &SuiteArgs) ->
         .unwrap_or_default()
         .to_string_lossy()
         .into_owned();
-    let target = suite_photo(path, 256, 256)?;
+    let target = photo(path, 256, 256)?;
     let obj = objective_for(&target);
     let _ = write!(
         md,
@@ -244,7 +300,7 @@ fn vtracer_section(md: &mut String, images: &Path) -> Result<()> {
         ("astronaut.png", 256, 256, 142, 21.96),
         ("chelsea.png", 256, 0, 58, 25.16),
     ] {
-        let target = suite_photo(&images.join(file), w, h)?;
+        let target = photo(&images.join(file), w, h)?;
         let obj = objective_for(&target);
         let t0 = Instant::now();
         let traced = trace(&target)?;

@@ -21,6 +21,7 @@ mod parity;
 mod perturb;
 mod plot;
 mod progress;
+mod recon_report;
 mod render;
 mod splat;
 mod util;

@@ -8,11 +8,10 @@ use anyhow::Result;
 use serde_json::json;
 
 use super::progress::{install_interrupt_handler, interrupted};
+use super::recon_report::{Reporting, psnr_text, sibling, undistortion_note, write_psnr_plot};
 use super::util::flag_error;
-use super::volume::{Reporting, psnr_text, sibling, write_psnr_plot};
 use diffsvg::image_io::write_atomic;
-use diffsvg::volume::dataset::Dataset;
-use diffsvg::volume::recon::{SplatJob, load_for_splat, recon_splat};
+use diffsvg::volume::recon::{SplatJob, recon_splat};
 use diffsvg::volume::splat::{self, TrainStep};
 
 /// Arguments of `diffsvg recon splat`.
@@ -142,25 +141,6 @@ pub fn run(a: SplatArgs) -> Result<()> {
         eprintln!("interrupted: the model so far was written");
     }
     Ok(())
-}
-
-/// Loads a dataset for splatting ([`load_for_splat`]), with a note on stderr when its
-/// photos were undistorted.
-pub(super) fn load_dataset(dir: &Path, downscale: u32) -> Result<Dataset> {
-    let (data, undistorted) = load_for_splat(dir, downscale)?;
-    if let Some(outside) = undistorted {
-        undistortion_note(dir, outside);
-    }
-    Ok(data)
-}
-
-pub(super) fn undistortion_note(dir: &Path, outside: f64) {
-    eprintln!(
-        "note: {}: the photos have lens distortion; undistorted to pinhole views ({:.2}% of \
-         pixels fell outside the photos and repeat its edge)",
-        dir.display(),
-        100.0 * outside
-    );
 }
 
 /// Writes `<model>.log.csv` (iteration, training seconds, Gaussians, SH degree, training

@@ -9,8 +9,10 @@ use anyhow::{Context, Result, bail};
 use serde_json::json;
 
 use super::choices::SplitArg;
-use super::plot::{PlotSpec, Series, write_plot};
 use super::progress::{install_interrupt_handler, interrupted};
+use super::recon_report::{
+    Reporting, file_stem, psnr_text, sibling, undistortion_note, write_psnr_plot,
+};
 use super::util::flag_error;
 use diffsvg::image_io::{Image, contact_sheet, write_atomic};
 use diffsvg::volume::metrics::{psnr, ssim};
@@ -31,21 +33,6 @@ enum ReconModel {
     Voxel(VoxelArgs),
     /// 3D Gaussians rasterized by splatting (Kerbl et al. 2023), written as a PLY.
     Splat(super::splat::SplatArgs),
-}
-
-/// Progress and evaluation flags of `recon voxel` and `recon splat`.
-#[derive(clap::Args, Debug)]
-pub(super) struct Reporting {
-    /// Every this many iterations, render the test views and log their mean PSNR (the
-    /// time this takes is not counted as training time); 0: only at the end.
-    #[arg(long, default_value_t = 0)]
-    pub eval_every: usize,
-    /// Print one JSON object per 50 iterations and a summary instead of a progress bar.
-    #[arg(long)]
-    pub json: bool,
-    /// No progress output (the summary line is still printed).
-    #[arg(long, short)]
-    pub quiet: bool,
 }
 
 /// Arguments of `diffsvg recon voxel`.
@@ -239,12 +226,6 @@ fn run_voxel(a: VoxelArgs) -> Result<()> {
     Ok(())
 }
 
-/// A test PSNR for the summary line: `"31.20 dB"` or why there is none.
-pub(super) fn psnr_text(p: Option<f64>) -> String {
-    p.map(|p| format!("{p:.2} dB"))
-        .unwrap_or_else(|| "n/a (no test views)".into())
-}
-
 /// Writes `<model>.log.csv` (iteration, training seconds, resolution, allocated slots,
 /// batch PSNR, test PSNR where evaluated) and, when the test views were evaluated more
 /// than once, `<model>.psnr.png` and `.psnr.svg`: PSNR against training time.
@@ -274,46 +255,6 @@ fn write_log(model: &Path, rows: &[(TrainStep, Option<f64>)]) -> Result<()> {
     write_psnr_plot(model, tests, batches, "training batches")
 }
 
-/// `model` with its extension replaced by `suffix` (`lego.vox` → `lego.log.csv`).
-pub(super) fn sibling(model: &Path, suffix: &str) -> PathBuf {
-    let mut p = model.with_extension("").into_os_string();
-    p.push(suffix);
-    PathBuf::from(p)
-}
-
-/// When the test views were evaluated more than once, writes `<model>.psnr.png` and
-/// `.psnr.svg`: test PSNR (and the training batches' or views', labelled `train_label`)
-/// against training seconds.
-pub(super) fn write_psnr_plot(
-    model: &Path,
-    tests: Vec<(f64, f64)>,
-    train: Vec<(f64, f64)>,
-    train_label: &str,
-) -> Result<()> {
-    if tests.len() < 2 {
-        return Ok(());
-    }
-    let spec = PlotSpec::new(
-        format!(
-            "{}: PSNR against training time",
-            file_stem(&model.to_string_lossy())
-        ),
-        "training seconds",
-        "PSNR (dB)",
-    );
-    let series = [
-        Series::new("test views", tests),
-        Series::new(train_label, train),
-    ];
-    write_plot(
-        &spec,
-        &series,
-        sibling(model, ".psnr.png"),
-        sibling(model, ".psnr.svg"),
-    )?;
-    Ok(())
-}
-
 fn to_image(rgb: &[[f32; 3]], w: u32, h: u32) -> Image {
     let mut img = Image::new(w, h);
     for (d, c) in img.data.iter_mut().zip(rgb) {
@@ -341,7 +282,7 @@ pub fn run_view(a: ViewArgs) -> Result<()> {
             let (data, undistorted) = model.load_dataset(d, a.downscale)?;
             super::util::print_warnings(&data.warnings);
             if let Some(outside) = undistorted {
-                super::splat::undistortion_note(d, outside);
+                undistortion_note(d, outside);
             }
             Some(data)
         }
@@ -435,13 +376,6 @@ pub fn run_view(a: ViewArgs) -> Result<()> {
         println!("{}", serde_json::Value::Object(summary));
     }
     Ok(())
-}
-
-fn file_stem(name: &str) -> String {
-    Path::new(name)
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_else(|| name.replace(['/', '\\'], "_"))
 }
 
 fn write_gif(frames: &[Image], path: &Path) -> Result<()> {
