@@ -535,6 +535,7 @@ mod tests {
     }
 
     #[test]
+    #[cfg(feature = "trace")]
     fn traced_discs_render_close_to_the_image() {
         let img = discs(
             96,
@@ -566,6 +567,7 @@ mod tests {
     }
 
     #[test]
+    #[cfg(feature = "trace")]
     fn pruning_beats_dropping_top_or_random_paths() {
         let img = busy_image();
         let scene = trace(&img).unwrap();

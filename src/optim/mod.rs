@@ -15,7 +15,7 @@
 //!   ([`Schedule::factor`] as a `scale`, or [`exponential`] per group) changes them over
 //!   the run.
 //! * Steps count from 1 (Adam's bias correction `1 − βᵗ`); a fresh [`Moments`] has taken 0.
-//! * A dense step ([`Moments::step`], the 2D fitter's, through [`Adam::step`]) treats a
+//! * A dense step ([`Moments::step`], the 2D fitter's, through `fit::Adam::step`) treats a
 //!   non-finite gradient entry as 0 and counts it, and does not move a slot whose rate is
 //!   0. A lazy step ([`Moments::lazy_step`], the voxel trainer's) is applied by the caller
 //!   to the slots that got a gradient only, and checks nothing; its constants are
