@@ -228,16 +228,10 @@ pub(crate) fn view<'py>(
     downscale: u32,
     step: f32,
 ) -> PyResult<Bound<'py, PyDict>> {
-    use diffsvg::volume::view::{Model, orbit_cameras};
+    use diffsvg::volume::view::{Model, Split, check_downscale, orbit_cameras};
     use numpy::PyArrayMethods as _;
-    let test = match split {
-        "test" => true,
-        "train" => false,
-        s => return Err(bad(format!("split {s:?}: expected \"test\" or \"train\""))),
-    };
-    if downscale == 0 {
-        return Err(bad("downscale 0 must be at least 1"));
-    }
+    let split: Split = split.parse().map_err(bad)?;
+    check_downscale(downscale).map_err(to_py)?;
     if scene.is_none() && orbit == 0 {
         return Err(bad("nothing to render: give scene and/or orbit"));
     }
@@ -252,7 +246,7 @@ pub(crate) fn view<'py>(
                 };
                 let mut views = Vec::new();
                 if let Some(d) = &data {
-                    for v in if test { &d.test } else { &d.train } {
+                    for v in split.views(d) {
                         let out = m.render(&v.camera)?;
                         views.push((
                             v.name.clone(),

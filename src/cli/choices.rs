@@ -33,26 +33,6 @@ pub enum InitArg {
     Trace,
 }
 
-/// `view --split`.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ValueEnum)]
-pub enum SplitArg {
-    /// The held-out views.
-    #[default]
-    Test,
-    /// The training views.
-    Train,
-}
-
-impl SplitArg {
-    /// The name as typed.
-    pub fn name(self) -> &'static str {
-        match self {
-            SplitArg::Test => "test",
-            SplitArg::Train => "train",
-        }
-    }
-}
-
 /// `fit --background`/`vectorize --background`: `auto` or a color.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Background {

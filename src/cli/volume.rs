@@ -8,16 +8,17 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use serde_json::json;
 
-use super::choices::SplitArg;
+use super::choices::choice;
 use super::progress::{install_interrupt_handler, interrupted};
 use super::recon_report::{
     Reporting, file_stem, psnr_text, sibling, undistortion_note, write_psnr_plot,
 };
 use super::util::flag_error;
+use diffsvg::choice::Choice as _;
 use diffsvg::image_io::{Image, contact_sheet, write_atomic};
 use diffsvg::volume::metrics::{psnr, ssim};
 use diffsvg::volume::recon::{VoxelJob, recon_voxel};
-use diffsvg::volume::view::{Model, orbit_cameras};
+use diffsvg::volume::view::{Model, Split, check_downscale, orbit_cameras};
 use diffsvg::volume::voxel::{self, TrainStep};
 
 /// Arguments of `diffsvg recon`.
@@ -97,8 +98,8 @@ pub struct ViewArgs {
     #[arg(long)]
     scene: Option<PathBuf>,
     /// Which views.
-    #[arg(long, value_enum, ignore_case = true, default_value_t)]
-    split: SplitArg,
+    #[arg(long, ignore_case = true, value_parser = choice::<Split>(), default_value = Split::default().name())]
+    split: Split,
     /// Output folder: one PNG per view (rendering | photo), metrics.csv, and orbit frames.
     #[arg(short, long)]
     output: PathBuf,
@@ -274,12 +275,10 @@ pub fn run_view(a: ViewArgs) -> Result<()> {
     if a.scene.is_none() && a.orbit == 0 {
         bail!("nothing to render: give --scene DIR and/or --orbit N");
     }
-    if a.downscale == 0 {
-        bail!("--downscale must be at least 1");
-    }
+    check_downscale(a.downscale).map_err(flag_error)?;
     let data = match &a.scene {
         Some(d) => {
-            let (data, undistorted) = model.load_dataset(d, a.downscale)?;
+            let (data, undistorted) = model.load_dataset(d, a.downscale).map_err(flag_error)?;
             super::util::print_warnings(&data.warnings);
             if let Some(outside) = undistorted {
                 undistortion_note(d, outside);
@@ -298,11 +297,7 @@ pub fn run_view(a: ViewArgs) -> Result<()> {
         .with_context(|| format!("{}: cannot create the output folder", a.output.display()))?;
     let mut summary = serde_json::Map::new();
     if let Some(data) = &data {
-        let views = if a.split == SplitArg::Test {
-            &data.test
-        } else {
-            &data.train
-        };
+        let views = a.split.views(data);
         if views.is_empty() {
             bail!(
                 "{}: no {} views",

@@ -18,6 +18,45 @@ use super::splat::{self, Gaussians};
 use super::voxel::{self, Grid};
 use crate::error::{Error, Result};
 
+/// Which views of a dataset to render.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Split {
+    /// The held-out views.
+    #[default]
+    Test,
+    /// The training views.
+    Train,
+}
+
+impl Split {
+    /// The views of `data` this split names.
+    pub fn views(self, data: &Dataset) -> &[View] {
+        match self {
+            Split::Test => &data.test,
+            Split::Train => &data.train,
+        }
+    }
+}
+
+impl crate::choice::Choice for Split {
+    const WHAT: &'static str = "split";
+    const ALL: &'static [Self] = &[Split::Test, Split::Train];
+    fn name(self) -> &'static str {
+        match self {
+            Split::Test => "test",
+            Split::Train => "train",
+        }
+    }
+}
+
+impl std::str::FromStr for Split {
+    type Err = String;
+    /// By name, any case ([`crate::choice::parse`]).
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        crate::choice::parse(s)
+    }
+}
+
 /// A trained model of either kind, with the settings it renders with.
 pub enum Model {
     /// A sparse voxel grid (`.vox`).
@@ -53,8 +92,10 @@ impl Model {
 
     /// Loads the dataset the model is compared with, as its trainer saw it (photos with
     /// lens distortion undistorted for Gaussians), and takes its background for Gaussians.
+    /// `downscale` (at least 1) divides the photos' sizes, as in training.
     /// Also returns, for undistorted photos, the fraction of pixels that fell outside them.
     pub fn load_dataset(&mut self, dir: &Path, downscale: u32) -> Result<(Dataset, Option<f64>)> {
+        check_downscale(downscale)?;
         let (data, outside) = match self {
             Model::Splat(..) => load_for_splat(dir, downscale)?,
             Model::Voxel(..) => (Dataset::load(dir, downscale)?, None),
@@ -90,6 +131,11 @@ impl Model {
             Model::Splat(g, _) => splat_bounds(g),
         }
     }
+}
+
+/// Refuses a `downscale` of 0 (the photos' sizes are divided by it), naming the option.
+pub fn check_downscale(downscale: u32) -> Result<()> {
+    crate::limits::check_count("downscale", downscale as usize, 1..=usize::MAX)
 }
 
 /// The center and half-size of the box of the middle 98% of a Gaussian model's means on
@@ -247,5 +293,10 @@ mod tests {
             "{az:?}"
         );
         assert!(az.iter().all(|&a| !(60.5..299.5).contains(&a)), "{az:?}");
+    }
+
+    #[test]
+    fn split_names_round_trip() {
+        crate::choice::tests::round_trip::<Split>();
     }
 }
