@@ -2,9 +2,10 @@
 
 use std::path::PathBuf;
 
-use diffsvg::scene::params::{PaintOffsets, written_point_gradient};
+use diffsvg::scene::params::written_point_gradient;
 use diffsvg::scene::project;
-use diffsvg::scene::{GradientKind, Paint, ParamGroup, ParamLayout, SegmentKind};
+use diffsvg::scene::structure::PaintSlots;
+use diffsvg::scene::{ParamGroup, ParamLayout, Structure};
 use diffsvg::{Scene, Sizing};
 use numpy::{PyArray1, PyArray2, PyReadonlyArray1};
 use pyo3::prelude::*;
@@ -42,28 +43,19 @@ fn group_code(g: ParamGroup) -> u8 {
 
 /// `{"kind", "offset", "len", "geometry", "stops"}` of one paint: `len` slots from `offset`
 /// hold its paint values then its opacity (solid: `r, g, b, opacity`; gradient: geometry,
-/// stops, opacity).
+/// stops, opacity); the library's [`PaintSlots`] as a dict.
 fn paint_entry<'py>(
     py: Python<'py>,
-    paint: &Paint,
-    po: Option<PaintOffsets>,
-    opacity: usize,
+    ps: Option<&PaintSlots>,
 ) -> PyResult<Option<Bound<'py, PyDict>>> {
-    let Some(po) = po else { return Ok(None) };
+    let Some(ps) = ps else { return Ok(None) };
     let d = PyDict::new(py);
-    d.set_item("offset", po.base)?;
-    d.set_item("len", opacity + 1 - po.base)?;
-    match paint {
-        Paint::Solid(_) => d.set_item("kind", "solid")?,
-        Paint::Gradient(g) => {
-            let (kind, n) = match g.kind {
-                GradientKind::Linear { .. } => ("linear", 4),
-                GradientKind::Radial { .. } => ("radial", 6),
-            };
-            d.set_item("kind", kind)?;
-            d.set_item("geometry", n)?;
-            d.set_item("stops", g.stops.len())?;
-        }
+    d.set_item("offset", ps.offset)?;
+    d.set_item("len", ps.len)?;
+    d.set_item("kind", ps.kind)?;
+    if ps.kind != "solid" {
+        d.set_item("geometry", ps.geometry)?;
+        d.set_item("stops", ps.stops)?;
     }
     Ok(Some(d))
 }
@@ -203,67 +195,25 @@ impl PyScene {
     /// subpath, `kinds` of the written segments ("L", "Q", "C"), `fill` and `stroke` paint
     /// entries or None, `stroke_width` offset or None) and `groups` (`id`, `offset`).
     fn structure<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        let l = ParamLayout::new(&self.inner);
+        let st = Structure::of(&self.inner);
         let shapes = PyList::empty(py);
-        let mut err = None;
-        let mut i = 0;
-        self.inner.for_each_path(|p| {
-            let r = (|| -> PyResult<()> {
-                let off = l.paths[i];
-                let d = PyDict::new(py);
-                d.set_item("id", &p.id)?;
-                d.set_item("points", (off.points, p.points.len()))?;
-                let segs: Vec<usize> = p.subpaths.iter().map(|s| s.kinds.len()).collect();
-                let closed: Vec<bool> = p.subpaths.iter().map(|s| s.closed).collect();
-                let kinds: Vec<String> = p
-                    .subpaths
-                    .iter()
-                    .map(|s| {
-                        s.kinds
-                            .iter()
-                            .map(|k| match k {
-                                SegmentKind::Line => 'L',
-                                SegmentKind::Quad => 'Q',
-                                SegmentKind::Cubic => 'C',
-                            })
-                            .collect()
-                    })
-                    .collect();
-                d.set_item("segments", segs)?;
-                d.set_item("closed", closed)?;
-                d.set_item("kinds", kinds)?;
-                let fill = match &p.fill {
-                    Some(f) => paint_entry(py, &f.paint, off.fill, off.fill_opacity)?,
-                    None => None,
-                };
-                d.set_item("fill", fill)?;
-                let (stroke, width) = match &p.stroke {
-                    Some(s) => (
-                        paint_entry(py, &s.paint, off.stroke, off.stroke_opacity)?,
-                        Some(off.stroke_width),
-                    ),
-                    None => (None, None),
-                };
-                d.set_item("stroke", stroke)?;
-                d.set_item("stroke_width", width)?;
-                shapes.append(d)?;
-                Ok(())
-            })();
-            if let Err(e) = r {
-                err.get_or_insert(e);
-            }
-            i += 1;
-        });
-        if let Some(e) = err {
-            return Err(e);
+        for sh in &st.shapes {
+            let d = PyDict::new(py);
+            d.set_item("id", &sh.id)?;
+            d.set_item("points", sh.points)?;
+            d.set_item("segments", &sh.segments)?;
+            d.set_item("closed", &sh.closed)?;
+            d.set_item("kinds", &sh.kinds)?;
+            d.set_item("fill", paint_entry(py, sh.fill.as_ref())?)?;
+            d.set_item("stroke", paint_entry(py, sh.stroke.as_ref())?)?;
+            d.set_item("stroke_width", sh.stroke_width)?;
+            shapes.append(d)?;
         }
         let groups = PyList::empty(py);
-        let mut ids = Vec::new();
-        collect_group_ids(&self.inner.nodes, &mut ids);
-        for (id, off) in ids.iter().zip(&l.groups) {
+        for g in &st.groups {
             let e = PyDict::new(py);
-            e.set_item("id", id)?;
-            e.set_item("offset", off)?;
+            e.set_item("id", &g.id)?;
+            e.set_item("offset", g.offset)?;
             groups.append(e)?;
         }
         let d = PyDict::new(py);
@@ -300,14 +250,5 @@ impl PyScene {
                 PyArray2::from_vec2(py, &rows).map_err(|e| bad(e.to_string()))
             })
             .collect()
-    }
-}
-
-fn collect_group_ids(nodes: &[diffsvg::Node], out: &mut Vec<String>) {
-    for n in nodes {
-        if let diffsvg::Node::Group(g) = n {
-            out.push(g.id.clone());
-            collect_group_ids(&g.children, out);
-        }
     }
 }

@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use anyhow::{Result, bail};
-use serde_json::{Value, json};
+use serde_json::Value;
 
 use super::choices::choice;
 use super::util::{SizeArgs, parse_color};
@@ -12,7 +12,7 @@ use diffsvg::gradcheck::{analytic, compare, numeric};
 use diffsvg::image_io::Image;
 use diffsvg::loss::Loss;
 use diffsvg::raster::{RenderOptions, render};
-use diffsvg::scene::{GradientKind, Node, ParamLayout, Path, Scene};
+use diffsvg::scene::{ParamLayout, Scene, Structure};
 
 /// Arguments shared by `loss` and `grad`.
 #[derive(clap::Args, Debug)]
@@ -195,87 +195,5 @@ pub fn run_grad(a: GradArgs) -> Result<GradOutcome> {
 /// arc `A` becomes one or more `C`. Internally a line or quadratic is a cubic; the
 /// gradients of its derived control points are chained to the points written.
 pub fn gradient_json(scene: &Scene, loss: f64, grad: &[f64]) -> Value {
-    let layout = ParamLayout::new(scene);
-    let mut shapes = Vec::new();
-    let mut groups = Vec::new();
-    let mut path_ix = 0usize;
-    let mut group_ix = 0usize;
-    fn visit(
-        nodes: &[Node],
-        layout: &ParamLayout,
-        grad: &[f64],
-        shapes: &mut Vec<Value>,
-        groups: &mut Vec<Value>,
-        path_ix: &mut usize,
-        group_ix: &mut usize,
-    ) {
-        for n in nodes {
-            match n {
-                Node::Group(g) => {
-                    groups.push(json!({"id": g.id, "opacity": grad[layout.groups[*group_ix]]}));
-                    *group_ix += 1;
-                    visit(&g.children, layout, grad, shapes, groups, path_ix, group_ix);
-                }
-                Node::Path(p) => {
-                    shapes.push(shape_json(p, &layout.paths[*path_ix], grad));
-                    *path_ix += 1;
-                }
-            }
-        }
-    }
-    visit(
-        &scene.nodes,
-        &layout,
-        grad,
-        &mut shapes,
-        &mut groups,
-        &mut path_ix,
-        &mut group_ix,
-    );
-    json!({"loss": loss, "shapes": shapes, "groups": groups})
-}
-
-fn shape_json(p: &Path, off: &diffsvg::scene::params::PathOffsets, grad: &[f64]) -> Value {
-    let point_grad = &grad[off.points..off.points + 2 * p.points.len()];
-    let points = diffsvg::scene::params::written_point_gradient(p, point_grad);
-    let paint = |po: Option<diffsvg::scene::params::PaintOffsets>,
-                 paint: &diffsvg::scene::Paint,
-                 opacity: usize|
-     -> Value {
-        let Some(po) = po else { return Value::Null };
-        match paint {
-            diffsvg::scene::Paint::Solid(_) => {
-                json!([
-                    grad[po.base],
-                    grad[po.base + 1],
-                    grad[po.base + 2],
-                    grad[opacity]
-                ])
-            }
-            diffsvg::scene::Paint::Gradient(gr) => {
-                let n = match gr.kind {
-                    GradientKind::Linear { .. } => 4,
-                    GradientKind::Radial { .. } => 6,
-                };
-                let stops: Vec<Vec<f64>> = (0..gr.stops.len())
-                    .map(|s| grad[po.stops + 5 * s..po.stops + 5 * s + 5].to_vec())
-                    .collect();
-                json!({
-                    "kind": if n == 4 { "linear" } else { "radial" },
-                    "geometry": grad[po.base..po.base + n].to_vec(),
-                    "stops": stops,
-                    "opacity": grad[opacity],
-                })
-            }
-        }
-    };
-    let mut v = json!({"id": p.id, "points": points});
-    if let Some(f) = &p.fill {
-        v["fill"] = paint(off.fill, &f.paint, off.fill_opacity);
-    }
-    if let Some(s) = &p.stroke {
-        v["stroke"] = paint(off.stroke, &s.paint, off.stroke_opacity);
-        v["stroke_width"] = json!(grad[off.stroke_width]);
-    }
-    v
+    Structure::of(scene).gradient_json(scene, loss, grad)
 }

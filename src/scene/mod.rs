@@ -37,11 +37,13 @@ pub(crate) mod geom;
 pub mod params;
 mod project;
 pub mod random;
+pub mod structure;
 pub(crate) mod svg_in;
 pub(crate) mod svg_out;
 
 pub use params::{ParamGroup, ParamLayout, ParamSlot};
 pub use project::project;
+pub use structure::Structure;
 pub use svg_in::{Sizing, from_tree, parse_tree};
 pub use svg_out::escape;
 
