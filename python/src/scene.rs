@@ -23,18 +23,7 @@ pub(crate) struct PyScene {
 }
 
 fn sizing(width: Option<u32>, height: Option<u32>, scale: Option<f64>) -> PyResult<Sizing> {
-    Ok(match (width, height, scale) {
-        (None, None, None) => Sizing::Natural,
-        (Some(w), None, None) => Sizing::Width(w),
-        (Some(w), Some(h), None) => Sizing::Exact(w, h),
-        (None, None, Some(s)) if s.is_finite() && s > 0.0 => Sizing::Scale(s),
-        (None, None, Some(s)) => return Err(bad(format!("scale {s} must be a positive number"))),
-        _ => {
-            return Err(bad(
-                "give width, width and height, or scale (height alone or with scale is ambiguous)",
-            ));
-        }
-    })
+    Sizing::from_options(width, height, scale).map_err(to_py)
 }
 
 fn group_code(g: ParamGroup) -> u8 {

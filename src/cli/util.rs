@@ -3,7 +3,7 @@
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
-use anyhow::{Result, bail};
+use anyhow::Result;
 
 use diffsvg::Sizing;
 
@@ -35,23 +35,10 @@ pub struct SizeArgs {
 }
 
 impl SizeArgs {
-    /// The sizing these flags ask for.
+    /// The sizing these flags ask for (the library reads them; errors name the flag).
     pub fn sizing(&self) -> Result<Sizing> {
-        sizing(self.width, self.scale)
+        Sizing::from_options(self.width, None, self.scale).map_err(flag_error)
     }
-}
-
-/// Sizing from `--width` / `--scale` (clap keeps them exclusive).
-fn sizing(width: Option<u32>, scale: Option<f64>) -> Result<Sizing> {
-    Ok(match (width, scale) {
-        (Some(0), _) => bail!("--width must be at least 1 pixel"),
-        (Some(w), _) => Sizing::Width(w),
-        (None, Some(s)) if !(s.is_finite() && s > 0.0) => {
-            bail!("--scale {s} must be a positive number")
-        }
-        (None, Some(s)) => Sizing::Scale(s),
-        (None, None) => Sizing::Natural,
-    })
 }
 
 /// `out.png` → `out.<suffix>.png`, beside it.

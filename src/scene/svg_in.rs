@@ -28,6 +28,46 @@ pub enum Sizing {
     Exact(u32, u32),
 }
 
+impl Sizing {
+    /// The sizing asked for by a `width` (height by the aspect ratio), a `width` and a
+    /// `height` (exactly), or a `scale`; none of them: the natural size. The one reading of
+    /// these options for every front end: errors ([`Error::Setting`]) name the option.
+    pub fn from_options(
+        width: Option<u32>,
+        height: Option<u32>,
+        scale: Option<f64>,
+    ) -> Result<Sizing> {
+        let positive = |name: &str, v: Option<u32>| -> Result<()> {
+            match v {
+                Some(v) => crate::limits::check_count(name, v as usize, 1..=usize::MAX),
+                None => Ok(()),
+            }
+        };
+        positive("width", width)?;
+        positive("height", height)?;
+        Ok(match (width, height, scale) {
+            (None, None, None) => Sizing::Natural,
+            (Some(w), None, None) => Sizing::Width(w),
+            (Some(w), Some(h), None) => Sizing::Exact(w, h),
+            (None, None, Some(s)) if s.is_finite() && s > 0.0 => Sizing::Scale(s),
+            (None, None, Some(s)) => {
+                return Err(Error::Setting {
+                    name: "scale".into(),
+                    message: format!("{s} must be a positive number"),
+                });
+            }
+            _ => {
+                return Err(Error::Setting {
+                    name: "height".into(),
+                    message: "alone or with scale is ambiguous: give width, width and \
+                              height, or scale"
+                        .into(),
+                });
+            }
+        })
+    }
+}
+
 impl Scene {
     /// Loads an SVG file (plain or gzip-compressed, `.svgz`), of at most
     /// [`MAX_FILE_BYTES`] bytes. Errors name the file.
