@@ -43,6 +43,20 @@ pub fn parse_among<T: Choice>(s: &str, among: &[T]) -> Result<T, String> {
         })
 }
 
+/// Implements [`std::str::FromStr`] by [`parse`] (name or alias, any case) for choices.
+macro_rules! from_str_by_name {
+    ($($t:ty),*) => {$(
+        impl std::str::FromStr for $t {
+            type Err = String;
+            /// By name or alias, any case ([`crate::choice::parse`]).
+            fn from_str(s: &str) -> Result<Self, String> {
+                $crate::choice::parse(s)
+            }
+        }
+    )*};
+}
+pub(crate) use from_str_by_name;
+
 /// [`parse_among`] over every value.
 pub fn parse<T: Choice>(s: &str) -> Result<T, String> {
     parse_among(s, T::ALL)

@@ -123,13 +123,7 @@ impl crate::choice::Choice for Loss {
     }
 }
 
-impl std::str::FromStr for Loss {
-    type Err = String;
-    /// By name or alias, any case ([`crate::choice::parse`]).
-    fn from_str(s: &str) -> Result<Self, String> {
-        crate::choice::parse(s)
-    }
-}
+crate::choice::from_str_by_name!(Loss);
 
 #[cfg(test)]
 mod tests {

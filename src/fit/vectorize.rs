@@ -440,13 +440,7 @@ impl crate::choice::Choice for Mode {
     }
 }
 
-impl std::str::FromStr for Mode {
-    type Err = String;
-    /// By name or alias, any case ([`crate::choice::parse`]).
-    fn from_str(s: &str) -> Result<Self, String> {
-        crate::choice::parse(s)
-    }
-}
+crate::choice::from_str_by_name!(Mode);
 
 #[cfg(test)]
 mod tests {

@@ -81,13 +81,7 @@ impl crate::choice::Choice for Schedule {
     }
 }
 
-impl std::str::FromStr for Schedule {
-    type Err = String;
-    /// By name or alias, any case ([`crate::choice::parse`]).
-    fn from_str(s: &str) -> Result<Self, String> {
-        crate::choice::parse(s)
-    }
-}
+crate::choice::from_str_by_name!(Schedule);
 
 #[cfg(test)]
 mod tests {

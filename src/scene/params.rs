@@ -490,13 +490,7 @@ impl crate::choice::Choice for ParamGroup {
     }
 }
 
-impl std::str::FromStr for ParamGroup {
-    type Err = String;
-    /// By name or alias, any case ([`crate::choice::parse`]).
-    fn from_str(s: &str) -> Result<Self, String> {
-        crate::choice::parse(s)
-    }
-}
+crate::choice::from_str_by_name!(ParamGroup);
 
 #[cfg(test)]
 mod tests {

@@ -49,13 +49,7 @@ impl crate::choice::Choice for Split {
     }
 }
 
-impl std::str::FromStr for Split {
-    type Err = String;
-    /// By name, any case ([`crate::choice::parse`]).
-    fn from_str(s: &str) -> std::result::Result<Self, String> {
-        crate::choice::parse(s)
-    }
-}
+crate::choice::from_str_by_name!(Split);
 
 /// A trained model of either kind, with the settings it renders with.
 pub enum Model {
