@@ -215,13 +215,21 @@ pub fn load_target(path: &Path, size: Option<(u32, u32)>) -> Result<Image> {
 mod tests {
     use super::*;
 
+    /// `validate` of the defaults changed by `f`, its error as text.
+    fn changed<T>(
+        mut o: T,
+        f: &dyn Fn(&mut T),
+        validate: fn(&T) -> Result<()>,
+    ) -> Result<(), String> {
+        f(&mut o);
+        validate(&o).map_err(|e| e.to_string())
+    }
+
     /// Each bound is refused just past it and accepted at it, with the option's name.
     #[test]
     fn bounds_name_their_option() {
         let v = |f: &dyn Fn(&mut VectorizeOptions)| {
-            let mut o = VectorizeOptions::default();
-            f(&mut o);
-            o.validate().map_err(|e| e.to_string())
+            changed(VectorizeOptions::default(), f, VectorizeOptions::validate)
         };
         assert_eq!(
             v(&|o| o.segments = 1),
@@ -258,9 +266,7 @@ mod tests {
         assert!(p(0).is_err() && p(MAX_PYRAMID_LEVELS + 1).is_err());
         assert!(p(1).is_ok() && p(MAX_PYRAMID_LEVELS).is_ok());
         let d = |f: &dyn Fn(&mut DigitOptions)| {
-            let mut o = DigitOptions::default();
-            f(&mut o);
-            o.validate().map_err(|e| e.to_string())
+            changed(DigitOptions::default(), f, DigitOptions::validate)
         };
         assert!(d(&|_| ()).is_ok());
         assert_eq!(
@@ -274,9 +280,7 @@ mod tests {
                 .starts_with("max_segments 0")
         );
         let g = |f: &dyn Fn(&mut GlyphOptions)| {
-            let mut o = GlyphOptions::default();
-            f(&mut o);
-            o.validate().map_err(|e| e.to_string())
+            changed(GlyphOptions::default(), f, GlyphOptions::validate)
         };
         assert!(g(&|_| ()).is_ok());
         assert_eq!(
