@@ -77,6 +77,11 @@ pub const MAX_SCENE_CHORDS: usize = 4_000_000;
 /// compositing time over that box per level, not canvas-wide.
 pub const MAX_GROUP_DEPTH: usize = 256;
 
+/// Most elements markers may be copied into, estimated before parsing as the size of the
+/// largest `<marker>` times the numbers in all path data (usvg copies a marker's content
+/// at every vertex that uses it). The resvg suite's marker files are below 2,000.
+pub const MAX_MARKER_NODES: usize = 2_000_000;
+
 /// Most steps a stylesheet's selectors may take to match, estimated before parsing as
 /// `elements × depth^(parts − 1)` for the selector with the most compound parts: usvg
 /// matches descendant combinators by backtracking over ancestors. Ordinary drawings are far

@@ -396,7 +396,13 @@ fn group_opacity(p: &Prepared) -> Vec<f32> {
     for op in &p.ops {
         match *op {
             Op::Draw(i) => open.last_mut().unwrap().push(i),
-            Op::Push => open.push(Vec::new()),
+            Op::Push | Op::PushMask => open.push(Vec::new()),
+            // A mask's or clip path's shapes paint nothing themselves.
+            Op::PopMask { .. } => {
+                for i in open.pop().unwrap_or_default() {
+                    scale[i] = 0.0;
+                }
+            }
             Op::Pop { opacity, .. } => {
                 if open.len() > 1 {
                     let inner = open.pop().unwrap();
@@ -673,11 +679,7 @@ mod tests {
         scene
             .nodes
             .push(Node::Path(square(4.0, 4.0, 12.0, [1.0, 0.0, 0.0])));
-        scene.nodes.push(Node::Group(Group {
-            id: String::new(),
-            opacity: 0.5,
-            children: vec![Node::Path(square(20.0, 20.0, 8.0, [0.0, 0.0, 1.0]))],
-        }));
+        scene.nodes.push(Node::Group(Group::new(String::new(), 0.5, vec![Node::Path(square(20.0, 20.0, 8.0, [0.0, 0.0, 1.0]))])));
         let mut s = scene.clone();
         prune_to_budget(&mut s, &target, 3, [0.0; 4]);
         assert_eq!(s.nodes, scene.nodes[..3]);
@@ -740,14 +742,10 @@ mod tests {
             Node::Path(red.clone()),
             Node::Path(clear),
             Node::Path(named(square(40.0, -20.0, 8.0, [0.0, 1.0, 0.0]), "outside")),
-            Node::Group(Group {
-                id: String::new(),
-                opacity: 0.0,
-                children: vec![Node::Path(named(
+            Node::Group(Group::new(String::new(), 0.0, vec![Node::Path(named(
                     square(2.0, 20.0, 8.0, [1.0, 0.0, 1.0]),
                     "in clear group",
-                ))],
-            }),
+                ))])),
             Node::Path(named(square(20.0, 20.0, 6.0, [0.0, 0.0, 1.0]), "blue")),
             Node::Path(named(square(2.0, 24.0, 5.0, [1.0, 1.0, 0.0]), "wrong")),
         ];
@@ -838,11 +836,7 @@ mod tests {
         let lone = stroked.nodes.remove(6);
         stroked.nodes.insert(
             6,
-            Node::Group(Group {
-                id: String::new(),
-                opacity: 0.6,
-                children: vec![lone],
-            }),
+            Node::Group(Group::new(String::new(), 0.6, vec![lone])),
         );
         let blobs = crate::fit::shapes::random_blobs(14, 40, 40, 9);
         let mut total = 0;

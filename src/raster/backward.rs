@@ -32,13 +32,13 @@ use rayon::prelude::*;
 use super::coverage::{Cells, backward_line, coverage_row, coverage_slopes_row};
 use super::paint::PaintEval;
 use super::prepare::{ItemKind, Op, Prepared, item_rect, prepare, stroke_outline};
+use super::layer::{apply_mask, apply_mask_backward, composite_backward, composite_layer};
 use super::render::{
-    Area, BAND_ROWS, BandRenderer, RenderOptions, RowScratch, blank_canvas, composite_layer,
-    covered_span, over,
+    Area, BAND_ROWS, BandRenderer, RenderOptions, RowScratch, blank_canvas, covered_span, over,
 };
 use super::stroke::NONE;
 use crate::image_io::Image;
-use crate::scene::{ParamLayout, Path, Point, Scene};
+use crate::scene::{BlendMode, MaskKind, ParamLayout, Path, Point, Scene};
 
 /// Renders `scene` once and returns the image, the loss and its gradient with respect to
 /// every parameter. `loss` receives the rendered image (premultiplied RGBA) and returns the
@@ -226,14 +226,27 @@ enum Rec {
     },
     Push,
     Pop {
-        group: usize,
+        group: Option<usize>,
         opacity: f32,
+        blend: BlendMode,
         /// The layer, over `area`.
         top: Vec<[f32; 4]>,
         /// The color below it, over `area` only (elsewhere the layer is transparent).
         below: Vec<[f32; 4]>,
         area: Area,
     },
+    PushMask,
+    /// A mask layer multiplied the layer below it.
+    PopMask {
+        kind: MaskKind,
+        /// The mask layer, over `mask_area`.
+        mask: Vec<[f32; 4]>,
+        mask_area: Area,
+        /// The masked layer before masking, over its own area.
+        content: Vec<[f32; 4]>,
+    },
+    /// A mask drawing nothing in this band made the layer below it transparent.
+    ZeroMask,
 }
 
 /// Like [`render_backward`], reusing a prepared scene (which must come from `scene`).
@@ -768,23 +781,46 @@ fn band_backward(
                     cells: first..cells.len(),
                 });
             }
-            Op::Push => {
+            Op::Push | Op::PushMask => {
                 let span = p.groups[group_ix];
+                let mask = p.ops[i] == Op::PushMask;
                 match r.layer_area(&span) {
                     Some(a) => {
                         layers.push((a, vec![[0.0; 4]; a.len()]));
-                        tape.push(Rec::Push);
+                        tape.push(if mask { Rec::PushMask } else { Rec::Push });
                         group_ix += 1;
                     }
                     None => {
-                        // Nothing inside touches this band: no layer, no gradient.
+                        // Nothing inside touches this band: a group's layer changes
+                        // nothing and gets no gradient; a mask's hides what it masks.
+                        if mask {
+                            let (_, content) = layers.last_mut().expect("a masked layer");
+                            content.fill([0.0; 4]);
+                            tape.push(Rec::ZeroMask);
+                        }
                         group_ix = span.groups_end;
                         i = span.end + 1;
                         continue;
                     }
                 }
             }
-            Op::Pop { opacity, group } => {
+            Op::PopMask { kind } => {
+                let (mask_area, mask) = layers.pop().expect("a mask layer");
+                let (ca, content) = layers.last_mut().expect("a masked layer");
+                let before = content.clone();
+                apply_mask(content, *ca, Some((&mask, mask_area)), kind);
+                tape.push(Rec::PopMask {
+                    kind,
+                    mask,
+                    mask_area,
+                    content: before,
+                });
+            }
+            Op::Pop {
+                opacity,
+                group,
+                blend,
+            } => {
                 let (ta, top) = layers.pop().expect("a layer per group");
                 let (ba, below_buf) = match layers.last_mut() {
                     Some((a, l)) => (*a, l.as_mut_slice()),
@@ -795,10 +831,11 @@ fn band_backward(
                     let start = ba.index(ta.x0, ta.y0 + row);
                     below.extend_from_slice(&below_buf[start..start + ta.w]);
                 }
-                composite_layer(below_buf, ba, &top, ta, opacity);
+                composite_layer(below_buf, ba, &top, ta, opacity, blend);
                 tape.push(Rec::Pop {
                     group,
                     opacity,
+                    blend,
                     top,
                     below,
                     area: ta,
@@ -814,8 +851,9 @@ fn band_backward(
         tape_bytes: tape
             .iter()
             .map(|r| match r {
-                Rec::Draw { .. } | Rec::Push => 0,
+                Rec::Draw { .. } | Rec::Push | Rec::PushMask | Rec::ZeroMask => 0,
                 Rec::Pop { top, below, .. } => (top.len() + below.len()) * 16,
+                Rec::PopMask { mask, content, .. } => (mask.len() + content.len()) * 16,
             })
             .sum::<usize>()
             + cells.len() * std::mem::size_of::<TapeCell>()
@@ -829,13 +867,13 @@ fn band_backward(
             Rec::Pop {
                 group,
                 opacity,
+                blend,
                 top,
                 below,
                 area,
             } => {
                 let (ga, g) = g_stack.last_mut().expect("layer gradient");
                 let ga = *ga;
-                let op = *opacity;
                 let mut g_top = vec![[0.0f32; 4]; area.len()];
                 let mut g_op = 0.0f64;
                 // Outside `area` the layer is transparent: the gradient below passes
@@ -845,22 +883,34 @@ fn band_backward(
                     for col in 0..area.w {
                         let k = row * area.w + col;
                         let kg = kg0 + col;
-                        let (go, t, b) = (g[kg], top[k], below[k]);
-                        let gb: f32 = (0..4).map(|c| go[c] * b[c]).sum();
-                        let gt: f32 = (0..4).map(|c| go[c] * t[c]).sum();
-                        for c in 0..4 {
-                            g_top[k][c] = go[c] * op;
-                            g[kg][c] = go[c] * (1.0 - t[3] * op);
-                        }
-                        g_top[k][3] -= op * gb;
-                        g_op += (gt - t[3] * gb) as f64;
+                        let (gt, gb, go) =
+                            composite_backward(*blend, *opacity, g[kg], top[k], below[k]);
+                        g_top[k] = gt;
+                        g[kg] = gb;
+                        g_op += go as f64;
                     }
                 }
-                out.groups.push((*group as u32, g_op));
+                if let Some(group) = group {
+                    out.groups.push((*group as u32, g_op));
+                }
                 g_stack.push((*area, g_top));
             }
-            Rec::Push => {
+            Rec::Push | Rec::PushMask => {
                 g_stack.pop();
+            }
+            Rec::ZeroMask => {
+                let (_, g) = g_stack.last_mut().expect("layer gradient");
+                g.fill([0.0; 4]);
+            }
+            Rec::PopMask {
+                kind,
+                mask,
+                mask_area,
+                content,
+            } => {
+                let (ca, g) = g_stack.last_mut().expect("layer gradient");
+                let gm = apply_mask_backward(g, *ca, content, mask, *mask_area, *kind);
+                g_stack.push((*mask_area, gm));
             }
             Rec::Draw {
                 item,
@@ -1031,11 +1081,7 @@ mod tests {
         });
         let mut node = Node::Path(p);
         for _ in 0..levels {
-            node = Node::Group(Group {
-                id: String::new(),
-                opacity: 0.9,
-                children: vec![node],
-            });
+            node = Node::Group(Group::new(String::new(), 0.9, vec![node]));
         }
         let mut s = Scene::new(size, size);
         s.nodes.push(node);

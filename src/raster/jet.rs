@@ -60,25 +60,25 @@ impl Scalar for f64 {
     }
 }
 
-/// A value with its derivatives with respect to [`N`] inputs.
+/// A value with its derivatives with respect to `K` inputs ([`N`] unless said).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub(crate) struct Jet {
+pub(crate) struct Jet<const K: usize = N> {
     /// Value.
     pub(crate) v: f64,
     /// Partial derivatives.
-    pub(crate) d: [f64; N],
+    pub(crate) d: [f64; K],
 }
 
-impl Jet {
+impl<const K: usize> Jet<K> {
     /// The input number `i` with value `v`.
-    pub(crate) fn var(v: f64, i: usize) -> Jet {
-        let mut d = [0.0; N];
+    pub(crate) fn var(v: f64, i: usize) -> Self {
+        let mut d = [0.0; K];
         d[i] = 1.0;
         Jet { v, d }
     }
 
     #[inline]
-    fn chain(self, v: f64, dv: f64) -> Jet {
+    fn chain(self, v: f64, dv: f64) -> Self {
         Jet {
             v,
             d: self.d.map(|x| x * dv),
@@ -86,10 +86,10 @@ impl Jet {
     }
 }
 
-impl Add for Jet {
-    type Output = Jet;
+impl<const K: usize> Add for Jet<K> {
+    type Output = Self;
     #[inline]
-    fn add(self, o: Jet) -> Jet {
+    fn add(self, o: Self) -> Self {
         let mut d = self.d;
         for (a, b) in d.iter_mut().zip(o.d) {
             *a += b;
@@ -98,18 +98,18 @@ impl Add for Jet {
     }
 }
 
-impl Sub for Jet {
-    type Output = Jet;
+impl<const K: usize> Sub for Jet<K> {
+    type Output = Self;
     #[inline]
-    fn sub(self, o: Jet) -> Jet {
+    fn sub(self, o: Self) -> Self {
         self + (-o)
     }
 }
 
-impl Neg for Jet {
-    type Output = Jet;
+impl<const K: usize> Neg for Jet<K> {
+    type Output = Self;
     #[inline]
-    fn neg(self) -> Jet {
+    fn neg(self) -> Self {
         Jet {
             v: -self.v,
             d: self.d.map(|x| -x),
@@ -117,11 +117,11 @@ impl Neg for Jet {
     }
 }
 
-impl Mul for Jet {
-    type Output = Jet;
+impl<const K: usize> Mul for Jet<K> {
+    type Output = Self;
     #[inline]
-    fn mul(self, o: Jet) -> Jet {
-        let mut d = [0.0; N];
+    fn mul(self, o: Self) -> Self {
+        let mut d = [0.0; K];
         for (i, x) in d.iter_mut().enumerate() {
             *x = self.d[i] * o.v + self.v * o.d[i];
         }
@@ -129,12 +129,12 @@ impl Mul for Jet {
     }
 }
 
-impl Div for Jet {
-    type Output = Jet;
+impl<const K: usize> Div for Jet<K> {
+    type Output = Self;
     #[inline]
-    fn div(self, o: Jet) -> Jet {
+    fn div(self, o: Self) -> Self {
         let v = self.v / o.v;
-        let mut d = [0.0; N];
+        let mut d = [0.0; K];
         for (i, x) in d.iter_mut().enumerate() {
             *x = (self.d[i] - v * o.d[i]) / o.v;
         }
@@ -142,9 +142,9 @@ impl Div for Jet {
     }
 }
 
-impl Scalar for Jet {
+impl<const K: usize> Scalar for Jet<K> {
     fn c(v: f64) -> Self {
-        Jet { v, d: [0.0; N] }
+        Jet { v, d: [0.0; K] }
     }
     fn v(self) -> f64 {
         self.v
@@ -163,9 +163,9 @@ impl Scalar for Jet {
         let r2 = self.v * self.v + x.v * x.v;
         let v = self.v.atan2(x.v);
         if r2 == 0.0 {
-            return Jet::c(v);
+            return Self::c(v);
         }
-        let mut d = [0.0; N];
+        let mut d = [0.0; K];
         for (i, o) in d.iter_mut().enumerate() {
             *o = (x.v * self.d[i] - self.v * x.d[i]) / r2;
         }
@@ -179,10 +179,10 @@ mod tests {
 
     #[test]
     fn derivatives_match_differences() {
-        let f = |x: Jet, y: Jet| (x * y + x.sin()) / (y.sqrt() + Jet::c(1.0)) + y.atan2(x).cos();
+        let f = |x: Jet, y: Jet| (x * y + x.sin()) / (y.sqrt() + <Jet>::c(1.0)) + y.atan2(x).cos();
         let (x0, y0) = (0.7, 1.3);
-        let j = f(Jet::var(x0, 0), Jet::var(y0, 1));
-        let fv = |x: f64, y: f64| f(Jet::c(x), Jet::c(y)).v;
+        let j = f(<Jet>::var(x0, 0), <Jet>::var(y0, 1));
+        let fv = |x: f64, y: f64| f(<Jet>::c(x), <Jet>::c(y)).v;
         let e = 1e-6;
         let dx = (fv(x0 + e, y0) - fv(x0 - e, y0)) / (2.0 * e);
         let dy = (fv(x0, y0 + e) - fv(x0, y0 - e)) / (2.0 * e);

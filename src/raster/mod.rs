@@ -32,6 +32,7 @@ pub(crate) mod coverage;
 pub(crate) mod dash;
 pub(crate) mod flatten;
 pub(crate) mod jet;
+pub(crate) mod layer;
 pub(crate) mod paint;
 pub(crate) mod prepare;
 pub(crate) mod render;

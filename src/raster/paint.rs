@@ -540,8 +540,8 @@ impl Geometry<f64> {
     /// The parameters as dual numbers, parameter `k` seeded in slot `k`.
     pub(crate) fn to_jets(self) -> Geometry<Jet> {
         match self {
-            Geometry::Linear(v) => Geometry::Linear(std::array::from_fn(|k| Jet::var(v[k], k))),
-            Geometry::Radial(v) => Geometry::Radial(std::array::from_fn(|k| Jet::var(v[k], k))),
+            Geometry::Linear(v) => Geometry::Linear(std::array::from_fn(|k| <Jet>::var(v[k], k))),
+            Geometry::Radial(v) => Geometry::Radial(std::array::from_fn(|k| <Jet>::var(v[k], k))),
         }
     }
 }

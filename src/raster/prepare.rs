@@ -7,7 +7,7 @@ use super::paint::PaintEval;
 use super::stroke::{Style, outline};
 use crate::limits::MAX_DASHES_PER_PATH;
 use crate::scene::geom::{flatten_rect, frame_tolerance};
-use crate::scene::{FillRule, Node, Path, Point, Scene, Stroke};
+use crate::scene::{BlendMode, FillRule, Group, MaskKind, Node, Path, Point, Role, Scene, Stroke};
 use rayon::prelude::*;
 
 /// Whether an item is a path's fill or its stroke.
@@ -137,13 +137,26 @@ pub(crate) enum Op {
     Draw(usize),
     /// Start a transparent layer.
     Push,
-    /// Composite the current layer onto the one below with `opacity`; `group` numbers the
-    /// group in walk order (its slot in [`crate::scene::ParamLayout::groups`]).
+    /// Composite the current layer onto the one below with `opacity` and `blend`;
+    /// `group` numbers the group among those with an opacity parameter, in walk order
+    /// (its slot in [`crate::scene::ParamLayout::groups`]); `None` for a group inside a
+    /// clip path, drawn opaque.
     Pop {
         /// Layer opacity.
         opacity: f32,
-        /// Group index.
-        group: usize,
+        /// Parameter group index.
+        group: Option<usize>,
+        /// Blend mode.
+        blend: BlendMode,
+    },
+    /// Start a transparent mask layer (a clip path's shapes or a mask's content).
+    PushMask,
+    /// Multiply the layer below the current one by the current layer's factor (`kind`),
+    /// pixel by pixel, and drop the current layer; where the mask layer has no pixels
+    /// the factor is 0.
+    PopMask {
+        /// Luminance or alpha.
+        kind: MaskKind,
     },
 }
 
@@ -165,7 +178,7 @@ pub(crate) struct PathGeom {
 /// touches allocates and composites only the group's box.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) struct GroupSpan {
-    /// Index in [`Prepared::ops`] of the group's [`Op::Pop`].
+    /// Index in [`Prepared::ops`] of the group's [`Op::Pop`] (or [`Op::PopMask`]).
     pub(crate) end: usize,
     /// Number of groups opened up to and including this group's descendants (the next
     /// group opened after it has this index).
@@ -189,7 +202,8 @@ pub struct Prepared {
     pub(crate) items: Vec<Item>,
     /// Per path geometry, in paint order.
     pub(crate) geoms: Vec<PathGeom>,
-    /// Per group, in walk order (the order of the [`Op::Push`]es).
+    /// Per layer, group or mask, in the order of the [`Op::Push`]es and
+    /// [`Op::PushMask`]es.
     pub(crate) groups: Vec<GroupSpan>,
     /// Paths (paint order) whose dash pattern was dropped for a solid stroke because it
     /// would cut more than [`MAX_DASHES_PER_PATH`] dashes; see [`warnings`].
@@ -285,12 +299,12 @@ fn prepare_with(
     // Each path's geometry and items depend on that path alone: built in parallel (in
     // paint order, so the result is the same on any thread count), then placed by the
     // walk that lays out groups.
-    let mut paths: Vec<&Path> = Vec::new();
-    scene.for_each_path(|q| paths.push(q));
-    let build = |(ix, path): (usize, &&Path)| {
+    let mut paths: Vec<(&Path, Role)> = Vec::new();
+    scene.for_each_path_role(|q, role| paths.push((q, role)));
+    let build = |(ix, &(path, role)): (usize, &(&Path, Role))| {
         let fixed = counts.and_then(|c| c.get(ix)).map(|c| c.as_slice());
         let size = (scene.width, scene.height);
-        build_path(path, ix, size, tolerance, fixed, for_backward)
+        build_path(path, role, ix, size, tolerance, fixed, for_backward)
     };
     let built: Vec<Built> = if paths.len() >= PARALLEL_PATHS {
         paths.par_iter().enumerate().map(build).collect()
@@ -300,8 +314,9 @@ fn prepare_with(
     let mut b = Builder {
         built: built.into_iter(),
         out: &mut p,
+        param_groups: 0,
     };
-    b.nodes(&scene.nodes);
+    b.nodes(&scene.nodes, Role::Paint);
     p
 }
 
@@ -441,6 +456,8 @@ struct Builder<'a> {
     /// Every path's geometry and items, in paint order.
     built: std::vec::IntoIter<Built>,
     out: &'a mut Prepared,
+    /// Groups with an opacity parameter opened so far.
+    param_groups: usize,
 }
 
 /// One path prepared: its geometry and items (in drawing order).
@@ -452,47 +469,84 @@ struct Built {
 }
 
 impl Builder<'_> {
-    fn nodes(&mut self, nodes: &[Node]) {
+    fn nodes(&mut self, nodes: &[Node], role: Role) {
         for n in nodes {
             match n {
                 Node::Path(_) => self.path(),
                 Node::Group(g) => {
-                    let group = self.out.groups.len();
-                    self.out.groups.push(GroupSpan {
-                        end: 0,
-                        groups_end: 0,
-                        rect: None,
+                    // The walk order of the parameters: a group's opacity first.
+                    let group = (role == Role::Paint).then(|| {
+                        self.param_groups += 1;
+                        self.param_groups - 1
                     });
-                    let first_item = self.out.items.len();
-                    self.out.ops.push(Op::Push);
-                    self.nodes(&g.children);
+                    let span = self.open(Op::Push);
+                    self.layer(g, role);
                     self.out.ops.push(Op::Pop {
                         opacity: g.opacity.clamp(0.0, 1.0) as f32,
                         group,
+                        blend: g.blend,
                     });
-                    let (w, h) = (self.out.width, self.out.height);
-                    let mut rect: Option<[usize; 4]> = None;
-                    for it in &self.out.items[first_item..] {
-                        if let Some(r) = item_rect(it.bbox, w, h) {
-                            rect = Some(match rect {
-                                None => r,
-                                Some(u) => [
-                                    u[0].min(r[0]),
-                                    u[1].min(r[1]),
-                                    u[2].max(r[2]),
-                                    u[3].max(r[3]),
-                                ],
-                            });
-                        }
-                    }
-                    self.out.groups[group] = GroupSpan {
-                        end: self.out.ops.len() - 1,
-                        groups_end: self.out.groups.len(),
-                        rect,
-                    };
+                    self.close(span);
                 }
             }
         }
+    }
+
+    /// A layer's body: the group's children, then its clip path and its mask, each a
+    /// mask layer multiplying the layer.
+    fn layer(&mut self, g: &Group, role: Role) {
+        self.nodes(&g.children, role);
+        if let Some(c) = &g.clip {
+            let span = self.open(Op::PushMask);
+            self.layer(&c.content, Role::Clip);
+            self.out.ops.push(Op::PopMask {
+                kind: MaskKind::Alpha,
+            });
+            self.close(span);
+        }
+        if let Some(m) = &g.mask {
+            let span = self.open(Op::PushMask);
+            self.layer(&m.content, role);
+            self.out.ops.push(Op::PopMask { kind: m.kind });
+            self.close(span);
+        }
+    }
+
+    /// Pushes `op` and a span to fill in by [`close`](Self::close): `(span, first item)`.
+    fn open(&mut self, op: Op) -> (usize, usize) {
+        let span = self.out.groups.len();
+        self.out.groups.push(GroupSpan {
+            end: 0,
+            groups_end: 0,
+            rect: None,
+        });
+        self.out.ops.push(op);
+        (span, self.out.items.len())
+    }
+
+    /// Fills in a span opened by [`open`](Self::open), once its closing op is pushed:
+    /// the union of the boxes of the items drawn inside.
+    fn close(&mut self, (span, first_item): (usize, usize)) {
+        let (w, h) = (self.out.width, self.out.height);
+        let mut rect: Option<[usize; 4]> = None;
+        for it in &self.out.items[first_item..] {
+            if let Some(r) = item_rect(it.bbox, w, h) {
+                rect = Some(match rect {
+                    None => r,
+                    Some(u) => [
+                        u[0].min(r[0]),
+                        u[1].min(r[1]),
+                        u[2].max(r[2]),
+                        u[3].max(r[3]),
+                    ],
+                });
+            }
+        }
+        self.out.groups[span] = GroupSpan {
+            end: self.out.ops.len() - 1,
+            groups_end: self.out.groups.len(),
+            rect,
+        };
     }
 
     fn path(&mut self) {
@@ -513,6 +567,7 @@ impl Builder<'_> {
 /// with the chord counts `fixed` when given; `keep` keeps what the backward pass needs.
 fn build_path(
     path: &Path,
+    role: Role,
     ix: usize,
     (width, height): (u32, u32),
     tolerance: f64,
@@ -527,7 +582,11 @@ fn build_path(
         ..PathGeom::default()
     };
     let fill_item = path.fill.as_ref().and_then(|f| {
-        let paint = PaintEval::new(&f.paint, f.opacity)?;
+        // A clip path's shape is drawn opaque black: only its coverage counts.
+        let paint = match role {
+            Role::Paint => PaintEval::new(&f.paint, f.opacity)?,
+            Role::Clip => PaintEval::new(&crate::scene::Paint::Solid([0.0; 3]), 1.0)?,
+        };
         let mut pts = Vec::with_capacity(geom.flat.pts.len());
         let mut src = Vec::with_capacity(if keep { geom.flat.pts.len() } else { 0 });
         let mut rings = Vec::new();
@@ -552,7 +611,7 @@ fn build_path(
     });
     let mut solid = false;
     let stroke_item = path.stroke.as_ref().and_then(|s| {
-        if !(s.width > 0.0) {
+        if !(s.width > 0.0) || role == Role::Clip {
             return None;
         }
         let paint = PaintEval::new(&s.paint, s.opacity)?;

@@ -4,6 +4,7 @@ use rayon::prelude::*;
 
 use super::coverage::{Cells, accumulate_line, ceil_f64, coverage_row, floor_f64, integrate_rows};
 use super::paint::PaintEval;
+use super::layer::{apply_mask, composite_layer};
 use super::prepare::{GroupSpan, Item, Op, Prepared, prepare_forward};
 use crate::image_io::Image;
 use crate::scene::Scene;
@@ -68,11 +69,11 @@ fn opaque_start(p: &Prepared) -> (usize, usize, [f32; 4]) {
                 }
             }
             Op::Draw(_) => {}
-            Op::Push => {
+            Op::Push | Op::PushMask => {
                 depth += 1;
                 groups += 1;
             }
-            Op::Pop { .. } => depth -= 1,
+            Op::Pop { .. } | Op::PopMask { .. } => depth -= 1,
         }
     }
     start
@@ -218,7 +219,7 @@ impl<'a> BandRenderer<'a> {
                     };
                     self.draw(&self.p.items[it], target, area);
                 }
-                Op::Push => {
+                Op::Push | Op::PushMask => {
                     let span = self.p.groups[group];
                     match self.layer_area(&span) {
                         Some(a) => {
@@ -226,19 +227,30 @@ impl<'a> BandRenderer<'a> {
                             group += 1;
                         }
                         None => {
+                            // A group drawing nothing here changes nothing; a mask
+                            // drawing nothing here hides the layer it masks.
+                            if ops[i] == Op::PushMask {
+                                let (_, content) = layers.last_mut().expect("a masked layer");
+                                content.fill([0.0; 4]);
+                            }
                             group = span.groups_end;
                             i = span.end + 1;
                             continue;
                         }
                     }
                 }
-                Op::Pop { opacity, .. } => {
+                Op::Pop { opacity, blend, .. } => {
                     let (ta, top) = layers.pop().expect("a layer per group");
                     let (ba, below) = match layers.last_mut() {
                         Some((a, l)) => (*a, l.as_mut_slice()),
                         None => (base, &mut *out),
                     };
-                    composite_layer(below, ba, &top, ta, opacity);
+                    composite_layer(below, ba, &top, ta, opacity, blend);
+                }
+                Op::PopMask { kind } => {
+                    let (ma, mask) = layers.pop().expect("a mask layer");
+                    let (ca, content) = layers.last_mut().expect("a masked layer");
+                    apply_mask(content, *ca, Some((&mask, ma)), kind);
                 }
             }
             i += 1;
@@ -500,25 +512,6 @@ pub(crate) fn over(d: &mut [f32; 4], s: [f32; 4], cov: f32) {
     let k = 1.0 - s[3] * cov;
     for c in 0..4 {
         d[c] = s[c] * cov + d[c] * k;
-    }
-}
-
-/// Composites a layer `top` (covering `ta`) onto `below` (covering `ba`, which contains
-/// `ta`) with `opacity`. Pixels of `below` outside `ta` are left as they are, which is
-/// what compositing a transparent pixel does.
-pub(crate) fn composite_layer(
-    below: &mut [[f32; 4]],
-    ba: Area,
-    top: &[[f32; 4]],
-    ta: Area,
-    opacity: f32,
-) {
-    for r in 0..ta.h {
-        let src = &top[r * ta.w..][..ta.w];
-        let dst = &mut below[ba.index(ta.x0, ta.y0 + r)..][..ta.w];
-        for (d, s) in dst.iter_mut().zip(src) {
-            over(d, *s, opacity);
-        }
     }
 }
 

@@ -252,8 +252,8 @@ impl Recipe {
         h: f64,
         g: Point,
     ) -> ([Point; 3], f64) {
-        let j = |p: Point, i: usize| [Jet::var(p[0], i), Jet::var(p[1], i + 1)];
-        let out = self.eval(j(pa, 0), j(pb, 2), j(pc, 4), Jet::var(h, 6));
+        let j = |p: Point, i: usize| [<Jet>::var(p[0], i), <Jet>::var(p[1], i + 1)];
+        let out = self.eval(j(pa, 0), j(pb, 2), j(pc, 4), <Jet>::var(h, 6));
         let mut d = [0.0; 7];
         for (i, v) in d.iter_mut().enumerate() {
             *v = g[0] * out[0].d[i] + g[1] * out[1].d[i];

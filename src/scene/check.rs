@@ -5,7 +5,7 @@ use std::path::Path as FsPath;
 use super::geom::{
     DEFAULT_TOLERANCE, arc_steps, cap_vertices, chord_count, flatten_rect, frame_tolerance,
 };
-use super::{LineCap, LineJoin, Node, Scene};
+use super::{Group, LineCap, LineJoin, Node, Scene};
 use crate::limits::{MAX_GROUP_DEPTH, MAX_SCENE_CHORDS};
 use crate::{Error, Result};
 
@@ -22,7 +22,8 @@ impl Scene {
             return Err(Error::Unsupported {
                 path: name.to_path_buf(),
                 what: format!(
-                    "groups with opacity nested {depth} deep (the limit is {MAX_GROUP_DEPTH})"
+                    "layers (groups, clip paths, masks) nested {depth} deep (the limit is \
+                     {MAX_GROUP_DEPTH})"
                 ),
             });
         }
@@ -40,16 +41,27 @@ impl Scene {
         Ok(())
     }
 
-    /// Deepest nesting of [`Node::Group`]s (0 without groups).
+    /// Deepest nesting of layers (0 without groups): a [`Node::Group`] is one, and the
+    /// content of its clip path and of its mask one more inside it.
     pub fn group_depth(&self) -> usize {
         let mut deepest = 0;
-        let mut stack: Vec<(&[Node], usize)> = vec![(&self.nodes, 0)];
-        while let Some((nodes, depth)) = stack.pop() {
-            deepest = deepest.max(depth);
+        // (a layer's content, its depth)
+        let mut stack: Vec<(&Group, usize)> = Vec::new();
+        fn push_children<'a>(nodes: &'a [Node], depth: usize, stack: &mut Vec<(&'a Group, usize)>) {
             for n in nodes {
                 if let Node::Group(g) = n {
-                    stack.push((&g.children, depth + 1));
+                    stack.push((g, depth));
                 }
+            }
+        }
+        push_children(&self.nodes, 1, &mut stack);
+        while let Some((g, depth)) = stack.pop() {
+            deepest = deepest.max(depth);
+            push_children(&g.children, depth + 1, &mut stack);
+            let clip = g.clip.as_ref().map(|c| &c.content);
+            let mask = g.mask.as_ref().map(|m| &m.content);
+            for content in [clip, mask].into_iter().flatten() {
+                stack.push((content, depth + 1));
             }
         }
         deepest
@@ -100,11 +112,7 @@ mod tests {
         p.stroke = Some(Stroke::new(Paint::Solid([0.0; 3]), 1.0));
         let mut node = Node::Path(p);
         for _ in 0..depth {
-            node = Node::Group(Group {
-                id: String::new(),
-                opacity: 0.5,
-                children: vec![node],
-            });
+            node = Node::Group(Group::new(String::new(), 0.5, vec![node]));
         }
         let mut s = Scene::new(10, 10);
         s.nodes.push(node);

@@ -114,7 +114,8 @@ pub enum Node {
     Group(Group),
 }
 
-/// A group of nodes rendered into a transparent layer, then composited with `opacity`.
+/// A group of nodes rendered into a transparent layer, then clipped, masked and
+/// composited onto what lies below with `opacity` and `blend` (resvg's order).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Group {
     /// The SVG id (may be empty).
@@ -123,6 +124,165 @@ pub struct Group {
     pub opacity: f64,
     /// Children in paint order.
     pub children: Vec<Node>,
+    /// A clip path: the layer is multiplied by the clip's coverage.
+    pub clip: Option<Box<Clip>>,
+    /// A mask: the layer is multiplied by the mask's luminance or alpha.
+    pub mask: Option<Box<Mask>>,
+    /// How the layer is composited onto what lies below.
+    pub blend: BlendMode,
+}
+
+impl Group {
+    /// A plain group: opacity only, no clip, mask or blend mode.
+    pub fn new(id: impl Into<String>, opacity: f64, children: Vec<Node>) -> Self {
+        Group {
+            id: id.into(),
+            opacity,
+            children,
+            clip: None,
+            mask: None,
+            blend: BlendMode::Normal,
+        }
+    }
+
+    /// Whether the group is only a layer with an opacity (no clip, mask or blend mode).
+    pub fn is_plain(&self) -> bool {
+        self.clip.is_none() && self.mask.is_none() && self.blend == BlendMode::Normal
+    }
+}
+
+/// An SVG `clipPath`: the union of its shapes' coverage, each shape filled with its own
+/// fill rule (`clip-rule`); paints, opacities and strokes play no part. A clip's shapes
+/// are parameters through their control points only.
+///
+/// `content` holds the shapes in device pixels (as every node of a scene). A clip path of
+/// the clip path (`clip-path` on `<clipPath>`) is `content.clip`: multiplying the clip's
+/// coverage by it is multiplying the clipped layer by both, as resvg does.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Clip {
+    /// The SVG id of the `clipPath` element (may be empty).
+    pub id: String,
+    /// The shapes; [`Path::fill`] carries only the fill rule (drawn opaque black).
+    pub content: Group,
+}
+
+/// How a mask's rendered content becomes a per-pixel factor.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MaskKind {
+    /// `0.2125·r + 0.7154·g + 0.0721·b` of the premultiplied sRGB color (resvg's
+    /// coefficients), the default `mask-type`.
+    Luminance,
+    /// The alpha (`mask-type: alpha`).
+    Alpha,
+}
+
+/// An SVG `mask`: its content rendered into a layer, then reduced to one factor per
+/// pixel by `kind`. The mask region is `content.clip`; a mask of the mask (`mask` on
+/// `<mask>`) is `content.mask` (the product is the same either way: both factors are
+/// linear in the content's premultiplied color).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Mask {
+    /// The SVG id of the `mask` element (may be empty).
+    pub id: String,
+    /// Luminance or alpha.
+    pub kind: MaskKind,
+    /// The content, device pixels.
+    pub content: Group,
+}
+
+/// How a layer is composited onto the one below: SVG's `mix-blend-mode`, on
+/// premultiplied colors as resvg (tiny-skia) computes them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum BlendMode {
+    /// Source-over.
+    Normal,
+    /// `s·d`.
+    Multiply,
+    /// `s + d − s·d`.
+    Screen,
+    /// Hard light with the layers swapped.
+    Overlay,
+    /// The darker of the two.
+    Darken,
+    /// The lighter of the two.
+    Lighten,
+    /// Brightens the backdrop.
+    ColorDodge,
+    /// Darkens the backdrop.
+    ColorBurn,
+    /// Multiply or screen by the source.
+    HardLight,
+    /// A softer hard light.
+    SoftLight,
+    /// `|s − d|`.
+    Difference,
+    /// `s + d − 2·s·d`.
+    Exclusion,
+    /// The source's hue with the backdrop's saturation and luminosity.
+    Hue,
+    /// The source's saturation.
+    Saturation,
+    /// The source's hue and saturation.
+    Color,
+    /// The source's luminosity.
+    Luminosity,
+    /// `min(s + d, 1)` on every channel (`plus-lighter`).
+    PlusLighter,
+}
+
+impl BlendMode {
+    /// Every mode, in SVG's order.
+    pub const ALL: [BlendMode; 17] = [
+        BlendMode::Normal,
+        BlendMode::Multiply,
+        BlendMode::Screen,
+        BlendMode::Overlay,
+        BlendMode::Darken,
+        BlendMode::Lighten,
+        BlendMode::ColorDodge,
+        BlendMode::ColorBurn,
+        BlendMode::HardLight,
+        BlendMode::SoftLight,
+        BlendMode::Difference,
+        BlendMode::Exclusion,
+        BlendMode::Hue,
+        BlendMode::Saturation,
+        BlendMode::Color,
+        BlendMode::Luminosity,
+        BlendMode::PlusLighter,
+    ];
+
+    /// The CSS name (`mix-blend-mode` value).
+    pub fn name(self) -> &'static str {
+        match self {
+            BlendMode::Normal => "normal",
+            BlendMode::Multiply => "multiply",
+            BlendMode::Screen => "screen",
+            BlendMode::Overlay => "overlay",
+            BlendMode::Darken => "darken",
+            BlendMode::Lighten => "lighten",
+            BlendMode::ColorDodge => "color-dodge",
+            BlendMode::ColorBurn => "color-burn",
+            BlendMode::HardLight => "hard-light",
+            BlendMode::SoftLight => "soft-light",
+            BlendMode::Difference => "difference",
+            BlendMode::Exclusion => "exclusion",
+            BlendMode::Hue => "hue",
+            BlendMode::Saturation => "saturation",
+            BlendMode::Color => "color",
+            BlendMode::Luminosity => "luminosity",
+            BlendMode::PlusLighter => "plus-lighter",
+        }
+    }
+}
+
+/// What a path is drawn for: painted, or as a shape of a clip path (coverage only).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Role {
+    /// Painted with its fill and stroke.
+    Paint,
+    /// A clip path's shape: its fill rule and coverage count, nothing else.
+    Clip,
 }
 
 /// How a segment was written in the source, so SVG out can write it back compactly.
@@ -427,17 +587,32 @@ impl Scene {
         }
     }
 
-    /// Calls `f` on every path in paint order (depth first).
+    /// Calls `f` on every path in paint order (depth first): a group's children, then
+    /// its clip path's shapes, then its mask's content.
     pub fn for_each_path<'a>(&'a self, mut f: impl FnMut(&'a Path)) {
-        fn walk<'a>(nodes: &'a [Node], f: &mut impl FnMut(&'a Path)) {
+        self.for_each_path_role(|p, _| f(p));
+    }
+
+    /// Like [`for_each_path`](Self::for_each_path), telling which paths are clip shapes.
+    pub fn for_each_path_role<'a>(&'a self, mut f: impl FnMut(&'a Path, Role)) {
+        fn walk<'a>(nodes: &'a [Node], role: Role, f: &mut impl FnMut(&'a Path, Role)) {
             for n in nodes {
                 match n {
-                    Node::Path(p) => f(p),
-                    Node::Group(g) => walk(&g.children, f),
+                    Node::Path(p) => f(p, role),
+                    Node::Group(g) => group(g, role, f),
                 }
             }
         }
-        walk(&self.nodes, &mut f);
+        fn group<'a>(g: &'a Group, role: Role, f: &mut impl FnMut(&'a Path, Role)) {
+            walk(&g.children, role, f);
+            if let Some(c) = &g.clip {
+                group(&c.content, Role::Clip, f);
+            }
+            if let Some(m) = &g.mask {
+                group(&m.content, role, f);
+            }
+        }
+        walk(&self.nodes, Role::Paint, &mut f);
     }
 
     /// Calls `f` on every path in paint order (depth first), mutably.
@@ -446,8 +621,17 @@ impl Scene {
             for n in nodes {
                 match n {
                     Node::Path(p) => f(p),
-                    Node::Group(g) => walk(&mut g.children, f),
+                    Node::Group(g) => group(g, f),
                 }
+            }
+        }
+        fn group(g: &mut Group, f: &mut impl FnMut(&mut Path)) {
+            walk(&mut g.children, f);
+            if let Some(c) = &mut g.clip {
+                group(&mut c.content, f);
+            }
+            if let Some(m) = &mut g.mask {
+                group(&mut m.content, f);
             }
         }
         walk(&mut self.nodes, &mut f);

@@ -28,7 +28,7 @@
 //! ```
 
 use super::geom::{add_scaled, scale};
-use super::{GradientKind, Node, Paint, Path, Point, Scene, SegmentKind};
+use super::{GradientKind, Node, Paint, Path, Point, Role, Scene, SegmentKind};
 
 /// What kind of quantity a parameter is; the optimizer gives each group its own learning
 /// rate and projection.
@@ -158,45 +158,70 @@ pub(crate) enum Part {
 /// Visits every parameter of `scene` in the canonical order. `f` receives the owner index
 /// (into [`ParamLayout::owners`]), the group, what the slot is, and the value.
 pub(crate) fn walk(scene: &mut Scene, f: &mut dyn FnMut(usize, ParamGroup, Part, &mut f64)) {
-    let mut owner = 0usize;
-    let mut path_ix = 0usize;
-    let mut group_ix = 0usize;
-    walk_nodes(&mut scene.nodes, f, &mut owner, &mut path_ix, &mut group_ix);
+    let mut w = Walk {
+        f,
+        owner: 0,
+        path_ix: 0,
+        group_ix: 0,
+    };
+    w.nodes(&mut scene.nodes, Role::Paint);
 }
 
-fn walk_nodes(
-    nodes: &mut [Node],
-    f: &mut dyn FnMut(usize, ParamGroup, Part, &mut f64),
-    owner: &mut usize,
-    path_ix: &mut usize,
-    group_ix: &mut usize,
-) {
-    for n in nodes {
-        match n {
-            Node::Group(g) => {
-                f(
-                    *owner,
-                    ParamGroup::Opacity,
-                    Part::GroupOpacity(*group_ix),
-                    &mut g.opacity,
-                );
-                *owner += 1;
-                *group_ix += 1;
-                walk_nodes(&mut g.children, f, owner, path_ix, group_ix);
+/// The counters of [`walk`].
+struct Walk<'a> {
+    f: &'a mut dyn FnMut(usize, ParamGroup, Part, &mut f64),
+    owner: usize,
+    path_ix: usize,
+    group_ix: usize,
+}
+
+impl Walk<'_> {
+    fn nodes(&mut self, nodes: &mut [Node], role: Role) {
+        for n in nodes {
+            match n {
+                Node::Group(g) => {
+                    // A group inside a clip path is drawn opaque: its opacity is no
+                    // parameter.
+                    if role == Role::Paint {
+                        (self.f)(
+                            self.owner,
+                            ParamGroup::Opacity,
+                            Part::GroupOpacity(self.group_ix),
+                            &mut g.opacity,
+                        );
+                        self.group_ix += 1;
+                    }
+                    self.owner += 1;
+                    self.layers(g, role);
+                }
+                Node::Path(p) => {
+                    walk_path(p, self.owner, self.path_ix, role, self.f);
+                    self.owner += 1;
+                    self.path_ix += 1;
+                }
             }
-            Node::Path(p) => {
-                walk_path(p, *owner, *path_ix, f);
-                *owner += 1;
-                *path_ix += 1;
-            }
+        }
+    }
+
+    /// A group's children, then its clip path's shapes, then its mask's content (the
+    /// order of [`Scene::for_each_path`]).
+    fn layers(&mut self, g: &mut super::Group, role: Role) {
+        self.nodes(&mut g.children, role);
+        if let Some(c) = &mut g.clip {
+            self.layers(&mut c.content, Role::Clip);
+        }
+        if let Some(m) = &mut g.mask {
+            self.layers(&mut m.content, role);
         }
     }
 }
 
+/// A path's slots; a clip path's shape has only its points.
 fn walk_path(
     p: &mut Path,
     owner: usize,
     ix: usize,
+    role: Role,
     f: &mut dyn FnMut(usize, ParamGroup, Part, &mut f64),
 ) {
     for (k, q) in p.points.iter_mut().enumerate() {
@@ -207,6 +232,9 @@ fn walk_path(
         };
         f(owner, ParamGroup::Points, first, &mut q[0]);
         f(owner, ParamGroup::Points, Part::Point, &mut q[1]);
+    }
+    if role == Role::Clip {
+        return;
     }
     if let Some(fill) = &mut p.fill {
         walk_paint(&mut fill.paint, owner, Part::FillPaint(ix), f);
@@ -347,13 +375,24 @@ fn collect_owners(nodes: &[Node], out: &mut Vec<Owner>) {
                     id: g.id.clone(),
                     is_group: true,
                 });
-                collect_owners(&g.children, out);
+                collect_layer_owners(g, out);
             }
             Node::Path(p) => out.push(Owner {
                 id: p.id.clone(),
                 is_group: false,
             }),
         }
+    }
+}
+
+/// The owners in a group's children, clip path and mask, in walk order.
+fn collect_layer_owners(g: &super::Group, out: &mut Vec<Owner>) {
+    collect_owners(&g.children, out);
+    if let Some(c) = &g.clip {
+        collect_layer_owners(&c.content, out);
+    }
+    if let Some(m) = &g.mask {
+        collect_layer_owners(&m.content, out);
     }
 }
 
@@ -531,11 +570,7 @@ mod tests {
             opacity: 0.8,
             rule: FillRule::NonZero,
         });
-        s.nodes.push(Node::Group(crate::scene::Group {
-            id: "grp".into(),
-            opacity: 0.5,
-            children: vec![Node::Path(p)],
-        }));
+        s.nodes.push(Node::Group(crate::scene::Group::new("grp", 0.5, vec![Node::Path(p)])));
         s
     }
 

@@ -3,15 +3,17 @@
 use std::path::Path as FsPath;
 
 use super::{
-    Affine, FRAME_IDENTITY, Fill, FillRule, Gradient, GradientKind, Group, LineCap, LineJoin, Node,
-    Paint, Path, Scene, Spread, Stop, Stroke, apply, concat,
+    Affine, BlendMode, Clip, FRAME_IDENTITY, Fill, FillRule, Gradient, GradientKind, Group,
+    LineCap, LineJoin, Mask, MaskKind, Node, Paint, Path, Role, Scene, Spread, Stop, Stroke,
+    apply, concat,
 };
 use crate::error::{Error, Result};
 
 use crate::image_io::{gunzip_bounded, is_gzip, read_bounded};
 pub(crate) use crate::limits::MAX_SIDE;
 use crate::limits::{
-    MAX_ARC_RADIUS, MAX_DECOMPRESSED_BYTES, MAX_FILE_BYTES, MAX_PIXELS, MAX_SELECTOR_WORK,
+    MAX_ARC_RADIUS, MAX_DECOMPRESSED_BYTES, MAX_FILE_BYTES, MAX_MARKER_NODES, MAX_PIXELS,
+    MAX_SELECTOR_WORK,
 };
 
 /// How to size the canvas when loading an SVG.
@@ -129,6 +131,7 @@ fn reject_unsupported_xml(text: &str, name: &FsPath) -> Result<()> {
         return Ok(()); // usvg reports the parse error with more detail
     };
     check_selector_work(&doc, name)?;
+    check_marker_work(&doc, name)?;
     for n in doc.descendants().filter(|n| n.is_element()) {
         let tag = n.tag_name().name();
         if matches!(tag, "text" | "foreignObject" | "image") {
@@ -138,16 +141,6 @@ fn reject_unsupported_xml(text: &str, name: &FsPath) -> Result<()> {
             });
         }
         for a in n.attributes() {
-            let is_marker = matches!(
-                a.name(),
-                "marker-start" | "marker-mid" | "marker-end" | "marker"
-            ) || (a.name() == "style" && a.value().contains("marker"));
-            if is_marker && !a.value().trim().eq_ignore_ascii_case("none") {
-                return Err(Error::Unsupported {
-                    path: name.to_path_buf(),
-                    what: format!("markers ({})", describe(tag, n.attribute("id"))),
-                });
-            }
             let bad = if a.name() == "style" {
                 css_bad_number(a.value())
             } else if GEOMETRY_ATTRIBUTES.contains(&a.name()) {
@@ -178,6 +171,38 @@ fn reject_unsupported_xml(text: &str, name: &FsPath) -> Result<()> {
                 });
             }
         }
+    }
+    Ok(())
+}
+
+/// Refuses a file whose markers would make more than [`MAX_MARKER_NODES`] elements:
+/// usvg copies a marker's content at every vertex of every path that uses it, so a
+/// marker of `m` elements on paths of `v` vertices in all makes up to `m × v` of them,
+/// allocated before anything can be checked. Estimated from the text: the numbers in all
+/// path data and point lists (at least one per vertex) times the largest marker.
+fn check_marker_work(doc: &usvg::roxmltree::Document, name: &FsPath) -> Result<()> {
+    let markers = doc.descendants().filter(|n| n.has_tag_name("marker"));
+    let largest = markers.map(|m| m.descendants().count()).max().unwrap_or(0) as f64;
+    if largest == 0.0 {
+        return Ok(());
+    }
+    let numbers: f64 = doc
+        .descendants()
+        .flat_map(|n| [n.attribute("d"), n.attribute("points")])
+        .flatten()
+        .map(|v| v.split(|c: char| !c.is_ascii_digit()).filter(|t| !t.is_empty()).count() as f64)
+        .sum();
+    // Every vertex has at least one number; a few more for the start and end markers.
+    let work = largest * (numbers + 3.0);
+    if work > MAX_MARKER_NODES as f64 {
+        return Err(Error::Unsupported {
+            path: name.to_path_buf(),
+            what: format!(
+                "markers would be copied into about {work:.0} elements (a marker of {largest} \
+                 elements on paths of up to {numbers} vertices; the limit is \
+                 {MAX_MARKER_NODES})"
+            ),
+        });
     }
     Ok(())
 }
@@ -524,7 +549,7 @@ pub fn from_tree(tree: &usvg::Tree, name: &FsPath, sizing: Sizing) -> Result<Sce
     let ctx = Ctx { name, root };
     let mut scene = Scene::new(w, h);
     let t = concat(&ctx.root, &to_affine(tree.root().transform()));
-    scene.nodes = convert_group_children(tree.root(), &ctx, &t)?;
+    scene.nodes = convert_group_children(tree.root(), &ctx, &t, Role::Paint)?;
 
     super::svg_out::check_numbers_with(&scene, super::svg_out::READ_SLACK)
         .map_err(|what| ctx.invalid(what))?;
@@ -533,40 +558,59 @@ pub fn from_tree(tree: &usvg::Tree, name: &FsPath, sizing: Sizing) -> Result<Sce
 }
 
 /// Converts a group's children; `t` maps the group's user space to device pixels.
-/// (resvg composes group transforms the same way while drawing.)
-fn convert_group_children(g: &usvg::Group, ctx: &Ctx, t: &Affine) -> Result<Vec<Node>> {
+/// (resvg composes group transforms the same way while drawing.) In a clip path
+/// (`role` [`Role::Clip`]) only shapes and their fill rules count, as resvg draws them.
+fn convert_group_children(
+    g: &usvg::Group,
+    ctx: &Ctx,
+    t: &Affine,
+    role: Role,
+) -> Result<Vec<Node>> {
     let mut out = Vec::new();
     for child in g.children() {
         match child {
             usvg::Node::Group(g) => {
                 let what = |f: &str| describe("g", Some(g.id())).replace("element", f);
-                if g.clip_path().is_some() {
-                    return Err(ctx.unsupported(what("element with clip-path")));
-                }
-                if g.mask().is_some() {
-                    return Err(ctx.unsupported(what("element with mask")));
-                }
-                if !g.filters().is_empty() {
+                if !g.filters().is_empty() && role == Role::Paint {
                     return Err(ctx.unsupported(what("element with filter")));
                 }
-                if g.blend_mode() != usvg::BlendMode::Normal {
-                    return Err(ctx.unsupported(what("element with mix-blend-mode")));
-                }
-                let children =
-                    convert_group_children(g, ctx, &concat(t, &to_affine(g.transform())))?;
-                let opacity = g.opacity().get() as f64;
-                if g.should_isolate() && opacity < 1.0 {
-                    out.push(Node::Group(Group {
-                        id: g.id().to_string(),
-                        opacity,
-                        children,
-                    }));
+                let gt = concat(t, &to_affine(g.transform()));
+                let children = convert_group_children(g, ctx, &gt, role)?;
+                let clip = match g.clip_path() {
+                    Some(c) => Some(Box::new(convert_clip(c, ctx, &gt)?)),
+                    None => None,
+                };
+                // Inside a clip path resvg draws a child group's shapes and its own clip
+                // path only: no opacity, mask or blend mode.
+                let (mask, opacity, blend) = match role {
+                    Role::Clip => (None, 1.0, BlendMode::Normal),
+                    Role::Paint => (
+                        match g.mask() {
+                            Some(m) => Some(Box::new(convert_mask(m, ctx, &gt)?)),
+                            None => None,
+                        },
+                        g.opacity().get() as f64,
+                        convert_blend(g.blend_mode()),
+                    ),
+                };
+                let group = Group {
+                    id: g.id().to_string(),
+                    opacity,
+                    children,
+                    clip,
+                    mask,
+                    blend,
+                };
+                // A layer composited source-over at full opacity, unclipped and
+                // unmasked, changes nothing (`isolation: isolate` alone).
+                if opacity < 1.0 || !group.is_plain() {
+                    out.push(Node::Group(group));
                 } else {
-                    out.extend(children);
+                    out.extend(group.children);
                 }
             }
             usvg::Node::Path(p) => {
-                if let Some(path) = convert_path(p, ctx, t)? {
+                if let Some(path) = convert_path(p, ctx, t, role)? {
                     out.push(Node::Path(path));
                 }
             }
@@ -581,7 +625,84 @@ fn convert_group_children(g: &usvg::Group, ctx: &Ctx, t: &Affine) -> Result<Vec<
     Ok(out)
 }
 
-fn convert_path(p: &usvg::Path, ctx: &Ctx, t: &Affine) -> Result<Option<Path>> {
+/// A clip path applied to a group whose user space `t` maps to device pixels.
+fn convert_clip(c: &usvg::ClipPath, ctx: &Ctx, t: &Affine) -> Result<Clip> {
+    let ct = concat(t, &to_affine(c.transform()));
+    let mut content = Group::new("", 1.0, convert_group_children(c.root(), ctx, &ct, Role::Clip)?);
+    // A clip path of the clip path multiplies the same layer (resvg applies it with the
+    // group's transform, not the clip path's).
+    if let Some(inner) = c.clip_path() {
+        content.clip = Some(Box::new(convert_clip(inner, ctx, t)?));
+    }
+    Ok(Clip {
+        id: c.id().to_string(),
+        content,
+    })
+}
+
+/// A mask applied to a group whose user space `t` maps to device pixels: its content,
+/// clipped to the mask region, and a mask of the mask multiplying the same layer.
+fn convert_mask(m: &usvg::Mask, ctx: &Ctx, t: &Affine) -> Result<Mask> {
+    let mut content = Group::new("", 1.0, convert_group_children(m.root(), ctx, t, Role::Paint)?);
+    let r = m.rect();
+    let (x0, y0, x1, y1) = (
+        r.left() as f64,
+        r.top() as f64,
+        r.right() as f64,
+        r.bottom() as f64,
+    );
+    let mut region = Path::new("");
+    region.move_to(apply(t, [x0, y0]));
+    region.line_to(apply(t, [x1, y0]));
+    region.line_to(apply(t, [x1, y1]));
+    region.line_to(apply(t, [x0, y1]));
+    region.close();
+    region.fill = Some(Fill {
+        paint: Paint::Solid([0.0; 3]),
+        opacity: 1.0,
+        rule: FillRule::NonZero,
+    });
+    content.clip = Some(Box::new(Clip {
+        id: String::new(),
+        content: Group::new("", 1.0, vec![Node::Path(region)]),
+    }));
+    if let Some(inner) = m.mask() {
+        content.mask = Some(Box::new(convert_mask(inner, ctx, t)?));
+    }
+    Ok(Mask {
+        id: m.id().to_string(),
+        kind: match m.kind() {
+            usvg::MaskType::Luminance => MaskKind::Luminance,
+            usvg::MaskType::Alpha => MaskKind::Alpha,
+        },
+        content,
+    })
+}
+
+fn convert_blend(b: usvg::BlendMode) -> BlendMode {
+    use usvg::BlendMode as U;
+    match b {
+        U::Normal => BlendMode::Normal,
+        U::Multiply => BlendMode::Multiply,
+        U::Screen => BlendMode::Screen,
+        U::Overlay => BlendMode::Overlay,
+        U::Darken => BlendMode::Darken,
+        U::Lighten => BlendMode::Lighten,
+        U::ColorDodge => BlendMode::ColorDodge,
+        U::ColorBurn => BlendMode::ColorBurn,
+        U::HardLight => BlendMode::HardLight,
+        U::SoftLight => BlendMode::SoftLight,
+        U::Difference => BlendMode::Difference,
+        U::Exclusion => BlendMode::Exclusion,
+        U::Hue => BlendMode::Hue,
+        U::Saturation => BlendMode::Saturation,
+        U::Color => BlendMode::Color,
+        U::Luminosity => BlendMode::Luminosity,
+        U::PlusLighter => BlendMode::PlusLighter,
+    }
+}
+
+fn convert_path(p: &usvg::Path, ctx: &Ctx, t: &Affine, role: Role) -> Result<Option<Path>> {
     if !p.is_visible() {
         return Ok(None);
     }
@@ -628,6 +749,18 @@ fn convert_path(p: &usvg::Path, ctx: &Ctx, t: &Affine) -> Result<Option<Path>> {
     }
     if out.points.is_empty() {
         return Ok(None);
+    }
+    if role == Role::Clip {
+        // A clip path's shape: its coverage under its fill rule (`clip-rule`) only.
+        out.fill = p.fill().map(|f| Fill {
+            paint: Paint::Solid([0.0; 3]),
+            opacity: 1.0,
+            rule: match f.rule() {
+                usvg::FillRule::NonZero => FillRule::NonZero,
+                usvg::FillRule::EvenOdd => FillRule::EvenOdd,
+            },
+        });
+        return Ok(out.fill.is_some().then_some(out));
     }
     if let Some(f) = p.fill() {
         out.fill = Some(Fill {

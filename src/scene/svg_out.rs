@@ -12,8 +12,8 @@ use std::path::Path as FsPath;
 
 use super::geom::lerp;
 use super::{
-    Affine, FRAME_IDENTITY, FillRule, GradientKind, LineCap, LineJoin, Node, Paint, Path, Scene,
-    SegmentKind, Spread, apply, concat, invert,
+    Affine, BlendMode, Clip, FRAME_IDENTITY, FillRule, GradientKind, Group, LineCap, LineJoin,
+    Mask, MaskKind, Node, Paint, Path, Point, Scene, SegmentKind, Spread, apply, concat, invert,
 };
 use crate::error::{Error, Result};
 use crate::limits::MAX_COORDINATE;
@@ -42,6 +42,30 @@ struct Writer {
     body: String,
     ids: HashSet<String>,
     next_id: usize,
+    /// Writing a clip path's shapes.
+    in_clip: bool,
+}
+
+/// The device-space rectangle `[x0, y0, x1, y1]` a clip content is, when it is one
+/// axis-aligned rectangle path (a mask region as the reader makes it).
+fn rectangle(content: &Group) -> Option<[f64; 4]> {
+    let [Node::Path(p)] = content.children.as_slice() else {
+        return None;
+    };
+    if content.clip.is_some() || p.subpaths.len() != 1 {
+        return None;
+    }
+    let sp = &p.subpaths[0];
+    if sp.kinds.len() != 3 || sp.kinds.iter().any(|k| *k != SegmentKind::Line) {
+        return None;
+    }
+    let c: Vec<Point> = (0..4).map(|k| p.points[sp.start + 3 * k]).collect();
+    let b = p.control_bounds()?;
+    let axis = (0..4).all(|k| {
+        let (a, n) = (c[k], c[(k + 1) % 4]);
+        (a[0] == n[0]) != (a[1] == n[1])
+    });
+    axis.then_some(b)
 }
 
 impl Writer {
@@ -134,21 +158,116 @@ impl Writer {
             match n {
                 Node::Group(g) => {
                     let pad = "  ".repeat(indent);
-                    let _ = write!(self.body, "{pad}<g");
+                    let mut attrs = String::new();
                     if !g.id.is_empty() {
-                        let _ = write!(self.body, " id=\"{}\"", escape(&g.id));
+                        let _ = write!(attrs, " id=\"{}\"", escape(&g.id));
                     }
-                    let _ = writeln!(
-                        self.body,
-                        " opacity=\"{}\">",
-                        num(g.opacity.clamp(0.0, 1.0))
-                    );
+                    if !self.in_clip {
+                        let _ = write!(attrs, " opacity=\"{}\"", num(g.opacity.clamp(0.0, 1.0)));
+                    }
+                    attrs.push_str(&self.layer_attrs(g));
+                    let _ = writeln!(self.body, "{pad}<g{attrs}>");
                     self.nodes(&g.children, indent + 1);
                     let _ = writeln!(self.body, "{pad}</g>");
                 }
                 Node::Path(p) => self.path(p, indent),
             }
         }
+    }
+
+    /// The `clip-path`, `mask` and blend attributes of a layer (its clip path and mask
+    /// written to the defs).
+    fn layer_attrs(&mut self, g: &Group) -> String {
+        let mut attrs = String::new();
+        if let Some(c) = &g.clip {
+            let id = self.clip(c);
+            let _ = write!(attrs, " clip-path=\"url(#{id})\"");
+        }
+        if let Some(m) = &g.mask {
+            let id = self.mask(m);
+            let _ = write!(attrs, " mask=\"url(#{id})\"");
+        }
+        if g.blend != BlendMode::Normal {
+            let _ = write!(attrs, " style=\"mix-blend-mode:{}\"", g.blend.name());
+        }
+        attrs
+    }
+
+    /// Writes `nodes` into a string of their own (for the defs), at `indent`, with
+    /// paths written as clip shapes when `in_clip`.
+    fn detached(&mut self, nodes: &[Node], indent: usize, in_clip: bool) -> String {
+        let body = std::mem::take(&mut self.body);
+        let was = std::mem::replace(&mut self.in_clip, in_clip);
+        self.nodes(nodes, indent);
+        self.in_clip = was;
+        std::mem::replace(&mut self.body, body)
+    }
+
+    /// Writes a clip path to the defs; returns its id. A clip path of the clip path
+    /// becomes the `clip-path` of the `<clipPath>` element.
+    fn clip(&mut self, c: &Clip) -> String {
+        let id = self.unique_id(if c.id.is_empty() { "clip" } else { &c.id });
+        let mut attrs = String::new();
+        if let Some(inner) = &c.content.clip {
+            let inner = self.clip(inner);
+            let _ = write!(attrs, " clip-path=\"url(#{inner})\"");
+        }
+        let content = self.detached(&c.content.children, 3, true);
+        let _ = write!(
+            self.defs,
+            "    <clipPath id=\"{id}\" clipPathUnits=\"userSpaceOnUse\"{attrs}>\n{content}    </clipPath>\n"
+        );
+        id
+    }
+
+    /// Writes a mask to the defs; returns its id. The mask region (the content's clip
+    /// path) is written as the mask's rectangle where it is one in device space, else
+    /// as a clip path of the content inside a region around it; a mask of the mask
+    /// becomes the `mask` of a group holding the content.
+    fn mask(&mut self, m: &Mask) -> String {
+        let id = self.unique_id(if m.id.is_empty() { "mask" } else { &m.id });
+        let region = m.content.clip.as_ref().and_then(|c| rectangle(&c.content));
+        let mut inner = m.content.clone();
+        let rect = match region {
+            Some(r) => {
+                inner.clip = None;
+                r
+            }
+            None => {
+                // The content's bounds, and the region as a clip path inside them.
+                let mut b = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
+                let mut probe = Scene::new(1, 1);
+                probe.nodes = vec![Node::Group(inner.clone())];
+                probe.for_each_path(|p| {
+                    if let Some(c) = p.control_bounds() {
+                        b = [b[0].min(c[0]), b[1].min(c[1]), b[2].max(c[2]), b[3].max(c[3])];
+                    }
+                });
+                if b[0] > b[2] {
+                    b = [0.0, 0.0, 1.0, 1.0];
+                }
+                [b[0] - 1.0, b[1] - 1.0, b[2] + 1.0, b[3] + 1.0]
+            }
+        };
+        let kind = match m.kind {
+            MaskKind::Luminance => "",
+            MaskKind::Alpha => " style=\"mask-type:alpha\"",
+        };
+        let content = if inner.is_plain() {
+            self.detached(&inner.children, 3, false)
+        } else {
+            inner.opacity = 1.0;
+            self.detached(&[Node::Group(inner)], 3, false)
+        };
+        let _ = write!(
+            self.defs,
+            "    <mask id=\"{id}\" maskUnits=\"userSpaceOnUse\" x=\"{}\" y=\"{}\" width=\"{}\" height=\"{}\"{kind}>\n{content}    </mask>\n",
+            num(rect[0]),
+            num(rect[1]),
+            num(rect[2] - rect[0]),
+            num(rect[3] - rect[1])
+        );
+        id
     }
 
     fn path(&mut self, p: &Path, indent: usize) {
@@ -195,7 +314,12 @@ impl Writer {
                     );
                 }
                 if f.rule == FillRule::EvenOdd {
-                    attrs.push_str(" fill-rule=\"evenodd\"");
+                    // A clip path's shapes take their rule from `clip-rule`.
+                    attrs.push_str(if self.in_clip {
+                        " clip-rule=\"evenodd\""
+                    } else {
+                        " fill-rule=\"evenodd\""
+                    });
                 }
             }
             None => attrs.push_str(" fill=\"none\""),
@@ -322,6 +446,7 @@ impl Scene {
             body: String::new(),
             ids: HashSet::new(),
             next_id: 0,
+            in_clip: false,
         };
         // Reserve path and group ids so that gradient ids do not collide with them.
         fn reserve(nodes: &[Node], ids: &mut HashSet<String>) {
@@ -329,12 +454,23 @@ impl Scene {
                 match n {
                     Node::Group(g) => {
                         ids.insert(g.id.clone());
-                        reserve(&g.children, ids);
+                        reserve_layer(g, ids);
                     }
                     Node::Path(p) => {
                         ids.insert(p.id.clone());
                     }
                 }
+            }
+        }
+        fn reserve_layer(g: &Group, ids: &mut HashSet<String>) {
+            reserve(&g.children, ids);
+            if let Some(c) = &g.clip {
+                ids.insert(c.id.clone());
+                reserve_layer(&c.content, ids);
+            }
+            if let Some(m) = &g.mask {
+                ids.insert(m.id.clone());
+                reserve_layer(&m.content, ids);
             }
         }
         reserve(&self.nodes, &mut w.ids);
@@ -438,13 +574,25 @@ impl Checker {
                     let k = self.groups;
                     let owner = || name("group", &g.id, k);
                     self.value(&owner, "opacity", g.opacity)?;
-                    self.nodes(&g.children)?;
+                    self.layer(g)?;
                 }
                 Node::Path(p) => {
                     self.paths += 1;
                     self.path(p)?;
                 }
             }
+        }
+        Ok(())
+    }
+
+    /// A layer's children, then its clip path's and mask's content.
+    fn layer(&mut self, g: &Group) -> std::result::Result<(), String> {
+        self.nodes(&g.children)?;
+        if let Some(c) = &g.clip {
+            self.layer(&c.content)?;
+        }
+        if let Some(m) = &g.mask {
+            self.layer(&m.content)?;
         }
         Ok(())
     }
