@@ -679,7 +679,11 @@ mod tests {
         scene
             .nodes
             .push(Node::Path(square(4.0, 4.0, 12.0, [1.0, 0.0, 0.0])));
-        scene.nodes.push(Node::Group(Group::new(String::new(), 0.5, vec![Node::Path(square(20.0, 20.0, 8.0, [0.0, 0.0, 1.0]))])));
+        scene.nodes.push(Node::Group(Group::new(
+            String::new(),
+            0.5,
+            vec![Node::Path(square(20.0, 20.0, 8.0, [0.0, 0.0, 1.0]))],
+        )));
         let mut s = scene.clone();
         prune_to_budget(&mut s, &target, 3, [0.0; 4]);
         assert_eq!(s.nodes, scene.nodes[..3]);
@@ -742,10 +746,14 @@ mod tests {
             Node::Path(red.clone()),
             Node::Path(clear),
             Node::Path(named(square(40.0, -20.0, 8.0, [0.0, 1.0, 0.0]), "outside")),
-            Node::Group(Group::new(String::new(), 0.0, vec![Node::Path(named(
+            Node::Group(Group::new(
+                String::new(),
+                0.0,
+                vec![Node::Path(named(
                     square(2.0, 20.0, 8.0, [1.0, 0.0, 1.0]),
                     "in clear group",
-                ))])),
+                ))],
+            )),
             Node::Path(named(square(20.0, 20.0, 6.0, [0.0, 0.0, 1.0]), "blue")),
             Node::Path(named(square(2.0, 24.0, 5.0, [1.0, 1.0, 0.0]), "wrong")),
         ];
@@ -834,10 +842,9 @@ mod tests {
             p.stroke = Some(st);
         }
         let lone = stroked.nodes.remove(6);
-        stroked.nodes.insert(
-            6,
-            Node::Group(Group::new(String::new(), 0.6, vec![lone])),
-        );
+        stroked
+            .nodes
+            .insert(6, Node::Group(Group::new(String::new(), 0.6, vec![lone])));
         let blobs = crate::fit::shapes::random_blobs(14, 40, 40, 9);
         let mut total = 0;
         for (name, scene) in [("curved", curved), ("stroked", stroked), ("blobs", blobs)] {

@@ -30,9 +30,9 @@
 use rayon::prelude::*;
 
 use super::coverage::{Cells, backward_line, coverage_row, coverage_slopes_row};
+use super::layer::{apply_mask, apply_mask_backward, composite_backward, composite_layer};
 use super::paint::PaintEval;
 use super::prepare::{ItemKind, Op, Prepared, item_rect, prepare, stroke_outline};
-use super::layer::{apply_mask, apply_mask_backward, composite_backward, composite_layer};
 use super::render::{
     Area, BAND_ROWS, BandRenderer, RenderOptions, RowScratch, blank_canvas, covered_span, over,
 };

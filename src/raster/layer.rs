@@ -194,7 +194,12 @@ pub(crate) fn blend_px<S: Scalar>(mode: BlendMode, s: [S; 4], d: [S; 4]) -> [S; 
     let (sa, da) = (s[3], d[3]);
     // A function of the color channels; alpha is source-over.
     let sep = |f: &dyn Fn(S, S) -> S| -> [S; 4] {
-        [f(s[0], d[0]), f(s[1], d[1]), f(s[2], d[2]), d[3] * inv(sa) + sa]
+        [
+            f(s[0], d[0]),
+            f(s[1], d[1]),
+            f(s[2], d[2]),
+            d[3] * inv(sa) + sa,
+        ]
     };
     match mode {
         BlendMode::Normal => std::array::from_fn(|c| d[c] * inv(sa) + s[c]),
@@ -471,7 +476,10 @@ mod tests {
                     p[k][c] += e;
                     m[k][c] -= e;
                     let fd = (loss(&p, &mask) - loss(&m, &mask)) / (2.0 * e as f64);
-                    assert!((fd - g[k][c] as f64).abs() < 1e-3, "{kind:?} content {k} {c}");
+                    assert!(
+                        (fd - g[k][c] as f64).abs() < 1e-3,
+                        "{kind:?} content {k} {c}"
+                    );
                 }
             }
         }

@@ -3,8 +3,8 @@
 use rayon::prelude::*;
 
 use super::coverage::{Cells, accumulate_line, ceil_f64, coverage_row, floor_f64, integrate_rows};
-use super::paint::PaintEval;
 use super::layer::{apply_mask, composite_layer};
+use super::paint::PaintEval;
 use super::prepare::{GroupSpan, Item, Op, Prepared, prepare_forward};
 use crate::image_io::Image;
 use crate::scene::Scene;

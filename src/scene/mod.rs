@@ -130,6 +130,10 @@ pub struct Group {
     pub mask: Option<Box<Mask>>,
     /// How the layer is composited onto what lies below.
     pub blend: BlendMode,
+    /// `isolation: isolate`: the children's blend modes see a transparent backdrop (the
+    /// layer), not what lies below the group. A group with an opacity, clip path, mask or
+    /// blend mode is isolated anyway.
+    pub isolate: bool,
 }
 
 impl Group {
@@ -142,12 +146,17 @@ impl Group {
             clip: None,
             mask: None,
             blend: BlendMode::Normal,
+            isolate: false,
         }
     }
 
-    /// Whether the group is only a layer with an opacity (no clip, mask or blend mode).
+    /// Whether the group is only a layer with an opacity (no clip, mask, blend mode or
+    /// isolation).
     pub fn is_plain(&self) -> bool {
-        self.clip.is_none() && self.mask.is_none() && self.blend == BlendMode::Normal
+        self.clip.is_none()
+            && self.mask.is_none()
+            && self.blend == BlendMode::Normal
+            && !self.isolate
     }
 }
 

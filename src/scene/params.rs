@@ -570,7 +570,11 @@ mod tests {
             opacity: 0.8,
             rule: FillRule::NonZero,
         });
-        s.nodes.push(Node::Group(crate::scene::Group::new("grp", 0.5, vec![Node::Path(p)])));
+        s.nodes.push(Node::Group(crate::scene::Group::new(
+            "grp",
+            0.5,
+            vec![Node::Path(p)],
+        )));
         s
     }
 

@@ -4,8 +4,8 @@ use std::path::Path as FsPath;
 
 use super::{
     Affine, BlendMode, Clip, FRAME_IDENTITY, Fill, FillRule, Gradient, GradientKind, Group,
-    LineCap, LineJoin, Mask, MaskKind, Node, Paint, Path, Role, Scene, Spread, Stop, Stroke,
-    apply, concat,
+    LineCap, LineJoin, Mask, MaskKind, Node, Paint, Path, Role, Scene, Spread, Stop, Stroke, apply,
+    concat,
 };
 use crate::error::{Error, Result};
 
@@ -190,7 +190,11 @@ fn check_marker_work(doc: &usvg::roxmltree::Document, name: &FsPath) -> Result<(
         .descendants()
         .flat_map(|n| [n.attribute("d"), n.attribute("points")])
         .flatten()
-        .map(|v| v.split(|c: char| !c.is_ascii_digit()).filter(|t| !t.is_empty()).count() as f64)
+        .map(|v| {
+            v.split(|c: char| !c.is_ascii_digit())
+                .filter(|t| !t.is_empty())
+                .count() as f64
+        })
         .sum();
     // Every vertex has at least one number; a few more for the start and end markers.
     let work = largest * (numbers + 3.0);
@@ -560,12 +564,7 @@ pub fn from_tree(tree: &usvg::Tree, name: &FsPath, sizing: Sizing) -> Result<Sce
 /// Converts a group's children; `t` maps the group's user space to device pixels.
 /// (resvg composes group transforms the same way while drawing.) In a clip path
 /// (`role` [`Role::Clip`]) only shapes and their fill rules count, as resvg draws them.
-fn convert_group_children(
-    g: &usvg::Group,
-    ctx: &Ctx,
-    t: &Affine,
-    role: Role,
-) -> Result<Vec<Node>> {
+fn convert_group_children(g: &usvg::Group, ctx: &Ctx, t: &Affine, role: Role) -> Result<Vec<Node>> {
     let mut out = Vec::new();
     for child in g.children() {
         match child {
@@ -600,6 +599,8 @@ fn convert_group_children(
                     clip,
                     mask,
                     blend,
+                    // Isolation matters only to children that blend.
+                    isolate: g.isolate() && role == Role::Paint,
                 };
                 // A layer composited source-over at full opacity, unclipped and
                 // unmasked, changes nothing (`isolation: isolate` alone).
@@ -628,7 +629,11 @@ fn convert_group_children(
 /// A clip path applied to a group whose user space `t` maps to device pixels.
 fn convert_clip(c: &usvg::ClipPath, ctx: &Ctx, t: &Affine) -> Result<Clip> {
     let ct = concat(t, &to_affine(c.transform()));
-    let mut content = Group::new("", 1.0, convert_group_children(c.root(), ctx, &ct, Role::Clip)?);
+    let mut content = Group::new(
+        "",
+        1.0,
+        convert_group_children(c.root(), ctx, &ct, Role::Clip)?,
+    );
     // A clip path of the clip path multiplies the same layer (resvg applies it with the
     // group's transform, not the clip path's).
     if let Some(inner) = c.clip_path() {
@@ -643,7 +648,11 @@ fn convert_clip(c: &usvg::ClipPath, ctx: &Ctx, t: &Affine) -> Result<Clip> {
 /// A mask applied to a group whose user space `t` maps to device pixels: its content,
 /// clipped to the mask region, and a mask of the mask multiplying the same layer.
 fn convert_mask(m: &usvg::Mask, ctx: &Ctx, t: &Affine) -> Result<Mask> {
-    let mut content = Group::new("", 1.0, convert_group_children(m.root(), ctx, t, Role::Paint)?);
+    let mut content = Group::new(
+        "",
+        1.0,
+        convert_group_children(m.root(), ctx, t, Role::Paint)?,
+    );
     let r = m.rect();
     let (x0, y0, x1, y1) = (
         r.left() as f64,

@@ -44,6 +44,9 @@ struct Writer {
     next_id: usize,
     /// Writing a clip path's shapes.
     in_clip: bool,
+    /// While writing a clip path's shapes, the clip path (and its id) of the group they
+    /// are in, which each shape carries.
+    clip_ref: Option<(String, Box<Clip>)>,
 }
 
 /// The device-space rectangle `[x0, y0, x1, y1]` a clip content is, when it is one
@@ -156,6 +159,30 @@ impl Writer {
     fn nodes(&mut self, nodes: &[Node], indent: usize) {
         for n in nodes {
             match n {
+                // A `<clipPath>` holds shapes, not groups: a group's clip path goes on
+                // each of its shapes (the union of clipped shapes is the clipped union).
+                Node::Group(g) if self.in_clip => {
+                    let outer = self.clip_ref.take();
+                    if let Some(c) = &g.clip {
+                        let mut c = (**c).clone();
+                        if let Some((_, outer)) = &outer {
+                            // Both clip the shapes: chain the outer one after this one's.
+                            fn chain(c: &mut Clip, outer: Box<Clip>) {
+                                match &mut c.content.clip {
+                                    Some(next) => chain(next, outer),
+                                    None => c.content.clip = Some(outer),
+                                }
+                            }
+                            chain(&mut c, outer.clone());
+                        }
+                        let id = self.clip(&c);
+                        self.clip_ref = Some((id, Box::new(c)));
+                    } else {
+                        self.clip_ref = outer.clone();
+                    }
+                    self.nodes(&g.children, indent);
+                    self.clip_ref = outer;
+                }
                 Node::Group(g) => {
                     let pad = "  ".repeat(indent);
                     let mut attrs = String::new();
@@ -187,8 +214,15 @@ impl Writer {
             let id = self.mask(m);
             let _ = write!(attrs, " mask=\"url(#{id})\"");
         }
+        let mut style = Vec::new();
         if g.blend != BlendMode::Normal {
-            let _ = write!(attrs, " style=\"mix-blend-mode:{}\"", g.blend.name());
+            style.push(format!("mix-blend-mode:{}", g.blend.name()));
+        }
+        if g.isolate {
+            style.push("isolation:isolate".to_string());
+        }
+        if !style.is_empty() {
+            let _ = write!(attrs, " style=\"{}\"", style.join(";"));
         }
         attrs
     }
@@ -198,8 +232,10 @@ impl Writer {
     fn detached(&mut self, nodes: &[Node], indent: usize, in_clip: bool) -> String {
         let body = std::mem::take(&mut self.body);
         let was = std::mem::replace(&mut self.in_clip, in_clip);
+        let clip_ref = self.clip_ref.take();
         self.nodes(nodes, indent);
         self.in_clip = was;
+        self.clip_ref = clip_ref;
         std::mem::replace(&mut self.body, body)
     }
 
@@ -235,12 +271,22 @@ impl Writer {
             }
             None => {
                 // The content's bounds, and the region as a clip path inside them.
-                let mut b = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
+                let mut b = [
+                    f64::INFINITY,
+                    f64::INFINITY,
+                    f64::NEG_INFINITY,
+                    f64::NEG_INFINITY,
+                ];
                 let mut probe = Scene::new(1, 1);
                 probe.nodes = vec![Node::Group(inner.clone())];
                 probe.for_each_path(|p| {
                     if let Some(c) = p.control_bounds() {
-                        b = [b[0].min(c[0]), b[1].min(c[1]), b[2].max(c[2]), b[3].max(c[3])];
+                        b = [
+                            b[0].min(c[0]),
+                            b[1].min(c[1]),
+                            b[2].max(c[2]),
+                            b[3].max(c[3]),
+                        ];
                     }
                 });
                 if b[0] > b[2] {
@@ -312,6 +358,9 @@ impl Writer {
                         " fill-opacity=\"{}\"",
                         num(f.opacity.clamp(0.0, 1.0))
                     );
+                }
+                if let Some((id, _)) = &self.clip_ref {
+                    let _ = write!(attrs, " clip-path=\"url(#{id})\"");
                 }
                 if f.rule == FillRule::EvenOdd {
                     // A clip path's shapes take their rule from `clip-rule`.
@@ -447,6 +496,7 @@ impl Scene {
             ids: HashSet::new(),
             next_id: 0,
             in_clip: false,
+            clip_ref: None,
         };
         // Reserve path and group ids so that gradient ids do not collide with them.
         fn reserve(nodes: &[Node], ids: &mut HashSet<String>) {
