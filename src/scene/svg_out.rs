@@ -4,7 +4,8 @@
 //! ids; gradients are written to `<defs>` in `userSpaceOnUse` units with their transform.
 //! A stroke with a non-identity frame (drawn under a non-uniform scale) is written with a
 //! `transform` on its path so that the pen keeps its shape. Coordinates are written with
-//! four decimals, colors as `#rrggbb`.
+//! four decimals, colors as `#rrggbb`. The glyph outlines of a `<text>` are written as
+//! paths after a comment holding the text (`<!-- text: Hello -->`).
 
 use std::collections::HashSet;
 use std::fmt::Write as _;
@@ -246,6 +247,9 @@ impl Writer {
             }
         }
         let pad = "  ".repeat(indent);
+        if let Some(text) = &p.text {
+            let _ = writeln!(self.body, "{pad}<!-- text: {} -->", comment_text(text));
+        }
         let _ = writeln!(self.body, "{pad}<path{attrs}/>");
     }
 }
@@ -307,6 +311,28 @@ pub fn escape(s: &str) -> String {
             '>' => out.push_str("&gt;"),
             '"' => out.push_str("&quot;"),
             '\'' => out.push_str("&#39;"),
+            c if (c as u32) < 0x20 && c != '\t' => out.push(' '),
+            c => out.push(c),
+        }
+    }
+    out
+}
+
+/// Text made safe inside an XML comment, kept readable: `--` may not occur in a comment
+/// nor `-` end one, so a space follows every `-` that another `-` (or the end) follows;
+/// control characters, which XML 1.0 does not allow, become spaces as in [`escape`].
+/// Entities mean nothing in a comment: `<` and `&` stay as they are.
+pub(crate) fn comment_text(s: &str) -> String {
+    let mut out = String::with_capacity(s.len() + 2);
+    let mut chars = s.chars().peekable();
+    while let Some(c) = chars.next() {
+        match c {
+            '-' => {
+                out.push('-');
+                if matches!(chars.peek(), Some('-') | None) {
+                    out.push(' ');
+                }
+            }
             c if (c as u32) < 0x20 && c != '\t' => out.push(' '),
             c => out.push(c),
         }
