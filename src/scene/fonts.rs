@@ -319,8 +319,9 @@ impl Fonts {
             Some(families) => Err(Error::Unsupported {
                 path: name.to_path_buf(),
                 what: format!(
-                    "font family \"{families}\" of a <text> element: no loaded font has it \
-                     (load its font file or folder, or allow fallback to {})",
+                    "font-family {families} of a <text> element: no loaded font has any of \
+                     these families (load a font file or folder that does, or allow \
+                     fallback to {})",
                     self.default_family
                 ),
             }),
@@ -425,4 +426,83 @@ fn load_dir(
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bundled_faces_and_generic_families() {
+        let db = Fonts::new().database().unwrap();
+        assert_eq!(db.len(), 6);
+        for (generic, name) in [
+            (fontdb::Family::SansSerif, DEFAULT_FAMILY),
+            (fontdb::Family::Serif, "DejaVu Serif"),
+            (fontdb::Family::Monospace, "DejaVu Sans Mono"),
+        ] {
+            assert_eq!(db.family_name(&generic), name);
+            let id = db
+                .query(&fontdb::Query {
+                    families: &[generic],
+                    ..Default::default()
+                })
+                .unwrap();
+            assert!(db.face(id).unwrap().families.iter().any(|f| f.0 == name));
+        }
+        // Built once: a clone shares it.
+        let f = Fonts::new();
+        assert!(Arc::ptr_eq(
+            &f.database().unwrap(),
+            &f.clone().database().unwrap()
+        ));
+    }
+
+    #[test]
+    fn system_fonts_add_to_the_bundled_ones() {
+        // The machine may have no fonts at all; the bundled ones are there either way.
+        let f = Fonts::new().with_system_fonts(true);
+        assert!(f.system_fonts());
+        assert!(f.database().unwrap().len() >= 6);
+    }
+
+    #[test]
+    fn font_folders_are_searched_once_and_bad_files_named() {
+        let dir = std::env::temp_dir().join(format!("diffsvg-fonts-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(dir.join("sub")).unwrap();
+        std::fs::write(dir.join("sub/mono.ttf"), dejavu::sans_mono::bold()).unwrap();
+        // Not a font, though named like one: skipped in a folder, refused by name.
+        std::fs::write(dir.join("junk.ttf"), b"not a font").unwrap();
+        #[cfg(unix)]
+        std::os::unix::fs::symlink(&dir, dir.join("sub/loop")).unwrap();
+        let db = Fonts::new().with_dir(&dir).database().unwrap();
+        assert_eq!(db.len(), 7, "the bold mono face once, the loop not followed");
+        let e = Fonts::new()
+            .with_file(dir.join("junk.ttf"))
+            .database()
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("junk.ttf") && e.contains("not a font file"), "{e}");
+        let e = Fonts::new()
+            .with_dir(dir.join("none"))
+            .database()
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("none"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn missing_family_error_names_file_and_families() {
+        let svg = br#"<svg xmlns="http://www.w3.org/2000/svg" width="40" height="20">
+            <text x="2" y="15" font-family="'Nope', fantasy">Hi</text></svg>"#;
+        let e = crate::scene::parse_tree_with(svg, FsPath::new("n.svg"), &Fonts::new())
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("n.svg: unsupported: ") && e.contains("Nope"), "{e}");
+        assert!(e.contains("fantasy"), "{e}");
+        let fonts = Fonts::new().with_fallback(true);
+        assert!(crate::scene::parse_tree_with(svg, FsPath::new("n.svg"), &fonts).is_ok());
+    }
 }

@@ -318,8 +318,9 @@ pub fn escape(s: &str) -> String {
     out
 }
 
-/// Text made safe inside an XML comment, kept readable: `--` may not occur in a comment
-/// nor `-` end one, so a space follows every `-` that another `-` (or the end) follows;
+/// Text made safe inside an XML comment, kept readable: `--` may not occur in a comment,
+/// so a space follows every `-` that another `-` follows (the writer puts a space before
+/// `-->`, so a `-` at the end is safe);
 /// control characters, which XML 1.0 does not allow, become spaces as in [`escape`].
 /// Entities mean nothing in a comment: `<` and `&` stay as they are.
 pub(crate) fn comment_text(s: &str) -> String {
@@ -329,7 +330,7 @@ pub(crate) fn comment_text(s: &str) -> String {
         match c {
             '-' => {
                 out.push('-');
-                if matches!(chars.peek(), Some('-') | None) {
+                if chars.peek() == Some(&'-') {
                     out.push(' ');
                 }
             }
@@ -565,6 +566,20 @@ fn name(kind: &str, id: &str, k: usize) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn comment_text_never_holds_a_double_dash() {
+        assert_eq!(comment_text("a--b"), "a- -b");
+        assert_eq!(comment_text("---"), "- - -");
+        assert_eq!(comment_text("end-"), "end-");
+        assert_eq!(comment_text("<&>\n\tx"), "<&> \tx");
+        for s in ["--", "x---y-", "-->", "<!-- -->"] {
+            let c = comment_text(s);
+            assert!(!c.contains("--"), "{c}");
+            let doc = format!("<a><!-- text: {c} --></a>");
+            assert!(usvg::roxmltree::Document::parse(&doc).is_ok(), "{doc}");
+        }
+    }
     use crate::scene::svg_in::Sizing;
 
     #[test]

@@ -21,5 +21,6 @@ mod regress_volume;
 mod roundtrip;
 mod splat;
 mod splat_cli;
+mod text;
 mod vectorize;
 mod volume;
