@@ -85,7 +85,9 @@ impl PyScene {
         for dir in font_dirs {
             f = f.with_dir(dir);
         }
-        let inner = py.detach(|| Scene::load_with(&path, s, &f)).map_err(to_py)?;
+        let inner = py
+            .detach(|| Scene::load_with(&path, s, &f))
+            .map_err(to_py)?;
         Ok(PyScene { inner })
     }
 

@@ -6,11 +6,11 @@ use std::time::Instant;
 use anyhow::Result;
 
 use super::parity::collect_svgs;
+use super::util::FontArgs;
 use diffsvg::Sizing;
 use diffsvg::raster::{Prepared, RenderOptions, render_prepared};
 use diffsvg::reference::render_resvg_pixmap;
 use diffsvg::scene::random::curved_paths;
-use super::util::FontArgs;
 use diffsvg::scene::{from_tree, parse_tree, parse_tree_with};
 
 /// Arguments of `diffsvg bench`.

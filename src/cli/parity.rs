@@ -6,9 +6,9 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 
 use super::util::{FontArgs, SizeArgs};
-use diffsvg::scene::Fonts;
 use diffsvg::raster::RenderOptions;
 use diffsvg::reference::{PARITY_MAE, PARITY_PSNR, ParityError, parity_checked_with, parity_with};
+use diffsvg::scene::Fonts;
 
 /// Arguments of `diffsvg parity`.
 #[derive(clap::Args, Debug)]
@@ -156,7 +156,8 @@ pub fn run(a: Args) -> Result<()> {
                         std::fs::create_dir_all(dir)
                             .with_context(|| format!("{}: cannot create folder", dir.display()))?;
                         // It rendered a moment ago; should it not now, skip the picture.
-                        let Ok(p) = parity_with(f, sizing, &RenderOptions::default(), &fonts) else {
+                        let Ok(p) = parity_with(f, sizing, &RenderOptions::default(), &fonts)
+                        else {
                             continue;
                         };
                         let stem = f.file_stem().unwrap_or_default().to_string_lossy();

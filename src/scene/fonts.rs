@@ -417,10 +417,9 @@ fn load_dir(
             }
             continue;
         }
-        let is_font = path
-            .extension()
-            .and_then(|e| e.to_str())
-            .is_some_and(|e| ["ttf", "otf", "ttc", "otc"].contains(&e.to_ascii_lowercase().as_str()));
+        let is_font = path.extension().and_then(|e| e.to_str()).is_some_and(|e| {
+            ["ttf", "otf", "ttc", "otc"].contains(&e.to_ascii_lowercase().as_str())
+        });
         if is_font {
             load_file(db, &path, count)?;
         }
@@ -477,13 +476,20 @@ mod tests {
         #[cfg(unix)]
         std::os::unix::fs::symlink(&dir, dir.join("sub/loop")).unwrap();
         let db = Fonts::new().with_dir(&dir).database().unwrap();
-        assert_eq!(db.len(), 7, "the bold mono face once, the loop not followed");
+        assert_eq!(
+            db.len(),
+            7,
+            "the bold mono face once, the loop not followed"
+        );
         let e = Fonts::new()
             .with_file(dir.join("junk.ttf"))
             .database()
             .unwrap_err()
             .to_string();
-        assert!(e.contains("junk.ttf") && e.contains("not a font file"), "{e}");
+        assert!(
+            e.contains("junk.ttf") && e.contains("not a font file"),
+            "{e}"
+        );
         let e = Fonts::new()
             .with_dir(dir.join("none"))
             .database()
@@ -500,7 +506,10 @@ mod tests {
         let e = crate::scene::parse_tree_with(svg, FsPath::new("n.svg"), &Fonts::new())
             .unwrap_err()
             .to_string();
-        assert!(e.starts_with("n.svg: unsupported: ") && e.contains("Nope"), "{e}");
+        assert!(
+            e.starts_with("n.svg: unsupported: ") && e.contains("Nope"),
+            "{e}"
+        );
         assert!(e.contains("fantasy"), "{e}");
         let fonts = Fonts::new().with_fallback(true);
         assert!(crate::scene::parse_tree_with(svg, FsPath::new("n.svg"), &fonts).is_ok());

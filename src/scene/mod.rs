@@ -33,19 +33,19 @@
 //! ```
 
 mod check;
+pub mod fonts;
 pub(crate) mod geom;
 pub mod params;
 mod project;
 pub mod random;
 pub mod structure;
-pub mod fonts;
 pub(crate) mod svg_in;
 pub(crate) mod svg_out;
 
+pub use fonts::Fonts;
 pub use params::{ParamGroup, ParamLayout, ParamSlot};
 pub use project::project;
 pub use structure::Structure;
-pub use fonts::Fonts;
 pub use svg_in::{Sizing, from_tree, parse_tree, parse_tree_with};
 pub use svg_out::escape;
 

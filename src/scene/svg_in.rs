@@ -3,8 +3,8 @@
 use std::path::Path as FsPath;
 
 use super::{
-    Affine, Fonts, FRAME_IDENTITY, Fill, FillRule, Gradient, GradientKind, Group, LineCap, LineJoin, Node,
-    Paint, Path, Scene, Spread, Stop, Stroke, apply, concat,
+    Affine, FRAME_IDENTITY, Fill, FillRule, Fonts, Gradient, GradientKind, Group, LineCap,
+    LineJoin, Node, Paint, Path, Scene, Spread, Stop, Stroke, apply, concat,
 };
 use crate::error::{Error, Result};
 
@@ -889,7 +889,10 @@ mod tests {
         )
         .unwrap_err()
         .to_string();
-        assert!(e.contains("unsupported") && e.contains("foreignObject"), "{e}");
+        assert!(
+            e.contains("unsupported") && e.contains("foreignObject"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -39,15 +39,26 @@ fn text_in_the_bundled_font_matches_resvg() {
         ("sans.svg", with_family(&big, "sans-serif")),
         ("serif.svg", with_family(&big, "serif")),
         ("mono.svg", with_family(&big, "monospace")),
-        ("bold.svg", big.replace("<text ", "<text font-weight=\"bold\" ")),
+        (
+            "bold.svg",
+            big.replace("<text ", "<text font-weight=\"bold\" "),
+        ),
     ] {
         let f = write(&dir, name, &svg);
-        let p = parity_with(&f, Sizing::Natural, &RenderOptions::default(), &Fonts::new())
-            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        let p = parity_with(
+            &f,
+            Sizing::Natural,
+            &RenderOptions::default(),
+            &Fonts::new(),
+        )
+        .unwrap_or_else(|e| panic!("{name}: {e}"));
         let c = p.comparison;
         println!("{name}: MAE {:.3}, PSNR {:.2} dB", c.mae, c.psnr);
         // Ink: the glyphs are drawn, not dropped.
-        assert!(p.ours.data.iter().filter(|px| px[3] > 0.5).count() > 300, "{name}");
+        assert!(
+            p.ours.data.iter().filter(|px| px[3] > 0.5).count() > 300,
+            "{name}"
+        );
         outcomes.push((name, c.mae <= PARITY_MAE && c.psnr >= PARITY_PSNR, c));
     }
     let failing: Vec<_> = outcomes.iter().filter(|o| !o.1).collect();
@@ -186,7 +197,11 @@ fn text_survives_svg_out_and_back() {
         v
     };
     assert_eq!(ids(&a), ids(&b));
-    assert!(ids(&a).len() >= 2 && ids(&a)[0] == "greeting-1", "{:?}", ids(&a));
+    assert!(
+        ids(&a).len() >= 2 && ids(&a)[0] == "greeting-1",
+        "{:?}",
+        ids(&a)
+    );
     let opts = RenderOptions::default();
     let c = compare(&render(&a, &opts), &render(&b, &opts));
     assert!(c.max < 2.0 && c.mae < 0.01, "{c:?}");

@@ -534,7 +534,7 @@ mod tests {
                 "quiet_x": false, "freeze": ["points", "colors"], "loss": "l1"}"#,
         )
         .unwrap();
-        let f = flags(&t, &spec("fit").unwrap()).unwrap();
+        let f = flags(&t, &spec("fit").unwrap(), Path::new("/jobs")).unwrap();
         assert_eq!(
             f,
             [
@@ -544,6 +544,25 @@ mod tests {
                 "--iters=5",
                 "--loss=l1",
                 "--until-psnr=30.5"
+            ]
+        );
+    }
+
+    #[test]
+    fn font_paths_are_relative_to_the_job_file() {
+        let t: Map<String, Value> = serde_json::from_str(
+            r#"{"kind": "render", "font": ["a.ttf", "/abs/b.otf"], "font_dir": "fonts",
+                "font_fallback": true}"#,
+        )
+        .unwrap();
+        let f = flags(&t, &spec("render").unwrap(), Path::new("/jobs")).unwrap();
+        assert_eq!(
+            f,
+            [
+                "--font=/jobs/a.ttf",
+                "--font=/abs/b.otf",
+                "--font-dir=/jobs/fonts",
+                "--font-fallback"
             ]
         );
     }
