@@ -30,6 +30,16 @@ pub const MAX_IMAGE_PIXELS: u64 = MAX_PIXELS;
 /// Largest input file read whole (SVG, job file, camera file), in bytes.
 pub const MAX_FILE_BYTES: u64 = 64 << 20;
 
+/// Largest font file loaded for `<text>` (`--font`, a file in a `--font-dir`), in bytes,
+/// from its size before it is read.
+pub const MAX_FONT_BYTES: u64 = 64 << 20;
+
+/// Most font files loaded from `--font` and `--font-dir` together.
+pub const MAX_FONT_FILES: usize = 10_000;
+
+/// Deepest folder level searched below a `--font-dir` (a symlink loop ends here).
+pub const MAX_FONT_DIR_DEPTH: usize = 16;
+
 /// Largest model file read (a voxel grid), in bytes; its header's counts are checked
 /// against its length before anything else is allocated.
 pub const MAX_MODEL_BYTES: u64 = 4 << 30;

@@ -16,6 +16,7 @@ use std::path::Path;
 
 use crate::error::{Error, Result};
 use crate::image_io::Image;
+use crate::scene::Fonts;
 use crate::scene::svg_in::{Sizing, canvas_size};
 
 /// Largest coordinate magnitude, in device pixels, of anything resvg is asked to draw.
@@ -154,9 +155,20 @@ impl std::fmt::Display for ParityError {
 
 impl std::error::Error for ParityError {}
 
-/// Renders the SVG file at `path` with diffsvg and with resvg at the same size.
+/// Renders the SVG file at `path` with diffsvg and with resvg at the same size (`<text>`
+/// in the bundled fonts).
 pub fn parity(path: &Path, sizing: Sizing, opts: &crate::raster::RenderOptions) -> Result<Parity> {
-    parity_checked(path, sizing, opts).map_err(|e| match e {
+    parity_with(path, sizing, opts, crate::scene::fonts::bundled())
+}
+
+/// [`parity`] with these fonts for `<text>`.
+pub fn parity_with(
+    path: &Path,
+    sizing: Sizing,
+    opts: &crate::raster::RenderOptions,
+    fonts: &Fonts,
+) -> Result<Parity> {
+    parity_checked_with(path, sizing, opts, fonts).map_err(|e| match e {
         ParityError::Ours(e) | ParityError::Reference(e) => e,
     })
 }
@@ -167,9 +179,21 @@ pub fn parity_checked(
     sizing: Sizing,
     opts: &crate::raster::RenderOptions,
 ) -> std::result::Result<Parity, ParityError> {
+    parity_checked_with(path, sizing, opts, crate::scene::fonts::bundled())
+}
+
+/// [`parity_checked`] with these fonts for `<text>`. The file is parsed once, with
+/// `fonts`, and both renderers draw that tree: the same glyph outlines, so the comparison
+/// measures the rasterizers, not the font choice.
+pub fn parity_checked_with(
+    path: &Path,
+    sizing: Sizing,
+    opts: &crate::raster::RenderOptions,
+    fonts: &Fonts,
+) -> std::result::Result<Parity, ParityError> {
     let ours = || -> Result<_> {
         let data = crate::image_io::read_bounded(path, crate::limits::MAX_FILE_BYTES)?;
-        let tree = crate::scene::svg_in::parse_tree(&data, path)?;
+        let tree = crate::scene::svg_in::parse_tree_with(&data, path, fonts)?;
         let scene = crate::scene::svg_in::from_tree(&tree, path, sizing)?;
         Ok((tree, crate::raster::render(&scene, opts)))
     };

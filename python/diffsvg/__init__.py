@@ -94,10 +94,16 @@ class Scene:
     # ----- input and output ---------------------------------------------------------
     @classmethod
     def load(cls, path, width: Optional[int] = None, height: Optional[int] = None,
-             scale: Optional[float] = None) -> "Scene":
+             scale: Optional[float] = None, *, fonts=(), font_dirs=(),
+             font_fallback: bool = False) -> "Scene":
         """Loads an SVG or SVGZ file; ``width`` (with ``height``: exactly that size) or
-        ``scale`` resize the canvas, by default the SVG's own size."""
-        return cls(_native_scene=_native.Scene.load(os.fspath(path), width, height, scale))
+        ``scale`` resize the canvas, by default the SVG's own size. ``<text>`` is set in
+        the bundled DejaVu fonts plus the font files ``fonts`` and every font under the
+        folders ``font_dirs``; a font family none of them has is an error unless
+        ``font_fallback`` (then DejaVu Sans is used)."""
+        return cls(_native_scene=_native.Scene.load(
+            os.fspath(path), width, height, scale, [os.fspath(f) for f in fonts],
+            [os.fspath(d) for d in font_dirs], font_fallback))
 
     @classmethod
     def from_svg(cls, text: str, width: Optional[int] = None, height: Optional[int] = None,

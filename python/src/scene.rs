@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use diffsvg::scene::params::written_point_gradient;
 use diffsvg::scene::project;
 use diffsvg::scene::structure::PaintSlots;
-use diffsvg::scene::{ParamGroup, ParamLayout, Structure};
+use diffsvg::scene::{Fonts, ParamGroup, ParamLayout, Structure};
 use diffsvg::{Scene, Sizing};
 use numpy::{PyArray1, PyArray2, PyReadonlyArray1};
 use pyo3::prelude::*;
@@ -60,18 +60,34 @@ impl PyScene {
     }
 
     /// Loads an SVG or SVGZ file. `width` (with `height`: exactly that size) or `scale`
-    /// resize the canvas; by default the SVG's own size. Errors name the file.
+    /// resize the canvas; by default the SVG's own size. `<text>` is set in the bundled
+    /// DejaVu fonts plus the font files `fonts` and the fonts under the folders
+    /// `font_dirs`; a missing family is an error unless `font_fallback`. Errors name the
+    /// file.
     #[staticmethod]
-    #[pyo3(signature = (path, width=None, height=None, scale=None))]
+    #[pyo3(signature = (path, width=None, height=None, scale=None, fonts=Vec::new(), font_dirs=Vec::new(), font_fallback=false))]
+    #[allow(clippy::too_many_arguments)]
     fn load(
         py: Python<'_>,
         path: PathBuf,
         width: Option<u32>,
         height: Option<u32>,
         scale: Option<f64>,
+        fonts: Vec<PathBuf>,
+        font_dirs: Vec<PathBuf>,
+        font_fallback: bool,
     ) -> PyResult<Self> {
         let s = sizing(width, height, scale)?;
-        let inner = py.detach(|| Scene::load(&path, s)).map_err(to_py)?;
+        let mut f = Fonts::new().with_fallback(font_fallback);
+        for file in fonts {
+            f = f.with_file(file);
+        }
+        for dir in font_dirs {
+            f = f.with_dir(dir);
+        }
+        let inner = py
+            .detach(|| Scene::load_with(&path, s, &f))
+            .map_err(to_py)?;
         Ok(PyScene { inner })
     }
 

@@ -130,3 +130,27 @@ def test_the_gil_is_released_while_rendering():
     # This loop ticks about once a millisecond while the other thread renders; were the
     # GIL held, it would tick only between the four calls.
     assert len(ticks) > max(20, 0.3 * ms), (len(ticks), ms)
+
+
+TEXT = """<svg xmlns="http://www.w3.org/2000/svg" width="80" height="30">
+  <text id="t" x="4" y="22" font-size="20" font-family="{family}">Hi-</text></svg>"""
+
+
+def test_text_with_font_options(tmp_path):
+    svg = tmp_path / "text.svg"
+    svg.write_text(TEXT.format(family="DejaVu Sans"))
+    s = diffsvg.Scene.load(svg)
+    assert s.path_count >= 1
+    assert "<!-- text: Hi- -->" in s.to_svg()
+    missing = tmp_path / "missing.svg"
+    missing.write_text(TEXT.format(family="No Such Family"))
+    with pytest.raises(diffsvg.DiffsvgError, match="missing.svg.*No Such Family"):
+        diffsvg.Scene.load(missing)
+    # Fallback sets it in DejaVu Sans: the same pixels as asking for it.
+    fell = diffsvg.Scene.load(missing, font_fallback=True)
+    assert np.array_equal(diffsvg.render(fell), diffsvg.render(s))
+    # A font folder and a font file are loaded (a folder without fonts is fine).
+    (tmp_path / "fonts").mkdir()
+    assert diffsvg.Scene.load(svg, font_dirs=[tmp_path / "fonts"]).path_count >= 1
+    with pytest.raises(diffsvg.DiffsvgError, match="not a font file"):
+        diffsvg.Scene.load(svg, fonts=[svg])

@@ -6,11 +6,12 @@ use std::time::Instant;
 use anyhow::Result;
 
 use super::parity::collect_svgs;
+use super::util::FontArgs;
 use diffsvg::Sizing;
 use diffsvg::raster::{Prepared, RenderOptions, render_prepared};
 use diffsvg::reference::render_resvg_pixmap;
 use diffsvg::scene::random::curved_paths;
-use diffsvg::scene::{from_tree, parse_tree};
+use diffsvg::scene::{from_tree, parse_tree, parse_tree_with};
 
 /// Arguments of `diffsvg bench`.
 #[derive(clap::Args, Debug)]
@@ -41,6 +42,8 @@ pub struct Args {
     /// Shape counts for `--backward`.
     #[arg(long, value_delimiter = ',', default_value = "64,256,512")]
     shapes: Vec<usize>,
+    #[command(flatten)]
+    fonts: FontArgs,
 }
 
 fn run_backward(a: &Args) -> Result<()> {
@@ -142,9 +145,10 @@ pub fn run(a: Args) -> Result<()> {
         a.inputs.clone()
     };
     let mut cases: Vec<(String, usvg::Tree, Sizing)> = Vec::new();
+    let fonts = a.fonts.fonts();
     for f in collect_svgs(&inputs)? {
         let data = diffsvg::image_io::read_bounded(&f, diffsvg::limits::MAX_FILE_BYTES)?;
-        let tree = parse_tree(&data, &f)?;
+        let tree = parse_tree_with(&data, &f, &fonts)?;
         let name = f
             .file_name()
             .unwrap_or_default()

@@ -8,10 +8,10 @@ use serde_json::json;
 
 use super::choices::{Background, choice, parse_background};
 use super::progress::{ReportArgs, Reporter};
-use super::util::{check_output, flag_error, sibling};
+use super::util::{FontArgs, check_output, flag_error, sibling};
 use diffsvg::Sizing;
 use diffsvg::choice::Choice as _;
-use diffsvg::fit::{FitOptions, ObjectiveOptions, StopReason, load_target, refine};
+use diffsvg::fit::{FitOptions, ObjectiveOptions, StopReason, load_target_with, refine};
 use diffsvg::fit::{LearningRates, Objective};
 use diffsvg::image_io::{Image, side_by_side};
 use diffsvg::loss::Loss;
@@ -127,6 +127,8 @@ pub struct Args {
     #[command(flatten)]
     optim: OptimArgs,
     #[command(flatten)]
+    fonts: FontArgs,
+    #[command(flatten)]
     report: ReportArgs,
 }
 
@@ -138,9 +140,10 @@ pub fn run(a: Args) -> Result<()> {
         check_output(&compare_path, "png")?;
     }
     let opts = a.optim.fit_options(a.iters)?;
-    let target = load_target(&a.target, None)?;
+    let fonts = a.fonts.fonts();
+    let target = load_target_with(&a.target, None, &fonts)?;
     let objective = a.optim.objective(&target)?;
-    let scene = Scene::load(&a.init, Sizing::Exact(target.width, target.height))?;
+    let scene = Scene::load_with(&a.init, Sizing::Exact(target.width, target.height), &fonts)?;
     super::util::warn_about(&scene, &a.init, &diffsvg::raster::RenderOptions::default());
     diffsvg::raster::check_backward_memory(&scene, &opts.render, &a.init)?;
     let layout = ParamLayout::new(&scene);

@@ -8,7 +8,7 @@ use anyhow::{Result, bail};
 use serde_json::json;
 
 use super::parity::collect_svgs;
-use super::util::check_output;
+use super::util::{FontArgs, check_output};
 use diffsvg::Sizing;
 use diffsvg::fit::glyph::{GlyphOptions, GlyphOutcome, count_ink_segments, fit_glyph};
 use diffsvg::image_io::{Image, contact_sheet, write_atomic};
@@ -36,6 +36,8 @@ pub struct Args {
     /// Optimizer steps per round (after the start and after each added segment).
     #[arg(long, default_value_t = GlyphOptions::default().iters)]
     iters: usize,
+    #[command(flatten)]
+    fonts: FontArgs,
     /// Fill the fitted outlines with the even-odd rule instead of nonzero.
     #[arg(long)]
     evenodd: bool,
@@ -101,8 +103,9 @@ pub fn run(a: Args) -> Result<()> {
     // Load everything first, so that a bad file fails before the long part.
     let mut targets = Vec::with_capacity(files.len());
     let mut names = std::collections::BTreeSet::new();
+    let fonts = a.fonts.fonts();
     for f in &files {
-        let scene = Scene::load(f, Sizing::Width(a.size))?;
+        let scene = Scene::load_with(f, Sizing::Width(a.size), &fonts)?;
         let mut target = render(&scene, &RenderOptions::default());
         target.over_background([1.0; 4]);
         let (contours, segments) = count_ink_segments(&scene);

@@ -6,7 +6,7 @@ use anyhow::{Result, bail};
 use serde_json::Value;
 
 use super::choices::choice;
-use super::util::{SizeArgs, parse_color};
+use super::util::{FontArgs, SizeArgs, parse_color};
 use diffsvg::choice::Choice as _;
 use diffsvg::gradcheck::{analytic, compare, numeric};
 use diffsvg::image_io::Image;
@@ -29,6 +29,8 @@ pub struct Common {
     resize: bool,
     #[command(flatten)]
     size: SizeArgs,
+    #[command(flatten)]
+    fonts: FontArgs,
     /// Composite the render over this color before comparing (default: transparent).
     #[arg(long, value_parser = parse_color)]
     background: Option<[f32; 4]>,
@@ -81,7 +83,7 @@ struct Job {
 fn load(c: &Common) -> Result<Job> {
     let loss = c.loss;
     let background = c.background;
-    let scene = Scene::load(&c.input, c.size.sizing()?)?;
+    let scene = Scene::load_with(&c.input, c.size.sizing()?, &c.fonts.fonts())?;
     super::util::warn_about(&scene, &c.input, &RenderOptions::default());
     let mut target = Image::load(&c.target)?;
     if (target.width, target.height) != (scene.width, scene.height) {

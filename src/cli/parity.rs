@@ -5,9 +5,10 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 
-use super::util::SizeArgs;
+use super::util::{FontArgs, SizeArgs};
 use diffsvg::raster::RenderOptions;
-use diffsvg::reference::{PARITY_MAE, PARITY_PSNR, ParityError, parity, parity_checked};
+use diffsvg::reference::{PARITY_MAE, PARITY_PSNR, ParityError, parity_checked_with, parity_with};
+use diffsvg::scene::Fonts;
 
 /// Arguments of `diffsvg parity`.
 #[derive(clap::Args, Debug)]
@@ -17,6 +18,14 @@ pub struct Args {
     inputs: Vec<PathBuf>,
     #[command(flatten)]
     size: SizeArgs,
+    #[command(flatten)]
+    fonts: FontArgs,
+    /// resvg's test-suite font setup: the fonts of this folder (the suite's `fonts/`),
+    /// serif Noto Serif, sans-serif Noto Sans, cursive Yellowtail, fantasy Sedgwick Ave
+    /// Display, monospace Noto Mono, missing families set in Noto Serif (as resvg's own
+    /// test harness does). `--font` and `--font-dir` add to it.
+    #[arg(long, value_name = "DIR")]
+    resvg_fonts: Option<PathBuf>,
     /// Write a Markdown table of pass rates per folder here.
     #[arg(long)]
     report: Option<PathBuf>,
@@ -70,9 +79,11 @@ fn walk(dir: &Path, out: &mut Vec<PathBuf>) -> std::io::Result<()> {
 
 /// Compares one file. A panic of either renderer is caught and reported as
 /// [`Outcome::Failed`], so that one file cannot stop a run over a folder.
-pub fn check(path: &Path, sizing: diffsvg::Sizing) -> Outcome {
-    let run = || parity_checked(path, sizing, &RenderOptions::default());
-    match std::panic::catch_unwind(run) {
+pub fn check(path: &Path, sizing: diffsvg::Sizing, fonts: &Fonts) -> Outcome {
+    let run = || parity_checked_with(path, sizing, &RenderOptions::default(), fonts);
+    // The fonts' database is only read here (built before the files are shared out): a
+    // panic cannot leave it half-changed.
+    match std::panic::catch_unwind(std::panic::AssertUnwindSafe(run)) {
         Ok(Ok(p)) => Outcome::Compared {
             mae: p.comparison.mae,
             max: p.comparison.max,
@@ -85,14 +96,28 @@ pub fn check(path: &Path, sizing: diffsvg::Sizing) -> Outcome {
     }
 }
 
+impl Args {
+    /// The fonts of `--resvg-fonts` (or the bundled ones) and the font flags.
+    fn fonts(&self) -> Fonts {
+        let base = match &self.resvg_fonts {
+            Some(dir) => Fonts::resvg_test_suite(dir),
+            None => Fonts::new(),
+        };
+        self.fonts.add_to(base)
+    }
+}
+
 /// Runs `diffsvg parity`.
 pub fn run(a: Args) -> Result<()> {
     use rayon::prelude::*;
     let sizing = a.size.sizing()?;
     let files = collect_svgs(&a.inputs)?;
+    let fonts = a.fonts();
+    // Built once, before the files are shared out, so that a bad font flag is one error.
+    fonts.database()?;
     let outcomes: Vec<(PathBuf, Outcome)> = files
         .par_iter()
-        .map(|f| (f.clone(), check(f, sizing)))
+        .map(|f| (f.clone(), check(f, sizing, &fonts)))
         .collect();
     // Per folder: (files, passed, refused).
     let mut per: BTreeMap<String, [usize; 3]> = BTreeMap::new();
@@ -131,7 +156,8 @@ pub fn run(a: Args) -> Result<()> {
                         std::fs::create_dir_all(dir)
                             .with_context(|| format!("{}: cannot create folder", dir.display()))?;
                         // It rendered a moment ago; should it not now, skip the picture.
-                        let Ok(p) = parity(f, sizing, &RenderOptions::default()) else {
+                        let Ok(p) = parity_with(f, sizing, &RenderOptions::default(), &fonts)
+                        else {
                             continue;
                         };
                         let stem = f.file_stem().unwrap_or_default().to_string_lossy();

@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::{Result, bail};
 
-use super::util::{SizeArgs, check_output};
+use super::util::{FontArgs, SizeArgs, check_output};
 use diffsvg::limits::MAX_COORDINATE;
 use diffsvg::scene::Scene;
 use diffsvg::scene::random::perturb;
@@ -29,6 +29,8 @@ pub struct Args {
     seed: u64,
     #[command(flatten)]
     size: SizeArgs,
+    #[command(flatten)]
+    fonts: FontArgs,
 }
 
 /// Runs `diffsvg perturb`.
@@ -43,7 +45,7 @@ pub fn run(a: Args) -> Result<()> {
             a.points
         );
     }
-    let scene = Scene::load(&a.input, a.size.sizing()?)?;
+    let scene = Scene::load_with(&a.input, a.size.sizing()?, &a.fonts.fonts())?;
     perturb(&scene, a.points, a.colors, a.seed).save_svg(&a.output)?;
     Ok(())
 }

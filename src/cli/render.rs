@@ -4,11 +4,11 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 
-use super::util::{SizeArgs, check_output, parse_color, read, sibling};
+use super::util::{FontArgs, SizeArgs, check_output, parse_color, read, sibling};
 use diffsvg::metrics::{compare, difference_image};
 use diffsvg::raster::{RenderOptions, render};
 use diffsvg::reference::render_resvg;
-use diffsvg::scene::{from_tree, parse_tree};
+use diffsvg::scene::{from_tree, parse_tree_with};
 
 /// Arguments of `diffsvg render`.
 #[derive(clap::Args, Debug)]
@@ -20,6 +20,8 @@ pub struct Args {
     output: PathBuf,
     #[command(flatten)]
     size: SizeArgs,
+    #[command(flatten)]
+    fonts: FontArgs,
     /// Background color under the drawing (default: transparent).
     #[arg(long, value_parser = parse_color)]
     background: Option<[f32; 4]>,
@@ -41,7 +43,7 @@ pub fn run(a: Args) -> Result<()> {
         anyhow::bail!("--tolerance {} must be a positive number", a.tolerance);
     }
     let data = read(&a.input)?;
-    let tree = parse_tree(&data, &a.input)?;
+    let tree = parse_tree_with(&data, &a.input, &a.fonts.fonts())?;
     let scene = from_tree(&tree, &a.input, sizing)?;
     let opts = RenderOptions {
         tolerance: a.tolerance,

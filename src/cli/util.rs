@@ -6,6 +6,7 @@ use std::str::FromStr;
 use anyhow::Result;
 
 use diffsvg::Sizing;
+use diffsvg::scene::Fonts;
 
 /// Parses a CSS/SVG color (`white`, `#fa0`, `rgb(…)`, `none`) into straight RGBA in
 /// `[0, 1]`; a clap value parser.
@@ -38,6 +39,45 @@ impl SizeArgs {
     /// The sizing these flags ask for (the library reads them; errors name the flag).
     pub fn sizing(&self) -> Result<Sizing> {
         Sizing::from_options(self.width, None, self.scale).map_err(flag_error)
+    }
+}
+
+/// `--font`, `--font-dir`, `--font-fallback`: the fonts of `<text>`, shared by every
+/// command that reads SVG (and by batch job files, as `font`, `font_dir`, `font_fallback`).
+#[derive(clap::Args, Debug, Clone, Default)]
+pub struct FontArgs {
+    /// Font file (TrueType, OpenType, a collection) for `<text>`; repeatable. DejaVu Sans
+    /// (the default and sans-serif family), DejaVu Serif and DejaVu Sans Mono are bundled.
+    #[arg(long = "font", value_name = "FILE")]
+    pub files: Vec<PathBuf>,
+    /// Folder of font files for `<text>`, searched recursively; repeatable.
+    #[arg(long = "font-dir", value_name = "DIR")]
+    pub dirs: Vec<PathBuf>,
+    /// Set text whose font families are all missing in DejaVu Sans instead of refusing
+    /// the file.
+    #[arg(long)]
+    pub font_fallback: bool,
+}
+
+impl FontArgs {
+    /// The library's font options for these flags.
+    pub fn fonts(&self) -> Fonts {
+        self.add_to(Fonts::new())
+    }
+
+    /// `base` with these flags' files and folders added, and fallback if asked for.
+    pub fn add_to(&self, base: Fonts) -> Fonts {
+        let mut f = base;
+        if self.font_fallback {
+            f = f.with_fallback(true);
+        }
+        for file in &self.files {
+            f = f.with_file(file);
+        }
+        for dir in &self.dirs {
+            f = f.with_dir(dir);
+        }
+        f
     }
 }
 

@@ -8,9 +8,9 @@ use serde_json::json;
 use super::choices::{InitArg, among};
 use super::fit::OptimArgs;
 use super::progress::{ReportArgs, Reporter};
-use super::util::{check_output, flag_error, sibling};
+use super::util::{FontArgs, check_output, flag_error, sibling};
 use diffsvg::choice::Choice as _;
-use diffsvg::fit::load_target;
+use diffsvg::fit::load_target_with;
 use diffsvg::fit::vectorize::{Event, Mode, VectorizeOptions, vectorize};
 use diffsvg::image_io::side_by_side;
 use diffsvg::raster::{RenderOptions, render};
@@ -56,6 +56,9 @@ pub struct Args {
     compare: bool,
     #[command(flatten)]
     optim: OptimArgs,
+    /// The fonts of an SVG target's `<text>`.
+    #[command(flatten)]
+    fonts: FontArgs,
     #[command(flatten)]
     report: ReportArgs,
 }
@@ -114,7 +117,7 @@ pub fn run(a: Args) -> Result<()> {
         }
         e => flag_error(e),
     })?;
-    let mut target = load_target(&a.target, None)?;
+    let mut target = load_target_with(&a.target, None, &a.fonts.fonts())?;
     if let Some(w) = a.width {
         if w == 0 {
             bail!("--width must be at least 1 pixel");

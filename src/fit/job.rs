@@ -186,14 +186,24 @@ impl GlyphOptions {
 /// Loads a target picture for fitting: PNG or JPEG (sizes read from the header before
 /// decoding), or an SVG or SVGZ rendered by diffsvg at its own size; then resampled to
 /// `size` (width, height) when given. Refuses an empty picture. Errors name the file.
+/// An SVG's `<text>` is set in the bundled fonts; [`load_target_with`] takes others.
 pub fn load_target(path: &Path, size: Option<(u32, u32)>) -> Result<Image> {
+    load_target_with(path, size, crate::scene::fonts::bundled())
+}
+
+/// [`load_target`] with these fonts for an SVG target's `<text>`.
+pub fn load_target_with(
+    path: &Path,
+    size: Option<(u32, u32)>,
+    fonts: &crate::scene::Fonts,
+) -> Result<Image> {
     let is_svg = path
         .extension()
         .and_then(|e| e.to_str())
         .is_some_and(|e| e.eq_ignore_ascii_case("svg") || e.eq_ignore_ascii_case("svgz"));
     let t = if is_svg {
         render(
-            &Scene::load(path, Sizing::Natural)?,
+            &Scene::load_with(path, Sizing::Natural, fonts)?,
             &RenderOptions::default(),
         )
     } else {

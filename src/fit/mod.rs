@@ -28,7 +28,7 @@ pub(crate) mod trace;
 pub mod vectorize;
 
 pub use adam::{Adam, AdamConfig, LearningRates};
-pub use job::{ObjectiveOptions, load_target, rate_name};
+pub use job::{ObjectiveOptions, load_target, load_target_with, rate_name};
 pub use objective::Objective;
 pub use refine::{Control, FitOptions, FitOutcome, Step, StopReason, refine};
 pub use shapes::{random_blobs, random_strokes};

@@ -33,6 +33,7 @@
 //! ```
 
 mod check;
+pub mod fonts;
 pub(crate) mod geom;
 pub mod params;
 mod project;
@@ -41,10 +42,11 @@ pub mod structure;
 pub(crate) mod svg_in;
 pub(crate) mod svg_out;
 
+pub use fonts::Fonts;
 pub use params::{ParamGroup, ParamLayout, ParamSlot};
 pub use project::project;
 pub use structure::Structure;
-pub use svg_in::{Sizing, from_tree, parse_tree};
+pub use svg_in::{Sizing, from_tree, parse_tree, parse_tree_with};
 pub use svg_out::escape;
 
 /// A 2D point or vector in device pixels.
@@ -487,6 +489,10 @@ pub struct Path {
     pub stroke: Option<Stroke>,
     /// Paint the stroke before the fill.
     pub stroke_first: bool,
+    /// The characters of the `<text>` element this path is the outline of (on the first
+    /// path of each text only): SVG out writes them back as a comment, so that the text
+    /// stays recognisable once it is outlines.
+    pub text: Option<String>,
 }
 
 impl Path {
@@ -510,6 +516,7 @@ impl Path {
             fill: None,
             stroke: None,
             stroke_first: false,
+            text: None,
         }
     }
 

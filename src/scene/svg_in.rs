@@ -3,9 +3,9 @@
 use std::path::Path as FsPath;
 
 use super::{
-    Affine, BlendMode, Clip, FRAME_IDENTITY, Fill, FillRule, Gradient, GradientKind, Group,
-    LineCap, LineJoin, Mask, MaskKind, Node, Paint, Path, Role, Scene, Spread, Stop, Stroke, apply,
-    concat,
+    Affine, BlendMode, Clip, FRAME_IDENTITY, Fill, FillRule, Fonts, Gradient, GradientKind,
+    Group, LineCap, LineJoin, Mask, MaskKind, Node, Paint, Path, Role, Scene, Spread, Stop,
+    Stroke, apply, concat,
 };
 use crate::error::{Error, Result};
 
@@ -72,11 +72,17 @@ impl Sizing {
 
 impl Scene {
     /// Loads an SVG file (plain or gzip-compressed, `.svgz`), of at most
-    /// [`MAX_FILE_BYTES`] bytes. Errors name the file.
+    /// [`MAX_FILE_BYTES`] bytes, with the bundled fonts ([`Fonts::default`]). Errors name
+    /// the file.
     pub fn load(path: impl AsRef<FsPath>, sizing: Sizing) -> Result<Scene> {
+        Scene::load_with(path, sizing, super::fonts::bundled())
+    }
+
+    /// [`Scene::load`] with these fonts for `<text>`.
+    pub fn load_with(path: impl AsRef<FsPath>, sizing: Sizing, fonts: &Fonts) -> Result<Scene> {
         let path = path.as_ref();
         let data = read_bounded(path, MAX_FILE_BYTES)?;
-        Scene::from_svg_data(&data, path, sizing)
+        Scene::from_svg_data_with(&data, path, sizing, fonts)
     }
 
     /// Parses SVG text; `name` is used in error messages.
@@ -84,16 +90,46 @@ impl Scene {
         Scene::from_svg_data(text.as_bytes(), name.as_ref(), sizing)
     }
 
+    /// [`Scene::from_svg_str`] with these fonts for `<text>`.
+    pub fn from_svg_str_with(
+        text: &str,
+        name: impl AsRef<FsPath>,
+        sizing: Sizing,
+        fonts: &Fonts,
+    ) -> Result<Scene> {
+        Scene::from_svg_data_with(text.as_bytes(), name.as_ref(), sizing, fonts)
+    }
+
     /// Parses SVG bytes (plain or gzip-compressed); `name` is used in error messages.
     pub fn from_svg_data(data: &[u8], name: &FsPath, sizing: Sizing) -> Result<Scene> {
-        from_tree(&parse_tree(data, name)?, name, sizing)
+        Scene::from_svg_data_with(data, name, sizing, super::fonts::bundled())
     }
+
+    /// [`Scene::from_svg_data`] with these fonts for `<text>`.
+    pub fn from_svg_data_with(
+        data: &[u8],
+        name: &FsPath,
+        sizing: Sizing,
+        fonts: &Fonts,
+    ) -> Result<Scene> {
+        from_tree(&parse_tree_with(data, name, fonts)?, name, sizing)
+    }
+}
+
+/// [`parse_tree_with`] the bundled fonts ([`Fonts::default`]).
+pub fn parse_tree(data: &[u8], name: &FsPath) -> Result<usvg::Tree> {
+    parse_tree_with(data, name, super::fonts::bundled())
 }
 
 /// Parses SVG bytes with usvg, refusing elements usvg would silently drop. Gzip-compressed
 /// bytes (`.svgz`) are decompressed first, to at most [`MAX_DECOMPRESSED_BYTES`]. A panic
 /// inside usvg is caught and reported as an [`Error::Svg`] naming the file.
-pub fn parse_tree(data: &[u8], name: &FsPath) -> Result<usvg::Tree> {
+///
+/// `<text>` is laid out into glyph outlines with `fonts`; a `font-family` no loaded font
+/// has is an [`Error::Unsupported`] naming the file and the families, unless the fonts
+/// allow fallback. Give the same tree to [`from_tree`] and to the reference renderer
+/// (`reference::render_resvg`), and both draw the same glyphs.
+pub fn parse_tree_with(data: &[u8], name: &FsPath, fonts: &Fonts) -> Result<usvg::Tree> {
     let unzipped;
     let data = if is_gzip(data) {
         unzipped = gunzip_bounded(data, MAX_DECOMPRESSED_BYTES, name)?;
@@ -104,7 +140,7 @@ pub fn parse_tree(data: &[u8], name: &FsPath) -> Result<usvg::Tree> {
     if let Ok(text) = std::str::from_utf8(data) {
         reject_unsupported_xml(text, name)?;
     }
-    let opt = usvg::Options::default();
+    let (opt, missing) = fonts.usvg_options()?;
     // usvg's geometry unwraps rectangles it cannot build (a filter or image region of
     // width 3.4e38): behind the guard such a panic is one more parse error.
     let parsed =
@@ -112,13 +148,15 @@ pub fn parse_tree(data: &[u8], name: &FsPath) -> Result<usvg::Tree> {
             path: name.to_path_buf(),
             message: format!("the SVG parser (usvg) failed on this file: {why}"),
         })?;
-    parsed.map_err(|e| Error::Svg {
+    let tree = parsed.map_err(|e| Error::Svg {
         path: name.to_path_buf(),
         message: e.to_string(),
-    })
+    })?;
+    fonts.check_missing(&missing, name)?;
+    Ok(tree)
 }
 
-/// usvg silently drops some elements (text without fonts, images it cannot load); refuse
+/// usvg silently drops some elements (images it cannot load); refuse
 /// them instead of rendering something else than the file says.
 fn reject_unsupported_xml(text: &str, name: &FsPath) -> Result<()> {
     let Ok(doc) = usvg::roxmltree::Document::parse_with_options(
@@ -134,7 +172,7 @@ fn reject_unsupported_xml(text: &str, name: &FsPath) -> Result<()> {
     check_marker_work(&doc, name)?;
     for n in doc.descendants().filter(|n| n.is_element()) {
         let tag = n.tag_name().name();
-        if matches!(tag, "text" | "foreignObject" | "image") {
+        if matches!(tag, "foreignObject" | "image") {
             return Err(Error::Unsupported {
                 path: name.to_path_buf(),
                 what: describe(tag, n.attribute("id")),
@@ -618,9 +656,7 @@ fn convert_group_children(g: &usvg::Group, ctx: &Ctx, t: &Affine, role: Role) ->
             usvg::Node::Image(i) => {
                 return Err(ctx.unsupported(describe("image", Some(i.id()))));
             }
-            usvg::Node::Text(t) => {
-                return Err(ctx.unsupported(describe("text", Some(t.id()))));
-            }
+            usvg::Node::Text(text) => out.extend(convert_text(text, ctx, t, role)?),
         }
     }
     Ok(out)
@@ -709,6 +745,40 @@ fn convert_blend(b: usvg::BlendMode) -> BlendMode {
         U::Luminosity => BlendMode::Luminosity,
         U::PlusLighter => BlendMode::PlusLighter,
     }
+}
+
+/// A `<text>` as the glyph outlines usvg laid it out into (`flattened()`: a plain group of
+/// ordinary paths, one per span and decoration, so paints and gradients reach glyphs as
+/// they reach any path). The paths take the text's id (`id`, or `id-1`, `id-2`, … when
+/// there are several), and the first carries the characters for SVG out's comment.
+fn convert_text(text: &usvg::Text, ctx: &Ctx, t: &Affine, role: Role) -> Result<Vec<Node>> {
+    let g = text.flattened();
+    let mut nodes = convert_group_children(g, ctx, &concat(t, &to_affine(g.transform())), role)?;
+    let mut paths = Vec::new();
+    fn collect<'a>(nodes: &'a mut [Node], out: &mut Vec<&'a mut Path>) {
+        for n in nodes {
+            match n {
+                Node::Path(p) => out.push(p),
+                Node::Group(g) => collect(&mut g.children, out),
+            }
+        }
+    }
+    collect(&mut nodes, &mut paths);
+    let several = paths.len() > 1;
+    for (k, p) in paths.iter_mut().enumerate() {
+        if p.id.is_empty() && !text.id().is_empty() {
+            p.id = if several {
+                format!("{}-{}", text.id(), k + 1)
+            } else {
+                text.id().to_string()
+            };
+        }
+    }
+    if let Some(first) = paths.first_mut() {
+        let chars: String = text.chunks().iter().map(|c| c.text()).collect();
+        first.text = Some(chars);
+    }
+    Ok(nodes)
 }
 
 fn convert_path(p: &usvg::Path, ctx: &Ctx, t: &Affine, role: Role) -> Result<Option<Path>> {
@@ -957,11 +1027,14 @@ mod tests {
         let e = load("<svg").unwrap_err().to_string();
         assert!(e.contains("t.svg") && e.contains("malformed"), "{e}");
         let e = load(
-            r#"<svg xmlns="http://www.w3.org/2000/svg" width="10" height="10"><text id="x">hi</text></svg>"#,
+            r#"<svg xmlns="http://www.w3.org/2000/svg" width="10" height="10"><foreignObject id="x"/></svg>"#,
         )
         .unwrap_err()
         .to_string();
-        assert!(e.contains("unsupported") && e.contains("text"), "{e}");
+        assert!(
+            e.contains("unsupported") && e.contains("foreignObject"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -4,7 +4,8 @@
 //! ids; gradients are written to `<defs>` in `userSpaceOnUse` units with their transform.
 //! A stroke with a non-identity frame (drawn under a non-uniform scale) is written with a
 //! `transform` on its path so that the pen keeps its shape. Coordinates are written with
-//! four decimals, colors as `#rrggbb`.
+//! four decimals, colors as `#rrggbb`. The glyph outlines of a `<text>` are written as
+//! paths after a comment holding the text (`<!-- text: Hello -->`).
 
 use std::collections::HashSet;
 use std::fmt::Write as _;
@@ -419,6 +420,9 @@ impl Writer {
             }
         }
         let pad = "  ".repeat(indent);
+        if let Some(text) = &p.text {
+            let _ = writeln!(self.body, "{pad}<!-- text: {} -->", comment_text(text));
+        }
         let _ = writeln!(self.body, "{pad}<path{attrs}/>");
     }
 }
@@ -480,6 +484,29 @@ pub fn escape(s: &str) -> String {
             '>' => out.push_str("&gt;"),
             '"' => out.push_str("&quot;"),
             '\'' => out.push_str("&#39;"),
+            c if (c as u32) < 0x20 && c != '\t' => out.push(' '),
+            c => out.push(c),
+        }
+    }
+    out
+}
+
+/// Text made safe inside an XML comment, kept readable: `--` may not occur in a comment,
+/// so a space follows every `-` that another `-` follows (the writer puts a space before
+/// `-->`, so a `-` at the end is safe);
+/// control characters, which XML 1.0 does not allow, become spaces as in [`escape`].
+/// Entities mean nothing in a comment: `<` and `&` stay as they are.
+pub(crate) fn comment_text(s: &str) -> String {
+    let mut out = String::with_capacity(s.len() + 2);
+    let mut chars = s.chars().peekable();
+    while let Some(c) = chars.next() {
+        match c {
+            '-' => {
+                out.push('-');
+                if chars.peek() == Some(&'-') {
+                    out.push(' ');
+                }
+            }
             c if (c as u32) < 0x20 && c != '\t' => out.push(' '),
             c => out.push(c),
         }
@@ -737,6 +764,20 @@ fn name(kind: &str, id: &str, k: usize) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn comment_text_never_holds_a_double_dash() {
+        assert_eq!(comment_text("a--b"), "a- -b");
+        assert_eq!(comment_text("---"), "- - -");
+        assert_eq!(comment_text("end-"), "end-");
+        assert_eq!(comment_text("<&>\n\tx"), "<&> \tx");
+        for s in ["--", "x---y-", "-->", "<!-- -->"] {
+            let c = comment_text(s);
+            assert!(!c.contains("--"), "{c}");
+            let doc = format!("<a><!-- text: {c} --></a>");
+            assert!(usvg::roxmltree::Document::parse(&doc).is_ok(), "{doc}");
+        }
+    }
     use crate::scene::svg_in::Sizing;
 
     #[test]

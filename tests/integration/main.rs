@@ -22,5 +22,6 @@ mod regress_volume;
 mod roundtrip;
 mod splat;
 mod splat_cli;
+mod text;
 mod vectorize;
 mod volume;

@@ -5,7 +5,8 @@ use std::path::{Path, PathBuf};
 
 use diffsvg::Sizing;
 use diffsvg::raster::RenderOptions;
-use diffsvg::reference::{PARITY_MAE, PARITY_PSNR, parity};
+use diffsvg::reference::{PARITY_MAE, PARITY_PSNR, parity_with};
+use diffsvg::scene::Fonts;
 use rayon::prelude::*;
 
 use super::common::{root, samples, shared_data};
@@ -16,11 +17,15 @@ use super::common::{root, samples, shared_data};
 /// reason must be written by hand.
 const WRITE_SKIP: &str = "DIFFSVG_WRITE_PARITY_SKIP";
 
-fn check_all(files: &[(PathBuf, String, Sizing)], skip: &HashMap<String, (String, String)>) {
+fn check_all(
+    files: &[(PathBuf, String, Sizing)],
+    skip: &HashMap<String, (String, String)>,
+    fonts: &Fonts,
+) {
     let results: Vec<(String, Result<diffsvg::metrics::Comparison, String>)> = files
         .par_iter()
         .map(|(f, key, sizing)| {
-            let r = parity(f, *sizing, &RenderOptions::default())
+            let r = parity_with(f, *sizing, &RenderOptions::default(), fonts)
                 .map(|p| p.comparison)
                 .map_err(|e| e.to_string());
             (key.clone(), r)
@@ -137,7 +142,7 @@ fn samples_match_resvg() {
         })
         .collect();
     assert!(files.len() >= 12, "expected a dozen samples");
-    check_all(&files, &HashMap::new());
+    check_all(&files, &HashMap::new(), &Fonts::default());
 }
 
 fn svgs(dir: &Path, out: &mut Vec<PathBuf>) {
@@ -177,5 +182,7 @@ fn resvg_test_suite_matches_resvg() {
         "resvg-tests looks incomplete: {} files",
         files.len()
     );
-    check_all(&files, &skip_list());
+    // `<text>` with resvg's harness fonts, as `diffsvg parity --resvg-fonts` sets them.
+    let fonts = Fonts::resvg_test_suite(base.join("fonts"));
+    check_all(&files, &skip_list(), &fonts);
 }

@@ -17,6 +17,10 @@ const SET_BY_BATCH: [&str; 9] = [
     "output", "o", "json", "quiet", "q", "help", "h", "version", "V",
 ];
 
+/// Options whose values are paths, resolved against the job file's folder (a job runs in
+/// its own output folder): the fonts of `<text>`.
+const PATH_OPTIONS: [&str; 3] = ["font", "font_dir", "font-dir"];
+
 /// The file as written.
 #[derive(Deserialize, Debug)]
 #[serde(deny_unknown_fields)]
@@ -216,7 +220,7 @@ fn expand(table: usize, t: &Map<String, Value>, base: &Path) -> Result<Vec<Job>>
         Some(v) => bail!("`name` must be a string, not {v}"),
     };
     let inputs = input_values(t, &spec, base)?;
-    let flags = flags(t, &spec)?;
+    let flags = flags(t, &spec, base)?;
     let proto = Job {
         index: 0,
         table,
@@ -377,7 +381,7 @@ fn check_name(n: &str) -> Result<()> {
 
 /// Turns every non-reserved key into flags: `key = v` → `--key=v` (underscores become
 /// dashes), `true` → `--key`, `false` → nothing, an array → the flag repeated.
-fn flags(t: &Map<String, Value>, spec: &KindSpec) -> Result<Vec<String>> {
+fn flags(t: &Map<String, Value>, spec: &KindSpec, base: &Path) -> Result<Vec<String>> {
     let mut out = Vec::new();
     for (key, value) in t {
         if key == "kind" || key == "name" || spec.input_keys.contains(&key.as_str()) {
@@ -394,15 +398,24 @@ fn flags(t: &Map<String, Value>, spec: &KindSpec) -> Result<Vec<String>> {
             bail!("option {key:?} is not a flag name");
         }
         let flag = format!("--{}", key.replace('_', "-"));
+        let text = |v: &Value| -> Result<String> {
+            let s = scalar(key, v)?;
+            Ok(if PATH_OPTIONS.contains(&key.as_str()) {
+                let p = base.join(&s);
+                std::path::absolute(&p).unwrap_or(p).display().to_string()
+            } else {
+                s
+            })
+        };
         match value {
             Value::Bool(true) => out.push(flag),
             Value::Bool(false) => {}
             Value::Array(items) => {
                 for item in items {
-                    out.push(format!("{flag}={}", scalar(key, item)?));
+                    out.push(format!("{flag}={}", text(item)?));
                 }
             }
-            v => out.push(format!("{flag}={}", scalar(key, v)?)),
+            v => out.push(format!("{flag}={}", text(v)?)),
         }
     }
     Ok(out)
@@ -521,7 +534,7 @@ mod tests {
                 "quiet_x": false, "freeze": ["points", "colors"], "loss": "l1"}"#,
         )
         .unwrap();
-        let f = flags(&t, &spec("fit").unwrap()).unwrap();
+        let f = flags(&t, &spec("fit").unwrap(), Path::new("/jobs")).unwrap();
         assert_eq!(
             f,
             [
@@ -531,6 +544,25 @@ mod tests {
                 "--iters=5",
                 "--loss=l1",
                 "--until-psnr=30.5"
+            ]
+        );
+    }
+
+    #[test]
+    fn font_paths_are_relative_to_the_job_file() {
+        let t: Map<String, Value> = serde_json::from_str(
+            r#"{"kind": "render", "font": ["a.ttf", "/abs/b.otf"], "font_dir": "fonts",
+                "font_fallback": true}"#,
+        )
+        .unwrap();
+        let f = flags(&t, &spec("render").unwrap(), Path::new("/jobs")).unwrap();
+        assert_eq!(
+            f,
+            [
+                "--font=/jobs/a.ttf",
+                "--font=/abs/b.otf",
+                "--font-dir=/jobs/fonts",
+                "--font-fallback"
             ]
         );
     }
