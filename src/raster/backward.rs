@@ -600,8 +600,9 @@ fn scatter_item(
                 flat_g[k][0] += inv[0] * g[0] + inv[1] * g[1];
                 flat_g[k][1] += inv[2] * g[0] + inv[3] * g[1];
             }
-            grad[off.stroke_width] += 0.5 * gh;
+            // A clip shape's stroke has no width or paint parameters.
             if let Some(po) = off.stroke {
+                grad[off.stroke_width] += 0.5 * gh;
                 scatter_paint(grad, po, off.stroke_opacity, &paint_g[ii]);
             }
         }

@@ -611,10 +611,14 @@ fn build_path(
     });
     let mut solid = false;
     let stroke_item = path.stroke.as_ref().and_then(|s| {
-        if !(s.width > 0.0) || role == Role::Clip {
+        if !(s.width > 0.0) {
             return None;
         }
-        let paint = PaintEval::new(&s.paint, s.opacity)?;
+        // A clip shape's stroke (a pattern on a stroke) is drawn opaque black too.
+        let paint = match role {
+            Role::Paint => PaintEval::new(&s.paint, s.opacity)?,
+            Role::Clip => PaintEval::new(&crate::scene::Paint::Solid([0.0; 3]), 1.0)?,
+        };
         let [a, b, c, d] = s.frame;
         let inv = frame_inverse(s)?;
         let to_frame = |q: &Point| [inv[0] * q[0] + inv[2] * q[1], inv[1] * q[0] + inv[3] * q[1]];

@@ -12,8 +12,8 @@ use crate::error::{Error, Result};
 use crate::image_io::{gunzip_bounded, is_gzip, read_bounded};
 pub(crate) use crate::limits::MAX_SIDE;
 use crate::limits::{
-    MAX_ARC_RADIUS, MAX_DECOMPRESSED_BYTES, MAX_FILE_BYTES, MAX_MARKER_NODES, MAX_PIXELS,
-    MAX_SELECTOR_WORK,
+    MAX_ARC_RADIUS, MAX_DECOMPRESSED_BYTES, MAX_FILE_BYTES, MAX_MARKER_NODES, MAX_PATTERN_TILES,
+    MAX_PIXELS, MAX_SELECTOR_WORK,
 };
 
 /// How to size the canvas when loading an SVG.
@@ -649,7 +649,15 @@ fn convert_group_children(g: &usvg::Group, ctx: &Ctx, t: &Affine, role: Role) ->
                 }
             }
             usvg::Node::Path(p) => {
-                if let Some(path) = convert_path(p, ctx, t, role)? {
+                let Some(path) = convert_path(p, ctx, t, role)? else {
+                    continue;
+                };
+                let patterned = role == Role::Paint
+                    && (p.fill().is_some_and(|f| is_pattern(f.paint()))
+                        || p.stroke().is_some_and(|s| is_pattern(s.paint())));
+                if patterned {
+                    out.extend(convert_patterned(p, path, ctx, t)?);
+                } else {
                     out.push(Node::Path(path));
                 }
             }
@@ -843,7 +851,7 @@ fn convert_path(p: &usvg::Path, ctx: &Ctx, t: &Affine, role: Role) -> Result<Opt
     }
     if let Some(f) = p.fill() {
         out.fill = Some(Fill {
-            paint: convert_paint(f.paint(), &t, p.id(), ctx)?,
+            paint: convert_paint(f.paint(), &t),
             opacity: f.opacity().get() as f64,
             rule: match f.rule() {
                 usvg::FillRule::NonZero => FillRule::NonZero,
@@ -853,7 +861,7 @@ fn convert_path(p: &usvg::Path, ctx: &Ctx, t: &Affine, role: Role) -> Result<Opt
     }
     if let Some(s) = p.stroke() {
         let mut stroke = Stroke {
-            paint: convert_paint(s.paint(), &t, p.id(), ctx)?,
+            paint: convert_paint(s.paint(), &t),
             opacity: s.opacity().get() as f64,
             width: s.width().get() as f64,
             join: match s.linejoin() {
@@ -902,7 +910,7 @@ fn ensure_open(out: &mut Path, open: &mut bool) {
     }
 }
 
-fn convert_paint(paint: &usvg::Paint, t: &Affine, id: &str, ctx: &Ctx) -> Result<Paint> {
+fn convert_paint(paint: &usvg::Paint, t: &Affine) -> Paint {
     let color = |c: usvg::Color| {
         [
             c.red as f64 / 255.0,
@@ -929,7 +937,7 @@ fn convert_paint(paint: &usvg::Paint, t: &Affine, id: &str, ctx: &Ctx) -> Result
             })
             .collect(),
     };
-    Ok(match paint {
+    match paint {
         usvg::Paint::Color(c) => Paint::Solid(color(*c)),
         usvg::Paint::LinearGradient(g) => Paint::Gradient(base(
             g,
@@ -947,10 +955,178 @@ fn convert_paint(paint: &usvg::Paint, t: &Affine, id: &str, ctx: &Ctx) -> Result
                 fr: g.fr().get() as f64,
             },
         )),
-        usvg::Paint::Pattern(_) => {
-            return Err(ctx.unsupported(format!("pattern paint on path \"{id}\"")));
+        // A stand-in: `convert_patterned` replaces the paint by the tiles themselves.
+        usvg::Paint::Pattern(_) => Paint::Solid([0.0; 3]),
+    }
+}
+
+fn is_pattern(paint: &usvg::Paint) -> bool {
+    matches!(paint, usvg::Paint::Pattern(_))
+}
+
+/// A path painted with a pattern, as resvg draws it: for each patterned part (fill or
+/// stroke, in paint order) a layer with the part's opacity holding the pattern's tile
+/// content repeated over the part's bounds, clipped by the part's coverage (the fill
+/// under its rule, or the stroke outline). The tiles are ordinary shapes, so gradients
+/// reach their points and paints (each tile's copy on its own).
+fn convert_patterned(p: &usvg::Path, base: Path, ctx: &Ctx, t: &Affine) -> Result<Vec<Node>> {
+    let mut fill_part = base.clone();
+    fill_part.stroke = None;
+    let mut stroke_part = base.clone();
+    stroke_part.fill = None;
+    let bounds = base.control_bounds().unwrap_or([0.0; 4]);
+    let mut parts = Vec::new();
+    if let (Some(f), Some(uf)) = (fill_part.fill.clone(), p.fill()) {
+        parts.push(match uf.paint() {
+            usvg::Paint::Pattern(pat) => {
+                let mut shape = fill_part;
+                shape.fill = Some(Fill {
+                    paint: Paint::Solid([0.0; 3]),
+                    opacity: 1.0,
+                    rule: f.rule,
+                });
+                Some(patterned_layer(pat, shape, bounds, f.opacity, ctx, t)?)
+            }
+            _ => Some(Node::Path(fill_part)),
+        });
+    }
+    if let (Some(st), Some(us)) = (stroke_part.stroke.clone(), p.stroke()) {
+        let part = match us.paint() {
+            usvg::Paint::Pattern(pat) => {
+                let [a, b, c, d] = st.frame;
+                let reach = 0.5 * st.width.abs() * st.miter_limit.max(2.0)
+                    * (a * a + b * b + c * c + d * d).sqrt()
+                    + 1.0;
+                let grown = [
+                    bounds[0] - reach,
+                    bounds[1] - reach,
+                    bounds[2] + reach,
+                    bounds[3] + reach,
+                ];
+                let mut shape = stroke_part;
+                if let Some(s) = &mut shape.stroke {
+                    s.paint = Paint::Solid([0.0; 3]);
+                    s.opacity = 1.0;
+                }
+                patterned_layer(pat, shape, grown, st.opacity, ctx, t)?
+            }
+            _ => Node::Path(stroke_part),
+        };
+        if base.stroke_first {
+            parts.insert(0, Some(part));
+        } else {
+            parts.push(Some(part));
         }
-    })
+    }
+    Ok(parts.into_iter().flatten().collect())
+}
+
+/// One patterned part: the tiles covering `bounds` (device pixels), clipped by `shape`
+/// (drawn as a clip shape), composited with `opacity`.
+fn patterned_layer(
+    pat: &usvg::Pattern,
+    shape: Path,
+    bounds: [f64; 4],
+    opacity: f64,
+    ctx: &Ctx,
+    t: &Affine,
+) -> Result<Node> {
+    let mut layer = Group::new(pat.id(), opacity, pattern_tiles(pat, bounds, ctx, t)?);
+    layer.clip = Some(Box::new(Clip {
+        id: String::new(),
+        content: Group::new("", 1.0, vec![Node::Path(shape)]),
+    }));
+    Ok(Node::Group(layer))
+}
+
+/// The tiles of `pat` (drawn in the user space `t` maps to device pixels) that cover the
+/// device box `bounds`, each its content placed at its cell and clipped to it unless the
+/// content stays inside. Like resvg, a tile smaller than half a device pixel draws
+/// nothing; more than [`MAX_PATTERN_TILES`] tiles are refused.
+fn pattern_tiles(pat: &usvg::Pattern, bounds: [f64; 4], ctx: &Ctx, t: &Affine) -> Result<Vec<Node>> {
+    let pt = concat(t, &to_affine(pat.transform()));
+    let Some(inv) = super::invert(&pt) else {
+        return Ok(Vec::new());
+    };
+    let r = pat.rect();
+    let (rx, ry, rw, rh) = (r.x() as f64, r.y() as f64, r.width() as f64, r.height() as f64);
+    let (sx, sy) = (pt[0].hypot(pt[1]), pt[2].hypot(pt[3]));
+    let (pw, ph) = ((rw * sx).round(), (rh * sy).round());
+    if pw < 1.0 || ph < 1.0 {
+        return Ok(Vec::new());
+    }
+    // resvg draws a tile into a pixmap of whole device pixels and repeats that: the
+    // period (and the cell the content is clipped to) is the tile's size rounded to
+    // pixels. Done the same way here, so that both draw the same picture.
+    let (rw, rh) = (pw / sx, ph / sy);
+    // The bounds in pattern space.
+    let corners = [
+        [bounds[0], bounds[1]],
+        [bounds[2], bounds[1]],
+        [bounds[0], bounds[3]],
+        [bounds[2], bounds[3]],
+    ]
+    .map(|c| apply(&inv, c));
+    let (mut u0, mut v0, mut u1, mut v1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
+    for c in corners {
+        u0 = u0.min(c[0]);
+        v0 = v0.min(c[1]);
+        u1 = u1.max(c[0]);
+        v1 = v1.max(c[1]);
+    }
+    let (i0, i1) = (((u0 - rx) / rw).floor(), ((u1 - rx) / rw).ceil());
+    let (j0, j1) = (((v0 - ry) / rh).floor(), ((v1 - ry) / rh).ceil());
+    let count = (i1 - i0).max(0.0) * (j1 - j0).max(0.0);
+    if !(count <= MAX_PATTERN_TILES as f64) {
+        return Err(ctx.unsupported(format!(
+            "pattern \"{}\" would repeat {count:.0} tiles over its shape (the limit is \
+             {MAX_PATTERN_TILES})",
+            pat.id()
+        )));
+    }
+    // Whether the content stays inside its cell (then no tile needs a clip).
+    let local = convert_group_children(pat.root(), ctx, &super::IDENTITY, Role::Paint)?;
+    let mut probe = Scene::new(1, 1);
+    probe.nodes = local;
+    let mut inside = true;
+    probe.for_each_path(|q| {
+        let b = q.control_bounds().unwrap_or([0.0; 4]);
+        let reach = q.stroke.as_ref().map_or(0.0, |s| s.width.abs() * s.miter_limit.max(1.0));
+        inside &= b[0] - reach >= 0.0 && b[1] - reach >= 0.0 && b[2] + reach <= rw && b[3] + reach <= rh;
+    });
+    let mut tiles = Vec::new();
+    for j in (j0 as i64)..(j1 as i64) {
+        for i in (i0 as i64)..(i1 as i64) {
+            let cell: Affine = [1.0, 0.0, 0.0, 1.0, rx + i as f64 * rw, ry + j as f64 * rh];
+            let tt = concat(&pt, &cell);
+            let children = convert_group_children(pat.root(), ctx, &tt, Role::Paint)?;
+            if children.is_empty() {
+                continue;
+            }
+            if inside {
+                tiles.extend(children);
+                continue;
+            }
+            let mut cell_path = Path::new("");
+            cell_path.move_to(apply(&tt, [0.0, 0.0]));
+            cell_path.line_to(apply(&tt, [rw, 0.0]));
+            cell_path.line_to(apply(&tt, [rw, rh]));
+            cell_path.line_to(apply(&tt, [0.0, rh]));
+            cell_path.close();
+            cell_path.fill = Some(Fill {
+                paint: Paint::Solid([0.0; 3]),
+                opacity: 1.0,
+                rule: FillRule::NonZero,
+            });
+            let mut tile = Group::new("", 1.0, children);
+            tile.clip = Some(Box::new(Clip {
+                id: String::new(),
+                content: Group::new("", 1.0, vec![Node::Path(cell_path)]),
+            }));
+            tiles.push(Node::Group(tile));
+        }
+    }
+    Ok(tiles)
 }
 
 #[cfg(test)]
