@@ -276,3 +276,42 @@ fn layers_survive_a_round_trip_on_resvgs_suite() {
     }
     assert!(checked > 150, "only {checked} files checked");
 }
+
+#[test]
+fn pattern_gradients_reach_the_tiles() {
+    let s = scene(
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="40" height="36">
+        <pattern id="p" patternUnits="userSpaceOnUse" width="12" height="10">
+          <path id="t" d="M 1 1 L 10 2 L 6 9 Z" fill="rgb(30,140,60)" fill-opacity="0.9"/>
+        </pattern>
+        <path id="a" d="M 3 3 C 20 0 38 8 36 32 L 6 33 Z" fill="url(#p)" fill-opacity="0.8"
+              stroke="url(#p)" stroke-width="3"/></svg>"#,
+    );
+    // Several tiles, each a copy of the content with its own parameters.
+    assert!(s.path_count() > 8, "{}", s.path_count());
+    assert_agrees("pattern", &s, &nudged_target(&s, 1.0, WHITE), Loss::Mse, WHITE);
+}
+
+#[test]
+fn pattern_tiles_are_bounded() {
+    let svg = |w: f64| {
+        format!(
+            r#"<svg xmlns="http://www.w3.org/2000/svg" width="4000" height="4000">
+            <pattern id="p" patternUnits="userSpaceOnUse" width="{w}" height="{w}">
+              <rect width="{}" height="{}" fill="red"/></pattern>
+            <rect width="4000" height="4000" fill="url(#p)"/></svg>"#,
+            w / 2.0,
+            w / 2.0
+        )
+    };
+    // A tile of 1e-6 px draws nothing, as in resvg.
+    let s = Scene::from_svg_str(&svg(1e-6), "tiny.svg", Sizing::Natural).unwrap();
+    assert_eq!(s.path_count(), 1, "only the clip shape is left");
+    // A tile of 2 px over 4000² would be 4 million copies: refused before any is made.
+    let e = Scene::from_svg_str(&svg(2.0), "many.svg", Sizing::Natural).unwrap_err();
+    let msg = e.to_string();
+    assert!(msg.contains("many.svg") && msg.contains("tiles"), "{msg}");
+    // A tile of 1e6 px is one tile.
+    let s = Scene::from_svg_str(&svg(1e6), "huge.svg", Sizing::Natural).unwrap();
+    assert!(finite(&render(&s, &RenderOptions::default())));
+}
