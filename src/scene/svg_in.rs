@@ -739,6 +739,14 @@ fn convert_image(i: &usvg::Image, id: &str, ctx: &Ctx, t: &Affine) -> Result<Vec
         | usvg::ImageKind::WEBP(d) => d,
     };
     let left = MAX_SCENE_IMAGE_PIXELS - ctx.image_pixels.get();
+    // The size usvg read from the header (a malformed rest is not looked at).
+    let (hw, hh) = (i.size().width() as f64, i.size().height() as f64);
+    if hw * hh > left as f64 || hw > MAX_SIDE as f64 || hh > MAX_SIDE as f64 {
+        return Err(ctx.image(format!(
+            "{what} is {hw}x{hh} pixels, past the limit of {MAX_SIDE} a side and {left} \
+             pixels (limits::MAX_SCENE_IMAGE_PIXELS, for all the images of a drawing)"
+        )));
+    }
     let (width, height, pixels) = crate::image_io::decode_embedded(data, left)
         .map_err(|why| ctx.image(format!("{what} {why}")))?;
     ctx.image_pixels

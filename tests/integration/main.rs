@@ -12,6 +12,7 @@ mod fuzz;
 mod glyphs;
 mod gradcheck_cli;
 mod gradients;
+mod images;
 mod options;
 mod parity;
 mod regress_cli;
