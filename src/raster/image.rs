@@ -143,8 +143,7 @@ impl ImageEval {
                 let fy = fract(y + 0.5);
                 let wx = [far(1.0 - fx), near(1.0 - fx), near(fx), far(fx)];
                 let wy = [far(1.0 - fy), near(1.0 - fy), near(fy), far(fy)];
-                self.filter(x, y, -1.5, &wx, &wy)
-                    .map(|v| v.max(0.0).min(1.0))
+                self.filter(x, y, -1.5, &wx, &wy).map(|v| v.clamp(0.0, 1.0))
             }
         }
     }
@@ -260,7 +259,7 @@ mod tests {
     fn nearest_reads_the_pixel_under_the_center() {
         let img = image(3, 2, ImageQuality::Nearest, [2.0, 0.0, 0.0, 2.0, 1.0, 1.0]);
         let e = ImageEval::new(&img, 1.0).unwrap();
-        let px = |i: usize| e.premul[i].map(|v| v as f32 / 255.0);
+        let px = |i: usize| e.premul[i].map(|v| v as f32 * (1.0 / 255.0));
         assert_eq!(e.at([1.5, 1.5]), px(0));
         assert_eq!(e.at([4.5, 2.5]), px(1));
         assert_eq!(e.at([6.5, 4.5]), px(5));

@@ -1014,6 +1014,54 @@ mod tests {
         assert!(e.contains("unsupported") && e.contains("text"), "{e}");
     }
 
+    /// An `<image>` is its rectangle filled with the image, in device pixels: the transform
+    /// maps image pixels there, `preserveAspectRatio` (meet) included, and sizing and
+    /// `scale_to` scale it with the rest; the id usvg moves to a wrapper group is kept.
+    #[test]
+    fn image_becomes_its_rectangle_in_device_space() {
+        // A 2 × 1 PNG drawn into a 10 × 10 box: meet scales it by 5 and centers it.
+        let png = crate::image_io::encode_png_rgba8(2, 1, &[255, 0, 0, 255, 0, 0, 255, 100]);
+        use base64::Engine as _;
+        let url = base64::engine::general_purpose::STANDARD.encode(png);
+        let svg = format!(
+            r#"<svg xmlns="http://www.w3.org/2000/svg" width="20" height="20">
+               <image id="pic" x="4" y="4" width="10" height="10" style="image-rendering:pixelated"
+                 href="data:image/png;base64,{url}"/></svg>"#
+        );
+        let s = Scene::from_svg_str(&svg, "t.svg", Sizing::Width(40)).unwrap();
+        let Node::Path(p) = &s.nodes[0] else { panic!() };
+        assert_eq!(p.id, "pic");
+        let Some(Fill {
+            paint: Paint::Image(img),
+            ..
+        }) = &p.fill
+        else {
+            panic!("{:?}", p.fill)
+        };
+        assert_eq!(
+            (img.width, img.height, img.quality),
+            (2, 1, ImageQuality::Nearest)
+        );
+        assert_eq!(&img.pixels[..], &[255, 0, 0, 255, 0, 0, 255, 100]);
+        // User space: x 4..14, y 6.5..11.5; device: twice that.
+        assert_eq!(p.control_bounds().unwrap(), [8.0, 13.0, 28.0, 23.0]);
+        assert!(img.is_rectangle_of(p));
+        let mut scaled = s.clone();
+        scaled.scale_to(0.5, 20, 20);
+        let Node::Path(q) = &scaled.nodes[0] else {
+            panic!()
+        };
+        let Some(Fill {
+            paint: Paint::Image(half),
+            ..
+        }) = &q.fill
+        else {
+            panic!()
+        };
+        assert!(half.is_rectangle_of(q));
+        assert_eq!(q.control_bounds().unwrap(), [4.0, 6.5, 14.0, 11.5]);
+    }
+
     #[test]
     fn sizing_scales_everything() {
         let svg = r#"<svg xmlns="http://www.w3.org/2000/svg" width="10" height="20">
