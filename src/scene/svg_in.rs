@@ -158,7 +158,12 @@ fn image_options<'a>(
     let svg_name = name.to_path_buf();
     let vet = move |data: Arc<Vec<u8>>, what: &str| -> std::result::Result<Arc<Vec<u8>>, String> {
         if is_raster(&data) {
-            return Ok(data);
+            // usvg drops an image whose header gives no size (`ImageKind::actual_size`).
+            return match imagesize::blob_size(&data) {
+                Ok(s) if s.width > 0 && s.height > 0 => Ok(data),
+                Ok(s) => Err(format!("{what} is empty ({}x{})", s.width, s.height)),
+                Err(e) => Err(format!("{what} cannot be decoded: {e}")),
+            };
         }
         let data = if is_gzip(&data) {
             Arc::new(

@@ -233,6 +233,18 @@ fn missing_image_file_is_refused_by_the_cli() {
     );
     let e = Scene::load(&svg, Sizing::Natural).unwrap_err().to_string();
     assert!(e.contains("junk.svg") && e.contains("junk.png"), "{e}");
+    // A PNG signature and nothing else: usvg finds no size and would drop the image.
+    let svg = svg_with(
+        10,
+        r#"<image width="10" height="10" href="data:image/png;base64,iVBORw0KGgo="/>"#,
+    );
+    let e = Scene::from_svg_str(&svg, "sig.svg", Sizing::Natural)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("sig.svg") && e.contains("cannot be decoded"),
+        "{e}"
+    );
 }
 
 /// A shape drawn over an image: its points' gradient (the image is the color below it)
