@@ -158,12 +158,7 @@ fn image_options<'a>(
     let svg_name = name.to_path_buf();
     let vet = move |data: Arc<Vec<u8>>, what: &str| -> std::result::Result<Arc<Vec<u8>>, String> {
         if is_raster(&data) {
-            // usvg drops an image whose header gives no size (`ImageKind::actual_size`).
-            return match imagesize::blob_size(&data) {
-                Ok(s) if s.width > 0 && s.height > 0 => Ok(data),
-                Ok(s) => Err(format!("{what} is empty ({}x{})", s.width, s.height)),
-                Err(e) => Err(format!("{what} cannot be decoded: {e}")),
-            };
+            return Ok(data);
         }
         let data = if is_gzip(&data) {
             Arc::new(
@@ -182,6 +177,23 @@ fn image_options<'a>(
         }
         Ok(data)
     };
+    // What usvg made of the bytes: nothing, or a raster image whose header gives no size
+    // (usvg then drops it, `ImageKind::actual_size`), is a failure.
+    let resolved = move |kind: Option<usvg::ImageKind>, what: &str| {
+        use usvg::ImageKind as K;
+        match kind {
+            None => fail(format!("{what} cannot be decoded")),
+            Some(K::PNG(ref d) | K::JPEG(ref d) | K::GIF(ref d) | K::WEBP(ref d)) => {
+                match imagesize::blob_size(d) {
+                    Ok(s) if s.width > 0 && s.height > 0 => kind,
+                    Ok(s) => fail(format!("{what} is empty ({}x{})", s.width, s.height)),
+                    Err(e) => fail(format!("{what} cannot be decoded: {e}")),
+                }
+            }
+            Some(K::SVG(_)) => kind,
+        }
+    };
+    let resolved_data = resolved.clone();
     let vet_data = vet.clone();
     let resolve_data: usvg::ImageHrefDataResolverFn<'a> = Box::new(move |mime, data, opts| {
         let what = format!("an image in a data URL ({mime})");
@@ -189,8 +201,10 @@ fn image_options<'a>(
             Ok(d) => d,
             Err(e) => return fail(e),
         };
-        (usvg::ImageHrefResolver::default_data_resolver())(mime, data, opts)
-            .or_else(|| fail(format!("{what} cannot be decoded")))
+        resolved_data(
+            (usvg::ImageHrefResolver::default_data_resolver())(mime, data, opts),
+            &what,
+        )
     });
     let resolve_string: usvg::ImageHrefStringResolverFn<'a> = Box::new(move |href, opts| {
         let what = format!("image \"{href}\"");
@@ -206,8 +220,10 @@ fn image_options<'a>(
             Ok(d) => d,
             Err(e) => return fail(e),
         };
-        (usvg::ImageHrefResolver::default_data_resolver())("text/plain", data, opts)
-            .or_else(|| fail(format!("{what} ({}) cannot be decoded", path.display())))
+        resolved(
+            (usvg::ImageHrefResolver::default_data_resolver())("text/plain", data, opts),
+            &format!("{what} ({})", path.display()),
+        )
     });
     usvg::Options {
         resources_dir: name

@@ -245,6 +245,18 @@ fn missing_image_file_is_refused_by_the_cli() {
         e.contains("sig.svg") && e.contains("cannot be decoded"),
         "{e}"
     );
+    // Text that says it is a PNG.
+    let svg = svg_with(
+        10,
+        r#"<image width="10" height="10" href="data:image/png;base64,aGVsbG8="/>"#,
+    );
+    let e = Scene::from_svg_str(&svg, "text.svg", Sizing::Natural)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("text.svg") && e.contains("cannot be decoded"),
+        "{e}"
+    );
 }
 
 /// A shape drawn over an image: its points' gradient (the image is the color below it)
