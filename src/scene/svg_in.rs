@@ -193,7 +193,7 @@ fn image_options<'a>(
             Some(K::SVG(_)) => kind,
         }
     };
-    let resolved_data = resolved.clone();
+    let resolved_data = resolved;
     let vet_data = vet.clone();
     let resolve_data: usvg::ImageHrefDataResolverFn<'a> = Box::new(move |mime, data, opts| {
         let what = format!("an image in a data URL ({mime})");
