@@ -280,6 +280,54 @@ pub fn contact_sheet(
     out
 }
 
+/// Encodes straight 8-bit RGBA pixels (`4 · width · height` bytes) as a PNG.
+pub(crate) fn encode_png_rgba8(width: u32, height: u32, rgba: &[u8]) -> Vec<u8> {
+    let mut buf = Vec::new();
+    let enc = image::codecs::png::PngEncoder::new(&mut buf);
+    // Writing to memory fails only for a buffer of the wrong length, which the callers'
+    // images cannot have.
+    image::ImageEncoder::write_image(enc, rgba, width, height, image::ExtendedColorType::Rgba8)
+        .expect("PNG encoding into memory");
+    buf
+}
+
+/// Decodes an image embedded in a document (PNG, JPEG, GIF's first frame, WebP) to
+/// straight 8-bit RGBA: `(width, height, pixels)`. The size is read from the header and
+/// checked (at most [`MAX_SIDE`] a side and `max_pixels` in all) **before** anything is
+/// decoded; the error is a sentence without the file's name, for the caller to place.
+pub(crate) fn decode_embedded(
+    bytes: &[u8],
+    max_pixels: u64,
+) -> std::result::Result<(u32, u32, Vec<u8>), String> {
+    let reader = || {
+        image::ImageReader::new(std::io::Cursor::new(bytes))
+            .with_guessed_format()
+            .map_err(|e| format!("cannot be read: {e}"))
+    };
+    let (w, h) = reader()?
+        .into_dimensions()
+        .map_err(|e| format!("cannot be decoded: {e}"))?;
+    let pixels = w as u64 * h as u64;
+    if w == 0 || h == 0 {
+        return Err(format!("is empty ({w}x{h})"));
+    }
+    if w > MAX_SIDE || h > MAX_SIDE || pixels > max_pixels {
+        return Err(format!(
+            "is {w}x{h} pixels, past the limit of {MAX_SIDE} a side and {max_pixels} pixels \
+             (limits::MAX_SCENE_IMAGE_PIXELS, for all the images of a drawing)"
+        ));
+    }
+    let mut r = reader()?;
+    let mut limits = image::Limits::default();
+    limits.max_image_width = Some(MAX_SIDE);
+    limits.max_image_height = Some(MAX_SIDE);
+    limits.max_alloc = Some(pixels * 8 + (64 << 20));
+    r.limits(limits);
+    let img = r.decode().map_err(|e| format!("cannot be decoded: {e}"))?;
+    let rgba = img.to_rgba8();
+    Ok((rgba.width(), rgba.height(), rgba.into_raw()))
+}
+
 /// Refuses an image size of zero or above [`MAX_SIDE`] per side or [`MAX_IMAGE_PIXELS`]
 /// in all; the error names `path` (a file, or a flag such as `--width`).
 pub fn check_image_size(width: u32, height: u32, path: &Path) -> Result<()> {

@@ -27,6 +27,12 @@ pub const MAX_PIXELS: u64 = 1 << 25;
 /// the file's header before anything is decoded.
 pub const MAX_IMAGE_PIXELS: u64 = MAX_PIXELS;
 
+/// Most pixels of the raster images of one SVG (`<image>` elements, each PNG, JPEG, GIF or
+/// WebP), all together: each image's size is read from its header and counted before it
+/// is decoded, and an image that would pass the total is refused with the drawing. A
+/// loaded image holds 4 bytes a pixel, and rendering keeps a premultiplied copy of as many.
+pub const MAX_SCENE_IMAGE_PIXELS: u64 = MAX_PIXELS;
+
 /// Largest input file read whole (SVG, job file, camera file), in bytes.
 pub const MAX_FILE_BYTES: u64 = 64 << 20;
 

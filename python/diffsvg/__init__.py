@@ -80,7 +80,8 @@ def _paint_size(entry: dict) -> int:
 
 
 class Scene:
-    """A vector scene: paths with fills and strokes (solid or gradient paints) in groups.
+    """A vector scene: paths with fills and strokes (solid or gradient paints; an
+    ``<image>`` is its rectangle filled with the image's fixed pixels) in groups.
 
     Build one with :meth:`load` or :meth:`from_svg`; ``Scene(width, height)`` is empty.
     """
@@ -199,6 +200,9 @@ class Scene:
                     continue
                 if e["kind"] == "solid":
                     out.append((e["offset"], 4, ("shapes", i, key), (4,)))
+                elif e["kind"] == "image":
+                    # Fixed pixels: only the opacity is a parameter.
+                    out.append((e["offset"], 1, ("shapes", i, key, "opacity"), ()))
                 else:
                     g, k = e["geometry"], e["stops"]
                     out.append((e["offset"], g, ("shapes", i, key, "geometry"), (g,)))
@@ -243,7 +247,8 @@ class Scene:
                               | {"geometry": (4,)    # linear: x1, y1, x2, y2
                                              (6,),   # radial: cx, cy, r, fx, fy, fr
                                  "stops": (k, 5),    # offset, r, g, b, opacity
-                                 "opacity": ()},
+                                 "opacity": ()}
+                              | {"opacity": ()},     # image: its pixels are fixed
                          "stroke": ...,              # as fill
                          "stroke_width": ()}, ...],
              "groups": [{"opacity": ()}, ...]}

@@ -154,3 +154,27 @@ def test_text_with_font_options(tmp_path):
     assert diffsvg.Scene.load(svg, font_dirs=[tmp_path / "fonts"]).path_count >= 1
     with pytest.raises(diffsvg.DiffsvgError, match="not a font file"):
         diffsvg.Scene.load(svg, fonts=[svg])
+
+def test_an_image_is_a_rectangle_with_only_an_opacity(tmp_path):
+    # A 2 x 1 PNG: red, then half-transparent blue.
+    import base64, struct, zlib
+    raw = b"\x00" + bytes([255, 0, 0, 255, 0, 0, 255, 128])
+    def chunk(kind, data):
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+    png = (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", 2, 1, 8, 6, 0, 0, 0))
+           + chunk(b"IDAT", zlib.compress(raw)) + chunk(b"IEND", b""))
+    url = "data:image/png;base64," + base64.b64encode(png).decode()
+    s = diffsvg.Scene.from_svg(
+        f'<svg xmlns="http://www.w3.org/2000/svg" width="8" height="4">'
+        f'<image width="8" height="4" image-rendering="optimizeSpeed" href="{url}"/></svg>')
+    fill = s.structure()["shapes"][0]["fill"]
+    assert fill["kind"] == "image" and fill["len"] == 1
+    a = s.arrays()
+    assert set(a["shapes"][0]["fill"]) == {"opacity"}
+    assert np.array_equal(s.flatten(s.arrays(np.float64)), s.params())
+    img = diffsvg.render(s)
+    assert img[1, 1].tolist() == [1.0, 0.0, 0.0, 1.0]
+    assert abs(img[1, 6, 3] - 128 / 255) < 1e-6
+    s.save(tmp_path / "image.svg")
+    back = diffsvg.Scene.load(tmp_path / "image.svg")
+    assert np.array_equal(diffsvg.render(back), img)

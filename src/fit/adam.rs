@@ -106,7 +106,8 @@ impl LearningRates {
         }
     }
 
-    /// One rate per slot of `scene`'s parameter vector (see [`ParamLayout`]).
+    /// One rate per slot of `scene`'s parameter vector (see [`ParamLayout`]); 0 for the
+    /// points of an image's rectangle, which fits keep fixed.
     pub fn per_slot(&self, scene: &Scene) -> Vec<f64> {
         let layout = ParamLayout::new(scene);
         let mut rates: Vec<f64> = layout.slots.iter().map(|s| self.get(s.group)).collect();
@@ -118,6 +119,13 @@ impl LearningRates {
                 (p.fill.as_ref().map(|f| &f.paint), offsets.fill),
                 (p.stroke.as_ref().map(|s| &s.paint), offsets.stroke),
             ];
+            // An image's rectangle stays where it is: the writer puts an image only at its
+            // own rectangle (its pixels have no slots at all).
+            if let Some(Paint::Image(_)) = paints[0].0 {
+                for r in &mut rates[offsets.points..offsets.points + 2 * p.points.len()] {
+                    *r = 0.0;
+                }
+            }
             for (paint, at) in paints {
                 let (Some(Paint::Gradient(g)), Some(at)) = (paint, at) else {
                     continue;

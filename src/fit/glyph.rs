@@ -1087,7 +1087,7 @@ pub fn count_ink_segments(scene: &Scene) -> (usize, usize) {
                 ..
             }) => *opacity > 0.0 && (c[0] + c[1] + c[2]) / 3.0 < 0.5,
             Some(Fill {
-                paint: Paint::Gradient(_),
+                paint: Paint::Gradient(_) | Paint::Image(_),
                 ..
             }) => true,
             None => false,

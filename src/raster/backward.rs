@@ -704,7 +704,7 @@ fn record_row(
     // the same columns as the forward pass's `composite_row`, so the bits agree.
     match &item.paint {
         PaintEval::Solid(s) => colors.fill(s.premul),
-        PaintEval::Gradient(_) => {
+        PaintEval::Gradient(_) | PaintEval::Image(_) => {
             if let Some((a, b)) = covered_span(covs) {
                 item.paint.row(x0 + a, y, &mut colors[a..b]);
             }
@@ -934,7 +934,7 @@ fn band_backward(
                 let pg = &mut out.paint_vals[pg_at..];
                 let solid = match &it.paint {
                     PaintEval::Solid(c) => Some(c.premul),
-                    PaintEval::Gradient(_) => None,
+                    PaintEval::Gradient(_) | PaintEval::Image(_) => None,
                 };
                 let mut gs_sum = [0.0f64; 4];
                 let item_cells = &cells[range.clone()];

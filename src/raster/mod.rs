@@ -2,7 +2,7 @@
 //!
 //! A [`Scene`](crate::scene::Scene) is first prepared: every path is
 //! flattened at a tolerance, strokes become filled outline rings (`stroke`), dashes are
-//! cut (`dash`) and paints are readied for evaluation (`paint`). [`render`] then
+//! cut (`dash`) and paints are readied for evaluation (`paint`, images in `image`). [`render`] then
 //! accumulates exact-area coverage (`coverage`) row band by row band in parallel,
 //! evaluates paints at pixel centers and composites source-over in premultiplied `f32`.
 //! Bands are independent and each is processed in a fixed order, so the result has the
@@ -31,6 +31,7 @@ pub(crate) mod backward;
 pub(crate) mod coverage;
 pub(crate) mod dash;
 pub(crate) mod flatten;
+pub(crate) mod image;
 pub(crate) mod jet;
 pub(crate) mod layer;
 pub(crate) mod paint;

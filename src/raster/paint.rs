@@ -1,6 +1,6 @@
 //! Paint evaluation at pixel centers.
 //!
-//! Solid colors and gradients give a straight RGBA color; gradient stops are interpolated
+//! Images are sampled in `super::image`. Solid colors and gradients give a straight RGBA color; gradient stops are interpolated
 //! straight (not premultiplied) and premultiplied afterwards, as tiny-skia does. The item's
 //! opacity multiplies alpha. Gradient geometry lives in gradient space; pixel centers are
 //! mapped there by the inverse of [`Gradient::transform`].
@@ -11,6 +11,7 @@
 //! circle exists the pixel is left unpainted.
 
 use super::coverage::{floor_f32, floor_f64};
+use super::image::ImageEval;
 use super::jet::{Jet, Scalar};
 use crate::scene::geom::dist;
 use crate::scene::{Affine, Gradient, GradientKind, Paint, Point, Spread, Stop, apply, invert};
@@ -23,6 +24,8 @@ pub(crate) enum PaintEval {
     Solid(SolidEval),
     /// A gradient.
     Gradient(GradientEval),
+    /// A raster image (see [`super::image`]).
+    Image(ImageEval),
 }
 
 /// A solid color ready for compositing.
@@ -177,6 +180,7 @@ impl PaintEval {
                 }))
             }
             Paint::Gradient(g) => Some(PaintEval::Gradient(GradientEval::new(g, opacity)?)),
+            Paint::Image(i) => Some(PaintEval::Image(ImageEval::new(i, opacity)?)),
         }
     }
 
@@ -186,6 +190,7 @@ impl PaintEval {
         match self {
             PaintEval::Solid(c) => c.premul,
             PaintEval::Gradient(g) => g.at(p),
+            PaintEval::Image(i) => i.at(p),
         }
     }
 
@@ -196,15 +201,18 @@ impl PaintEval {
         match self {
             PaintEval::Solid(c) => out.fill(c.premul),
             PaintEval::Gradient(g) => g.row(x0, y, out),
+            PaintEval::Image(i) => i.row(x0, y, out),
         }
     }
 
     /// Length of this paint's gradient vector in [`PaintEval::backward`]: a solid paint has
     /// `r, g, b, opacity`; a gradient its geometry (4 or 6), `offset, r, g, b, opacity`
-    /// per stop, then the item opacity.
+    /// per stop, then the item opacity; an image only the item opacity (its pixels are
+    /// fixed).
     pub(crate) fn grad_len(&self) -> usize {
         match self {
             PaintEval::Solid(_) => 4,
+            PaintEval::Image(_) => 1,
             PaintEval::Gradient(g) => geometry(&g.kind).len() + 5 * g.stops.len() + 1,
         }
     }
@@ -224,6 +232,7 @@ impl PaintEval {
                 }
             }
             PaintEval::Gradient(g) => g.backward(p, gs, out),
+            PaintEval::Image(i) => i.backward(p, gs, out),
         }
     }
 }

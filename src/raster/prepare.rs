@@ -235,6 +235,8 @@ impl Prepared {
     pub(crate) fn work(&self) -> f64 {
         const PER_EDGE: f64 = 4.0;
         const PER_GRADIENT_PIXEL: f64 = 4.0;
+        // Bicubic sampling reads sixteen pixels.
+        const PER_IMAGE_PIXEL: f64 = 8.0;
         let (w, h) = (self.width as f64, self.height as f64);
         self.items
             .iter()
@@ -245,6 +247,7 @@ impl Prepared {
                 let per_pixel = match it.paint {
                     PaintEval::Solid(_) => 1.0,
                     PaintEval::Gradient(_) => PER_GRADIENT_PIXEL,
+                    PaintEval::Image(_) => PER_IMAGE_PIXEL,
                 };
                 cw * ch * per_pixel + PER_EDGE * it.pts.len() as f64
             })

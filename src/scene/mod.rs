@@ -7,12 +7,16 @@
 //!   of the top-left pixel. Pixel `(i, j)` covers `[i, i+1] × [j, j+1]`; its center is
 //!   `(i + 0.5, j + 0.5)`. SVG transforms and the viewBox are baked in when the scene is
 //!   loaded; only stroke frames and paint transforms keep a matrix (see [`Stroke::frame`],
-//!   [`Gradient::transform`]).
+//!   [`Gradient::transform`], [`ImagePaint::transform`]).
 //! * **Geometry.** A path is a list of subpaths; each subpath is a start point followed by
 //!   cubic Bézier segments (three points each). Lines and quadratics are elevated to cubics
 //!   exactly and remember their original kind only to be written back compactly.
-//! * **Colors** are straight (not premultiplied) sRGB values in `[0, 1]`, stored as `f64`.
-//!   Opacities are separate scalars in `[0, 1]`. Rendering premultiplies.
+//! * **Colors** are straight (not premultiplied) sRGB values in `[0, 1]`, stored as `f64`
+//!   (an image's pixels: straight 8-bit RGBA, [`ImagePaint`]). Opacities are separate
+//!   scalars in `[0, 1]`. Rendering premultiplies.
+//! * **Images.** An SVG `<image>` is a path (its rectangle) filled with
+//!   [`Paint::Image`]; its pixels have no parameters, and fits keep its rectangle where
+//!   it is (its point slots get a learning rate of 0).
 //! * **Paint order.** [`Scene::nodes`] is in paint order (first drawn first); a [`Group`]
 //!   with opacity < 1 is composited as one layer, like resvg.
 //!
@@ -408,6 +412,94 @@ pub enum Paint {
     Solid([f64; 3]),
     /// A linear or radial gradient.
     Gradient(Gradient),
+    /// A raster image (an SVG `<image>`): its pixels are fixed, so it has no parameters.
+    Image(ImagePaint),
+}
+
+/// How an [`ImagePaint`] is sampled between its pixels: tiny-skia's filters, which resvg
+/// picks from `image-rendering`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ImageQuality {
+    /// The pixel under the sample point (`optimizeSpeed`, `pixelated`, `crisp-edges`).
+    Nearest,
+    /// Bilinear between the four nearest pixels (`smooth`).
+    Bilinear,
+    /// Bicubic over the sixteen nearest pixels, with tiny-skia's cubic (B = C = 1/3,
+    /// Mitchell–Netravali); the default (`optimizeQuality`, `high-quality`).
+    Bicubic,
+}
+
+/// A raster image used as a paint: the pixels of an SVG `<image>`, drawn through
+/// [`transform`](Self::transform) onto the path it fills (its rectangle, when loaded).
+///
+/// Pixel `(i, j)` of the image covers `[i, i+1] × [j, j+1]` in image space. Outside the
+/// image the edge pixels extend (resvg's pad spread). Sampling follows tiny-skia: a
+/// pixel's premultiplied value (8 bits, rounded as tiny-skia premultiplies) is filtered as
+/// [`quality`](Self::quality) says; a transform that is a pure translation samples the
+/// nearest pixel, whatever the quality, as tiny-skia does.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ImagePaint {
+    /// Width in pixels, at least 1.
+    pub width: u32,
+    /// Height in pixels, at least 1.
+    pub height: u32,
+    /// **Straight** (not premultiplied) sRGB RGBA, 8 bits a channel, rows from the top,
+    /// `4 · width · height` bytes; shared between clones of a scene.
+    pub pixels: std::sync::Arc<Vec<u8>>,
+    /// Image space → device space.
+    pub transform: Affine,
+    /// Sampling filter.
+    pub quality: ImageQuality,
+}
+
+impl ImagePaint {
+    /// The image's own rectangle in device space: the corners of `[0, width] × [0, height]`
+    /// through the transform, clockwise from the origin in image space.
+    pub fn corners(&self) -> [Point; 4] {
+        let (w, h) = (self.width as f64, self.height as f64);
+        [[0.0, 0.0], [w, 0.0], [w, h], [0.0, h]].map(|q| apply(&self.transform, q))
+    }
+
+    /// Whether `path` is this image's rectangle as [`ImagePaint::rectangle`] builds it
+    /// (within a millionth of a pixel per coordinate, relative to the corners' size).
+    pub fn is_rectangle_of(&self, path: &Path) -> bool {
+        let want = Self::rectangle_points(self);
+        let scale = want.iter().flatten().fold(1.0f64, |m, v| m.max(v.abs()));
+        path.subpaths.len() == 1
+            && path.subpaths[0].closed
+            && path.points.len() == want.len()
+            && path.points.iter().zip(&want).all(|(a, b)| {
+                (a[0] - b[0]).abs() <= 1e-6 * scale && (a[1] - b[1]).abs() <= 1e-6 * scale
+            })
+    }
+
+    fn rectangle_points(&self) -> Vec<Point> {
+        let mut p = Path::new("");
+        self.trace(&mut p);
+        p.points
+    }
+
+    fn trace(&self, p: &mut Path) {
+        let c = self.corners();
+        p.move_to(c[0]);
+        for q in &c[1..] {
+            p.line_to(*q);
+        }
+        p.close();
+    }
+
+    /// A path filling this image's rectangle with the image (fill opacity 1, no stroke):
+    /// how an SVG `<image>` is loaded.
+    pub fn rectangle(self, id: impl Into<String>) -> Path {
+        let mut p = Path::new(id);
+        self.trace(&mut p);
+        p.fill = Some(Fill {
+            paint: Paint::Image(self),
+            opacity: 1.0,
+            rule: FillRule::NonZero,
+        });
+        p
+    }
 }
 
 /// Fill of a path.
@@ -667,8 +759,10 @@ impl Scene {
         self.height = height;
         let st: Affine = [s, 0.0, 0.0, s, 0.0, 0.0];
         fn scale_paint(p: &mut Paint, st: &Affine) {
-            if let Paint::Gradient(g) = p {
-                g.transform = concat(st, &g.transform);
+            match p {
+                Paint::Gradient(g) => g.transform = concat(st, &g.transform),
+                Paint::Image(i) => i.transform = concat(st, &i.transform),
+                Paint::Solid(_) => {}
             }
         }
         self.for_each_path_mut(|p| {

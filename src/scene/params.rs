@@ -7,7 +7,10 @@
 //! * per path: all control points (`x, y` per point, in [`Path::points`] order), then the
 //!   fill (paint, then opacity), then the stroke (paint, opacity, width);
 //! * a solid paint is `r, g, b`; a linear gradient is `x1, y1, x2, y2`, a radial one
-//!   `cx, cy, r, fx, fy, fr`, each followed by its stops as `offset, r, g, b, opacity`.
+//!   `cx, cy, r, fx, fy, fr`, each followed by its stops as `offset, r, g, b, opacity`;
+//!   an image has no slots (its [`PaintOffsets`] start, empty, at the item's opacity).
+//!   The points of an image's rectangle are slots like any path's (the gradient reaches
+//!   them), which fits freeze with a learning rate of 0.
 //!
 //! Gradients returned by the backward pass use the same layout.
 //!
@@ -301,6 +304,8 @@ fn walk_paint(
                 f(owner, ParamGroup::Opacity, Part::PaintSlot, &mut s.opacity);
             }
         }
+        // An image's pixels are fixed: no slots.
+        Paint::Image(_) => {}
     }
 }
 
@@ -347,8 +352,23 @@ impl ParamLayout {
                         }
                     }
                 }
-                Part::FillOpacity(i) => layout.paths[i].fill_opacity = at,
-                Part::StrokeOpacity(i) => layout.paths[i].stroke_opacity = at,
+                // A paint without slots (an image) starts, empty, at its opacity.
+                Part::FillOpacity(i) => {
+                    let p = &mut layout.paths[i];
+                    p.fill_opacity = at;
+                    p.fill.get_or_insert(PaintOffsets {
+                        base: at,
+                        stops: at,
+                    });
+                }
+                Part::StrokeOpacity(i) => {
+                    let p = &mut layout.paths[i];
+                    p.stroke_opacity = at;
+                    p.stroke.get_or_insert(PaintOffsets {
+                        base: at,
+                        stops: at,
+                    });
+                }
                 Part::StrokeWidth(i) => layout.paths[i].stroke_width = at,
                 Part::Point | Part::PaintSlot => {}
             }

@@ -55,6 +55,8 @@ fn project_nodes(nodes: &mut [Node]) {
 fn project_paint(paint: &mut Paint) {
     match paint {
         Paint::Solid(c) => c.iter_mut().for_each(unit),
+        // Fixed pixels, nothing to project.
+        Paint::Image(_) => {}
         Paint::Gradient(g) => {
             match &mut g.kind {
                 GradientKind::Linear { p1, p2 } => {

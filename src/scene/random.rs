@@ -49,7 +49,7 @@ pub fn curved_paths(n: usize, size: u32, seed: u64) -> Scene {
 /// A perturbed copy of `scene`: every control point moved by up to `max_px` pixels in x
 /// and y, and every color channel (solid and stop colors) shifted by up to `max_color`
 /// (then clamped to `[0, 1]`), uniformly at random. Used to test that refinement recovers.
-/// Moved points are kept within the readable range (±[`MAX_COORDINATE`] device pixels, see
+/// An image's rectangle is not moved. Moved points are kept within the readable range (±[`MAX_COORDINATE`] device pixels, see
 /// `super::params::clamp_points`), so the copy can always be written and read
 /// back.
 ///
@@ -68,6 +68,19 @@ pub fn perturb(scene: &Scene, max_px: f64, max_color: f64, seed: u64) -> Scene {
     let mut out = scene.clone();
     out.set_params(&p);
     clamp_all_points(&mut out.nodes);
+    // Image rectangles stay where they are, as fits keep them (SVG out writes an image
+    // only at its own rectangle).
+    let mut kept = Vec::new();
+    scene.for_each_path(|q| {
+        let image = matches!(q.fill.as_ref().map(|f| &f.paint), Some(Paint::Image(_)));
+        kept.push(image.then(|| q.points.clone()));
+    });
+    let mut kept = kept.into_iter();
+    out.for_each_path_mut(|q| {
+        if let Some(Some(points)) = kept.next() {
+            q.points = points;
+        }
+    });
     out
 }
 
@@ -90,6 +103,31 @@ mod tests {
         assert_ne!(curved_paths(5, 64, 7), curved_paths(5, 64, 8));
         let s = curved_paths(5, 64, 7);
         assert_eq!(s.path_count(), 5);
+    }
+
+    /// An image's rectangle is not perturbed (the shape beside it is), so the perturbed
+    /// scene can be saved.
+    #[test]
+    fn perturb_keeps_image_rectangles() {
+        use base64::Engine as _;
+        let png = crate::image_io::encode_png_rgba8(1, 1, &[9, 8, 7, 255]);
+        let url = base64::engine::general_purpose::STANDARD.encode(png);
+        let svg = format!(
+            r#"<svg xmlns="http://www.w3.org/2000/svg" width="20" height="20">
+               <image x="2" y="2" width="9" height="9" href="data:image/png;base64,{url}"/>
+               <rect x="5" y="5" width="9" height="9" fill="red"/></svg>"#
+        );
+        let s = Scene::from_svg_str(&svg, "t.svg", crate::scene::Sizing::Natural).unwrap();
+        let moved = perturb(&s, 3.0, 0.1, 2);
+        let points = |s: &Scene| {
+            let mut v = Vec::new();
+            s.for_each_path(|p| v.push(p.points.clone()));
+            v
+        };
+        let (a, b) = (points(&s), points(&moved));
+        assert_eq!(a[0], b[0]);
+        assert_ne!(a[1], b[1]);
+        assert!(crate::scene::svg_out::check_numbers(&moved).is_ok());
     }
 
     #[test]

@@ -11,10 +11,11 @@ use super::{GradientKind, Node, Paint, ParamLayout, Scene, SegmentKind};
 
 /// Where one paint's values lie: `len` slots from `offset` hold its values then its
 /// opacity (solid: `r, g, b`; a gradient: `geometry` values, then 5 per stop
-/// (`offset, r, g, b, opacity`) from `stops_offset`), the opacity at `opacity`.
+/// (`offset, r, g, b, opacity`) from `stops_offset`; an image: none), the opacity at
+/// `opacity`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PaintSlots {
-    /// `"solid"`, `"linear"` or `"radial"`.
+    /// `"solid"`, `"linear"`, `"radial"` or `"image"`.
     pub kind: &'static str,
     /// First slot.
     pub offset: usize,
@@ -73,6 +74,7 @@ fn paint_slots(paint: &Paint, po: Option<PaintOffsets>, opacity: usize) -> Optio
     let po = po?;
     let (kind, geometry, stops) = match paint {
         Paint::Solid(_) => ("solid", 0, 0),
+        Paint::Image(_) => ("image", 0, 0),
         Paint::Gradient(g) => match g.kind {
             GradientKind::Linear { .. } => ("linear", 4, g.stops.len()),
             GradientKind::Radial { .. } => ("radial", 6, g.stops.len()),

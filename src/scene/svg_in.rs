@@ -4,8 +4,8 @@ use std::path::Path as FsPath;
 
 use super::{
     Affine, BlendMode, Clip, FRAME_IDENTITY, Fill, FillRule, Fonts, Gradient, GradientKind,
-    Group, LineCap, LineJoin, Mask, MaskKind, Node, Paint, Path, Role, Scene, Spread, Stop,
-    Stroke, apply, concat,
+    Group, ImagePaint, ImageQuality, LineCap, LineJoin, Mask, MaskKind, Node, Paint, Path, Role,
+    Scene, Spread, Stop, Stroke, apply, concat,
 };
 use crate::error::{Error, Result};
 
@@ -13,7 +13,7 @@ use crate::image_io::{gunzip_bounded, is_gzip, read_bounded};
 pub(crate) use crate::limits::MAX_SIDE;
 use crate::limits::{
     MAX_ARC_RADIUS, MAX_DECOMPRESSED_BYTES, MAX_FILE_BYTES, MAX_MARKER_NODES, MAX_PATTERN_TILES,
-    MAX_PIXELS, MAX_SELECTOR_WORK,
+    MAX_PIXELS, MAX_SCENE_IMAGE_PIXELS, MAX_SELECTOR_WORK,
 };
 
 /// How to size the canvas when loading an SVG.
@@ -140,7 +140,16 @@ pub fn parse_tree_with(data: &[u8], name: &FsPath, fonts: &Fonts) -> Result<usvg
     if let Ok(text) = std::str::from_utf8(data) {
         reject_unsupported_xml(text, name)?;
     }
-    let (opt, missing) = fonts.usvg_options()?;
+    let (font_opt, missing) = fonts.usvg_options()?;
+    // Images usvg cannot load it skips without a word: the resolvers note each failure,
+    // and the first one refuses the file.
+    let failures = std::sync::Mutex::new(Vec::new());
+    let opt = usvg::Options {
+        fontdb: font_opt.fontdb,
+        font_family: font_opt.font_family,
+        font_resolver: font_opt.font_resolver,
+        ..image_options(name, &failures)
+    };
     // usvg's geometry unwraps rectangles it cannot build (a filter or image region of
     // width 3.4e38): behind the guard such a panic is one more parse error.
     let parsed =
@@ -152,12 +161,130 @@ pub fn parse_tree_with(data: &[u8], name: &FsPath, fonts: &Fonts) -> Result<usvg
         path: name.to_path_buf(),
         message: e.to_string(),
     })?;
+    drop(opt);
     fonts.check_missing(&missing, name)?;
-    Ok(tree)
+    let failures = failures.into_inner().unwrap_or_else(|e| e.into_inner());
+    match failures.into_iter().next() {
+        Some(message) => Err(Error::Image {
+            path: name.to_path_buf(),
+            message,
+        }),
+        None => Ok(tree),
+    }
 }
 
-/// usvg silently drops some elements (images it cannot load); refuse
-/// them instead of rendering something else than the file says.
+/// usvg's options for `name`: images referenced by a relative path resolve against the
+/// SVG's folder; an image file is read with the bound [`MAX_FILE_BYTES`]; an SVG image
+/// (file or data URL) passes the checks an SVG file passes (`reject_unsupported_xml`)
+/// before usvg parses it. Every image that cannot be loaded adds a sentence naming it to
+/// `failures` (usvg would drop the element silently).
+fn image_options<'a>(
+    name: &FsPath,
+    failures: &'a std::sync::Mutex<Vec<String>>,
+) -> usvg::Options<'a> {
+    use std::sync::Arc;
+    let fail = move |what: String| {
+        if let Ok(mut f) = failures.lock() {
+            f.push(what);
+        }
+        None
+    };
+    // Raster data is recognized by its signature; anything else is taken for SVG text.
+    let is_raster = |d: &[u8]| {
+        d.starts_with(b"\x89PNG")
+            || d.starts_with(&[0xff, 0xd8, 0xff])
+            || d.starts_with(b"GIF8")
+            || (d.len() >= 12 && &d[..4] == b"RIFF" && &d[8..12] == b"WEBP")
+    };
+    // An SVG image passes the checks of an SVG file; a compressed one (`.svgz`) is
+    // inflated here (usvg is built without its own gzip support). Returns the bytes for
+    // usvg, or the sentence that refuses them.
+    let svg_name = name.to_path_buf();
+    let vet = move |data: Arc<Vec<u8>>, what: &str| -> std::result::Result<Arc<Vec<u8>>, String> {
+        if is_raster(&data) {
+            return Ok(data);
+        }
+        let data = if is_gzip(&data) {
+            Arc::new(
+                gunzip_bounded(&data, MAX_DECOMPRESSED_BYTES, &svg_name)
+                    .map_err(|e| format!("{what}: {}", inner_message(&e)))?,
+            )
+        } else {
+            data
+        };
+        match std::str::from_utf8(&data) {
+            Ok(text) => reject_unsupported_xml(text, &svg_name)
+                .map_err(|e| format!("{what}, an SVG image: {}", inner_message(&e)))?,
+            Err(_) => {
+                return Err(format!("{what} is not a PNG, JPEG, GIF, WebP or SVG image"));
+            }
+        }
+        Ok(data)
+    };
+    // What usvg made of the bytes: nothing, or a raster image whose header gives no size
+    // (usvg then drops it, `ImageKind::actual_size`), is a failure.
+    let resolved = move |kind: Option<usvg::ImageKind>, what: &str| {
+        use usvg::ImageKind as K;
+        match kind {
+            None => fail(format!("{what} cannot be decoded")),
+            Some(K::PNG(ref d) | K::JPEG(ref d) | K::GIF(ref d) | K::WEBP(ref d)) => {
+                match imagesize::blob_size(d) {
+                    Ok(s) if s.width > 0 && s.height > 0 => kind,
+                    Ok(s) => fail(format!("{what} is empty ({}x{})", s.width, s.height)),
+                    Err(e) => fail(format!("{what} cannot be decoded: {e}")),
+                }
+            }
+            Some(K::SVG(_)) => kind,
+        }
+    };
+    let resolved_data = resolved;
+    let vet_data = vet.clone();
+    let resolve_data: usvg::ImageHrefDataResolverFn<'a> = Box::new(move |mime, data, opts| {
+        let what = format!("an image in a data URL ({mime})");
+        let data = match vet_data(data, &what) {
+            Ok(d) => d,
+            Err(e) => return fail(e),
+        };
+        resolved_data(
+            (usvg::ImageHrefResolver::default_data_resolver())(mime, data, opts),
+            &what,
+        )
+    });
+    let resolve_string: usvg::ImageHrefStringResolverFn<'a> = Box::new(move |href, opts| {
+        let what = format!("image \"{href}\"");
+        if href.contains("://") {
+            return fail(format!("{what} is a URL: diffsvg reads no remote images"));
+        }
+        let path = opts.get_abs_path(FsPath::new(href));
+        let data = match read_bounded(&path, MAX_FILE_BYTES) {
+            Ok(d) => d,
+            Err(e) => return fail(format!("{what} cannot be read: {e}")),
+        };
+        let data = match vet(Arc::new(data), &what) {
+            Ok(d) => d,
+            Err(e) => return fail(e),
+        };
+        resolved(
+            (usvg::ImageHrefResolver::default_data_resolver())("text/plain", data, opts),
+            &format!("{what} ({})", path.display()),
+        )
+    });
+    usvg::Options {
+        resources_dir: name
+            .parent()
+            .filter(|d| !d.as_os_str().is_empty())
+            .map(FsPath::to_path_buf),
+        image_href_resolver: usvg::ImageHrefResolver {
+            resolve_data,
+            resolve_string,
+        },
+        ..usvg::Options::default()
+    }
+}
+
+/// usvg silently drops some elements; refuse them instead of rendering something else
+/// than the file says. (Images it cannot load are caught by the resolvers of
+/// `image_options`, text without fonts by the font selector of [`Fonts`].)
 fn reject_unsupported_xml(text: &str, name: &FsPath) -> Result<()> {
     let Ok(doc) = usvg::roxmltree::Document::parse_with_options(
         text,
@@ -172,7 +299,7 @@ fn reject_unsupported_xml(text: &str, name: &FsPath) -> Result<()> {
     check_marker_work(&doc, name)?;
     for n in doc.descendants().filter(|n| n.is_element()) {
         let tag = n.tag_name().name();
-        if matches!(tag, "foreignObject" | "image") {
+        if matches!(tag, "foreignObject") {
             return Err(Error::Unsupported {
                 path: name.to_path_buf(),
                 what: describe(tag, n.attribute("id")),
@@ -495,6 +622,18 @@ fn bad_number(value: &str) -> Option<String> {
     None
 }
 
+/// An error's sentence without the file name it starts with (for an error about an image
+/// inside the file that is named already).
+fn inner_message(e: &Error) -> String {
+    match e {
+        Error::Svg { message, .. } => format!("malformed SVG: {message}"),
+        Error::Unsupported { what, .. } => format!("unsupported: {what}"),
+        Error::InvalidValue { what, .. } => format!("invalid value: {what}"),
+        Error::Image { message, .. } => message.clone(),
+        e => e.to_string(),
+    }
+}
+
 fn describe(tag: &str, id: Option<&str>) -> String {
     match id {
         Some(id) if !id.is_empty() => format!("<{tag}> element (id \"{id}\")"),
@@ -516,6 +655,8 @@ fn to_affine(t: usvg::Transform) -> Affine {
 struct Ctx<'a> {
     name: &'a FsPath,
     root: Affine,
+    /// Pixels of the raster images decoded so far ([`MAX_SCENE_IMAGE_PIXELS`]).
+    image_pixels: std::cell::Cell<u64>,
 }
 
 impl Ctx<'_> {
@@ -523,6 +664,12 @@ impl Ctx<'_> {
         Error::Unsupported {
             path: self.name.to_path_buf(),
             what,
+        }
+    }
+    fn image(&self, message: String) -> Error {
+        Error::Image {
+            path: self.name.to_path_buf(),
+            message,
         }
     }
     fn invalid(&self, what: String) -> Error {
@@ -588,7 +735,11 @@ pub(crate) fn canvas_size(
 /// applies.
 pub fn from_tree(tree: &usvg::Tree, name: &FsPath, sizing: Sizing) -> Result<Scene> {
     let (w, h, root) = canvas_size(tree, sizing, name)?;
-    let ctx = Ctx { name, root };
+    let ctx = Ctx {
+        name,
+        root,
+        image_pixels: std::cell::Cell::new(0),
+    };
     let mut scene = Scene::new(w, h);
     let t = concat(&ctx.root, &to_affine(tree.root().transform()));
     scene.nodes = convert_group_children(tree.root(), &ctx, &t, Role::Paint)?;
@@ -661,8 +812,18 @@ fn convert_group_children(g: &usvg::Group, ctx: &Ctx, t: &Affine, role: Role) ->
                     out.push(Node::Path(path));
                 }
             }
+            // A clip path draws shapes and text only (resvg skips its images).
+            usvg::Node::Image(_) if role == Role::Clip => {}
             usvg::Node::Image(i) => {
-                return Err(ctx.unsupported(describe("image", Some(i.id()))));
+                // usvg wraps each image in a group of its own, which holds the id.
+                let id = if i.id().is_empty() && g.children().len() == 1 {
+                    g.id()
+                } else {
+                    i.id()
+                };
+                if i.is_visible() {
+                    out.extend(convert_image(i, id, ctx, t)?);
+                }
             }
             usvg::Node::Text(text) => out.extend(convert_text(text, ctx, t, role)?),
         }
@@ -787,6 +948,64 @@ fn convert_text(text: &usvg::Text, ctx: &Ctx, t: &Affine, role: Role) -> Result<
         first.text = Some(chars);
     }
     Ok(nodes)
+}
+
+/// An image: a raster one becomes its rectangle filled with [`Paint::Image`] (decoded
+/// here, its size checked against [`MAX_SCENE_IMAGE_PIXELS`] first); an SVG one becomes
+/// its paths, converted as the file's own (what that conversion refuses, it refuses).
+/// `t` maps the image's pixel space (usvg resolved `preserveAspectRatio` into it) to
+/// device pixels.
+fn convert_image(i: &usvg::Image, id: &str, ctx: &Ctx, t: &Affine) -> Result<Vec<Node>> {
+    let what = describe("image", Some(id));
+    let data = match i.kind() {
+        usvg::ImageKind::SVG(tree) => {
+            let t = concat(t, &to_affine(tree.root().transform()));
+            return convert_group_children(tree.root(), ctx, &t, Role::Paint).map_err(|e| match e {
+                Error::Unsupported { path, what: inner } => Error::Unsupported {
+                    path,
+                    what: format!("{inner} inside the SVG of {what}"),
+                },
+                e => e,
+            });
+        }
+        usvg::ImageKind::PNG(d)
+        | usvg::ImageKind::JPEG(d)
+        | usvg::ImageKind::GIF(d)
+        | usvg::ImageKind::WEBP(d) => d,
+    };
+    let left = MAX_SCENE_IMAGE_PIXELS - ctx.image_pixels.get();
+    // The size usvg read from the header (a malformed rest is not looked at).
+    let (hw, hh) = (i.size().width() as f64, i.size().height() as f64);
+    if hw * hh > left as f64 || hw > MAX_SIDE as f64 || hh > MAX_SIDE as f64 {
+        return Err(ctx.image(format!(
+            "{what} is {hw}x{hh} pixels, past the limit of {MAX_SIDE} a side and {left} \
+             pixels (limits::MAX_SCENE_IMAGE_PIXELS, for all the images of a drawing)"
+        )));
+    }
+    let (width, height, pixels) = crate::image_io::decode_embedded(data, left)
+        .map_err(|why| ctx.image(format!("{what} {why}")))?;
+    ctx.image_pixels
+        .set(ctx.image_pixels.get() + width as u64 * height as u64);
+    let quality = match i.rendering_mode() {
+        usvg::ImageRendering::OptimizeSpeed
+        | usvg::ImageRendering::CrispEdges
+        | usvg::ImageRendering::Pixelated => ImageQuality::Nearest,
+        usvg::ImageRendering::Smooth => ImageQuality::Bilinear,
+        usvg::ImageRendering::OptimizeQuality | usvg::ImageRendering::HighQuality => {
+            ImageQuality::Bicubic
+        }
+    };
+    let paint = ImagePaint {
+        width,
+        height,
+        pixels: std::sync::Arc::new(pixels),
+        transform: *t,
+        quality,
+    };
+    if paint.corners().iter().flatten().any(|v| !v.is_finite()) {
+        return Err(ctx.invalid(format!("{what} has a non-finite transform")));
+    }
+    Ok(vec![Node::Path(paint.rectangle(id))])
 }
 
 fn convert_path(p: &usvg::Path, ctx: &Ctx, t: &Affine, role: Role) -> Result<Option<Path>> {
@@ -1211,6 +1430,54 @@ mod tests {
             e.contains("unsupported") && e.contains("foreignObject"),
             "{e}"
         );
+    }
+
+    /// An `<image>` is its rectangle filled with the image, in device pixels: the transform
+    /// maps image pixels there, `preserveAspectRatio` (meet) included, and sizing and
+    /// `scale_to` scale it with the rest; the id usvg moves to a wrapper group is kept.
+    #[test]
+    fn image_becomes_its_rectangle_in_device_space() {
+        // A 2 × 1 PNG drawn into a 10 × 10 box: meet scales it by 5 and centers it.
+        let png = crate::image_io::encode_png_rgba8(2, 1, &[255, 0, 0, 255, 0, 0, 255, 100]);
+        use base64::Engine as _;
+        let url = base64::engine::general_purpose::STANDARD.encode(png);
+        let svg = format!(
+            r#"<svg xmlns="http://www.w3.org/2000/svg" width="20" height="20">
+               <image id="pic" x="4" y="4" width="10" height="10" style="image-rendering:pixelated"
+                 href="data:image/png;base64,{url}"/></svg>"#
+        );
+        let s = Scene::from_svg_str(&svg, "t.svg", Sizing::Width(40)).unwrap();
+        let Node::Path(p) = &s.nodes[0] else { panic!() };
+        assert_eq!(p.id, "pic");
+        let Some(Fill {
+            paint: Paint::Image(img),
+            ..
+        }) = &p.fill
+        else {
+            panic!("{:?}", p.fill)
+        };
+        assert_eq!(
+            (img.width, img.height, img.quality),
+            (2, 1, ImageQuality::Nearest)
+        );
+        assert_eq!(&img.pixels[..], &[255, 0, 0, 255, 0, 0, 255, 100]);
+        // User space: x 4..14, y 6.5..11.5; device: twice that.
+        assert_eq!(p.control_bounds().unwrap(), [8.0, 13.0, 28.0, 23.0]);
+        assert!(img.is_rectangle_of(p));
+        let mut scaled = s.clone();
+        scaled.scale_to(0.5, 20, 20);
+        let Node::Path(q) = &scaled.nodes[0] else {
+            panic!()
+        };
+        let Some(Fill {
+            paint: Paint::Image(half),
+            ..
+        }) = &q.fill
+        else {
+            panic!()
+        };
+        assert!(half.is_rectangle_of(q));
+        assert_eq!(q.control_bounds().unwrap(), [4.0, 6.5, 14.0, 11.5]);
     }
 
     #[test]

@@ -5,7 +5,8 @@
 //! A stroke with a non-identity frame (drawn under a non-uniform scale) is written with a
 //! `transform` on its path so that the pen keeps its shape. Coordinates are written with
 //! four decimals, colors as `#rrggbb`. The glyph outlines of a `<text>` are written as
-//! paths after a comment holding the text (`<!-- text: Hello -->`).
+//! paths after a comment holding the text (`<!-- text: Hello -->`). An image-filled path is written as an
+//! `<image>` with its pixels embedded as a base64 PNG.
 
 use std::collections::HashSet;
 use std::fmt::Write as _;
@@ -13,8 +14,9 @@ use std::path::Path as FsPath;
 
 use super::geom::lerp;
 use super::{
-    Affine, BlendMode, Clip, FRAME_IDENTITY, FillRule, GradientKind, Group, LineCap, LineJoin,
-    Mask, MaskKind, Node, Paint, Path, Point, Scene, SegmentKind, Spread, apply, concat, invert,
+    Affine, BlendMode, Clip, FRAME_IDENTITY, Fill, FillRule, GradientKind, Group, ImagePaint,
+    ImageQuality, LineCap, LineJoin, Mask, MaskKind, Node, Paint, Path, Point, Scene,
+    SegmentKind, Spread, apply, concat, invert,
 };
 use crate::error::{Error, Result};
 use crate::limits::MAX_COORDINATE;
@@ -92,6 +94,9 @@ impl Writer {
     fn paint(&mut self, paint: &Paint, to_local: &Affine) -> String {
         match paint {
             Paint::Solid(c) => hex(c),
+            // An image is written as an `<image>` element (`Writer::image`), never as a
+            // paint of a path; `check_numbers` refuses an image anywhere else.
+            Paint::Image(_) => "none".to_string(),
             Paint::Gradient(g) => {
                 let id = self.unique_id(&g.id);
                 let t = concat(to_local, &g.transform);
@@ -198,7 +203,14 @@ impl Writer {
                     self.nodes(&g.children, indent + 1);
                     let _ = writeln!(self.body, "{pad}</g>");
                 }
-                Node::Path(p) => self.path(p, indent),
+                Node::Path(p) => match &p.fill {
+                    Some(Fill {
+                        paint: Paint::Image(img),
+                        opacity,
+                        ..
+                    }) => self.image(p, img, *opacity, indent),
+                    _ => self.path(p, indent),
+                },
             }
         }
     }
@@ -315,6 +327,42 @@ impl Writer {
             num(rect[3] - rect[1])
         );
         id
+    }
+
+    /// An image-filled path as `<image>`: its pixels as an embedded PNG at their own
+    /// size, placed by the image's transform, so that diffsvg, resvg and browsers read it
+    /// back as the same rectangle with the same pixels. The path's points are not written:
+    /// they are the image's rectangle (fits keep them there; `check_numbers` refuses to
+    /// save one moved off it).
+    fn image(&mut self, p: &Path, img: &ImagePaint, opacity: f64, indent: usize) {
+        let mut attrs = String::new();
+        if !p.id.is_empty() {
+            let _ = write!(attrs, " id=\"{}\"", escape(&p.id));
+        }
+        // Full precision: a rounded scale would move the far corner by its error times
+        // the image's size.
+        let t = img.transform;
+        let _ = write!(
+            attrs,
+            " width=\"{}\" height=\"{}\" preserveAspectRatio=\"none\" transform=\"matrix({} {} {} {} {} {})\"",
+            img.width, img.height, t[0], t[1], t[2], t[3], t[4], t[5]
+        );
+        match img.quality {
+            ImageQuality::Nearest => attrs.push_str(" image-rendering=\"optimizeSpeed\""),
+            ImageQuality::Bilinear => attrs.push_str(" style=\"image-rendering:smooth\""),
+            ImageQuality::Bicubic => {}
+        }
+        if opacity < 1.0 {
+            let _ = write!(attrs, " opacity=\"{}\"", num(opacity.clamp(0.0, 1.0)));
+        }
+        let png = crate::image_io::encode_png_rgba8(img.width, img.height, &img.pixels);
+        use base64::Engine as _;
+        let data = base64::engine::general_purpose::STANDARD.encode(png);
+        let pad = "  ".repeat(indent);
+        let _ = writeln!(
+            self.body,
+            "{pad}<image{attrs} href=\"data:image/png;base64,{data}\"/>"
+        );
     }
 
     fn path(&mut self, p: &Path, indent: usize) {
@@ -705,6 +753,28 @@ impl Checker {
             }
         }
         let to_local = to_local.unwrap_or(super::IDENTITY);
+        if let Some(Paint::Image(_)) = p.stroke.as_ref().map(|s| &s.paint) {
+            return Err(format!(
+                "{}: an image as a stroke's paint cannot be written (SVG has none)",
+                owner()
+            ));
+        }
+        if let Some(Fill {
+            paint: Paint::Image(img),
+            ..
+        }) = &p.fill
+        {
+            for v in img.transform {
+                self.value(&owner, "image transform entry", v)?;
+            }
+            if p.stroke.is_some() || !img.is_rectangle_of(p) {
+                return Err(format!(
+                    "{}: an image is written only as its own rectangle without a stroke, \
+                     and this one was moved or stroked",
+                    owner()
+                ));
+            }
+        }
         if let Some(f) = &p.fill {
             self.value(&owner, "fill opacity", f.opacity)?;
             self.paint(&owner, &f.paint, &to_local)?;

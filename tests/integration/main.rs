@@ -13,6 +13,7 @@ mod glyphs;
 mod gradcheck_cli;
 mod gradients;
 mod layers;
+mod images;
 mod options;
 mod parity;
 mod regress_cli;
