@@ -3,9 +3,9 @@
 use std::path::Path as FsPath;
 
 use super::{
-    Affine, BlendMode, Clip, FRAME_IDENTITY, Fill, FillRule, Fonts, Gradient, GradientKind,
-    Group, ImagePaint, ImageQuality, LineCap, LineJoin, Mask, MaskKind, Node, Paint, Path, Role,
-    Scene, Spread, Stop, Stroke, apply, concat,
+    Affine, BlendMode, Clip, FRAME_IDENTITY, Fill, FillRule, Fonts, Gradient, GradientKind, Group,
+    ImagePaint, ImageQuality, LineCap, LineJoin, Mask, MaskKind, Node, Paint, Path, Role, Scene,
+    Spread, Stop, Stroke, apply, concat,
 };
 use crate::error::{Error, Result};
 
@@ -960,13 +960,15 @@ fn convert_image(i: &usvg::Image, id: &str, ctx: &Ctx, t: &Affine) -> Result<Vec
     let data = match i.kind() {
         usvg::ImageKind::SVG(tree) => {
             let t = concat(t, &to_affine(tree.root().transform()));
-            return convert_group_children(tree.root(), ctx, &t, Role::Paint).map_err(|e| match e {
-                Error::Unsupported { path, what: inner } => Error::Unsupported {
-                    path,
-                    what: format!("{inner} inside the SVG of {what}"),
+            return convert_group_children(tree.root(), ctx, &t, Role::Paint).map_err(
+                |e| match e {
+                    Error::Unsupported { path, what: inner } => Error::Unsupported {
+                        path,
+                        what: format!("{inner} inside the SVG of {what}"),
+                    },
+                    e => e,
                 },
-                e => e,
-            });
+            );
         }
         usvg::ImageKind::PNG(d)
         | usvg::ImageKind::JPEG(d)
@@ -1213,7 +1215,9 @@ fn convert_patterned(p: &usvg::Path, base: Path, ctx: &Ctx, t: &Affine) -> Resul
         let part = match us.paint() {
             usvg::Paint::Pattern(pat) => {
                 let [a, b, c, d] = st.frame;
-                let reach = 0.5 * st.width.abs() * st.miter_limit.max(2.0)
+                let reach = 0.5
+                    * st.width.abs()
+                    * st.miter_limit.max(2.0)
                     * (a * a + b * b + c * c + d * d).sqrt()
                     + 1.0;
                 let grown = [
@@ -1262,13 +1266,23 @@ fn patterned_layer(
 /// device box `bounds`, each its content placed at its cell and clipped to it unless the
 /// content stays inside. Like resvg, a tile smaller than half a device pixel draws
 /// nothing; more than [`MAX_PATTERN_TILES`] tiles are refused.
-fn pattern_tiles(pat: &usvg::Pattern, bounds: [f64; 4], ctx: &Ctx, t: &Affine) -> Result<Vec<Node>> {
+fn pattern_tiles(
+    pat: &usvg::Pattern,
+    bounds: [f64; 4],
+    ctx: &Ctx,
+    t: &Affine,
+) -> Result<Vec<Node>> {
     let pt = concat(t, &to_affine(pat.transform()));
     let Some(inv) = super::invert(&pt) else {
         return Ok(Vec::new());
     };
     let r = pat.rect();
-    let (rx, ry, rw, rh) = (r.x() as f64, r.y() as f64, r.width() as f64, r.height() as f64);
+    let (rx, ry, rw, rh) = (
+        r.x() as f64,
+        r.y() as f64,
+        r.width() as f64,
+        r.height() as f64,
+    );
     let (sx, sy) = (pt[0].hypot(pt[1]), pt[2].hypot(pt[3]));
     let (pw, ph) = ((rw * sx).round(), (rh * sy).round());
     if pw < 1.0 || ph < 1.0 {
@@ -1310,8 +1324,12 @@ fn pattern_tiles(pat: &usvg::Pattern, bounds: [f64; 4], ctx: &Ctx, t: &Affine) -
     let mut inside = true;
     probe.for_each_path(|q| {
         let b = q.control_bounds().unwrap_or([0.0; 4]);
-        let reach = q.stroke.as_ref().map_or(0.0, |s| s.width.abs() * s.miter_limit.max(1.0));
-        inside &= b[0] - reach >= 0.0 && b[1] - reach >= 0.0 && b[2] + reach <= rw && b[3] + reach <= rh;
+        let reach = q
+            .stroke
+            .as_ref()
+            .map_or(0.0, |s| s.width.abs() * s.miter_limit.max(1.0));
+        inside &=
+            b[0] - reach >= 0.0 && b[1] - reach >= 0.0 && b[2] + reach <= rw && b[3] + reach <= rh;
     });
     let mut tiles = Vec::new();
     for j in (j0 as i64)..(j1 as i64) {

@@ -15,8 +15,8 @@ use std::path::Path as FsPath;
 use super::geom::lerp;
 use super::{
     Affine, BlendMode, Clip, FRAME_IDENTITY, Fill, FillRule, GradientKind, Group, ImagePaint,
-    ImageQuality, LineCap, LineJoin, Mask, MaskKind, Node, Paint, Path, Point, Scene,
-    SegmentKind, Spread, apply, concat, invert,
+    ImageQuality, LineCap, LineJoin, Mask, MaskKind, Node, Paint, Path, Point, Scene, SegmentKind,
+    Spread, apply, concat, invert,
 };
 use crate::error::{Error, Result};
 use crate::limits::MAX_COORDINATE;

@@ -289,7 +289,13 @@ fn pattern_gradients_reach_the_tiles() {
     );
     // Several tiles, each a copy of the content with its own parameters.
     assert!(s.path_count() > 8, "{}", s.path_count());
-    assert_agrees("pattern", &s, &nudged_target(&s, 1.0, WHITE), Loss::Mse, WHITE);
+    assert_agrees(
+        "pattern",
+        &s,
+        &nudged_target(&s, 1.0, WHITE),
+        Loss::Mse,
+        WHITE,
+    );
 }
 
 #[test]
