@@ -84,12 +84,12 @@ fn bad_inputs_fail_cleanly() {
     let p = write(
         &dir,
         "text.svg",
-        r#"<svg xmlns="http://www.w3.org/2000/svg" width="10" height="10"><text id="t">hi</text></svg>"#,
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="10" height="10"><text id="t" font-family="NoSuchFamily">hi</text></svg>"#,
     );
     assert_fails(
         &diffsvg(&["render", s(&p), "-o", &o]),
         "text.svg",
-        "unsupported: <text>",
+        "font-family \"nosuchfamily\"",
         &out,
     );
 

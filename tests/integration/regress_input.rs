@@ -392,8 +392,16 @@ fn huge_regions_inside_svg_parsing_are_one_line_errors() {
         r#"<filter id="f" width="3.4e38"><feGaussianBlur stdDeviation="2"/></filter><rect width="30" height="30" filter="url(#f)"/>"#,
         r#"<image width="3.4e38" height="10" href="data:image/png;base64,iVBORw0KGgo="/><rect width="30" height="30"/>"#,
         r#"<mask id="m" width="3.4e38" height="3.4e38"><rect width="9" height="9" fill="white"/></mask><rect width="30" height="30" mask="url(#m)"/>"#,
-        r#"<pattern id="p" width="3.4e38" height="3.4e38" patternUnits="userSpaceOnUse"><rect width="5" height="5"/></pattern><rect width="30" height="30" fill="url(#p)"/>"#,
     ];
+    // A pattern tile 3.4e38 wide is one tile now that patterns are drawn: it renders.
+    let svg = write(
+        &dir,
+        "pattern.svg",
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="64" height="64"><pattern id="p" width="3.4e38" height="3.4e38" patternUnits="userSpaceOnUse"><rect width="5" height="5"/></pattern><rect width="30" height="30" fill="url(#p)"/></svg>"#,
+    );
+    let png = dir.join("pattern.png");
+    let o = diffsvg(&["render", s(&svg), "-o", s(&png)]);
+    assert!(o.status.success() && png.exists(), "{o:?}");
     for (k, body) in cases.iter().enumerate() {
         let svg = write(
             &dir,
