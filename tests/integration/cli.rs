@@ -95,15 +95,15 @@ fn bad_inputs_fail_cleanly() {
 
     let p = write(
         &dir,
-        "clip.svg",
+        "filter.svg",
         r#"<svg xmlns="http://www.w3.org/2000/svg" width="10" height="10">
-        <clipPath id="c"><rect width="5" height="5"/></clipPath>
-        <rect id="r" width="10" height="10" clip-path="url(#c)"/></svg>"#,
+        <filter id="f"><feGaussianBlur stdDeviation="1"/></filter>
+        <rect id="r" width="10" height="10" filter="url(#f)"/></svg>"#,
     );
     assert_fails(
         &diffsvg(&["render", s(&p), "-o", &o]),
-        "clip.svg",
-        "clip-path",
+        "filter.svg",
+        "filter",
         &out,
     );
 
