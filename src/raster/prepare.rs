@@ -968,6 +968,9 @@ mod tests {
         assert_eq!(p.groups[0].groups_end, 2);
         assert_eq!(p.groups[1].rect, Some([49, 59, 62, 71]));
         assert_eq!(p.groups[2].rect, None);
-        assert!(matches!(p.ops[p.groups[0].end], Op::Pop { group: Some(0), .. }));
+        assert!(matches!(
+            p.ops[p.groups[0].end],
+            Op::Pop { group: Some(0), .. }
+        ));
     }
 }
