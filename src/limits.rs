@@ -98,9 +98,9 @@ pub const MAX_GROUP_DEPTH: usize = 256;
 /// at every vertex that uses it). The resvg suite's marker files are below 2,000.
 pub const MAX_MARKER_NODES: usize = 2_000_000;
 
-/// Most tiles a pattern paint may repeat over one shape: each tile is a copy of the
-/// pattern's content (a shape of the scene, with its own parameters). A tile smaller than
-/// half a pixel draws nothing, as in resvg.
+/// Most pattern tiles one drawing may hold, nested patterns' tiles included: each tile is
+/// a copy of the pattern's content (shapes of the scene, with their own parameters). A
+/// tile smaller than half a pixel draws nothing, as in resvg.
 pub const MAX_PATTERN_TILES: usize = 10_000;
 
 /// Most steps a stylesheet's selectors may take to match, estimated before parsing as

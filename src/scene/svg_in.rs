@@ -10,6 +10,7 @@ use super::{
 use crate::error::{Error, Result};
 
 use crate::image_io::{gunzip_bounded, is_gzip, read_bounded};
+use crate::limits::MAX_GROUP_DEPTH;
 pub(crate) use crate::limits::MAX_SIDE;
 use crate::limits::{
     MAX_ARC_RADIUS, MAX_DECOMPRESSED_BYTES, MAX_FILE_BYTES, MAX_MARKER_NODES, MAX_PATTERN_TILES,
@@ -297,6 +298,7 @@ fn reject_unsupported_xml(text: &str, name: &FsPath) -> Result<()> {
     };
     check_selector_work(&doc, name)?;
     check_marker_work(&doc, name)?;
+    check_reference_depth(&doc, name)?;
     for n in doc.descendants().filter(|n| n.is_element()) {
         let tag = n.tag_name().name();
         if matches!(tag, "foreignObject") {
@@ -334,6 +336,88 @@ fn reject_unsupported_xml(text: &str, name: &FsPath) -> Result<()> {
                     path: name.to_path_buf(),
                     what: format!("{bad} in property {property} of a <style> rule"),
                 });
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Refuses clip paths, masks, patterns and markers that refer to each other (`clip-path`
+/// on a `<clipPath>`, a pattern filling a pattern's shape, …) in a chain longer than
+/// [`MAX_GROUP_DEPTH`]: each link is a layer inside a layer, and usvg follows the chain
+/// recursively before anything else can count it (20,000 links overflowed the stack).
+/// Cycles are usvg's to report; they add nothing here.
+fn check_reference_depth(doc: &usvg::roxmltree::Document, name: &FsPath) -> Result<()> {
+    use std::collections::HashMap;
+    const KINDS: [&str; 4] = ["clipPath", "mask", "pattern", "marker"];
+    let urls = |n: usvg::roxmltree::Node| -> Vec<String> {
+        let mut out = Vec::new();
+        for d in n.descendants().filter(|d| d.is_element()) {
+            for a in d.attributes() {
+                let mut rest = a.value();
+                while let Some(at) = rest.find("url(") {
+                    rest = &rest[at + 4..];
+                    let end = rest.find(')').unwrap_or(rest.len());
+                    let id = rest[..end]
+                        .trim()
+                        .trim_matches(['\'', '"'])
+                        .trim_start_matches('#');
+                    out.push(id.to_string());
+                    rest = &rest[end..];
+                }
+            }
+        }
+        out
+    };
+    let mut links: HashMap<&str, Vec<String>> = HashMap::new();
+    for n in doc
+        .descendants()
+        .filter(|n| KINDS.contains(&n.tag_name().name()))
+    {
+        if let Some(id) = n.attribute("id") {
+            links.insert(id, urls(n));
+        }
+    }
+    // Longest chain from each element, without recursion: 0 while being explored (a
+    // cycle counts nothing more).
+    let mut depth: HashMap<&str, usize> = HashMap::new();
+    for &start in links.keys() {
+        let mut stack: Vec<(&str, usize)> = vec![(start, 0)];
+        while let Some(&(id, next)) = stack.last() {
+            if next == 0 && depth.contains_key(id) {
+                stack.pop();
+                continue;
+            }
+            depth.entry(id).or_insert(0);
+            let targets = &links[id];
+            match targets.get(next) {
+                Some(t) => {
+                    stack.last_mut().expect("on the stack").1 += 1;
+                    if let Some((key, _)) = links.get_key_value(t.as_str())
+                        && !depth.contains_key(key)
+                    {
+                        stack.push((key, 0));
+                    }
+                }
+                None => {
+                    let d = 1 + targets
+                        .iter()
+                        .filter_map(|t| depth.get(t.as_str()))
+                        .max()
+                        .copied()
+                        .unwrap_or(0);
+                    depth.insert(id, d);
+                    stack.pop();
+                    if d > MAX_GROUP_DEPTH {
+                        return Err(Error::Unsupported {
+                            path: name.to_path_buf(),
+                            what: format!(
+                                "clip paths, masks, patterns or markers referring to each \
+                                 other more than {MAX_GROUP_DEPTH} deep (the layer limit)"
+                            ),
+                        });
+                    }
+                }
             }
         }
     }
@@ -657,6 +741,8 @@ struct Ctx<'a> {
     root: Affine,
     /// Pixels of the raster images decoded so far ([`MAX_SCENE_IMAGE_PIXELS`]).
     image_pixels: std::cell::Cell<u64>,
+    /// Pattern tiles made so far, nested patterns' included ([`MAX_PATTERN_TILES`]).
+    pattern_tiles: std::cell::Cell<usize>,
 }
 
 impl Ctx<'_> {
@@ -739,6 +825,7 @@ pub fn from_tree(tree: &usvg::Tree, name: &FsPath, sizing: Sizing) -> Result<Sce
         name,
         root,
         image_pixels: std::cell::Cell::new(0),
+        pattern_tiles: std::cell::Cell::new(0),
     };
     let mut scene = Scene::new(w, h);
     let t = concat(&ctx.root, &to_affine(tree.root().transform()));
@@ -1265,7 +1352,7 @@ fn patterned_layer(
 /// The tiles of `pat` (drawn in the user space `t` maps to device pixels) that cover the
 /// device box `bounds`, each its content placed at its cell and clipped to it unless the
 /// content stays inside. Like resvg, a tile smaller than half a device pixel draws
-/// nothing; more than [`MAX_PATTERN_TILES`] tiles are refused.
+/// nothing; more than [`MAX_PATTERN_TILES`] tiles in the drawing are refused.
 fn pattern_tiles(
     pat: &usvg::Pattern,
     bounds: [f64; 4],
@@ -1310,13 +1397,16 @@ fn pattern_tiles(
     let (i0, i1) = (((u0 - rx) / rw).floor(), ((u1 - rx) / rw).ceil());
     let (j0, j1) = (((v0 - ry) / rh).floor(), ((v1 - ry) / rh).ceil());
     let count = (i1 - i0).max(0.0) * (j1 - j0).max(0.0);
-    if !(count <= MAX_PATTERN_TILES as f64) {
+    // Counted over the whole drawing: a pattern inside a pattern's tile multiplies.
+    let total = count + ctx.pattern_tiles.get() as f64;
+    if !(total <= MAX_PATTERN_TILES as f64) {
         return Err(ctx.unsupported(format!(
-            "pattern \"{}\" would repeat {count:.0} tiles over its shape (the limit is \
-             {MAX_PATTERN_TILES})",
+            "pattern \"{}\" would repeat {count:.0} tiles over its shape, {total:.0} in the \
+             drawing with the patterns before and around it (the limit is {MAX_PATTERN_TILES})",
             pat.id()
         )));
     }
+    ctx.pattern_tiles.set(total as usize);
     // Whether the content stays inside its cell (then no tile needs a clip).
     let local = convert_group_children(pat.root(), ctx, &super::IDENTITY, Role::Paint)?;
     let mut probe = Scene::new(1, 1);

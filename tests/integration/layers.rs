@@ -321,3 +321,48 @@ fn pattern_tiles_are_bounded() {
     let s = Scene::from_svg_str(&svg(1e6), "huge.svg", Sizing::Natural).unwrap();
     assert!(finite(&render(&s, &RenderOptions::default())));
 }
+
+/// Patterns inside patterns multiply their tiles: counted over the drawing, refused past
+/// the limit; and long chains of clip paths (or patterns) referring to each other are
+/// refused before usvg follows them (20,000 links overflowed its stack).
+#[test]
+fn nested_patterns_and_reference_chains_are_bounded() {
+    let mut defs = String::new();
+    for k in 0..4 {
+        let fill = if k < 3 {
+            format!("url(#p{})", k + 1)
+        } else {
+            "red".to_string()
+        };
+        defs.push_str(&format!(
+            r#"<pattern id="p{k}" patternUnits="userSpaceOnUse" width="40" height="40"><rect width="400" height="400" fill="{fill}"/></pattern>"#
+        ));
+    }
+    let svg = format!(
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="400" height="400">{defs}<rect width="400" height="400" fill="url(#p0)"/></svg>"#
+    );
+    let e = Scene::from_svg_str(&svg, "nested.svg", Sizing::Natural).unwrap_err();
+    let msg = e.to_string();
+    assert!(msg.contains("nested.svg") && msg.contains("tiles"), "{msg}");
+
+    let n = 20_000;
+    let defs: String = (0..n)
+        .map(|k| {
+            let next = if k + 1 < n {
+                format!(r#" clip-path="url(#c{})""#, k + 1)
+            } else {
+                String::new()
+            };
+            format!(r#"<clipPath id="c{k}"{next}><rect width="30" height="30"/></clipPath>"#)
+        })
+        .collect();
+    let svg = format!(
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="32" height="32">{defs}<g clip-path="url(#c0)"><rect width="32" height="32"/></g></svg>"#
+    );
+    let e = Scene::from_svg_str(&svg, "chain.svg", Sizing::Natural).unwrap_err();
+    let msg = e.to_string();
+    assert!(
+        msg.contains("chain.svg") && msg.contains("256 deep"),
+        "{msg}"
+    );
+}
