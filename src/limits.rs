@@ -96,12 +96,17 @@ pub const MAX_GROUP_DEPTH: usize = 256;
 /// Most elements markers may be copied into, estimated before parsing as the size of the
 /// largest `<marker>` times the numbers in all path data (usvg copies a marker's content
 /// at every vertex that uses it). The resvg suite's marker files are below 2,000.
-pub const MAX_MARKER_NODES: usize = 2_000_000;
+pub const MAX_MARKER_NODES: usize = 100_000;
 
 /// Most pattern tiles one drawing may hold, nested patterns' tiles included: each tile is
 /// a copy of the pattern's content (shapes of the scene, with their own parameters). A
 /// tile smaller than half a pixel draws nothing, as in resvg.
 pub const MAX_PATTERN_TILES: usize = 10_000;
+
+/// Most shapes one drawing's pattern tiles may copy in all (tiles × the shapes of each
+/// tile's content, nested patterns included): a pattern of 1,000 shapes over a few
+/// hundred tiles ran out of memory before this bound.
+pub const MAX_PATTERN_SHAPES: usize = 100_000;
 
 /// Most steps a stylesheet's selectors may take to match, estimated before parsing as
 /// `elements × depth^(parts − 1)` for the selector with the most compound parts: usvg

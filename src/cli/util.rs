@@ -119,15 +119,28 @@ pub fn check_output(path: &Path, ext: &str) -> Result<()> {
 
 /// Prints the library's warnings (one line each, already naming their file) to stderr.
 pub fn print_warnings(warnings: &[String]) {
-    for w in warnings {
+    for w in warnings.iter().take(MAX_WARNINGS) {
         eprintln!("warning: {w}");
+    }
+    if warnings.len() > MAX_WARNINGS {
+        eprintln!(
+            "warning: … and {} more warnings like these",
+            warnings.len() - MAX_WARNINGS
+        );
     }
 }
 
+/// Warnings printed at most, the rest counted: a file of 20,000 copies of one dashed
+/// path printed 20,000 lines before its error.
+const MAX_WARNINGS: usize = 20;
+
 /// Prints the renderer's warnings about `scene` (read from `path`) to stderr, one line
-/// each: strokes drawn other than the file says because a limit was reached.
+/// each (at most [`MAX_WARNINGS`]): strokes drawn other than the file says because a limit
+/// was reached.
 pub fn warn_about(scene: &diffsvg::Scene, path: &Path, opts: &diffsvg::raster::RenderOptions) {
-    for w in diffsvg::raster::warnings(scene, opts) {
-        eprintln!("warning: {}: {w}", path.display());
-    }
+    let lines: Vec<String> = diffsvg::raster::warnings(scene, opts)
+        .into_iter()
+        .map(|w| format!("{}: {w}", path.display()))
+        .collect();
+    print_warnings(&lines);
 }

@@ -13,8 +13,8 @@ use crate::image_io::{gunzip_bounded, is_gzip, read_bounded};
 use crate::limits::MAX_GROUP_DEPTH;
 pub(crate) use crate::limits::MAX_SIDE;
 use crate::limits::{
-    MAX_ARC_RADIUS, MAX_DECOMPRESSED_BYTES, MAX_FILE_BYTES, MAX_MARKER_NODES, MAX_PATTERN_TILES,
-    MAX_PIXELS, MAX_SCENE_IMAGE_PIXELS, MAX_SELECTOR_WORK,
+    MAX_ARC_RADIUS, MAX_DECOMPRESSED_BYTES, MAX_FILE_BYTES, MAX_MARKER_NODES, MAX_PATTERN_SHAPES,
+    MAX_PATTERN_TILES, MAX_PIXELS, MAX_SCENE_IMAGE_PIXELS, MAX_SELECTOR_WORK,
 };
 
 /// How to size the canvas when loading an SVG.
@@ -427,17 +427,36 @@ fn check_reference_depth(doc: &usvg::roxmltree::Document, name: &FsPath) -> Resu
 /// Refuses a file whose markers would make more than [`MAX_MARKER_NODES`] elements:
 /// usvg copies a marker's content at every vertex of every path that uses it, so a
 /// marker of `m` elements on paths of `v` vertices in all makes up to `m × v` of them,
-/// allocated before anything can be checked. Estimated from the text: the numbers in all
-/// path data and point lists (at least one per vertex) times the largest marker.
+/// allocated before anything can be checked. Estimated from the text: the numbers in the
+/// path data and point lists of the shapes that name a marker (of every shape when a
+/// stylesheet or a container may give them one), at least one per vertex, times the
+/// largest marker.
 fn check_marker_work(doc: &usvg::roxmltree::Document, name: &FsPath) -> Result<()> {
     let markers = doc.descendants().filter(|n| n.has_tag_name("marker"));
     let largest = markers.map(|m| m.descendants().count()).max().unwrap_or(0) as f64;
     if largest == 0.0 {
         return Ok(());
     }
+    // The shapes that can carry markers: those naming one, unless a stylesheet or a
+    // container (inherited) may give them to any shape.
+    let names_marker = |n: &usvg::roxmltree::Node| {
+        n.attributes().any(|a| {
+            a.name().starts_with("marker") || (a.name() == "style" && a.value().contains("marker"))
+        })
+    };
+    let shapes = ["path", "line", "polyline", "polygon"];
+    let inherited = doc.descendants().any(|n| {
+        (n.has_tag_name("style") && n.text().is_some_and(|t| t.contains("marker")))
+            || (n.is_element() && !shapes.contains(&n.tag_name().name()) && names_marker(&n))
+    });
     let numbers: f64 = doc
         .descendants()
-        .flat_map(|n| [n.attribute("d"), n.attribute("points")])
+        .filter(|n| inherited || names_marker(n))
+        .flat_map(|n| {
+            // A line's four numbers make two vertices.
+            let line = n.has_tag_name("line").then_some("0 0 0 0");
+            [n.attribute("d"), n.attribute("points"), line]
+        })
         .flatten()
         .map(|v| {
             v.split(|c: char| !c.is_ascii_digit())
@@ -743,6 +762,8 @@ struct Ctx<'a> {
     image_pixels: std::cell::Cell<u64>,
     /// Pattern tiles made so far, nested patterns' included ([`MAX_PATTERN_TILES`]).
     pattern_tiles: std::cell::Cell<usize>,
+    /// Shapes copied into pattern tiles so far ([`MAX_PATTERN_SHAPES`]).
+    pattern_shapes: std::cell::Cell<usize>,
 }
 
 impl Ctx<'_> {
@@ -826,6 +847,7 @@ pub fn from_tree(tree: &usvg::Tree, name: &FsPath, sizing: Sizing) -> Result<Sce
         root,
         image_pixels: std::cell::Cell::new(0),
         pattern_tiles: std::cell::Cell::new(0),
+        pattern_shapes: std::cell::Cell::new(0),
     };
     let mut scene = Scene::new(w, h);
     let t = concat(&ctx.root, &to_affine(tree.root().transform()));
@@ -1411,6 +1433,17 @@ fn pattern_tiles(
     let local = convert_group_children(pat.root(), ctx, &super::IDENTITY, Role::Paint)?;
     let mut probe = Scene::new(1, 1);
     probe.nodes = local;
+    // The shapes the tiles copy, counted over the drawing before any copy is made.
+    let shapes = count * probe.path_count() as f64 + ctx.pattern_shapes.get() as f64;
+    if !(shapes <= MAX_PATTERN_SHAPES as f64) {
+        return Err(ctx.unsupported(format!(
+            "pattern \"{}\" would copy its {} shapes into {count:.0} tiles, {shapes:.0} shapes \
+             in the drawing (the limit is {MAX_PATTERN_SHAPES})",
+            pat.id(),
+            probe.path_count()
+        )));
+    }
+    ctx.pattern_shapes.set(shapes as usize);
     let mut inside = true;
     probe.for_each_path(|q| {
         let b = q.control_bounds().unwrap_or([0.0; 4]);

@@ -366,3 +366,37 @@ fn nested_patterns_and_reference_chains_are_bounded() {
         "{msg}"
     );
 }
+
+/// Found by the fuzzer (seed 29): a pattern of 1,000 shapes over a few hundred tiles, and
+/// 20,000 copies of a path with small markers, each ran out of a gigabyte before a bound
+/// applied. Both are refused now, naming the file.
+#[test]
+fn copies_of_patterns_and_markers_are_bounded() {
+    let rects: String = (0..1000)
+        .map(|_| r#"<rect x="10" y="10" width="10" height="10" fill="green"/>"#)
+        .collect();
+    let svg = format!(
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="400" height="400"><pattern id="p" patternUnits="userSpaceOnUse" width="20" height="20">{rects}</pattern><rect width="400" height="400" fill="url(#p)"/></svg>"#
+    );
+    let msg = Scene::from_svg_str(&svg, "shapes.svg", Sizing::Natural)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        msg.contains("shapes.svg") && msg.contains("shapes"),
+        "{msg}"
+    );
+
+    let paths: String = (0..20_000)
+        .map(|_| r#"<path d="M 1 155 C 40 125 80 185 120 155" marker-mid="url(#m)" marker-end="url(#m)" fill="none" stroke="black"/>"#)
+        .collect();
+    let svg = format!(
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="200" height="200"><marker id="m" markerWidth="4" markerHeight="4"><circle cx="2" cy="2" r="2"/><rect width="1" height="1"/></marker>{paths}</svg>"#
+    );
+    let msg = Scene::from_svg_str(&svg, "marked.svg", Sizing::Natural)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        msg.contains("marked.svg") && msg.contains("markers"),
+        "{msg}"
+    );
+}
