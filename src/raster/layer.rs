@@ -231,16 +231,13 @@ pub(crate) fn blend_px<S: Scalar>(mode: BlendMode, s: [S; 4], d: [S; 4]) -> [S; 
                 sa * min(da, (d * sa) / (sa - s)) + s * inv(da) + d * inv(sa)
             }
         }),
-        BlendMode::HardLight => sep(&|s, d| {
-            let k = if two(s).v() <= sa.v() {
-                two(s * d)
-            } else {
-                sa * da - two((da - d) * (sa - s))
+        // Multiply or screen, chosen by the source (hard light) or the backdrop (overlay).
+        BlendMode::HardLight | BlendMode::Overlay => sep(&|s, d| {
+            let multiply = match mode {
+                BlendMode::HardLight => two(s).v() <= sa.v(),
+                _ => two(d).v() <= da.v(),
             };
-            s * inv(da) + d * inv(sa) + k
-        }),
-        BlendMode::Overlay => sep(&|s, d| {
-            let k = if two(d).v() <= da.v() {
+            let k = if multiply {
                 two(s * d)
             } else {
                 sa * da - two((da - d) * (sa - s))

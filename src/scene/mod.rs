@@ -181,6 +181,16 @@ pub struct Clip {
     pub content: Group,
 }
 
+impl Clip {
+    /// The clip path of one shape (drawn as a clip shape: its coverage only), without id.
+    pub fn of_shape(shape: Path) -> Clip {
+        Clip {
+            id: String::new(),
+            content: Group::new("", 1.0, vec![Node::Path(shape)]),
+        }
+    }
+}
+
 /// How a mask's rendered content becomes a per-pixel factor.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum MaskKind {

@@ -974,21 +974,7 @@ fn convert_mask(m: &usvg::Mask, ctx: &Ctx, t: &Affine) -> Result<Mask> {
         r.right() as f64,
         r.bottom() as f64,
     );
-    let mut region = Path::new("");
-    region.move_to(apply(t, [x0, y0]));
-    region.line_to(apply(t, [x1, y0]));
-    region.line_to(apply(t, [x1, y1]));
-    region.line_to(apply(t, [x0, y1]));
-    region.close();
-    region.fill = Some(Fill {
-        paint: Paint::Solid([0.0; 3]),
-        opacity: 1.0,
-        rule: FillRule::NonZero,
-    });
-    content.clip = Some(Box::new(Clip {
-        id: String::new(),
-        content: Group::new("", 1.0, vec![Node::Path(region)]),
-    }));
+    content.clip = Some(rect_clip(t, [x0, y0, x1, y1]));
     if let Some(inner) = m.mask() {
         content.mask = Some(Box::new(convert_mask(inner, ctx, t)?));
     }
@@ -1364,11 +1350,25 @@ fn patterned_layer(
     t: &Affine,
 ) -> Result<Node> {
     let mut layer = Group::new(pat.id(), opacity, pattern_tiles(pat, bounds, ctx, t)?);
-    layer.clip = Some(Box::new(Clip {
-        id: String::new(),
-        content: Group::new("", 1.0, vec![Node::Path(shape)]),
-    }));
+    layer.clip = Some(Box::new(Clip::of_shape(shape)));
     Ok(Node::Group(layer))
+}
+
+/// The clip path of the rectangle `[x0, y0, x1, y1]` of the user space `t` maps to device
+/// pixels (a mask region, a pattern's cell).
+fn rect_clip(t: &Affine, [x0, y0, x1, y1]: [f64; 4]) -> Box<Clip> {
+    let mut rect = Path::new("");
+    rect.move_to(apply(t, [x0, y0]));
+    rect.line_to(apply(t, [x1, y0]));
+    rect.line_to(apply(t, [x1, y1]));
+    rect.line_to(apply(t, [x0, y1]));
+    rect.close();
+    rect.fill = Some(Fill {
+        paint: Paint::Solid([0.0; 3]),
+        opacity: 1.0,
+        rule: FillRule::NonZero,
+    });
+    Box::new(Clip::of_shape(rect))
 }
 
 /// The tiles of `pat` (drawn in the user space `t` maps to device pixels) that cover the
@@ -1467,22 +1467,8 @@ fn pattern_tiles(
                 tiles.extend(children);
                 continue;
             }
-            let mut cell_path = Path::new("");
-            cell_path.move_to(apply(&tt, [0.0, 0.0]));
-            cell_path.line_to(apply(&tt, [rw, 0.0]));
-            cell_path.line_to(apply(&tt, [rw, rh]));
-            cell_path.line_to(apply(&tt, [0.0, rh]));
-            cell_path.close();
-            cell_path.fill = Some(Fill {
-                paint: Paint::Solid([0.0; 3]),
-                opacity: 1.0,
-                rule: FillRule::NonZero,
-            });
             let mut tile = Group::new("", 1.0, children);
-            tile.clip = Some(Box::new(Clip {
-                id: String::new(),
-                content: Group::new("", 1.0, vec![Node::Path(cell_path)]),
-            }));
+            tile.clip = Some(rect_clip(&tt, [0.0, 0.0, rw, rh]));
             tiles.push(Node::Group(tile));
         }
     }
