@@ -8,7 +8,7 @@ use anyhow::Result;
 use super::parity::collect_svgs;
 use super::util::FontArgs;
 use diffsvg::Sizing;
-use diffsvg::raster::{Prepared, RenderOptions, render_prepared};
+use diffsvg::raster::{Alpha, Prepared, RenderOptions, render_prepared, render_rgba8};
 use diffsvg::reference::render_resvg_pixmap;
 use diffsvg::scene::random::curved_paths;
 use diffsvg::scene::{from_tree, parse_tree, parse_tree_with};
@@ -42,6 +42,10 @@ pub struct Args {
     /// Shape counts for `--backward`.
     #[arg(long, value_delimiter = ',', default_value = "64,256,512")]
     shapes: Vec<usize>,
+    /// Time diffsvg's premultiplied `f32` image (`raster::render`) instead of an 8-bit
+    /// premultiplied pixmap like the one resvg renders into (`raster::render_rgba8`).
+    #[arg(long)]
+    f32: bool,
     #[command(flatten)]
     fonts: FontArgs,
 }
@@ -224,7 +228,12 @@ pub fn run(a: Args) -> Result<()> {
                 Box::new(|| {
                     pool.install(|| {
                         timed_ms(|| {
-                            let _ = diffsvg::raster::render(&scene, &opts);
+                            if a.f32 {
+                                let _ = diffsvg::raster::render(&scene, &opts);
+                            } else {
+                                let p = Prepared::new(&scene, &opts);
+                                let _ = render_rgba8(&p, Alpha::Premultiplied);
+                            }
                         })
                     })
                 }),

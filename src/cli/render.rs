@@ -5,8 +5,9 @@ use std::path::PathBuf;
 use anyhow::Result;
 
 use super::util::{FontArgs, SizeArgs, check_output, parse_color, read, sibling};
+use diffsvg::image_io::save_png_rgba8;
 use diffsvg::metrics::{compare, difference_image};
-use diffsvg::raster::{RenderOptions, render};
+use diffsvg::raster::{Alpha, Prepared, RenderOptions, render, render_rgba8};
 use diffsvg::reference::render_resvg;
 use diffsvg::scene::{from_tree, parse_tree_with};
 
@@ -49,6 +50,12 @@ pub fn run(a: Args) -> Result<()> {
         tolerance: a.tolerance,
     };
     super::util::warn_about(&scene, &a.input, &opts);
+    if bg.is_none() && !a.compare {
+        // Straight to the file's bytes, band by band, without a whole f32 image.
+        let rgba = render_rgba8(&Prepared::new(&scene, &opts), Alpha::Straight);
+        save_png_rgba8(scene.width, scene.height, &rgba, &a.output)?;
+        return Ok(());
+    }
     let mut img = render(&scene, &opts);
     if let Some(bg) = bg {
         img.over_background(bg);

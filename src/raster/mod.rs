@@ -35,6 +35,7 @@ pub(crate) mod image;
 pub(crate) mod jet;
 pub(crate) mod layer;
 pub(crate) mod paint;
+pub(crate) mod pixmap;
 pub(crate) mod prepare;
 pub(crate) mod render;
 pub(crate) mod stroke;
@@ -44,6 +45,7 @@ pub use backward::{
     BackwardStats, BandLoss, Fused, backward_with_stats, check_backward_memory,
     render_and_backward, render_and_backward_fused, render_backward, render_backward_checked,
 };
+pub use pixmap::{Alpha, render_rgba8};
 pub(crate) use prepare::prepare;
 pub use prepare::{Prepared, warnings};
 pub use render::{RenderOptions, render, render_prepared};

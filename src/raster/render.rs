@@ -7,6 +7,7 @@ use super::layer::{apply_mask, composite_layer};
 use super::paint::PaintEval;
 use super::prepare::{GroupSpan, Item, Op, Prepared, prepare_forward};
 use crate::image_io::Image;
+use crate::scene::BlendMode;
 use crate::scene::Scene;
 
 /// Rasterization settings.
@@ -58,7 +59,7 @@ pub fn render_prepared(p: &Prepared) -> Image {
 /// Where a forward render may start: just after the last top-level item that paints the
 /// whole canvas an opaque color ([`Item::opaque_cover`]), as `(op, groups opened before
 /// it, color)`; `(0, 0, transparent)` when there is none.
-fn opaque_start(p: &Prepared) -> (usize, usize, [f32; 4]) {
+pub(crate) fn opaque_start(p: &Prepared) -> (usize, usize, [f32; 4]) {
     let mut start = (0, 0, [0.0; 4]);
     let (mut depth, mut groups) = (0usize, 0usize);
     for (i, op) in p.ops.iter().enumerate() {
@@ -204,7 +205,7 @@ impl<'a> BandRenderer<'a> {
 
     /// Runs the program onto `out` (`rows × width`, transparent or not) from op `start`,
     /// which lies at the top level after `group` groups were opened (`0, 0`: all of it).
-    fn run(&mut self, out: &mut [[f32; 4]], start: usize, group: usize) {
+    pub(crate) fn run<C: Canvas + ?Sized>(&mut self, out: &mut C, start: usize, group: usize) {
         let base = self.band_area();
         // Open layers, each only as large as its group's content in this band.
         let mut layers: Vec<(Area, Vec<[f32; 4]>)> = Vec::new();
@@ -212,13 +213,10 @@ impl<'a> BandRenderer<'a> {
         let (mut i, mut group) = (start, group);
         while i < ops.len() {
             match ops[i] {
-                Op::Draw(it) => {
-                    let (area, target) = match layers.last_mut() {
-                        Some((a, l)) => (*a, l.as_mut_slice()),
-                        None => (base, &mut *out),
-                    };
-                    self.draw(&self.p.items[it], target, area);
-                }
+                Op::Draw(it) => match layers.last_mut() {
+                    Some((a, l)) => self.draw(&self.p.items[it], l, *a),
+                    None => out.draw(self, &self.p.items[it], base),
+                },
                 Op::Push | Op::PushMask => {
                     let span = self.p.groups[group];
                     match self.layer_area(&span) {
@@ -241,11 +239,10 @@ impl<'a> BandRenderer<'a> {
                 }
                 Op::Pop { opacity, blend, .. } => {
                     let (ta, top) = layers.pop().expect("a layer per group");
-                    let (ba, below) = match layers.last_mut() {
-                        Some((a, l)) => (*a, l.as_mut_slice()),
-                        None => (base, &mut *out),
-                    };
-                    composite_layer(below, ba, &top, ta, opacity, blend);
+                    match layers.last_mut() {
+                        Some((a, l)) => composite_layer(l, *a, &top, ta, opacity, blend),
+                        None => out.composite(base, &top, ta, opacity, blend),
+                    }
                 }
                 Op::PopMask { kind } => {
                     let (ma, mask) = layers.pop().expect("a mask layer");
@@ -343,6 +340,32 @@ impl<'a> BandRenderer<'a> {
     }
 }
 
+/// What a band's top level is drawn onto: `f32` pixels, or
+/// [`ChunkCanvas`](super::pixmap::ChunkCanvas) for 8-bit output.
+pub(crate) trait Canvas {
+    /// Draws one item source-over onto the band `area`.
+    fn draw(&mut self, r: &mut BandRenderer<'_>, item: &Item, area: Area);
+    /// Composites a group's layer `top`, covering `ta`, onto the band `area`.
+    fn composite(&mut self, area: Area, top: &[[f32; 4]], ta: Area, opacity: f32, blend: BlendMode);
+}
+
+impl Canvas for [[f32; 4]] {
+    fn draw(&mut self, r: &mut BandRenderer<'_>, item: &Item, area: Area) {
+        r.draw(item, self, area);
+    }
+
+    fn composite(
+        &mut self,
+        area: Area,
+        top: &[[f32; 4]],
+        ta: Area,
+        opacity: f32,
+        blend: BlendMode,
+    ) {
+        composite_layer(self, area, top, ta, opacity, blend);
+    }
+}
+
 impl Drop for BandRenderer<'_> {
     /// Leaves the buffers to the thread's next band renderer; the values of `acc` only
     /// when they are all zero again (as drawing an item leaves them), else none.
@@ -363,13 +386,13 @@ impl Drop for BandRenderer<'_> {
 /// Whether every value is `±0`: one OR over the bits less the sign, without early exits,
 /// which the compiler turns into a few vector instructions.
 #[inline]
-fn all_zero(v: &[f32]) -> bool {
+pub(crate) fn all_zero(v: &[f32]) -> bool {
     v.iter().fold(0u32, |a, &x| a | (x.to_bits() << 1)) == 0
 }
 
 /// Whether every value is exactly `1.0`, as [`all_zero`].
 #[inline]
-fn all_one(v: &[f32]) -> bool {
+pub(crate) fn all_one(v: &[f32]) -> bool {
     v.iter()
         .fold(0u32, |a, &x| a | (x.to_bits() ^ 1.0f32.to_bits()))
         == 0
