@@ -63,7 +63,7 @@ class _Layout:
     data of a :class:`Params` (equal layouts compare equal, so ``jit`` reuses a compiled
     step for every vector of a scene's structure)."""
 
-    __slots__ = ("pieces", "size", "shapes", "groups", "_hash")
+    __slots__ = ("pieces", "size", "shapes", "groups", "_hash", "_by_owner")
 
     def __init__(self, scene: Scene):
         st = scene.structure()
@@ -72,6 +72,9 @@ class _Layout:
         self.shapes = len(st["shapes"])
         self.groups = len(st["groups"])
         self._hash = hash(self.pieces)
+        self._by_owner: dict = {}
+        for off, size, key, shape in self.pieces:
+            self._by_owner.setdefault(key[:2], []).append((key[2:], off, size, shape))
 
     def __eq__(self, other) -> bool:
         return self is other or (isinstance(other, _Layout) and self._hash == other._hash
@@ -79,13 +82,6 @@ class _Layout:
 
     def __hash__(self) -> int:
         return self._hash
-
-    @functools.cached_property
-    def _by_owner(self):
-        by = {}
-        for off, size, key, shape in self.pieces:
-            by.setdefault(key[:2], []).append((key[2:], off, size, shape))
-        return by
 
     def view(self, flat, kind: str, i: int) -> dict:
         """Shape or group ``i``'s arrays, slices of ``flat``."""
