@@ -269,9 +269,26 @@ def render_flat(scene: Scene, background: Optional[tuple], tolerance: float,
     return _forward(scene, background, tolerance, flat)
 
 
+_CALLBACKS: "weakref.WeakKeyDictionary[Scene, dict]" = weakref.WeakKeyDictionary()
+
+
+def _callbacks(scene, background, tolerance):
+    """The forward and backward callbacks of one scene and options, the same objects on
+    every call: JAX caches what it compiles for a callback by the callable, so outside
+    ``jit`` a new one per call would compile each step anew."""
+    per_scene = _CALLBACKS.setdefault(scene, {})
+    key = (background, tolerance)
+    if key not in per_scene:
+        ref = weakref.ref(scene)  # not the scene itself: the cache must not keep it alive
+        per_scene[key] = (
+            lambda v: _forward_cb(ref(), background, tolerance, v),
+            lambda v, d: _backward_cb(ref(), background, tolerance, v, d))
+    return per_scene[key]
+
+
 def _forward(scene, background, tolerance, flat):
     shape = jax.ShapeDtypeStruct((scene.height, scene.width, 4), jnp.float32)
-    cb = functools.partial(_forward_cb, scene, background, tolerance)
+    cb = _callbacks(scene, background, tolerance)[0]
     return jax.pure_callback(cb, shape, flat, vmap_method="broadcast_all")
 
 
@@ -281,7 +298,7 @@ def _fwd(scene, background, tolerance, flat):
 
 def _bwd(scene, background, tolerance, flat, d_image):
     out = jax.ShapeDtypeStruct(flat.shape, flat.dtype)
-    cb = functools.partial(_backward_cb, scene, background, tolerance)
+    cb = _callbacks(scene, background, tolerance)[1]
     return (jax.pure_callback(cb, out, flat, d_image, vmap_method="broadcast_all"),)
 
 
