@@ -14,7 +14,7 @@ use crate::array::color_in;
 use crate::error::bad;
 use crate::on_pool;
 use crate::render::options;
-use crate::scene::PyScene;
+use crate::scene::{PyScene, Rendered};
 
 /// Row `b` of `params` written into a copy of `scene` and projected onto valid scenes, as
 /// `Scene.set_params` does; a non-finite value is refused, naming the row and slot.
@@ -62,7 +62,7 @@ pub(crate) fn render_batch<'py>(
     let p = params.as_array();
     check_params(s, &p)?;
     let (w, h) = (s.width as usize, s.height as usize);
-    let done: Result<Vec<(Image, (Vec<f64>, Scene))>, String> = py.detach(|| {
+    let done: Result<Vec<(Image, Rendered)>, String> = py.detach(|| {
         on_pool(|| {
             (0..p.nrows())
                 .into_par_iter()

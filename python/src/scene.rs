@@ -23,8 +23,11 @@ pub(crate) struct PyScene {
     /// The copies `render_batch` made for its rows, with the rows: its backward pass on
     /// the same rows takes them instead of copying and projecting again (`diffsvg.jax`
     /// calls the two in turn). Not part of the scene: a copy starts without.
-    pub(crate) rendered: Mutex<Vec<(Vec<f64>, Scene)>>,
+    pub(crate) rendered: Mutex<Vec<Rendered>>,
 }
+
+/// A row of parameters and the scene `render_batch` made of it.
+pub(crate) type Rendered = (Vec<f64>, Scene);
 
 impl From<Scene> for PyScene {
     fn from(inner: Scene) -> Self {
