@@ -12,8 +12,9 @@ parameter:
   per array (the old default; its compile time grows with the paths).
 
 Compile time is ``lower`` plus ``compile`` of the jitted step; step times are medians over
-``--steps`` steps after one warm-up, ``block_until_ready`` included. ``vmap`` renders a
-batch of 4 vectors in one call against 4 calls one after the other.
+``--steps`` steps after one warm-up, ``block_until_ready`` included, the numpy and the jax
+step alternating; "eager" is the same step without ``jit``. ``vmap`` renders a batch of 4
+vectors in one call against 4 jitted calls one after the other.
 """
 import argparse
 import statistics
@@ -64,7 +65,7 @@ def main():
     a = ap.parse_args()
     print("| paths | params | compile flat s | compile Params s"
           + (" | compile dict s" if a.dict else "")
-          + " | numpy step ms | jax step ms | ratio | vmap 4 ms | 4 calls ms |")
+          + " | numpy step ms | jax step ms | ratio | eager ms | vmap 4 ms | 4 calls ms |")
     for n in map(int, a.paths.split(",")):
         scene = diffsvg.random_blobs(n, 256, 256, seed=0)
         target = diffsvg.render(diffsvg.random_blobs(n, 256, 256, seed=1))
@@ -78,7 +79,10 @@ def main():
             return diffsvg.render_backward(scene, d, structured=False)
 
         x = jnp.asarray(x64, jnp.float32)
-        c_flat, step = jitted(lambda v: jnp.mean((djax.render(scene, v) - jt) ** 2), x)
+        loss = lambda v: jnp.mean((djax.render(scene, v) - jt) ** 2)  # noqa: E731
+        c_flat, step = jitted(loss, x)
+        eager = jax.value_and_grad(loss)
+        eager_ms = median_ms(lambda: jax.block_until_ready(eager(x)), max(5, a.steps // 4))
         # The two steps alternate, so that a change of the machine's load hits both.
         numpy_ms, jax_ms = alternating(numpy_step, lambda: jax.block_until_ready(step(x)),
                                        a.steps)
@@ -96,7 +100,7 @@ def main():
                                         lambda: [jax.block_until_ready(one(v)) for v in xs],
                                         a.steps)
         row += [f"{numpy_ms:.2f}", f"{jax_ms:.2f}", f"{jax_ms / numpy_ms:.2f}",
-                f"{vmap_ms:.2f}", f"{calls_ms:.2f}"]
+                f"{eager_ms:.1f}", f"{vmap_ms:.2f}", f"{calls_ms:.2f}"]
         print("| " + " | ".join(map(str, row)) + " |", flush=True)
 
 
