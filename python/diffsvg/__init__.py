@@ -21,15 +21,23 @@ Conventions (the library's):
 
 from __future__ import annotations
 
+import operator
 import os
-from typing import Any, Callable, Optional, Sequence
+from collections.abc import Mapping
+from typing import Any, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
 from . import _native
 from ._native import DiffsvgError
+from ._types import (Arrays, DigitInfo, FitInfo, GlyphInfo, GradJson, Layout, Progress,
+                     ReconInfo, Structure, VectorizeInfo, Views)
+
+__version__: str = _native.__version__
+"""The package's version: the Rust crates' (``diffsvg`` and its binding share it)."""
 
 __all__ = [
+    "__version__",
     "DiffsvgError",
     "Scene",
     "render",
@@ -57,11 +65,47 @@ Color = Optional[Sequence[float]]
 
 
 def _image(x: Any, name: str) -> np.ndarray:
-    """A C-contiguous float32 view (or copy, when the dtype or layout differs)."""
+    """A C-contiguous float32 view (or copy, when the dtype or layout differs).
+
+    Integer arrays are refused: an 8-bit picture holds 0-255, not the [0, 1] every image
+    here is in, and converting silently would compare 255 with 1."""
+    return np.ascontiguousarray(_floats(x, name), dtype=np.float32)
+
+
+def _floats(x: Any, name: str) -> np.ndarray:
+    """``x`` as an array of a float dtype, or the package's error naming ``name``."""
     a = np.asarray(x)
-    if a.dtype.kind not in "fiu":
+    if a.dtype.kind in "iu":
+        raise DiffsvgError(
+            f"{name}: integer dtype {a.dtype}; images are float in [0, 1] "
+            f"(convert first, e.g. x.astype(np.float32) / 255)")
+    if a.dtype.kind != "f":
         raise DiffsvgError(f"{name}: expected a numeric array, got dtype {a.dtype}")
-    return np.ascontiguousarray(a, dtype=np.float32)
+    return a
+
+
+_U32 = 2**32 - 1
+_U64 = 2**64 - 1
+
+
+def _whole(v: Any, name: str, top: int = _U32) -> int:
+    """``v`` as a whole number in ``[0, top]``, or the package's one-line error naming
+    ``name`` (instead of the ``OverflowError`` a negative number gives in the extension)."""
+    if isinstance(v, bool):
+        raise TypeError(f"{name}: expected a whole number, got {v!r}")
+    try:
+        n = operator.index(v)
+    except TypeError:
+        raise TypeError(f"{name}: expected a whole number, got {v!r}") from None
+    if n < 0:
+        raise DiffsvgError(f"{name}: {n} is negative (expected a whole number >= 0)")
+    if n > top:
+        raise DiffsvgError(f"{name}: {n} is too large (at most {top})")
+    return n
+
+
+def _whole_or_none(v: Any, name: str, top: int = _U32) -> Optional[int]:
+    return None if v is None else _whole(v, name, top)
 
 
 def _color(c: Color, name: str):
@@ -86,11 +130,14 @@ class Scene:
     Build one with :meth:`load` or :meth:`from_svg`; ``Scene(width, height)`` is empty.
     """
 
-    __slots__ = ("_s", "_structure")
+    __slots__ = ("_s", "_structure", "_params", "__weakref__")
 
-    def __init__(self, width: int = 0, height: int = 0, *, _native_scene=None):
-        self._s = _native_scene if _native_scene is not None else _native.Scene(width, height)
+    def __init__(self, width: int = 0, height: int = 0, *, _native_scene=None) -> None:
+        if _native_scene is None:
+            _native_scene = _native.Scene(_whole(width, "width"), _whole(height, "height"))
+        self._s = _native_scene
         self._structure = None
+        self._params = None
 
     # ----- input and output ---------------------------------------------------------
     @classmethod
@@ -103,14 +150,17 @@ class Scene:
         folders ``font_dirs``; a font family none of them has is an error unless
         ``font_fallback`` (then DejaVu Sans is used)."""
         return cls(_native_scene=_native.Scene.load(
-            os.fspath(path), width, height, scale, [os.fspath(f) for f in fonts],
+            os.fspath(path), _whole_or_none(width, "width"), _whole_or_none(height, "height"),
+            scale, [os.fspath(f) for f in fonts],
             [os.fspath(d) for d in font_dirs], font_fallback))
 
     @classmethod
     def from_svg(cls, text: str, width: Optional[int] = None, height: Optional[int] = None,
                  scale: Optional[float] = None, name: str = "<string>") -> "Scene":
         """Parses SVG text; ``name`` is what error messages call it."""
-        return cls(_native_scene=_native.Scene.from_svg(text, width, height, scale, name))
+        return cls(_native_scene=_native.Scene.from_svg(
+            text, _whole_or_none(width, "width"), _whole_or_none(height, "height"), scale,
+            name))
 
     def save(self, path) -> None:
         """Writes the scene as SVG (to a temporary file, then renamed)."""
@@ -151,7 +201,13 @@ class Scene:
     def params(self) -> np.ndarray:
         """Every parameter, one ``float64`` vector in the library's order (see
         :meth:`layout`)."""
-        return self._s.params()
+        return self._current().copy()
+
+    def _current(self) -> np.ndarray:
+        """:meth:`params`, read once after each change (not to be written to)."""
+        if self._params is None:
+            self._params = self._s.params()
+        return self._params
 
     def set_params(self, values) -> None:
         """Writes a parameter vector of ``len(params())`` finite values, then projects it
@@ -168,18 +224,19 @@ class Scene:
         if v.dtype.kind not in "fiu":
             raise DiffsvgError(f"set_params: expected a numeric array, got dtype {v.dtype}")
         if v.dtype == np.float32:
-            cur = self._s.params()
+            cur = self._current()
             if cur.shape == v.shape:
                 v = np.where(cur.astype(np.float32) == v, cur, v.astype(np.float64))
+        self._params = None
         self._s.set_params(np.ascontiguousarray(v, dtype=np.float64))
 
-    def layout(self) -> dict:
+    def layout(self) -> Layout:
         """Per slot of :meth:`params`: ``group`` (index into ``group_names``: points,
         colors, opacities, widths, paint, stops) and ``owner`` (index into ``owners``,
         dicts with ``id`` and ``kind``)."""
         return self._s.layout()
 
-    def structure(self) -> dict:
+    def structure(self) -> Structure:
         """Where each shape's arrays lie in :meth:`params` (offsets and sizes), with the
         path data's segment kinds ("L", "Q", "C") and closed flags per subpath."""
         if self._structure is None:
@@ -227,7 +284,7 @@ class Scene:
             shapes.append(d)
         return {"shapes": shapes, "groups": [{} for _ in st["groups"]]}
 
-    def unflatten(self, flat, dtype=np.float32) -> dict:
+    def unflatten(self, flat, dtype=np.float32) -> Arrays:
         """A vector in :meth:`params` layout as the per-shape structure of
         :meth:`arrays` (views of one array of ``dtype``)."""
         v = np.asarray(flat, dtype=dtype)
@@ -239,7 +296,7 @@ class Scene:
             node[key[-1]] = v[off:off + size].reshape(shape)
         return tree
 
-    def arrays(self, dtype=np.float32) -> dict:
+    def arrays(self, dtype=np.float32) -> Arrays:
         """The parameters per shape, as DiffVG names them::
 
             {"shapes": [{"points": (n, 2),           # every control point, cubic segments
@@ -257,11 +314,30 @@ class Scene:
         point ``3k`` starts segment ``k`` of a subpath and ``3k+1``, ``3k+2`` are its
         control points (a line's at 1/3 and 2/3). The structure is a pytree for JAX.
         """
-        return self.unflatten(self._s.params(), dtype)
+        return self.unflatten(self._current(), dtype)
 
-    def flatten(self, arrays, xp=np):
+    def _expected(self):
+        """The structure of :meth:`arrays` with each leaf's shape in place of its array."""
+        tree = self._skeleton()
+        for _, _, key, shape in self._pieces():
+            node = tree
+            for k in key[:-1]:
+                node = node[k]
+            node[key[-1]] = shape
+        return tree
+
+    def check_arrays(self, arrays) -> None:
+        """Refuses ``arrays`` unless it has exactly the structure of :meth:`arrays`: the
+        same shapes and groups, the same keys, the same array shapes. An appended shape or
+        a key the scene has no parameter for (a ``stroke_width`` on a shape without a
+        stroke) is an error, not ignored: arrays carry values, the scene its structure."""
+        _match(arrays, self._expected(), "")
+
+    def flatten(self, arrays, xp=np) -> Any:
         """The inverse of :meth:`arrays`: one vector in :meth:`params` layout; ``xp`` is
-        the array module (``numpy`` or ``jax.numpy``, which keeps it differentiable)."""
+        the array module (``numpy`` or ``jax.numpy``, which keeps it differentiable).
+        ``arrays`` must match the scene's structure (:meth:`check_arrays`)."""
+        self.check_arrays(arrays)
         parts = []
         total = 0
         for off, size, key, shape in self._pieces():
@@ -291,7 +367,7 @@ class Scene:
         flat = np.asarray(self.flatten(arrays), dtype=dtype)
         self.set_params(flat)
 
-    def grad_json(self, grad) -> dict:
+    def grad_json(self, grad) -> GradJson:
         """A gradient (flat vector in :meth:`params` layout) in the layout of
         ``diffsvg grad --json``: per shape its id, ``points`` chained to the points as
         written in the path data, ``fill``/``stroke`` ([r, g, b, opacity] or
@@ -324,6 +400,45 @@ class Scene:
         return {"shapes": shapes, "groups": groups}
 
 
+_VALUES_NOT_STRUCTURE = "arrays carry values; the scene's structure is fixed"
+
+
+def _match(given, expected, where: str) -> None:
+    """Raises the package's error at the first place ``given`` differs in structure from
+    ``expected`` (a tree of dicts and lists whose leaves are shapes)."""
+    name = where or "arrays"
+    if isinstance(expected, dict):
+        if not isinstance(given, Mapping):
+            raise DiffsvgError(f"arrays: {name} is a {type(given).__name__}, expected a dict "
+                               f"with keys {sorted(expected)}")
+        for k in given:
+            if k not in expected:
+                raise DiffsvgError(
+                    f"arrays: {where + '/' if where else ''}{k} is not in the scene's "
+                    f"structure (expected keys {sorted(expected)}; {_VALUES_NOT_STRUCTURE})")
+        for k in expected:
+            if k not in given:
+                raise DiffsvgError(f"arrays: missing {where + '/' if where else ''}{k}")
+            _match(given[k], expected[k], f"{where}/{k}" if where else str(k))
+    elif isinstance(expected, list):
+        if not isinstance(given, (list, tuple)):
+            raise DiffsvgError(f"arrays: {name} is a {type(given).__name__}, expected a list "
+                               f"of {len(expected)}")
+        if len(given) != len(expected):
+            raise DiffsvgError(
+                f"arrays: {name} has {len(given)} entries but the scene has {len(expected)} "
+                f"({_VALUES_NOT_STRUCTURE})")
+        for i, (g, e) in enumerate(zip(given, expected)):
+            _match(g, e, f"{where}/{i}")
+    else:
+        if isinstance(given, Mapping):
+            raise DiffsvgError(f"arrays: {name} is a dict, expected an array of shape "
+                               f"{expected}")
+        shape = tuple(getattr(given, "shape", np.shape(given)))
+        if shape != expected:
+            raise DiffsvgError(f"arrays: {name} has shape {shape}, expected {expected}")
+
+
 def _leaves(tree):
     if isinstance(tree, dict):
         for k in tree:
@@ -352,12 +467,14 @@ def render(scene: Scene, width: Optional[int] = None, height: Optional[int] = No
     the drawing. ``tolerance`` is the largest curve-to-chord distance in pixels. The GIL
     is released while rendering; the pixels are moved into numpy, not copied.
     """
-    return _native.render(_scene(scene), width, height, _color(background, "background"),
+    return _native.render(_scene(scene), _whole_or_none(width, "width"),
+                          _whole_or_none(height, "height"), _color(background, "background"),
                           tolerance)
 
 
 def render_backward(scene: Scene, d_image, background: Color = None,
-                    tolerance: float = 0.02, structured: bool = True, dtype=np.float32):
+                    tolerance: float = 0.02, structured: bool = True,
+                    dtype=np.float32) -> Union[Arrays, np.ndarray]:
     """The exact gradient of a loss with respect to every parameter of ``scene``, given
     ``d_image = dL/d(image)`` (``(height, width, 4)``, the scene's size).
 
@@ -371,18 +488,54 @@ def render_backward(scene: Scene, d_image, background: Color = None,
     return scene.unflatten(g, dtype) if structured else g
 
 
-def loss(image, target, kind: str = "mse", grad: bool = False):
-    """The mean over pixels and the four premultiplied channels of the squared
-    (``kind="mse"``) or absolute (``"l1"``) difference, as ``float``; with ``grad``,
-    ``(loss, dL/d(image))``."""
-    v, d = _native.loss(_image(image, "image"), _image(target, "target"), kind, grad)
+_CHANNELS = {"rgba": 4, "rgb": 3}
+
+
+def _channels(channels: str) -> int:
+    k = _CHANNELS.get(channels) if isinstance(channels, str) else None
+    if k is None:
+        raise DiffsvgError(f"channels: {channels!r} (expected 'rgba' or 'rgb')")
+    return k
+
+
+def loss(image, target, kind: str = "mse", grad: bool = False,
+         channels: str = "rgba") -> Union[float, Tuple[float, np.ndarray]]:
+    """The mean of the squared (``kind="mse"``) or absolute (``"l1"``) difference of two
+    premultiplied ``(h, w, 4)`` float images, as ``float``; with ``grad``,
+    ``(loss, dL/d(image))``.
+
+    ``channels``: ``"rgba"`` (the default, as ``diffsvg fit`` and ``diffsvg grad``
+    compare) averages over every pixel and all four premultiplied channels, alpha
+    included; ``"rgb"`` over the three color channels only (the gradient's alpha is then
+    0). Integer images (0-255) are refused: convert to float in [0, 1] first."""
+    k = _channels(channels)
+    v, d = _native.loss(_image(image, "image"), _image(target, "target"), kind, grad, k)
     return (v, d) if grad else v
 
 
-def psnr(image, target) -> float:
-    """Peak signal-to-noise ratio in dB over all four channels (values in [0, 1])."""
-    mse = float(np.mean((np.asarray(image, np.float64) - np.asarray(target, np.float64)) ** 2))
+def psnr(image, target, channels: str = "rgba") -> float:
+    """Peak signal-to-noise ratio in dB (values in [0, 1], peak 1) of two float images
+    of the same shape, from the mean squared difference in ``float64``.
+
+    ``channels``: ``"rgba"`` (the default) over all four channels of ``(..., 4)`` arrays;
+    ``"rgb"`` over the first three (of ``(..., 4)`` or ``(..., 3)`` arrays)."""
+    k = _channels(channels)
+    a, b = _float_array(image, "image"), _float_array(target, "target")
+    if a.shape != b.shape:
+        raise DiffsvgError(f"psnr: target has shape {b.shape} but the image {a.shape}")
+    last = a.shape[-1] if a.ndim else 0
+    if last != 4 and not (k == 3 and last == 3):
+        hint = " (pass channels='rgb')" if last == 3 else ""
+        shapes = "(..., 4) or (..., 3)" if k == 3 else "(..., 4)"
+        raise DiffsvgError(
+            f"psnr: channels={channels!r} needs arrays of shape {shapes}, got {a.shape}{hint}")
+    mse = float(np.mean((a[..., :k] - b[..., :k]) ** 2))
     return float("inf") if mse == 0 else -10.0 * np.log10(mse)
+
+
+def _float_array(x: Any, name: str) -> np.ndarray:
+    """``x`` as ``float64``, refusing integer (0-255) and non-numeric arrays."""
+    return _floats(x, name).astype(np.float64)
 
 
 def unpremultiply(image) -> np.ndarray:
@@ -402,7 +555,8 @@ def load_image(path) -> np.ndarray:
 def load_target(path, width: Optional[int] = None, height: Optional[int] = None) -> np.ndarray:
     """A picture to fit: PNG or JPEG, or an SVG rendered at its size; resampled to
     ``width x height`` when both are given."""
-    return _native.load_target(os.fspath(path), width, height)
+    return _native.load_target(os.fspath(path), _whole_or_none(width, "width"),
+                               _whole_or_none(height, "height"))
 
 
 def save_png(image, path) -> None:
@@ -411,7 +565,6 @@ def save_png(image, path) -> None:
 
 
 # ----- long jobs ------------------------------------------------------------------------
-Progress = Optional[Callable[[dict], Any]]
 
 
 def _target_for(target, width: int, height: int) -> np.ndarray:
@@ -425,7 +578,7 @@ def fit(scene: Scene, target, iters: int = 500, *, lr_points: float = 1.0,
         lr_paint: float = 0.5, lr_stops: float = 0.005, schedule: str = "constant",
         loss: str = "mse", background: Color = None, pyramid: int = 1,
         until_psnr: Optional[float] = None, tolerance: float = 0.02,
-        progress: Progress = None):
+        progress: Progress = None) -> Tuple["Scene", FitInfo]:
     """Refines every parameter of ``scene`` toward ``target`` with exact gradients and
     Adam (as ``diffsvg fit``); returns ``(best scene, info)``.
 
@@ -444,15 +597,16 @@ def fit(scene: Scene, target, iters: int = 500, *, lr_points: float = 1.0,
     options = dict(lr_points=lr_points, lr_color=lr_color, lr_opacity=lr_opacity,
                    lr_width=lr_width, lr_paint=lr_paint, lr_stops=lr_stops,
                    schedule=schedule, loss=loss, background=_color(background, "background"),
-                   pyramid=pyramid, tolerance=tolerance)
-    s, info = _native.fit(_scene(scene), t, iters, until_psnr, options, progress)
+                   pyramid=_whole(pyramid, "pyramid", _U64), tolerance=tolerance)
+    s, info = _native.fit(_scene(scene), t, _whole(iters, "iters", _U64), until_psnr, options,
+                          progress)
     return Scene(_native_scene=s), info
 
 
 def vectorize(target, paths: int = 64, mode: str = "adaptive", iters: int = 1000, *,
               seed: int = 0, target_psnr: Optional[float] = None, segments: int = 4,
               width: Optional[int] = None, background: Color = None,
-              progress: Progress = None, **rates):
+              progress: Progress = None, **rates) -> Tuple["Scene", VectorizeInfo]:
     """An SVG scene from a picture (as ``diffsvg vectorize``); returns ``(scene, info)``.
 
     ``mode``: "adaptive" (paths added in rounds where the error is largest, pruned),
@@ -462,6 +616,7 @@ def vectorize(target, paths: int = 64, mode: str = "adaptive", iters: int = 1000
     ``tolerance`` as in :func:`fit`. ``progress`` sees rounds (``round``, ``paths``) and
     evaluations (``iter``, ``loss``, ``psnr``, ``seconds``, ``paths``).
     """
+    width = _whole_or_none(width, "width")
     if isinstance(target, (str, os.PathLike)):
         t = load_target(target)
         if width is not None:
@@ -470,35 +625,48 @@ def vectorize(target, paths: int = 64, mode: str = "adaptive", iters: int = 1000
     else:
         t = _image(target, "target")
     options = dict(rates, background=_color(background, "background"))
-    s, info = _native.vectorize(t, paths, mode, iters, seed, target_psnr, segments, options,
+    if options.get("pyramid") is not None:
+        options["pyramid"] = _whole(options["pyramid"], "pyramid", _U64)
+    s, info = _native.vectorize(t, _whole(paths, "paths", _U64), mode,
+                                _whole(iters, "iters", _U64), _whole(seed, "seed", _U64),
+                                target_psnr, _whole(segments, "segments", _U64), options,
                                 progress)
     return Scene(_native_scene=s), info
+
+
+def _blob_args(n, width, height, seed):
+    return (_whole(n, "n", _U64), _whole(width, "width"), _whole(height, "height"),
+            _whole(seed, "seed", _U64))
 
 
 def random_blobs(n: int, width: int, height: int, seed: int = 0) -> Scene:
     """DiffVG's painterly blobs: ``n`` closed random-walk paths of 3-5 cubics with random
     RGBA fills (the scene of ``diffsvg bench painterly`` for the same seed)."""
-    return Scene(_native_scene=_native.random_blobs(n, width, height, seed))
+    return Scene(_native_scene=_native.random_blobs(*_blob_args(n, width, height, seed)))
 
 
 def random_strokes(n: int, width: int, height: int, seed: int = 0) -> Scene:
     """DiffVG's painterly strokes: ``n`` open random-walk paths, 1 px wide."""
-    return Scene(_native_scene=_native.random_strokes(n, width, height, seed))
+    return Scene(_native_scene=_native.random_strokes(*_blob_args(n, width, height, seed)))
 
 
 def digit(pixels, target_iou: float = 0.85, max_strokes: int = 2, max_segments: int = 3,
-          scale: int = 2):
+          scale: int = 2) -> Tuple["Scene", DigitInfo]:
     """White strokes fitted to one grayscale digit (``(h, w)`` in [0, 1], ink bright, e.g.
     an MNIST image / 255), the fewest curves reaching ``target_iou``; ``(scene, info)``."""
-    s, info = _native.digit(_image(pixels, "pixels"), target_iou, max_strokes, max_segments,
-                            scale)
+    s, info = _native.digit(_image(pixels, "pixels"), target_iou,
+                            _whole(max_strokes, "max_strokes", _U64),
+                            _whole(max_segments, "max_segments", _U64), _whole(scale, "scale"))
     return Scene(_native_scene=s), info
 
 
-def glyph(target, iou: float = 0.99, max_segments: int = 64, iters: int = 150):
+def glyph(target, iou: float = 0.99, max_segments: int = 64,
+          iters: int = 150) -> Tuple["Scene", GlyphInfo]:
     """A closed outline fitted to a rendered glyph (premultiplied RGBA, dark ink), the
     fewest cubic segments reaching ``iou``; ``(scene, info)``."""
-    s, info = _native.glyph(_image(target, "target"), iou, max_segments, iters)
+    s, info = _native.glyph(_image(target, "target"), iou,
+                            _whole(max_segments, "max_segments", _U64),
+                            _whole(iters, "iters", _U64))
     return Scene(_native_scene=s), info
 
 
@@ -512,14 +680,14 @@ def _each(fn, items, progress: Progress, kwargs):
     return out
 
 
-def digits(images, progress: Progress = None, **kwargs):
+def digits(images, progress: Progress = None, **kwargs) -> List[Tuple["Scene", DigitInfo]]:
     """:func:`digit` over a stack of digits (``(n, h, w)`` in [0, 1]); a list of
     ``(scene, info)``. ``progress`` sees each digit's info with its ``index``; returning
     ``False`` stops after that digit."""
     return _each(digit, images, progress, kwargs)
 
 
-def glyphs(images, progress: Progress = None, **kwargs):
+def glyphs(images, progress: Progress = None, **kwargs) -> List[Tuple["Scene", GlyphInfo]]:
     """:func:`glyph` over several glyph images; a list of ``(scene, info)``, ``progress``
     as in :func:`digits`."""
     return _each(glyph, images, progress, kwargs)
@@ -529,7 +697,7 @@ def recon_voxel(scene, output, *, res: int = 128, iters: int = 3000, batch: int 
                 downscale: int = 1, degree: int = 2, bound: Optional[float] = None,
                 step: float = 0.5, tv_density: Optional[float] = None,
                 tv_sh: Optional[float] = None, sparsity: Optional[float] = None,
-                seed: int = 0, eval_every: int = 0, progress: Progress = None) -> dict:
+                seed: int = 0, eval_every: int = 0, progress: Progress = None) -> ReconInfo:
     """Fits a sparse voxel grid of density and spherical-harmonic color (Plenoxels) to
     the posed photos in the folder ``scene`` and writes it to ``output`` (``.vox``),
     exactly as ``diffsvg recon voxel`` with the same options (same file, bit for bit).
@@ -550,14 +718,16 @@ def recon_voxel(scene, output, *, res: int = 128, iters: int = 3000, batch: int 
     evaluated), one per 50 iterations and per evaluation, the last the end of the run.
     """
     return _native.recon_voxel(
-        os.fspath(scene), os.fspath(output), res, iters, batch, downscale, degree, bound,
-        step, tv_density, tv_sh, sparsity, seed, eval_every, progress)
+        os.fspath(scene), os.fspath(output), _whole(res, "res"), _whole(iters, "iters", _U64),
+        _whole(batch, "batch", _U64), _whole(downscale, "downscale"), _whole(degree, "degree"),
+        bound, step, tv_density, tv_sh, sparsity, _whole(seed, "seed", _U64),
+        _whole(eval_every, "eval_every", _U64), progress)
 
 
 def recon_splat(scene, output, *, iters: int = 5000, downscale: int = 1,
                 max_gaussians: int = 300_000, initial: int = 50_000, degree: int = 3,
                 bound: Optional[float] = None, seed: int = 0, eval_every: int = 0,
-                progress: Progress = None) -> dict:
+                progress: Progress = None) -> ReconInfo:
     """Fits 3D Gaussians (splatting) to the posed photos in ``scene`` and writes them to
     ``output`` (``.ply``, the layout Gaussian-splatting viewers read), as ``diffsvg recon
     splat``. Photos with lens distortion are undistorted first. The model starts from the
@@ -572,12 +742,14 @@ def recon_splat(scene, output, *, iters: int = 5000, downscale: int = 1,
     test PSNR (NaN where not evaluated).
     """
     return _native.recon_splat(
-        os.fspath(scene), os.fspath(output), iters, downscale, max_gaussians, initial,
-        degree, bound, seed, eval_every, progress)
+        os.fspath(scene), os.fspath(output), _whole(iters, "iters", _U64),
+        _whole(downscale, "downscale"), _whole(max_gaussians, "max_gaussians", _U64),
+        _whole(initial, "initial", _U64), _whole(degree, "degree"), bound,
+        _whole(seed, "seed", _U64), _whole(eval_every, "eval_every", _U64), progress)
 
 
 def view(model, scene=None, *, split: str = "test", orbit: int = 0, elevation: float = 30.0,
-         downscale: int = 1, step: float = 0.5) -> dict:
+         downscale: int = 1, step: float = 0.5) -> Views:
     """Renders a trained model (``.vox`` or Gaussian ``.ply``, told apart by its header)
     as ``diffsvg view`` does, into arrays: from the cameras of the dataset ``scene``'s
     ``split`` views ("test" or "train"), and from ``orbit`` new cameras around the model
@@ -588,4 +760,5 @@ def view(model, scene=None, *, split: str = "test", orbit: int = 0, elevation: f
     list of renderings; each an ``(h, w, 3)`` ``float32`` array of linear RGB, unclamped.
     """
     return _native.view(os.fspath(model), None if scene is None else os.fspath(scene),
-                        split, orbit, elevation, downscale, step)
+                        split, _whole(orbit, "orbit", _U64), elevation,
+                        _whole(downscale, "downscale"), step)

@@ -1,58 +1,295 @@
-"""diffsvg inside JAX: :func:`render` is differentiable with respect to a scene's arrays.
+"""diffsvg inside JAX: :func:`render` is differentiable with respect to a scene's parameters.
 
 ::
 
     import jax, jax.numpy as jnp, diffsvg, diffsvg.jax
-    scene = diffsvg.Scene.load("drawing.svg")
-    arrays = jax.tree.map(jnp.asarray, scene.arrays())
-    def loss(arrays):
-        img = diffsvg.jax.render(scene, arrays)          # (h, w, 4) premultiplied float32
+    scene = diffsvg.Scene.load("svg-samples/10-logo.svg")
+    target = jnp.asarray(diffsvg.render(scene))
+    x = jnp.asarray(scene.params(), jnp.float32)         # the flat vector: the fast path
+    def loss(x):
+        img = diffsvg.jax.render(scene, x)               # (h, w, 4) premultiplied float32
         return jnp.mean((img - target) ** 2)
-    g = jax.grad(loss)(arrays)                           # same structure as arrays
+    g = jax.jit(jax.grad(loss))(x)                       # same shape as x
 
-The forward pass and the exact backward pass run in diffsvg (on the CPU, through
-``jax.pure_callback``, so it works under ``jax.jit``); the scene gives the topology (paths,
-segment kinds, paint kinds), ``arrays`` the values. ``float32`` arrays keep the scene's
-``float64`` values wherever they equal their ``float32`` rounding (see
-:meth:`diffsvg.Scene.set_params`); with ``jax_enable_x64`` and ``float64`` arrays the
-values are exact.
+The parameters are **one flat vector** in the layout of :meth:`diffsvg.Scene.params`, so a
+jitted step has one input and one callback, and compiles in the same time for 10 paths or
+10,000. :func:`params` gives the same vector as a :class:`Params`, a pytree with that one
+leaf that reads per shape (``p["shapes"][3]["points"]``) by slicing; optimizers (optax)
+see one array. A dict in the structure of :meth:`diffsvg.Scene.arrays` is accepted too,
+but it is one leaf per array and its compile time grows with the number of shapes.
+
+The forward pass and the exact backward pass run in diffsvg (on the CPU, one
+``jax.pure_callback`` each for the whole scene, so it works under ``jax.jit``); the scene
+gives the topology (paths, segment kinds, paint kinds), the vector the values. Under
+``jax.vmap`` a batch of vectors (scenes of one structure) is one call that renders the
+rows in parallel. ``float32`` vectors keep the scene's ``float64`` values wherever they
+equal their ``float32`` rounding (see :meth:`diffsvg.Scene.set_params`); with
+``jax_enable_x64`` and ``float64`` vectors the values are exact.
+
+Errors: everything about the call's structure (the vector's length and dtype, the arrays'
+structure, ``background``, ``tolerance``) is checked while tracing, so a bad call raises
+the package's one-line :class:`diffsvg.DiffsvgError` at the call, under ``jit`` too. Values
+are known only when the step runs: outside ``jit`` a non-finite parameter raises the same
+error; inside ``jit`` (where a callback must not raise) the image and the gradient come out
+NaN, as JAX's own functions do, with a one-line :class:`DiffsvgWarning` naming the slot
+(``jax.config.update("jax_debug_nans", True)`` then stops at that step).
 """
 
 from __future__ import annotations
 
 import functools
+import warnings
+import weakref
+from collections.abc import Mapping
+from typing import Any, Optional, Sequence, Tuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from . import Scene, _color, _native, _scene
+from . import DiffsvgError, Scene, _color, _native, _scene
+from ._types import Arrays
 
-__all__ = ["render", "render_flat"]
+__all__ = ["render", "render_flat", "params", "Params", "DiffsvgWarning"]
 
 
-def _with_params(scene: Scene, flat: np.ndarray) -> Scene:
-    s = scene.copy()
-    s.set_params(np.asarray(flat))
-    return s
+class DiffsvgWarning(UserWarning):
+    """A value diffsvg refused inside ``jax.jit``, where it renders as NaN instead."""
+
+
+# ----- the per-shape view of the flat vector --------------------------------------------
+class _Layout:
+    """Where each array of :meth:`diffsvg.Scene.arrays` lies in the flat vector: static
+    data of a :class:`Params` (equal layouts compare equal, so ``jit`` reuses a compiled
+    step for every vector of a scene's structure)."""
+
+    __slots__ = ("pieces", "size", "shapes", "groups", "_hash", "_by_owner")
+
+    def __init__(self, scene: Scene):
+        st = scene.structure()
+        self.pieces = tuple((off, size, key, shape) for off, size, key, shape in scene._pieces())
+        self.size = sum(p[1] for p in self.pieces)
+        self.shapes = len(st["shapes"])
+        self.groups = len(st["groups"])
+        self._hash = hash(self.pieces)
+        self._by_owner: dict = {}
+        for off, size, key, shape in self.pieces:
+            self._by_owner.setdefault(key[:2], []).append((key[2:], off, size, shape))
+
+    def __eq__(self, other) -> bool:
+        return self is other or (isinstance(other, _Layout) and self._hash == other._hash
+                                 and self.pieces == other.pieces)
+
+    def __hash__(self) -> int:
+        return self._hash
+
+    def view(self, flat, kind: str, i: int) -> dict:
+        """Shape or group ``i``'s arrays, slices of ``flat``."""
+        out: dict = {}
+        for key, off, size, shape in self._by_owner.get((kind, i), ()):
+            node = out
+            for k in key[:-1]:
+                node = node.setdefault(k, {})
+            node[key[-1]] = jnp.reshape(flat[off:off + size], shape)
+        return out
+
+    def find(self, key: Tuple) -> Tuple[int, int, tuple]:
+        for off, size, k, shape in self.pieces:
+            if k == key:
+                return off, size, shape
+        raise DiffsvgError(f"params: no array {'/'.join(map(str, key))} in the scene")
+
+
+_LAYOUTS: "weakref.WeakKeyDictionary[Scene, _Layout]" = weakref.WeakKeyDictionary()
+
+
+def _layout(scene: Scene) -> _Layout:
+    _scene(scene)
+    lay = _LAYOUTS.get(scene)
+    if lay is None:
+        lay = _LAYOUTS[scene] = _Layout(scene)
+    return lay
+
+
+class _Owners(Sequence):
+    """``p["shapes"]`` or ``p["groups"]``: one dict of slices per shape or group."""
+
+    def __init__(self, p: "Params", kind: str, n: int) -> None:
+        self._p, self._kind, self._n = p, kind, n
+
+    def __len__(self) -> int:
+        return self._n
+
+    def __getitem__(self, i):  # noqa: ANN001 - int or slice, as a Sequence's
+        if isinstance(i, slice):
+            return [self[j] for j in range(*i.indices(self._n))]
+        j = i + self._n if i < 0 else i
+        if not 0 <= j < self._n:
+            raise IndexError(f"{self._kind}: index {i} out of range ({self._n})")
+        return self._p._layout.view(self._p.flat, self._kind, j)
+
+
+@jax.tree_util.register_pytree_node_class
+class Params:
+    """A scene's parameters as one flat vector (``flat``, the layout of
+    :meth:`diffsvg.Scene.params`) that reads like :meth:`diffsvg.Scene.arrays`:
+    ``p["shapes"][i]["points"]`` is an ``(n, 2)`` slice of ``flat``, and so on for
+    ``fill``, ``stroke``, ``stroke_width`` and ``p["groups"][j]["opacity"]``.
+
+    A pytree with the one leaf ``flat``: ``jax.grad`` with respect to a ``Params`` gives a
+    ``Params`` (read per shape the same way), ``jax.tree.map`` and optax update the one
+    vector, and a jitted step compiles in the same time whatever the number of shapes.
+    """
+
+    __slots__ = ("flat", "_layout")
+
+    def __init__(self, flat: jax.Array, layout: _Layout) -> None:
+        self.flat = flat
+        self._layout = layout
+
+    def tree_flatten(self) -> Tuple[Tuple[jax.Array], _Layout]:
+        return (self.flat,), self._layout
+
+    @classmethod
+    def tree_unflatten(cls, layout: _Layout, children: Sequence[jax.Array]) -> "Params":
+        return cls(children[0], layout)
+
+    def __getitem__(self, key: str) -> _Owners:
+        if key == "shapes":
+            return _Owners(self, "shapes", self._layout.shapes)
+        if key == "groups":
+            return _Owners(self, "groups", self._layout.groups)
+        raise KeyError(key)
+
+    def keys(self) -> Tuple[str, str]:
+        return ("shapes", "groups")
+
+    def arrays(self) -> Arrays:
+        """Every shape's and group's arrays as a dict (the structure of
+        :meth:`diffsvg.Scene.arrays`), slices of ``flat``."""
+        return {"shapes": list(self["shapes"]), "groups": list(self["groups"])}
+
+    def set(self, key: Tuple, value) -> "Params":
+        """A copy with the array at ``key`` (e.g. ``("shapes", 0, "fill")``) replaced."""
+        off, size, shape = self._layout.find(tuple(key))
+        v = jnp.asarray(value, dtype=self.flat.dtype)
+        if v.shape != shape:
+            raise DiffsvgError(f"params: {'/'.join(map(str, key))} has shape {shape}, "
+                               f"got {v.shape}")
+        return Params(self.flat.at[off:off + size].set(jnp.reshape(v, (size,))), self._layout)
+
+    def __repr__(self) -> str:
+        return (f"Params({self._layout.size} values, {self._layout.shapes} shapes, "
+                f"{self._layout.groups} groups, dtype {getattr(self.flat, 'dtype', '?')})")
+
+
+def params(scene: Scene, dtype=jnp.float32, arrays: Any = None) -> Params:
+    """The parameters of ``scene`` (or of ``arrays``, the structure of
+    :meth:`diffsvg.Scene.arrays`) as a :class:`Params` of ``dtype``."""
+    lay = _layout(scene)
+    if arrays is None:
+        flat = jnp.asarray(scene.params(), dtype=dtype)
+    else:
+        flat = jnp.asarray(scene.flatten(arrays, xp=jnp), dtype=dtype)
+    return Params(flat, lay)
+
+
+# ----- the callbacks ----------------------------------------------------------------------
+def _rows(scene: Scene, v: np.ndarray) -> np.ndarray:
+    """Batched vectors as ``(batch, n)`` ``float64``, keeping each ``float64`` value of the
+    scene whose ``float32`` rounding a ``float32`` vector holds."""
+    v = np.asarray(v)
+    rows = v.reshape(-1, v.shape[-1])
+    if rows.dtype == np.float32:
+        cur = scene._current()
+        return np.where(cur.astype(np.float32) == rows, cur, rows.astype(np.float64))
+    return np.ascontiguousarray(rows, dtype=np.float64)
+
+
+def _warn_non_finite(bad: np.ndarray, rows: np.ndarray, what: str) -> None:
+    """One warning naming the first non-finite value of the first bad row."""
+    b = int(np.argmax(bad))
+    where = f"row {b}, " if rows.shape[0] > 1 else ""
+    r = rows[b].reshape(-1)
+    i = int(np.argmax(~np.isfinite(r)))
+    warnings.warn(DiffsvgWarning(
+        f"diffsvg.jax.render: {what} {where}value {i} is {r[i]} (not finite); the result "
+        "is NaN"), stacklevel=3)
+
+
+def _forward_cb(scene, background, tolerance, v):
+    batch = v.shape[:-1]
+    rows = _rows(scene, v)
+    try:
+        img = _native.render_batch(_scene(scene), rows, background, tolerance)
+    except DiffsvgError:
+        # Inside jit a callback must not raise: rows with a non-finite value render NaN.
+        bad = ~np.isfinite(rows).all(axis=1)
+        if not bad.any():
+            raise
+        _warn_non_finite(bad, rows, "params")
+        rows = rows.copy()
+        rows[bad] = scene._current()
+        img = _native.render_batch(_scene(scene), rows, background, tolerance)
+        img[bad] = np.nan
+    return img.reshape(*batch, scene.height, scene.width, 4)
+
+
+def _backward_cb(scene, background, tolerance, v, d):
+    batch = v.shape[:-1]
+    rows = _rows(scene, v)
+    d = np.ascontiguousarray(np.broadcast_to(d, (*batch, scene.height, scene.width, 4)),
+                             dtype=np.float32).reshape(-1, scene.height, scene.width, 4)
+    try:
+        g = _native.render_backward_batch(_scene(scene), rows, d, background, tolerance)
+    except DiffsvgError:
+        bad_p = ~np.isfinite(rows).all(axis=1)
+        bad_d = ~np.isfinite(d).all(axis=(1, 2, 3))
+        if not (bad_p | bad_d).any():
+            raise
+        if bad_p.any():
+            _warn_non_finite(bad_p, rows, "params")
+        else:
+            _warn_non_finite(bad_d, d, "d_image")
+        bad = bad_p | bad_d
+        rows, d = rows.copy(), d.copy()
+        rows[bad] = scene._current()
+        d[bad] = 0
+        g = _native.render_backward_batch(_scene(scene), rows, d, background, tolerance)
+        g[bad] = np.nan
+    return g.reshape(*batch, rows.shape[1]).astype(v.dtype)
 
 
 @functools.partial(jax.custom_vjp, nondiff_argnums=(0, 1, 2))
-def render_flat(scene: Scene, background, tolerance: float, flat):
-    """Renders ``scene`` with the parameter vector ``flat`` (layout of
-    :meth:`diffsvg.Scene.params`): a ``(height, width, 4)`` ``float32`` premultiplied
-    image, differentiable with respect to ``flat``."""
+def render_flat(scene: Scene, background: Optional[tuple], tolerance: float,
+                flat: jax.Array) -> jax.Array:
+    """:func:`render` of a flat vector with ``background`` (``None`` or straight
+    ``(r, g, b, a)``) and ``tolerance`` given as they are, unchecked: the primitive under
+    :func:`render`, kept for code written against it."""
     return _forward(scene, background, tolerance, flat)
+
+
+_CALLBACKS: "weakref.WeakKeyDictionary[Scene, dict]" = weakref.WeakKeyDictionary()
+
+
+def _callbacks(scene, background, tolerance):
+    """The forward and backward callbacks of one scene and options, the same objects on
+    every call: JAX caches what it compiles for a callback by the callable, so outside
+    ``jit`` a new one per call would compile each step anew."""
+    per_scene = _CALLBACKS.setdefault(scene, {})
+    key = (background, tolerance)
+    if key not in per_scene:
+        ref = weakref.ref(scene)  # not the scene itself: the cache must not keep it alive
+        per_scene[key] = (
+            lambda v: _forward_cb(ref(), background, tolerance, v),
+            lambda v, d: _backward_cb(ref(), background, tolerance, v, d))
+    return per_scene[key]
 
 
 def _forward(scene, background, tolerance, flat):
     shape = jax.ShapeDtypeStruct((scene.height, scene.width, 4), jnp.float32)
-
-    def cb(v):
-        s = _with_params(scene, v)
-        return _native.render(_scene(s), None, None, background, tolerance)
-
-    return jax.pure_callback(cb, shape, flat, vmap_method="sequential")
+    cb = _callbacks(scene, background, tolerance)[0]
+    return jax.pure_callback(cb, shape, flat, vmap_method="broadcast_all")
 
 
 def _fwd(scene, background, tolerance, flat):
@@ -61,23 +298,63 @@ def _fwd(scene, background, tolerance, flat):
 
 def _bwd(scene, background, tolerance, flat, d_image):
     out = jax.ShapeDtypeStruct(flat.shape, flat.dtype)
-
-    def cb(v, d):
-        s = _with_params(scene, v)
-        g = _native.render_backward(_scene(s), np.ascontiguousarray(d, dtype=np.float32),
-                                    background, tolerance)
-        return g.astype(out.dtype)
-
-    return (jax.pure_callback(cb, out, flat, d_image, vmap_method="sequential"),)
+    cb = _callbacks(scene, background, tolerance)[1]
+    return (jax.pure_callback(cb, out, flat, d_image, vmap_method="broadcast_all"),)
 
 
 render_flat.defvjp(_fwd, _bwd)
 
 
-def render(scene: Scene, arrays, background=None, tolerance: float = 0.02):
-    """Renders ``scene`` with the values of ``arrays`` (the structure of
-    :meth:`diffsvg.Scene.arrays`, numpy or JAX arrays): a ``(height, width, 4)``
-    ``float32`` premultiplied image, differentiable with respect to every array.
-    ``background`` (straight RGB[A]) is composited under the drawing."""
-    flat = scene.flatten(arrays, xp=jnp)
-    return render_flat(scene, _color(background, "background"), float(tolerance), flat)
+# ----- the entry point ---------------------------------------------------------------------
+def _flat_of(scene: Scene, p) -> Any:
+    lay = _layout(scene)
+    if isinstance(p, Params):
+        if p._layout != lay:
+            raise DiffsvgError("params: a Params of another scene's structure "
+                               f"({p._layout.size} values; this scene has {lay.size})")
+        flat = p.flat
+    elif isinstance(p, Mapping):
+        flat = scene.flatten(p, xp=jnp)
+    else:
+        flat = p
+    shape = tuple(np.shape(flat))
+    if shape != (lay.size,):
+        raise DiffsvgError(f"params: shape {shape}, expected ({lay.size},) (the scene's "
+                           "parameters; vmap for a batch)")
+    if not hasattr(flat, "dtype"):
+        flat = np.asarray(flat)
+    dtype = np.dtype(flat.dtype)
+    if dtype.kind != "f":
+        raise DiffsvgError(f"params: dtype {dtype}, expected float32 or float64")
+    if not isinstance(flat, jax.core.Tracer):
+        v = np.asarray(flat)
+        if not np.isfinite(v).all():
+            i = int(np.argmax(~np.isfinite(v)))
+            raise DiffsvgError(f"params: value {i} is {v[i]} (not finite)")
+    return jnp.asarray(flat)
+
+
+def _options(background, tolerance) -> Tuple[Optional[tuple], float]:
+    bg = _color(background, "background")
+    if bg is not None and not all(0.0 <= c <= 1.0 for c in bg):
+        raise DiffsvgError(f"background: {bg} is not a straight RGBA color with values in "
+                           "[0, 1]")
+    t = float(tolerance)
+    if not 0.0 < t <= 10.0:
+        raise DiffsvgError(f"tolerance {t} must be in (0, 10] pixels")
+    return bg, t
+
+
+def render(scene: Scene, params: Any, background: Optional[Sequence[float]] = None,
+           tolerance: float = 0.02) -> jax.Array:
+    """Renders ``scene`` with the values of ``params``: a ``(height, width, 4)``
+    ``float32`` premultiplied image, differentiable with respect to ``params``.
+
+    ``params``: the flat vector (layout of :meth:`diffsvg.Scene.params`, ``float32`` or
+    ``float64``; the fast path), a :class:`Params`, or a dict in the structure of
+    :meth:`diffsvg.Scene.arrays` (numpy or JAX arrays; one leaf per array, so its compile
+    time grows with the number of shapes). ``background`` (straight RGB[A]) is composited
+    under the drawing. Under ``jax.vmap`` a batch of vectors is one call, rendered in
+    parallel."""
+    bg, t = _options(background, tolerance)
+    return render_flat(scene, bg, t, _flat_of(scene, params))

@@ -30,9 +30,9 @@ for t in range(1, a.iters + 1):
     scene.set_params(x)  # projected onto valid scenes: colors stay in [0, 1]
     x = scene.params()
     if t % 25 == 0:
-        print(f"step {t}: PSNR {diffsvg.psnr(img[..., :3], target[..., :3]):.2f} dB")
+        print(f"step {t}: PSNR {diffsvg.psnr(img, target, channels='rgb'):.2f} dB")
 ms = 1e3 * (time.perf_counter() - start) / a.iters
 final = diffsvg.render(scene, background=white)
-print(f"{a.paths} paths: PSNR {diffsvg.psnr(final[..., :3], target[..., :3]):.2f} dB, "
+print(f"{a.paths} paths: PSNR {diffsvg.psnr(final, target, channels='rgb'):.2f} dB, "
       f"{ms:.1f} ms per step")
 scene.save(a.out)

@@ -17,8 +17,8 @@ scene = diffsvg.Scene.load(a.svg)
 target = diffsvg.load_target(a.target, scene.width, scene.height)
 white = (1.0, 1.0, 1.0)
 over_white = target + (1 - target[..., 3:])  # compared over white, as the fit does
-rgb = lambda s: diffsvg.render(s, background=white)[..., :3]  # PSNR over RGB, as fit
-before = diffsvg.psnr(rgb(scene), over_white[..., :3])
+over = lambda s: diffsvg.render(s, background=white)
+before = diffsvg.psnr(over(scene), over_white, channels="rgb")  # over RGB, as fit
 
 
 def progress(step):
@@ -30,6 +30,6 @@ start = time.perf_counter()
 best, info = diffsvg.fit(scene, target, iters=a.iters, background=white,
                          schedule="cosine", progress=progress)
 secs = time.perf_counter() - start
-after = diffsvg.psnr(rgb(best), over_white[..., :3])
+after = diffsvg.psnr(over(best), over_white, channels="rgb")
 print(f"PSNR {before:.2f} -> {after:.2f} dB in {secs:.2f} s ({a.iters} steps)")
 best.save(a.out)

@@ -225,7 +225,7 @@ pub(crate) fn fit<'py>(
         "seconds" => last.map(|s| s.elapsed.as_secs_f64()),
         "history" => history,
     };
-    Ok((PyScene { inner: out.best }, info))
+    Ok((PyScene::from(out.best), info))
 }
 
 /// Builds an SVG scene from a picture: `mode` "adaptive" (paths added where the error is
@@ -283,7 +283,7 @@ pub(crate) fn vectorize<'py>(
         "seconds" => out.elapsed.as_secs_f64(),
         "step_ms" => out.median_step_ms,
     };
-    Ok((PyScene { inner: out.scene }, info))
+    Ok((PyScene::from(out.scene), info))
 }
 
 fn canvas(n: usize, width: u32, height: u32) -> PyResult<()> {
@@ -300,9 +300,9 @@ fn canvas(n: usize, width: u32, height: u32) -> PyResult<()> {
 #[pyo3(signature = (n, width, height, seed=0))]
 pub(crate) fn random_blobs(n: usize, width: u32, height: u32, seed: u64) -> PyResult<PyScene> {
     canvas(n, width, height)?;
-    Ok(PyScene {
-        inner: diffsvg::fit::random_blobs(n, width, height, seed),
-    })
+    Ok(PyScene::from(diffsvg::fit::random_blobs(
+        n, width, height, seed,
+    )))
 }
 
 /// DiffVG's painterly strokes: `n` open random-walk paths of 1–3 cubics, 1 px wide.
@@ -310,9 +310,9 @@ pub(crate) fn random_blobs(n: usize, width: u32, height: u32, seed: u64) -> PyRe
 #[pyo3(signature = (n, width, height, seed=0))]
 pub(crate) fn random_strokes(n: usize, width: u32, height: u32, seed: u64) -> PyResult<PyScene> {
     canvas(n, width, height)?;
-    Ok(PyScene {
-        inner: diffsvg::fit::random_strokes(n, width, height, seed),
-    })
+    Ok(PyScene::from(diffsvg::fit::random_strokes(
+        n, width, height, seed,
+    )))
 }
 
 /// Fits white strokes to one grayscale digit (`(h, w)` intensities in `[0, 1]`, ink
@@ -357,7 +357,7 @@ pub(crate) fn digit<'py>(
         "segments" => f.segments.clone(),
         "steps" => f.steps,
     };
-    Ok((PyScene { inner: f.scene }, info))
+    Ok((PyScene::from(f.scene), info))
 }
 
 /// Fits one closed black outline (one cubic subpath per contour) to a rendered glyph
@@ -389,5 +389,5 @@ pub(crate) fn glyph<'py>(
         "steps" => out.steps,
         "seconds" => out.elapsed.as_secs_f64(),
     };
-    Ok((PyScene { inner: out.scene }, info))
+    Ok((PyScene::from(out.scene), info))
 }

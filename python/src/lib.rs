@@ -8,8 +8,10 @@
 //! the library's one-line message; the GIL is released while rendering and fitting.
 
 mod array;
+mod batch;
 mod error;
 mod jobs;
+mod output;
 mod recon;
 mod render;
 mod scene;
@@ -27,10 +29,13 @@ pub(crate) fn on_pool<R: Send>(f: impl FnOnce() -> R + Send) -> R {
 /// The native half of the `diffsvg` package.
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("DiffsvgError", m.py().get_type::<error::DiffsvgError>())?;
     m.add_class::<scene::PyScene>()?;
     m.add_function(wrap_pyfunction!(render::render, m)?)?;
     m.add_function(wrap_pyfunction!(render::render_backward, m)?)?;
+    m.add_function(wrap_pyfunction!(batch::render_batch, m)?)?;
+    m.add_function(wrap_pyfunction!(batch::render_backward_batch, m)?)?;
     m.add_function(wrap_pyfunction!(render::loss, m)?)?;
     m.add_function(wrap_pyfunction!(render::load_image, m)?)?;
     m.add_function(wrap_pyfunction!(render::load_target, m)?)?;

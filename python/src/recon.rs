@@ -16,8 +16,10 @@ use pyo3::types::PyDict;
 use crate::error::{bad, to_py};
 use crate::jobs::Progress;
 
-/// The library's output check (extension, not a folder, the folder writable).
+/// The library's output check (extension, not a folder, the folder writable), after
+/// refusing a missing folder (which the library would create, as the command line does).
 fn check_output(path: &Path, ext: &str) -> PyResult<()> {
+    crate::output::check_folder(path)?;
     diffsvg::image_io::check_output(path, ext).map_err(to_py)
 }
 

@@ -107,17 +107,24 @@ pub(crate) fn render_backward<'py>(
 }
 
 /// Loss of `image` against `target` (same shape, premultiplied RGBA), the mean over
-/// pixels and the four channels, in `f64`; with `grad`, also `∂L/∂image` (`float32`).
+/// pixels and the first `channels` channels (4: RGBA, 3: RGB), in `f64`; with `grad`,
+/// also `∂L/∂image` (`float32`, zero in the channels left out).
 #[pyfunction]
-#[pyo3(signature = (image, target, kind="mse", grad=false))]
+#[pyo3(signature = (image, target, kind="mse", grad=false, channels=4))]
 pub(crate) fn loss<'py>(
     py: Python<'py>,
     image: PyReadonlyArrayDyn<'py, f32>,
     target: PyReadonlyArrayDyn<'py, f32>,
     kind: &str,
     grad: bool,
+    channels: usize,
 ) -> PyResult<(f64, Option<Bound<'py, PyArray3<f32>>>)> {
     let l: Loss = kind.parse().map_err(bad)?;
+    if !(channels == 3 || channels == 4) {
+        return Err(bad(format!(
+            "channels: {channels} (expected 4 for RGBA or 3 for RGB)"
+        )));
+    }
     let a = image_in(&image, "image")?;
     let b = image_in(&target, "target")?;
     if (a.width, a.height) != (b.width, b.height) {
@@ -126,7 +133,7 @@ pub(crate) fn loss<'py>(
             b.width, b.height, a.width, a.height
         )));
     }
-    let (v, d) = py.detach(|| l.eval(&a, &b, 4, grad));
+    let (v, d) = py.detach(|| l.eval(&a, &b, channels, grad));
     Ok((v, d.map(|d| image_out(py, d))))
 }
 
@@ -158,8 +165,10 @@ pub(crate) fn load_target(
     Ok(image_out(py, img))
 }
 
-/// Writes a premultiplied RGBA `float32` image as an 8-bit PNG (temporary file, renamed).
+/// Writes a premultiplied RGBA `float32` image as an 8-bit PNG (temporary file, renamed)
+/// into a folder that exists.
 #[pyfunction]
 pub(crate) fn save_png(image: PyReadonlyArrayDyn<'_, f32>, path: PathBuf) -> PyResult<()> {
+    crate::output::check_folder(&path)?;
     image_in(&image, "image")?.save_png(&path).map_err(to_py)
 }

@@ -1,6 +1,7 @@
 //! `diffsvg.Scene`: an SVG drawing as the library holds it, with its parameters as numpy.
 
 use std::path::PathBuf;
+use std::sync::Mutex;
 
 use diffsvg::scene::params::written_point_gradient;
 use diffsvg::scene::project;
@@ -17,9 +18,30 @@ use crate::error::{bad, to_py};
 /// A vector scene: paths with fills and strokes (solid or gradient paints) in groups, in
 /// device pixels (y down). Load it with `Scene.load` or `Scene.from_svg`.
 #[pyclass(name = "Scene", module = "diffsvg._native")]
-#[derive(Clone)]
 pub(crate) struct PyScene {
     pub(crate) inner: Scene,
+    /// The copies `render_batch` made for its rows, with the rows: its backward pass on
+    /// the same rows takes them instead of copying and projecting again (`diffsvg.jax`
+    /// calls the two in turn). Not part of the scene: a copy starts without.
+    pub(crate) rendered: Mutex<Vec<Rendered>>,
+}
+
+/// A row of parameters and the scene `render_batch` made of it.
+pub(crate) type Rendered = (Vec<f64>, Scene);
+
+impl From<Scene> for PyScene {
+    fn from(inner: Scene) -> Self {
+        PyScene {
+            inner,
+            rendered: Mutex::new(Vec::new()),
+        }
+    }
+}
+
+impl Clone for PyScene {
+    fn clone(&self) -> Self {
+        PyScene::from(self.inner.clone())
+    }
 }
 
 fn sizing(width: Option<u32>, height: Option<u32>, scale: Option<f64>) -> PyResult<Sizing> {
@@ -54,9 +76,7 @@ impl PyScene {
     /// An empty scene of `width × height` pixels.
     #[new]
     fn new(width: u32, height: u32) -> Self {
-        PyScene {
-            inner: Scene::new(width, height),
-        }
+        PyScene::from(Scene::new(width, height))
     }
 
     /// Loads an SVG or SVGZ file. `width` (with `height`: exactly that size) or `scale`
@@ -88,7 +108,7 @@ impl PyScene {
         let inner = py
             .detach(|| Scene::load_with(&path, s, &f))
             .map_err(to_py)?;
-        Ok(PyScene { inner })
+        Ok(PyScene::from(inner))
     }
 
     /// Parses SVG text; `name` is what error messages call it.
@@ -103,11 +123,13 @@ impl PyScene {
     ) -> PyResult<Self> {
         let s = sizing(width, height, scale)?;
         let inner = Scene::from_svg_str(text, name, s).map_err(to_py)?;
-        Ok(PyScene { inner })
+        Ok(PyScene::from(inner))
     }
 
-    /// Writes the scene as SVG (to a temporary file, then renamed).
+    /// Writes the scene as SVG (to a temporary file, then renamed) into a folder that
+    /// exists.
     fn save(&self, path: PathBuf) -> PyResult<()> {
+        crate::output::check_folder(&path)?;
         self.inner.save_svg(&path).map_err(to_py)
     }
 

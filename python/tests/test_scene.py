@@ -178,3 +178,55 @@ def test_an_image_is_a_rectangle_with_only_an_opacity(tmp_path):
     s.save(tmp_path / "image.svg")
     back = diffsvg.Scene.load(tmp_path / "image.svg")
     assert np.array_equal(diffsvg.render(back), img)
+
+
+def test_version_is_the_crates():
+    import importlib.metadata
+    import tomllib
+    from conftest import ROOT
+    root = tomllib.loads((ROOT / "Cargo.toml").read_text())["package"]["version"]
+    binding = tomllib.loads((ROOT / "python" / "Cargo.toml").read_text())["package"]["version"]
+    assert diffsvg.__version__ == root == binding
+    assert importlib.metadata.version("diffsvg") == diffsvg.__version__
+    assert "__version__" in diffsvg.__all__
+
+
+def _pair():
+    rng = np.random.default_rng(1)
+    a = rng.uniform(0, 1, (6, 5, 4)).astype(np.float32)
+    b = rng.uniform(0, 1, (6, 5, 4)).astype(np.float32)
+    return a, b
+
+
+@pytest.mark.parametrize("kind", ["mse", "l1"])
+def test_loss_channels_rgba_and_rgb(kind):
+    a, b = _pair()
+    d64 = a.astype(np.float64) - b
+    term = d64 ** 2 if kind == "mse" else np.abs(d64)
+    # The default averages alpha in with the color, as `diffsvg fit` and `grad` do.
+    assert diffsvg.loss(a, b, kind) == pytest.approx(term.mean(), rel=1e-12)
+    assert diffsvg.loss(a, b, kind, channels="rgba") == diffsvg.loss(a, b, kind)
+    assert diffsvg.loss(a, b, kind, channels="rgb") == pytest.approx(term[..., :3].mean(),
+                                                                    rel=1e-12)
+    v, g = diffsvg.loss(a, b, kind, grad=True, channels="rgb")
+    assert v == diffsvg.loss(a, b, kind, channels="rgb")
+    assert np.all(g[..., 3] == 0)
+    expected = (2 * d64 if kind == "mse" else np.sign(d64))[..., :3] / (a.size // 4 * 3)
+    assert np.allclose(g[..., :3], expected, rtol=1e-6)
+    v4, g4 = diffsvg.loss(a, b, kind, grad=True)
+    assert np.allclose(g4, (2 * d64 if kind == "mse" else np.sign(d64)) / a.size, rtol=1e-6)
+    with pytest.raises(diffsvg.DiffsvgError, match="channels: 'bgr'"):
+        diffsvg.loss(a, b, channels="bgr")
+
+
+def test_psnr_channels_rgba_and_rgb():
+    a, b = _pair()
+    d = a.astype(np.float64) - b
+    assert diffsvg.psnr(a, b) == pytest.approx(-10 * np.log10(np.mean(d ** 2)))
+    rgb = -10 * np.log10(np.mean(d[..., :3] ** 2))
+    assert diffsvg.psnr(a, b, channels="rgb") == pytest.approx(rgb)
+    assert diffsvg.psnr(a[..., :3], b[..., :3], channels="rgb") == pytest.approx(rgb)
+    with pytest.raises(diffsvg.DiffsvgError, match=r"needs arrays of shape \(\.\.\., 4\), got "
+                                                   r"\(6, 5, 3\) \(pass channels='rgb'\)"):
+        diffsvg.psnr(a[..., :3], b[..., :3])
+    assert diffsvg.psnr(a, a) == float("inf")

@@ -1,0 +1,108 @@
+"""diffsvg.jax against the numpy calls: compile time and step time per path count.
+
+    python -P python/bench_jax.py [--paths 256,1096] [--steps 30] [--dict]
+
+Scenes are DiffVG's painterly blobs (``random_blobs``, 256x256, seed 0) fitted toward
+another set of blobs (seed 1). One step is the MSE and its gradient with respect to every
+parameter:
+
+* numpy: ``set_params(x)``, ``render``, ``loss(grad=True)``, ``render_backward``;
+* jax: ``jax.jit(jax.value_and_grad(loss))`` over the flat vector, over a
+  ``diffsvg.jax.Params``, and (``--dict``) over the dict of ``Scene.arrays()``, one leaf
+  per array (the old default; its compile time grows with the paths).
+
+Compile time is ``lower`` plus ``compile`` of the jitted step; step times are medians over
+``--steps`` steps after one warm-up, ``block_until_ready`` included, the numpy and the jax
+step alternating; "eager" is the same step without ``jit``. ``vmap`` renders a batch of 4
+vectors in one call against 4 jitted calls one after the other.
+"""
+import argparse
+import statistics
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import diffsvg
+import diffsvg.jax as djax
+
+
+def median_ms(fn, steps):
+    fn()
+    ts = []
+    for _ in range(steps):
+        t = time.perf_counter()
+        fn()
+        ts.append(time.perf_counter() - t)
+    return 1e3 * statistics.median(ts)
+
+
+def alternating(f, g, steps):
+    f(), g()
+    tf, tg = [], []
+    for _ in range(steps):
+        for fn, ts in ((f, tf), (g, tg)):
+            t = time.perf_counter()
+            fn()
+            ts.append(time.perf_counter() - t)
+    return 1e3 * statistics.median(tf), 1e3 * statistics.median(tg)
+
+
+def jitted(loss, x):
+    """The compiled value-and-gradient step and the seconds lowering and compiling took."""
+    f = jax.jit(jax.value_and_grad(loss))
+    t = time.perf_counter()
+    c = f.lower(x).compile()
+    return time.perf_counter() - t, c
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--paths", default="256,1096")
+    ap.add_argument("--steps", type=int, default=30)
+    ap.add_argument("--dict", action="store_true")
+    a = ap.parse_args()
+    print("| paths | params | compile flat s | compile Params s"
+          + (" | compile dict s" if a.dict else "")
+          + " | numpy step ms | jax step ms | ratio | eager ms | vmap 4 ms | 4 calls ms |")
+    for n in map(int, a.paths.split(",")):
+        scene = diffsvg.random_blobs(n, 256, 256, seed=0)
+        target = diffsvg.render(diffsvg.random_blobs(n, 256, 256, seed=1))
+        x64 = scene.params()
+        jt = jnp.asarray(target)
+
+        def numpy_step():
+            scene.set_params(x64)
+            img = diffsvg.render(scene)
+            _, d = diffsvg.loss(img, target, grad=True)
+            return diffsvg.render_backward(scene, d, structured=False)
+
+        x = jnp.asarray(x64, jnp.float32)
+        loss = lambda v: jnp.mean((djax.render(scene, v) - jt) ** 2)  # noqa: E731
+        c_flat, step = jitted(loss, x)
+        eager = jax.value_and_grad(loss)
+        eager_ms = median_ms(lambda: jax.block_until_ready(eager(x)), max(5, a.steps // 4))
+        # The two steps alternate, so that a change of the machine's load hits both.
+        numpy_ms, jax_ms = alternating(numpy_step, lambda: jax.block_until_ready(step(x)),
+                                       a.steps)
+        p = djax.params(scene)
+        c_params, _ = jitted(lambda q: jnp.mean((djax.render(scene, q) - jt) ** 2), p)
+        row = [n, x.size, f"{c_flat:.2f}", f"{c_params:.2f}"]
+        if a.dict:
+            arrays = jax.tree.map(jnp.asarray, scene.arrays())
+            c_dict, _ = jitted(lambda d: jnp.mean((djax.render(scene, d) - jt) ** 2), arrays)
+            row.append(f"{c_dict:.2f}")
+        xs = jnp.stack([x + 0.5 * k for k in range(4)])
+        batch = jax.jit(jax.vmap(lambda v: djax.render(scene, v)))
+        one = jax.jit(lambda v: djax.render(scene, v))
+        vmap_ms, calls_ms = alternating(lambda: jax.block_until_ready(batch(xs)),
+                                        lambda: [jax.block_until_ready(one(v)) for v in xs],
+                                        a.steps)
+        row += [f"{numpy_ms:.2f}", f"{jax_ms:.2f}", f"{jax_ms / numpy_ms:.2f}",
+                f"{eager_ms:.1f}", f"{vmap_ms:.2f}", f"{calls_ms:.2f}"]
+        print("| " + " | ".join(map(str, row)) + " |", flush=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,174 @@
+"""The dicts diffsvg returns and passes to progress callbacks, as ``TypedDict``s (for type
+checkers and readers; at run time they are plain dicts)."""
+
+from __future__ import annotations
+
+import sys
+from typing import Callable, List, Optional, Tuple, Union
+
+import numpy as np
+import numpy.typing as npt
+
+if sys.version_info >= (3, 11):
+    from typing import NotRequired, TypedDict
+else:  # pragma: no cover - typing_extensions ships with every type checker
+    from typing import TypedDict
+    NotRequired = Optional
+
+F32 = npt.NDArray[np.float32]
+F64 = npt.NDArray[np.float64]
+
+
+class Owner(TypedDict):
+    """Who a slot of ``Scene.params()`` belongs to."""
+    id: str
+    kind: str  # "path" or "group"
+
+
+class Layout(TypedDict):
+    """``Scene.layout()``: per slot its group and owner."""
+    group: npt.NDArray[np.uint8]
+    owner: npt.NDArray[np.uint32]
+    group_names: List[str]
+    owners: List[Owner]
+
+
+class PaintEntry(TypedDict):
+    """Where a paint's values lie: ``len`` slots from ``offset`` (paint values, then the
+    opacity); gradients give the count of geometry values and of stops."""
+    kind: str  # "solid", "linear", "radial" or "image"
+    offset: int
+    len: int
+    geometry: NotRequired[int]
+    stops: NotRequired[int]
+
+
+class ShapeEntry(TypedDict):
+    """One path of ``Scene.structure()``."""
+    id: str
+    points: Tuple[int, int]  # offset, count
+    segments: List[int]
+    closed: List[bool]
+    kinds: List[str]  # per subpath, one letter per segment as written: "LCQ"
+    fill: Optional[PaintEntry]
+    stroke: Optional[PaintEntry]
+    stroke_width: Optional[int]
+
+
+class GroupEntry(TypedDict):
+    """One group of ``Scene.structure()``: its opacity's slot."""
+    id: str
+    offset: int
+
+
+class Structure(TypedDict):
+    """``Scene.structure()``."""
+    shapes: List[ShapeEntry]
+    groups: List[GroupEntry]
+
+
+class FitInfo(TypedDict):
+    """What ``fit`` returns beside the scene."""
+    loss: float
+    psnr: float
+    steps: int
+    reason: str
+    step_ms: float
+    final_loss: Optional[float]
+    seconds: Optional[float]
+    history: F64  # rows of iter, loss, psnr, seconds
+
+
+class VectorizeInfo(TypedDict):
+    """What ``vectorize`` returns beside the scene."""
+    psnr: float
+    mse: float
+    steps: int
+    rounds: int
+    pruned: int
+    seconds: float
+    step_ms: float
+
+
+class DigitInfo(TypedDict):
+    """What ``digit`` returns beside the scene."""
+    iou: float
+    mse: float
+    segments: List[int]
+    steps: int
+
+
+class GlyphInfo(TypedDict):
+    """What ``glyph`` returns beside the scene."""
+    iou: float
+    mse: float
+    segments: int
+    reached: bool
+    steps: int
+    seconds: float
+
+
+class ReconInfo(TypedDict):
+    """What ``recon_voxel`` and ``recon_splat`` return."""
+    output: str
+    iterations: int
+    stopped: bool
+    seconds: float
+    load_seconds: float
+    test_psnr: Optional[float]
+    log: F64
+    res: NotRequired[int]
+    allocated: NotRequired[int]
+    batch: NotRequired[int]
+    gaussians: NotRequired[int]
+    undistorted: NotRequired[Optional[float]]
+
+
+class Views(TypedDict):
+    """What ``view`` returns: ``(name, rendering, photo)`` per view and the orbit."""
+    views: List[Tuple[str, F32, F32]]
+    orbit: List[F32]
+
+
+Step = dict
+"""A progress report: ``iter``, ``loss``, ``psnr``, ``seconds`` (and more per job)."""
+
+Progress = Optional[Callable[[Step], object]]
+"""A progress callback: returning ``False`` stops the run; other values are ignored."""
+
+Info = Union[FitInfo, VectorizeInfo, DigitInfo, GlyphInfo]
+
+Array = npt.NDArray[np.floating]
+
+
+class PaintArrays(TypedDict, total=False):
+    """A gradient's (``geometry``, ``stops``, ``opacity``) or an image's (``opacity``)
+    arrays in ``Scene.arrays()``."""
+    geometry: Array
+    stops: Array
+    opacity: Array
+
+
+class ShapeArrays(TypedDict, total=False):
+    """One shape of ``Scene.arrays()``; keys absent when the shape has no such paint."""
+    points: Array
+    fill: Union[Array, PaintArrays]
+    stroke: Union[Array, PaintArrays]
+    stroke_width: Array
+
+
+class GroupArrays(TypedDict):
+    """One group of ``Scene.arrays()``."""
+    opacity: Array
+
+
+class Arrays(TypedDict):
+    """``Scene.arrays()``: the parameters per shape and group, as DiffVG names them."""
+    shapes: List[ShapeArrays]
+    groups: List[GroupArrays]
+
+
+class GradJson(TypedDict):
+    """``Scene.grad_json()``: the layout of ``diffsvg grad --json``."""
+    shapes: List[dict]
+    groups: List[dict]
