@@ -38,6 +38,7 @@ use super::render::{
 };
 use super::stroke::NONE;
 use crate::image_io::Image;
+use crate::scene::params::join_closing_gradients;
 use crate::scene::{BlendMode, MaskKind, ParamLayout, Path, Point, Scene};
 
 /// Renders `scene` once and returns the image, the loss and its gradient with respect to
@@ -447,6 +448,7 @@ fn backward_bands(
                 &mut block,
             );
         }
+        join_closing_gradients(paths[pi], layout.paths[pi].points - block.base, block.g);
     });
     for (g, v) in group_g.iter().enumerate() {
         grad[layout.groups[g]] += v;

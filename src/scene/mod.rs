@@ -331,6 +331,11 @@ pub struct Subpath {
     pub kinds: Vec<SegmentKind>,
     /// Whether the subpath is closed by a straight line back to its start.
     pub closed: bool,
+    /// Whether it is closed and its last segment ends on its start point: then the two are
+    /// one point, one parameter (the start's; see [`params`](crate::scene::ParamLayout)),
+    /// so that optimization cannot open a gap that the closing line would bridge with a
+    /// straight chord. Set by [`Path::close`].
+    pub ends_at_start: bool,
 }
 
 impl Subpath {
@@ -628,6 +633,7 @@ impl Path {
             start: self.points.len(),
             kinds: Vec::new(),
             closed: false,
+            ends_at_start: false,
         });
         self.points.push(p);
     }
@@ -672,10 +678,23 @@ impl Path {
         self.points.extend_from_slice(&pts);
     }
 
-    /// Closes the current subpath.
+    /// Closes the current subpath. When its last segment already ends on its start point,
+    /// the two become one parameter ([`Subpath::ends_at_start`]).
     pub fn close(&mut self) {
         if let Some(sp) = self.subpaths.last_mut() {
             sp.closed = true;
+            sp.ends_at_start =
+                sp.segments() > 0 && self.points[sp.end() - 1] == self.points[sp.start];
+        }
+    }
+
+    /// Gives each closed subpath that ends at its start its start point's value again
+    /// (after parameters were written one slot at a time).
+    pub(crate) fn join_closing_points(&mut self) {
+        for sp in &self.subpaths {
+            if sp.ends_at_start {
+                self.points[sp.end() - 1] = self.points[sp.start];
+            }
         }
     }
 

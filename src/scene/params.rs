@@ -14,6 +14,13 @@
 //!
 //! Gradients returned by the backward pass use the same layout.
 //!
+//! A closed subpath whose last segment ends on its start point
+//! ([`Subpath::ends_at_start`](super::Subpath::ends_at_start), a circle's outline for
+//! instance) keeps both points' slots, but they are one parameter: `set_params` copies
+//! the start's value into the closing point, and its gradient is added to the start's
+//! (the closing point's slots get 0). So an optimizer cannot open a gap that the closing
+//! line would bridge with a straight chord.
+//!
 //! ```
 //! use diffsvg::scene::{ParamGroup, ParamLayout};
 //! use diffsvg::{Scene, Sizing};
@@ -434,6 +441,25 @@ impl Scene {
             i += 1;
         });
         assert_eq!(i, values.len(), "parameter vector length mismatch");
+        self.for_each_path_mut(Path::join_closing_points);
+    }
+}
+
+/// Moves the gradient of each closing point that is its subpath's start
+/// ([`Subpath::ends_at_start`](super::Subpath::ends_at_start)) onto the start's slots:
+/// the two are one parameter, read from the start ([`Scene::set_params`] writes the start's
+/// value into both), so the start's slots get the sum and the closing point's get 0 (a
+/// change written there alone is overwritten, and changes nothing). `points` is the
+/// path's first point slot in `grad`.
+pub(crate) fn join_closing_gradients(path: &Path, points: usize, grad: &mut [f64]) {
+    for sp in &path.subpaths {
+        if sp.ends_at_start {
+            let (a, b) = (points + 2 * sp.start, points + 2 * (sp.end() - 1));
+            for c in 0..2 {
+                grad[a + c] += grad[b + c];
+                grad[b + c] = 0.0;
+            }
+        }
     }
 }
 
@@ -665,6 +691,32 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn a_closing_point_on_the_start_is_the_starts_parameter() {
+        let svg = r#"<svg xmlns="http://www.w3.org/2000/svg" width="20" height="20">
+            <path d="M2 2 C8 0 12 4 18 10 C10 18 4 12 2 2 Z M3 15 L6 15 L6 18 Z"/></svg>"#;
+        let mut s = Scene::from_svg_str(svg, "t.svg", crate::Sizing::Natural).unwrap();
+        let Node::Path(p) = &s.nodes[0] else { panic!() };
+        let (a, b) = (p.subpaths[0].clone(), p.subpaths[1].clone());
+        assert!(a.ends_at_start && !b.ends_at_start, "{:?}", p.subpaths);
+        let end = 2 * (a.end() - 1);
+        let mut v = s.params();
+        v[0] += 0.5; // the start's x
+        v[end + 1] -= 3.0; // the closing point's y alone: overwritten
+        s.set_params(&v);
+        let Node::Path(p) = &s.nodes[0] else { panic!() };
+        assert_eq!(p.points[a.end() - 1], p.points[0]);
+        assert_eq!(p.points[0], [2.5, 2.0]);
+        // The gradient: the start's slots get the sum, the closing point's 0.
+        let mut g: Vec<f64> = (0..2 * p.points.len()).map(|i| i as f64).collect();
+        join_closing_gradients(p, 0, &mut g);
+        assert_eq!((g[0], g[1]), (end as f64, 1.0 + (end + 1) as f64));
+        assert_eq!((g[end], g[end + 1]), (0.0, 0.0));
+        // The triangle's closing line is a real segment: its points stay apart.
+        let t = 2 * (b.end() - 1);
+        assert_eq!(g[t], t as f64);
     }
 
     #[test]

@@ -32,6 +32,13 @@ fn summary(out: &std::process::Output) -> serde_json::Value {
     serde_json::from_str(last).unwrap_or_else(|e| panic!("{e}: {text}"))
 }
 
+/// Per path, how many closed subpaths end on their start point.
+fn ends_at_start(scene: &Scene) -> Vec<usize> {
+    let mut v = Vec::new();
+    scene.for_each_path(|p| v.push(p.subpaths.iter().filter(|s| s.ends_at_start).count()));
+    v
+}
+
 /// The recovery goal on a few samples at 128 px wide: ≥ 40 dB within 500 steps.
 #[test]
 fn refinement_recovers_perturbed_samples() {
@@ -71,6 +78,17 @@ fn refinement_recovers_perturbed_samples() {
         );
         // The written SVG renders to what the summary says.
         let fitted = Scene::load(&out_svg, Sizing::Natural).unwrap();
+        // Closed subpaths that end on their start still do (their closing point is the
+        // start's parameter): no gap opened for the closing line to bridge.
+        let source = Scene::load(
+            root().join(format!("svg-samples/{name}.svg")),
+            Sizing::Natural,
+        )
+        .unwrap();
+        assert_eq!(ends_at_start(&fitted), ends_at_start(&source), "{name}");
+        if name == "10-logo" {
+            assert!(ends_at_start(&source).iter().sum::<usize>() > 0);
+        }
         let mut target = diffsvg::Image::load(&png).unwrap();
         target.over_background([1.0; 4]);
         let mut img = render(&fitted, &RenderOptions::default()).quantized();
