@@ -304,7 +304,7 @@ fn line_weights(g: &Cells<[f32; 2]>, p0: Point, p1: Point, dx: f64, dy: f64) -> 
 /// The parameter range `[t0, t1] ⊆ [0, 1]` of the segment from `p0` along `(dx, dy)` inside
 /// the closed box `[xlo, ylo, xhi, yhi]` (boundary lines count: the cell inside may see a
 /// piece lying on them); `None` when it has no length there.
-fn clip_to_box(p0: Point, dx: f64, dy: f64, [xlo, ylo, xhi, yhi]: [f64; 4]) -> Option<(f64, f64)> {
+pub(crate) fn clip_to_box(p0: Point, dx: f64, dy: f64, [xlo, ylo, xhi, yhi]: [f64; 4]) -> Option<(f64, f64)> {
     let (mut t0, mut t1) = (0.0f64, 1.0f64);
     for (o, d, lo, hi) in [(p0[0], dx, xlo, xhi), (p0[1], dy, ylo, yhi)] {
         if d == 0.0 {

@@ -47,6 +47,10 @@ pub(crate) struct Item {
     /// horizontal at integer y). Only then do pixels with a zero winding integral take
     /// part in the backward pass.
     pub(crate) grid_aligned: bool,
+    /// Whether the winding number can take more than two adjacent values inside one
+    /// pixel: anything but a single convex ring. Only such items look for the cells whose
+    /// coverage [`overlap`](super::overlap) computes exactly.
+    pub(crate) can_overlap: bool,
 }
 
 /// Edges per run of [`Item::runs`].
@@ -720,8 +724,13 @@ fn item(
                 || (a[1] == b[1] && a[1] == floor_f64(a[1]));
         }
     }
+    let can_overlap = match rings.as_slice() {
+        [(s, n)] => !super::overlap::ring_is_convex(&pts[*s..s + n]),
+        _ => true,
+    };
     Some(Item {
         grid_aligned,
+        can_overlap,
         path,
         kind,
         runs: edge_runs(&pts, &rings),

@@ -4,6 +4,7 @@ use rayon::prelude::*;
 
 use super::coverage::{Cells, accumulate_line, ceil_f64, coverage_row, floor_f64, integrate_rows};
 use super::layer::{apply_mask, composite_layer};
+use super::overlap::Overlaps;
 use super::paint::PaintEval;
 use super::prepare::{GroupSpan, Item, Op, Prepared, prepare_forward};
 use crate::image_io::Image;
@@ -132,6 +133,10 @@ pub(crate) struct BandRenderer<'a> {
     row: Vec<f32>,
     /// Per-row scratch.
     scratch: RowScratch,
+    /// The current item's cells of exact coverage ([`deltas`](Self::deltas) finds them).
+    pub(crate) overlaps: Overlaps,
+    /// Whether [`overlaps`](Self::overlaps) keeps what the backward pass needs.
+    pub(crate) for_backward: bool,
 }
 
 /// A band renderer's buffers, kept on each thread from one band to the next: a small
@@ -142,6 +147,7 @@ struct BandBuffers {
     acc: Vec<f32>,
     row: Vec<f32>,
     scratch: RowScratch,
+    overlaps: Overlaps,
 }
 
 thread_local! {
@@ -175,6 +181,8 @@ impl<'a> BandRenderer<'a> {
             clean: true,
             row: b.row,
             scratch: b.scratch,
+            overlaps: b.overlaps,
+            for_backward: false,
         }
     }
 
@@ -260,7 +268,7 @@ impl<'a> BandRenderer<'a> {
     /// Accumulates the winding integrals of `item` over the band into `self.acc`.
     /// Returns `false` when the item does not touch the band.
     pub(crate) fn winding(&mut self, item: &Item) -> bool {
-        if !self.deltas(item) {
+        if !self.deltas_with(item, false) {
             return false;
         }
         integrate_rows(&mut self.acc);
@@ -272,6 +280,11 @@ impl<'a> BandRenderer<'a> {
     /// row with [`take_row`](Self::take_row) (every row, which leaves `acc` clear).
     /// Returns `false` when the item does not touch the band.
     pub(crate) fn deltas(&mut self, item: &Item) -> bool {
+        self.deltas_with(item, true)
+    }
+
+    /// [`deltas`](Self::deltas), finding the cells of exact coverage when `exact`.
+    fn deltas_with(&mut self, item: &Item, exact: bool) -> bool {
         let w = self.p.width as f64;
         let b = item.bbox;
         if b[2] <= 0.0 || b[0] >= w {
@@ -303,13 +316,21 @@ impl<'a> BandRenderer<'a> {
                 accumulate_line(acc, a, c, w);
             }
         });
+        if exact && item.can_overlap {
+            let cols = acc.w.min(self.p.width as usize - acc.x0 as usize);
+            let (origin, rows) = ((acc.x0, acc.y0), acc.h);
+            self.overlaps
+                .find(item, origin, cols, rows, self.for_backward);
+        } else {
+            self.overlaps.clear();
+        }
         true
     }
 
     /// The winding integrals of row `r` of `acc` (after [`deltas`](Self::deltas)), over
     /// its columns inside the canvas, and scratch rows at least as long; the row's deltas
     /// are cleared.
-    pub(crate) fn take_row(&mut self, r: usize) -> (&[f32], &mut RowScratch) {
+    pub(crate) fn take_row(&mut self, r: usize) -> (&[f32], &mut RowScratch, &mut Overlaps) {
         let acc = &mut self.acc;
         let cols = acc.w.min(self.p.width as usize - acc.x0 as usize);
         if self.row.len() < acc.w {
@@ -324,7 +345,7 @@ impl<'a> BandRenderer<'a> {
             &mut acc.data[r * acc.w..(r + 1) * acc.w],
             &mut self.row[..acc.w],
         );
-        (&self.row[..cols], &mut self.scratch)
+        (&self.row[..cols], &mut self.scratch, &mut self.overlaps)
     }
 
     /// Draws one item source-over onto `target`, a layer covering `area` (which holds
@@ -336,9 +357,16 @@ impl<'a> BandRenderer<'a> {
         let (x0, y0) = (self.acc.x0 as usize, self.acc.y0 as usize);
         for r in 0..self.acc.h {
             let y = y0 + r;
-            let (row, sc) = self.take_row(r);
+            let (row, sc, ov) = self.take_row(r);
             let dst = &mut target[area.index(x0, y)..][..row.len()];
-            composite_row(item, row, &mut sc.covs, &mut sc.colors, dst, x0, y);
+            if ov.has_row(r) {
+                let covs = &mut sc.covs[..row.len()];
+                coverage_row(row, item.evenodd, covs);
+                ov.resolve_row(r, row, item.evenodd, covs);
+                composite_covs(item, covs, &mut sc.colors, dst, x0, y);
+            } else {
+                composite_row(item, row, &mut sc.covs, &mut sc.colors, dst, x0, y);
+            }
         }
     }
 }
@@ -355,6 +383,7 @@ impl Drop for BandRenderer<'_> {
             acc,
             row: std::mem::take(&mut self.row),
             scratch: std::mem::take(&mut self.scratch),
+            overlaps: std::mem::take(&mut self.overlaps),
         };
         BAND_BUFFERS.with(|b| *b.borrow_mut() = kept);
     }
@@ -426,8 +455,21 @@ pub(crate) fn composite_row(
     y: usize,
 ) {
     let covs = &mut covs[..row.len()];
-    let colors = &mut colors[..row.len()];
     coverage_row(row, item.evenodd, covs);
+    composite_covs(item, covs, colors, dst, x0, y);
+}
+
+/// [`composite_row`] from the row's coverages `covs`.
+#[inline]
+pub(crate) fn composite_covs(
+    item: &Item,
+    covs: &[f32],
+    colors: &mut [[f32; 4]],
+    dst: &mut [[f32; 4]],
+    x0: usize,
+    y: usize,
+) {
+    let colors = &mut colors[..covs.len()];
     if let PaintEval::Solid(solid) = &item.paint {
         // One color: no per-pixel position or paint call. Eight pixels at a time, runs
         // outside the shape are skipped and runs of an opaque color fully inside it are
