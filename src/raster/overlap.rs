@@ -162,7 +162,11 @@ pub(crate) struct Overlaps {
     next: usize,
     state: Vec<CellState>,
     touched: Vec<u32>,
+    /// Every piece of the item in the box, its cell's index in `slot`.
+    all: Vec<Piece>,
     pieces: Vec<Piece>,
+    cuts: Vec<f64>,
+    found: Vec<u32>,
     segs: Vec<Seg>,
     ys: Vec<f64>,
     order: Vec<(f64, usize)>,
@@ -202,13 +206,23 @@ impl Overlaps {
         if self.state.len() < cols * rows {
             self.state.resize(cols * rows, CellState::default());
         }
-        // 1. Candidates.
+        // 1. Candidates; every piece is kept (its cell in `slot` for now).
         let (state, touched) = (&mut self.state, &mut self.touched);
+        let all = &mut self.all;
+        all.clear();
         item.for_each_edge_near(bx[1], bx[3], |ia, ib| {
             let (p, q) = (item.pts[ia], item.pts[ib]);
             let bits = dir_bits(q[0] - p[0], q[1] - p[1]);
             walk(p, q, bx, &mut |col, row, ta, tb| {
                 let k = row * cols + col;
+                all.push(Piece {
+                    slot: k as u32,
+                    a: ia as u32,
+                    b: ib as u32,
+                    ta,
+                    tb,
+                    half: false,
+                });
                 let s = &mut state[k];
                 let (ia, ib) = (ia as u32, ib as u32);
                 if s.count == 0 {
@@ -229,7 +243,8 @@ impl Overlaps {
                 }
             });
         });
-        let mut found: Vec<u32> = Vec::new();
+        let found = &mut self.found;
+        found.clear();
         for &k in touched.iter() {
             let s = &state[k as usize];
             if s.candidate && s.count as usize <= SAMPLED_PIECES {
@@ -245,37 +260,34 @@ impl Overlaps {
             // cell on the line's other side.
             let pieces = &mut self.pieces;
             pieces.clear();
-            item.for_each_edge_near(bx[1], bx[3], |ia, ib| {
-                let (p, q) = (item.pts[ia], item.pts[ib]);
-                let (dx, dy) = (q[0] - p[0], q[1] - p[1]);
-                walk(p, q, bx, &mut |col, row, ta, tb| {
-                    let on_v = dx == 0.0 && p[0] == floor_f64(p[0]);
-                    let on_h = dy == 0.0 && p[1] == floor_f64(p[1]);
-                    let half = on_v || on_h;
-                    let mut push = |k: usize| {
-                        let slot = state[k].slot;
-                        if slot != NONE {
-                            pieces.push(Piece {
-                                slot,
-                                a: ia as u32,
-                                b: ib as u32,
-                                ta,
-                                tb,
-                                half,
-                            });
-                        }
-                    };
-                    push(row * cols + col);
-                    if on_v && col > 0 {
-                        push(row * cols + col - 1);
-                    } else if on_h && row > 0 {
-                        push((row - 1) * cols + col);
+            for piece in &self.all {
+                let k = piece.slot as usize;
+                let (p, q) = (item.pts[piece.a as usize], item.pts[piece.b as usize]);
+                let on_v = p[0] == q[0] && p[0] == floor_f64(p[0]);
+                let on_h = p[1] == q[1] && p[1] == floor_f64(p[1]);
+                let half = on_v || on_h;
+                let mut push = |k: usize| {
+                    let slot = state[k].slot;
+                    if slot != NONE {
+                        pieces.push(Piece {
+                            slot,
+                            half,
+                            ..*piece
+                        });
                     }
-                });
-            });
+                };
+                push(k);
+                let (row, col) = (k / cols, k % cols);
+                if on_v && col > 0 {
+                    push(k - 1);
+                } else if on_h && row > 0 {
+                    push(k - cols);
+                }
+            }
             self.pieces.sort_by_key(|p| p.slot);
             let mut at = 0;
-            for (slot, &k) in found.iter().enumerate() {
+            for slot in 0..self.found.len() {
+                let k = self.found[slot];
                 let end = at + self.pieces[at..]
                     .iter()
                     .take_while(|p| p.slot == slot as u32)
@@ -493,7 +505,9 @@ impl Overlaps {
                         order.push((t.x_at(yh), i));
                     }
                 }
-                let mut cuts: Vec<f64> = vec![xl, xr];
+                let cuts = &mut self.cuts;
+                cuts.clear();
+                cuts.extend([xl, xr]);
                 cuts.extend(order.iter().map(|o| o.0).filter(|&x| x > xl && x < xr));
                 cuts.sort_by(|a, b| a.total_cmp(b));
                 let wl = w_left(ym);
@@ -633,6 +647,16 @@ fn dir_bits(dx: f64, dy: f64) -> u8 {
 fn walk(p0: Point, p1: Point, bx: [f64; 4], f: &mut impl FnMut(usize, usize, f64, f64)) {
     let (dx, dy) = (p1[0] - p0[0], p1[1] - p0[1]);
     if dx == 0.0 && dy == 0.0 {
+        return;
+    }
+    let (c0, r0) = (floor_f64(p0[0]), floor_f64(p0[1]));
+    if c0 == floor_f64(p1[0]) && r0 == floor_f64(p1[1]) {
+        // Inside one cell (most chords at a fine tolerance): one piece, as the walk below
+        // would give it without a sliver from rounding.
+        let (c, r) = (c0 - bx[0], r0 - bx[1]);
+        if c >= 0.0 && r >= 0.0 && c < bx[2] - bx[0] && r < bx[3] - bx[1] {
+            f(c as usize, r as usize, 0.0, 1.0);
+        }
         return;
     }
     let Some((t0, t1)) = clip_to_box(p0, dx, dy, bx) else {
