@@ -32,6 +32,11 @@ pub struct Args {
     /// Write `ours | resvg | difference` images of failing files into this folder.
     #[arg(long)]
     failures: Option<PathBuf>,
+    /// Instead of the pass rates: the MAE (0–255 levels) of diffsvg and of resvg against
+    /// resvg rendered N times larger and box-filtered down (N × N samples per pixel), one
+    /// row per file and the means, as a Markdown table (to `--report` as well).
+    #[arg(long, value_name = "N")]
+    supersampled: Option<u32>,
 }
 
 /// What happened to one file.
@@ -107,6 +112,53 @@ impl Args {
     }
 }
 
+/// `diffsvg parity --supersampled N`: both renderers' MAE against the box-filtered
+/// reference, per file.
+fn supersampled(
+    a: &Args,
+    files: &[PathBuf],
+    sizing: diffsvg::Sizing,
+    fonts: &Fonts,
+    factor: u32,
+) -> Result<()> {
+    use rayon::prelude::*;
+    let opts = RenderOptions::default();
+    let rows: Vec<(PathBuf, diffsvg::Result<(f64, f64)>)> = files
+        .par_iter()
+        .map(|f| {
+            let r = diffsvg::reference::supersampled_mae(f, sizing, &opts, fonts, factor);
+            (f.clone(), r)
+        })
+        .collect();
+    let mut table = format!(
+        "| file | diffsvg MAE | resvg MAE |\n|---|---:|---:|\n"
+    );
+    let (mut sums, mut n) = ([0.0f64; 2], 0usize);
+    for (f, r) in &rows {
+        match r {
+            Ok((ours, theirs)) => {
+                table += &format!("| {} | {ours:.3} | {theirs:.3} |\n", f.display());
+                sums[0] += ours;
+                sums[1] += theirs;
+                n += 1;
+            }
+            Err(e) => println!("SKIPPED {e}"),
+        }
+    }
+    if n > 0 {
+        table += &format!(
+            "| mean of {n} files | {:.3} | {:.3} |\n",
+            sums[0] / n as f64,
+            sums[1] / n as f64
+        );
+    }
+    print!("{table}");
+    if let Some(path) = &a.report {
+        std::fs::write(path, &table).with_context(|| format!("{}: cannot write", path.display()))?;
+    }
+    Ok(())
+}
+
 /// Runs `diffsvg parity`.
 pub fn run(a: Args) -> Result<()> {
     use rayon::prelude::*;
@@ -115,6 +167,9 @@ pub fn run(a: Args) -> Result<()> {
     let fonts = a.fonts();
     // Built once, before the files are shared out, so that a bad font flag is one error.
     fonts.database()?;
+    if let Some(factor) = a.supersampled {
+        return supersampled(&a, &files, sizing, &fonts, factor);
+    }
     let outcomes: Vec<(PathBuf, Outcome)> = files
         .par_iter()
         .map(|f| (f.clone(), check(f, sizing, &fonts)))

@@ -700,6 +700,127 @@ fn walk(p0: Point, p1: Point, bx: [f64; 4], f: &mut impl FnMut(usize, usize, f64
     }
 }
 
+/// Whether no pixel can hold three winding values: every ring is simple (convex, or
+/// monotone in y with its two sides apart) and no two rings share a pixel. `false` when
+/// unsure (many rings close together, a ring neither convex nor y-monotone).
+pub(crate) fn rings_cannot_overlap(pts: &[Point], rings: &[(usize, usize)]) -> bool {
+    /// Pairs of rings compared at most, before giving up.
+    const MAX_PAIRS: usize = 4096;
+    if !rings
+        .iter()
+        .all(|&(s, n)| ring_is_convex(&pts[s..s + n]) || ring_is_y_monotone_simple(&pts[s..s + n]))
+    {
+        return false;
+    }
+    if rings.len() == 1 {
+        return true;
+    }
+    // The cells each ring's box touches, `[x0, y0, x1, y1]` inclusive.
+    let mut boxes: Vec<[f64; 4]> = rings
+        .iter()
+        .map(|&(s, n)| {
+            let mut b = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
+            for q in &pts[s..s + n] {
+                b = [b[0].min(q[0]), b[1].min(q[1]), b[2].max(q[0]), b[3].max(q[1])];
+            }
+            b.map(floor_f64)
+        })
+        .collect();
+    boxes.sort_by(|a, b| a[0].total_cmp(&b[0]));
+    let mut pairs = 0;
+    for i in 0..boxes.len() {
+        for j in i + 1..boxes.len() {
+            if boxes[j][0] > boxes[i][2] {
+                break;
+            }
+            pairs += 1;
+            if pairs > MAX_PAIRS {
+                return false;
+            }
+            if boxes[j][1] <= boxes[i][3] && boxes[i][1] <= boxes[j][3] {
+                return false;
+            }
+        }
+    }
+    true
+}
+
+/// Whether a ring is monotone in y (its direction's y component changes sign twice, with
+/// horizontal edges only at its top and bottom) with its two sides apart between them:
+/// then it is simple.
+fn ring_is_y_monotone_simple(ring: &[Point]) -> bool {
+    let n = ring.len();
+    if n < 3 {
+        return true;
+    }
+    let (mut top, mut bottom) = (0, 0);
+    for k in 0..n {
+        if ring[k][1] < ring[top][1] {
+            top = k;
+        }
+        if ring[k][1] > ring[bottom][1] {
+            bottom = k;
+        }
+    }
+    let (ymin, ymax) = (ring[top][1], ring[bottom][1]);
+    if !(ymax > ymin) {
+        return false;
+    }
+    // The two sides from `top` to `bottom`, each with y never decreasing.
+    let side = |step: usize| -> Option<Vec<Point>> {
+        let mut v = vec![ring[top]];
+        let mut k = top;
+        while k != bottom {
+            let next = (k + step) % n;
+            let (a, b) = (ring[k], ring[next]);
+            if b[1] < a[1] || (b[1] == a[1] && a[1] > ymin && a[1] < ymax) {
+                return None;
+            }
+            v.push(b);
+            k = next;
+        }
+        Some(v)
+    };
+    let (Some(a), Some(b)) = (side(1), side(n - 1)) else {
+        return false;
+    };
+    // x of a side at height y (first edge reaching it).
+    let x_at = |s: &[Point], y: f64| -> f64 {
+        for w in s.windows(2) {
+            if w[1][1] >= y && w[1][1] > w[0][1] {
+                return w[0][0] + (y - w[0][1]) / (w[1][1] - w[0][1]) * (w[1][0] - w[0][0]);
+            }
+        }
+        s[s.len() - 1][0]
+    };
+    // Where each side leaves the top and reaches the bottom: apart there too, or the same
+    // point.
+    let leave = |s: &[Point]| s.iter().rev().find(|q| q[1] == ymin).map_or(s[0][0], |q| q[0]);
+    let reach = |s: &[Point]| s.iter().find(|q| q[1] == ymax).map_or(s[s.len() - 1][0], |q| q[0]);
+    let mut sign = 0.0f64;
+    for d in [leave(&a) - leave(&b), reach(&a) - reach(&b)] {
+        if d != 0.0 {
+            if sign != 0.0 && (d > 0.0) != (sign > 0.0) {
+                return false;
+            }
+            sign = d;
+        }
+    }
+    for (s, o, flip) in [(&a, &b, 1.0), (&b, &a, -1.0)] {
+        for q in s.iter() {
+            if q[1] <= ymin || q[1] >= ymax {
+                continue;
+            }
+            let d = flip * (q[0] - x_at(o, q[1]));
+            if !(d != 0.0) || (sign != 0.0 && (d > 0.0) != (sign > 0.0)) {
+                return false;
+            }
+            sign = d;
+        }
+    }
+    true
+}
+
 /// Whether a ring is convex: turns all one way, with its direction's y component changing
 /// sign at most twice around it (a pentagram turns one way too, twice around).
 pub(crate) fn ring_is_convex(ring: &[Point]) -> bool {
@@ -1028,5 +1149,27 @@ mod tests {
         assert!(ring_is_convex(&sq2));
         let back = [[0.0, 0.0], [2.0, 0.0], [1.0, 0.0], [1.0, 1.0]];
         assert!(!ring_is_convex(&back));
+        // Monotone in y and simple: a chevron; its sides crossed: a bow-tie on its side.
+        let chevron = [[0.0, 0.0], [1.0, 1.0], [0.0, 2.0], [3.0, 2.0], [2.0, 1.0], [3.0, 0.0]];
+        assert!(!ring_is_convex(&chevron) && ring_is_y_monotone_simple(&chevron));
+        let crossed = [[0.0, 0.0], [3.0, 2.0], [0.0, 2.0], [3.0, 0.0]];
+        assert!(!ring_is_y_monotone_simple(&crossed));
+        let hourglass = [[0.0, 0.0], [2.0, 0.0], [0.5, 1.0], [2.0, 2.0], [0.0, 2.0], [1.5, 1.0]];
+        assert!(!ring_is_y_monotone_simple(&hourglass));
+        let star: Vec<Point> = (0..5)
+            .map(|k| {
+                let a = (k * 2) as f64 * std::f64::consts::TAU / 5.0 + 0.3;
+                [a.cos(), a.sin()]
+            })
+            .collect();
+        assert!(!ring_is_y_monotone_simple(&star));
+        // Rings apart, and rings sharing a pixel.
+        let pts = [
+            [0.2, 0.2], [1.8, 0.2], [1.8, 1.8], [0.2, 1.8],
+            [3.2, 0.2], [4.8, 0.2], [4.8, 1.8],
+        ];
+        assert!(rings_cannot_overlap(&pts, &[(0, 4), (4, 3)]));
+        let near = [[0.2, 0.2], [1.8, 0.2], [1.8, 1.8], [1.9, 0.2], [3.8, 0.2], [3.8, 1.8]];
+        assert!(!rings_cannot_overlap(&near, &[(0, 3), (3, 3)]));
     }
 }

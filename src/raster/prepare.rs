@@ -48,7 +48,8 @@ pub(crate) struct Item {
     /// part in the backward pass.
     pub(crate) grid_aligned: bool,
     /// Whether the winding number can take more than two adjacent values inside one
-    /// pixel: anything but a single convex ring. Only such items look for the cells whose
+    /// pixel: anything but simple rings (convex, or monotone in y) apart from each other
+    /// ([`rings_cannot_overlap`](super::overlap::rings_cannot_overlap)). Only such items look for the cells whose
     /// coverage [`overlap`](super::overlap) computes exactly.
     pub(crate) can_overlap: bool,
 }
@@ -724,10 +725,7 @@ fn item(
                 || (a[1] == b[1] && a[1] == floor_f64(a[1]));
         }
     }
-    let can_overlap = match rings.as_slice() {
-        [(s, n)] => !super::overlap::ring_is_convex(&pts[*s..s + n]),
-        _ => true,
-    };
+    let can_overlap = !super::overlap::rings_cannot_overlap(&pts, &rings);
     Some(Item {
         grid_aligned,
         can_overlap,
