@@ -204,9 +204,9 @@ pub fn render_resvg_supersampled(
     Ok(out)
 }
 
-/// Mean absolute difference in 0–255 levels of diffsvg's and resvg's renderings of the
-/// file at `path` against [`render_resvg_supersampled`] with `factor`, as
-/// `(diffsvg, resvg)`; both are quantized to 8 bits first, as parity compares them.
+/// Mean absolute difference in 0–255 levels of diffsvg's (with `opts`) and resvg's
+/// renderings of the file at `path` against [`render_resvg_supersampled`] with `factor`,
+/// as `(diffsvg, resvg)`; both are quantized to 8 bits first, as parity compares them.
 pub fn supersampled_mae(
     path: &Path,
     sizing: Sizing,

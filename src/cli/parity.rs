@@ -32,7 +32,8 @@ pub struct Args {
     /// Write `ours | resvg | difference` images of failing files into this folder.
     #[arg(long)]
     failures: Option<PathBuf>,
-    /// Instead of the pass rates: the MAE (0–255 levels) of diffsvg and of resvg against
+    /// Instead of the pass rates: the MAE (0–255 levels) of diffsvg (as it renders by
+    /// default, and with `RenderOptions::exact_overlaps`) and of resvg against
     /// resvg rendered N times larger and box-filtered down (N × N samples per pixel), one
     /// row per file and the means, as a Markdown table (to `--report` as well).
     #[arg(long, value_name = "N")]
@@ -122,34 +123,52 @@ fn supersampled(
     factor: u32,
 ) -> Result<()> {
     use rayon::prelude::*;
-    let opts = RenderOptions::default();
-    let rows: Vec<(PathBuf, diffsvg::Result<(f64, f64)>)> = files
+    use diffsvg::reference::supersampled_mae;
+    let (clamped, exact) = (
+        RenderOptions::default(),
+        RenderOptions {
+            exact_overlaps: true,
+            ..RenderOptions::default()
+        },
+    );
+    type Row = diffsvg::Result<[f64; 3]>;
+    let rows: Vec<(PathBuf, Row)> = files
         .par_iter()
         .map(|f| {
-            let r = diffsvg::reference::supersampled_mae(f, sizing, &opts, fonts, factor);
+            let r = supersampled_mae(f, sizing, &clamped, fonts, factor).and_then(|(a, c)| {
+                let (b, _) = supersampled_mae(f, sizing, &exact, fonts, factor)?;
+                Ok([a, b, c])
+            });
             (f.clone(), r)
         })
         .collect();
-    let mut table = format!(
-        "| file | diffsvg MAE | resvg MAE |\n|---|---:|---:|\n"
+    let mut table = String::from(
+        "| file | diffsvg MAE | diffsvg, exact overlaps | resvg MAE |\n|---|---:|---:|---:|\n",
     );
-    let (mut sums, mut n) = ([0.0f64; 2], 0usize);
+    let (mut sums, mut n) = ([0.0f64; 3], 0usize);
     for (f, r) in &rows {
         match r {
-            Ok((ours, theirs)) => {
-                table += &format!("| {} | {ours:.3} | {theirs:.3} |\n", f.display());
-                sums[0] += ours;
-                sums[1] += theirs;
+            Ok(m) => {
+                table += &format!(
+                    "| {} | {:.3} | {:.3} | {:.3} |\n",
+                    f.display(),
+                    m[0],
+                    m[1],
+                    m[2]
+                );
+                for k in 0..3 {
+                    sums[k] += m[k];
+                }
                 n += 1;
             }
             Err(e) => println!("SKIPPED {e}"),
         }
     }
     if n > 0 {
+        let mean = sums.map(|v| v / n as f64);
         table += &format!(
-            "| mean of {n} files | {:.3} | {:.3} |\n",
-            sums[0] / n as f64,
-            sums[1] / n as f64
+            "| mean of {n} files | {:.3} | {:.3} | {:.3} |\n",
+            mean[0], mean[1], mean[2]
         );
     }
     print!("{table}");

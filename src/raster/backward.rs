@@ -49,7 +49,7 @@ pub fn render_and_backward(
     opts: &RenderOptions,
     loss: impl FnOnce(&Image) -> (f64, Image),
 ) -> (Image, f64, Vec<f64>) {
-    let prepared = prepare(scene, opts.tolerance, None);
+    let prepared = Prepared::new(scene, opts);
     let img = super::render::render_prepared(&prepared);
     let (l, d) = loss(&img);
     let g = backward_prepared(scene, &prepared, &d);
@@ -59,7 +59,7 @@ pub fn render_and_backward(
 /// The gradient of a loss with respect to every parameter of `scene` (in
 /// [`Scene::params`] order), given `d_image = ∂L/∂image`.
 pub fn render_backward(scene: &Scene, opts: &RenderOptions, d_image: &Image) -> Vec<f64> {
-    backward_prepared(scene, &prepare(scene, opts.tolerance, None), d_image)
+    backward_prepared(scene, &Prepared::new(scene, opts), d_image)
 }
 
 /// [`render_backward`] after [`check_backward_memory`], preparing the scene once for both:
@@ -70,7 +70,7 @@ pub fn render_backward_checked(
     d_image: &Image,
     name: &std::path::Path,
 ) -> crate::Result<Vec<f64>> {
-    let p = prepare(scene, opts.tolerance, None);
+    let p = Prepared::new(scene, opts);
     check_prepared(&p, name)?;
     Ok(backward_prepared(scene, &p, d_image))
 }

@@ -4,7 +4,8 @@
 //! area to that cell and carries the rest of its height (the "cover") to the next cell;
 //! a prefix sum along each row then gives, per pixel, the integral of the winding number
 //! over the pixel square: the exact box-filtered coverage of the polygon wherever edges do
-//! not overlap inside a pixel. A segment going down (y increasing) counts +1.
+//! not overlap inside a pixel (where they do, [`overlap`](super::overlap) integrates the
+//! pixel exactly instead). A segment going down (y increasing) counts +1.
 //!
 //! **Backward.** Let `G(p) = ∂L/∂w(p)` be the loss gradient with respect to the winding
 //! integral of pixel `p`. Moving the boundary by a velocity field `v` changes `Σ G·w` by

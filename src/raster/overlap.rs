@@ -878,6 +878,14 @@ mod tests {
     use crate::scene::{Fill, FillRule, Node, Paint, Path, Scene};
     use crate::Image;
 
+    /// The options with exact overlaps on.
+    fn exact() -> RenderOptions {
+        RenderOptions {
+            exact_overlaps: true,
+            ..RenderOptions::default()
+        }
+    }
+
     fn scene(w: u32, h: u32, rings: &[Vec<Point>], evenodd: bool) -> Scene {
         let mut p = Path::new("p");
         for ring in rings {
@@ -902,7 +910,7 @@ mod tests {
     }
 
     fn alpha(s: &Scene) -> Vec<f64> {
-        render(s, &RenderOptions::default())
+        render(s, &exact())
             .data
             .iter()
             .map(|p| p[3] as f64)
@@ -949,7 +957,7 @@ mod tests {
 
     /// Cells whose exact coverage replaced the accumulated one, over the whole canvas.
     fn active_cells(s: &Scene) -> usize {
-        let p = prepare(s, RenderOptions::default().tolerance, None);
+        let p = crate::raster::Prepared::new(s, &exact());
         let mut count = 0;
         for y0 in (0..p.height as usize).step_by(16) {
             let rows = 16.min(p.height as usize - y0);
@@ -1036,6 +1044,9 @@ mod tests {
         assert!((img[5] - 1.0).abs() < 1e-6 && (img[6] - 0.25).abs() < 1e-6, "{img:?}");
         let p = prepare(&s, 0.02, None);
         assert!(p.items[0].can_overlap);
+        // Off (the default), the clamped integral everywhere: the same values here.
+        let off = render(&s, &RenderOptions::default());
+        assert!((off.data[5][3] as f64 - img[5]).abs() < 1e-6);
     }
 
     /// Many coincident rings in one cell: sampled, then kept clamped, always finite.
@@ -1066,7 +1077,7 @@ mod tests {
                 assert!((g - r).abs() < 0.03, "{got:?} vs {want:?}");
             }
             let d = Image::filled(4, 4, [0.1, 0.2, 0.3, 0.4]);
-            let g = render_backward(&s, &RenderOptions::default(), &d);
+            let g = render_backward(&s, &exact(), &d);
             assert!(g.iter().all(|v| v.is_finite()));
         }
     }
@@ -1087,7 +1098,7 @@ mod tests {
                 let k = ((i * 7919) % 13) as f32 / 13.0 - 0.4;
                 *px = [0.0, 0.0, 0.0, k];
             }
-            let opts = RenderOptions::default();
+            let opts = exact();
             let loss = |s: &Scene| -> f64 {
                 let img = render(s, &opts);
                 img.data

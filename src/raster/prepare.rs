@@ -219,6 +219,8 @@ pub struct Prepared {
     pub(crate) for_backward: bool,
     /// The flattening tolerance used, in device pixels.
     pub(crate) tolerance: f64,
+    /// [`RenderOptions::exact_overlaps`](super::RenderOptions::exact_overlaps).
+    pub(crate) exact_overlaps: bool,
 }
 
 impl Prepared {
@@ -226,7 +228,9 @@ impl Prepared {
     /// and [`backward_with_stats`](super::backward_with_stats) calls, flattened at
     /// `opts.tolerance` with chord counts chosen from the scene as it is now.
     pub fn new(scene: &Scene, opts: &super::RenderOptions) -> Prepared {
-        prepare(scene, opts.tolerance, None)
+        let mut p = prepare(scene, opts.tolerance, None);
+        p.exact_overlaps = opts.exact_overlaps;
+        p
     }
 
     /// Canvas size in pixels, `(width, height)`.
@@ -303,6 +307,7 @@ fn prepare_with(
         solid_dashes: Vec::new(),
         for_backward,
         tolerance,
+        exact_overlaps: false,
     };
     // Each path's geometry and items depend on that path alone: built in parallel (in
     // paint order, so the result is the same on any thread count), then placed by the

@@ -15,12 +15,19 @@ use crate::scene::Scene;
 pub struct RenderOptions {
     /// Largest distance between a curve and its flattened chords, in device pixels.
     pub tolerance: f64,
+    /// Integrate exactly the pixels where a path overlaps itself (issue 29,
+    /// [`overlap`](super::overlap)); off: the clamped winding integral there, as before.
+    /// Off by default until its gradient agrees with finite differences at edges lying on
+    /// pixel lines beside an overlap and in pixels of more than 32 edge pieces (see
+    /// docs/parity.md).
+    pub exact_overlaps: bool,
 }
 
 impl Default for RenderOptions {
     fn default() -> Self {
         RenderOptions {
             tolerance: crate::scene::geom::DEFAULT_TOLERANCE,
+            exact_overlaps: false,
         }
     }
 }
@@ -32,7 +39,9 @@ pub(crate) const BAND_ROWS: usize = crate::loss::SUM_ROWS;
 /// are evaluated at pixel centers and coverage is the exact area of each pixel square
 /// inside the (flattened) shape.
 pub fn render(scene: &Scene, opts: &RenderOptions) -> Image {
-    render_prepared(&prepare_forward(scene, opts.tolerance))
+    let mut p = prepare_forward(scene, opts.tolerance);
+    p.exact_overlaps = opts.exact_overlaps;
+    render_prepared(&p)
 }
 
 /// Renders an already prepared scene.
@@ -316,7 +325,7 @@ impl<'a> BandRenderer<'a> {
                 accumulate_line(acc, a, c, w);
             }
         });
-        if exact && item.can_overlap {
+        if exact && item.can_overlap && self.p.exact_overlaps {
             let cols = acc.w.min(self.p.width as usize - acc.x0 as usize);
             let (origin, rows) = ((acc.x0, acc.y0), acc.h);
             self.overlaps
