@@ -74,7 +74,7 @@ fn loss_fixed(
     background: Option<[f32; 4]>,
 ) -> f64 {
     let mut p = prepare(scene, opts.tolerance, Some(counts));
-    p.exact_overlaps = opts.exact_overlaps;
+    p.set_exact_overlaps(opts.exact_overlaps);
     let mut img = render_prepared(&p);
     if let Some(bg) = background {
         img.over_background(bg);
@@ -92,7 +92,7 @@ pub fn analytic(
     background: Option<[f32; 4]>,
 ) -> (f64, Vec<f64>) {
     let mut p = prepare(scene, opts.tolerance, None);
-    p.exact_overlaps = opts.exact_overlaps;
+    p.set_exact_overlaps(opts.exact_overlaps);
     let mut img = render_prepared(&p);
     if let Some(bg) = background {
         img.over_background(bg);

@@ -122,8 +122,8 @@ fn supersampled(
     fonts: &Fonts,
     factor: u32,
 ) -> Result<()> {
-    use rayon::prelude::*;
     use diffsvg::reference::supersampled_mae;
+    use rayon::prelude::*;
     let (clamped, exact) = (
         RenderOptions::default(),
         RenderOptions {
@@ -173,7 +173,8 @@ fn supersampled(
     }
     print!("{table}");
     if let Some(path) = &a.report {
-        std::fs::write(path, &table).with_context(|| format!("{}: cannot write", path.display()))?;
+        std::fs::write(path, &table)
+            .with_context(|| format!("{}: cannot write", path.display()))?;
     }
     Ok(())
 }

@@ -723,7 +723,11 @@ fn record_row(
     } else {
         &[]
     };
-    let mut next_exact = exact.iter().filter(|c| c.active).map(|c| c.col as usize).peekable();
+    let mut next_exact = exact
+        .iter()
+        .filter(|c| c.active)
+        .map(|c| c.col as usize)
+        .peekable();
     // A gradient's colors only where some coverage is (where `over` reads them), over
     // the same columns as the forward pass's `composite_row`, so the bits agree.
     match &item.paint {

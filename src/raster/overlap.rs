@@ -31,6 +31,14 @@
 //! inside an overlap counts 0. A piece lying on a grid line counts half in each cell beside
 //! it (the mean of the one-sided derivatives, as the accumulated backward does).
 //!
+//! **Off by default** ([`RenderOptions::exact_overlaps`](super::RenderOptions)): where an
+//! edge lies exactly on a pixel line beside an overlap, the cell on the other side of it
+//! keeps its accumulated slope, which can assume the wrong pair of windings (a derivative
+//! of 1 where moving the edge turns winding 1 into 2 and adds nothing), and sampled cells
+//! (below) get the exact-area derivative of their pieces rather than the derivative of
+//! the sampled coverage; three gradient checks of `tests/hard_cases.rs` disagree with
+//! central differences with it on. See docs/parity.md.
+//!
 //! **Bounds.** A cell with up to [`EXACT_PIECES`] pieces is exact (its pairwise crossings
 //! are `O(k²)`, its strips `O(k²)` sorts of `k`). Up to [`SAMPLED_PIECES`] the cell is
 //! integrated on [`SAMPLE_ROWS`] horizontal scanlines instead (exact along x, the midpoint
@@ -288,10 +296,11 @@ impl Overlaps {
             let mut at = 0;
             for slot in 0..self.found.len() {
                 let k = self.found[slot];
-                let end = at + self.pieces[at..]
-                    .iter()
-                    .take_while(|p| p.slot == slot as u32)
-                    .count();
+                let end = at
+                    + self.pieces[at..]
+                        .iter()
+                        .take_while(|p| p.slot == slot as u32)
+                        .count();
                 let (row, col) = (k as usize / cols, k as usize % cols);
                 let cell = [x0 + col as f64, y0 + row as f64];
                 self.cell(item, cell, at..end, portions);
@@ -519,8 +528,12 @@ impl Overlaps {
                         continue;
                     }
                     let xp = 0.5 * (c[0] + c[1]);
-                    let side: i32 =
-                        wl + order.iter().filter(|o| o.0 < xp).map(|o| segs[o.1].dir).sum::<i32>();
+                    let side: i32 = wl
+                        + order
+                            .iter()
+                            .filter(|o| o.0 < xp)
+                            .map(|o| segs[o.1].dir)
+                            .sum::<i32>();
                     // Earlier coincident horizontal pieces covering `xp` lie between this
                     // one and the strip.
                     let stacked: i32 = segs[..j]
@@ -570,7 +583,9 @@ impl Overlaps {
     /// Whether row `row` (of the band's cell box) holds a candidate cell not yet resolved.
     #[inline]
     pub(crate) fn has_row(&self, row: usize) -> bool {
-        self.cells.get(self.next).is_some_and(|c| c.row as usize == row)
+        self.cells
+            .get(self.next)
+            .is_some_and(|c| c.row as usize == row)
     }
 
     /// Resolves the candidate cells of row `row` from its winding integrals `wrow`:
@@ -604,7 +619,7 @@ impl Overlaps {
                 }
             }
             let w0 = (integral as f64 - moment).round();
-            if !(hi > lo.saturating_add(1)) || !w0.is_finite() || w0.abs() > 1e9 {
+            if hi <= lo.saturating_add(1) || !w0.is_finite() || w0.abs() > 1e9 {
                 continue;
             }
             let w0 = w0 as i32;
@@ -675,8 +690,16 @@ fn walk(p0: Point, p1: Point, bx: [f64; 4], f: &mut impl FnMut(usize, usize, f64
     let start = at(t0);
     let mut nx = next(start[0], p0[0], dx);
     let mut ny = next(start[1], p0[1], dy);
-    let step_x = if dx != 0.0 { 1.0 / dx.abs() } else { f64::INFINITY };
-    let step_y = if dy != 0.0 { 1.0 / dy.abs() } else { f64::INFINITY };
+    let step_x = if dx != 0.0 {
+        1.0 / dx.abs()
+    } else {
+        f64::INFINITY
+    };
+    let step_y = if dy != 0.0 {
+        1.0 / dy.abs()
+    } else {
+        f64::INFINITY
+    };
     let (cols, rows) = (bx[2] - bx[0], bx[3] - bx[1]);
     let mut ta = t0;
     let mut guard = 0usize;
@@ -719,9 +742,19 @@ pub(crate) fn rings_cannot_overlap(pts: &[Point], rings: &[(usize, usize)]) -> b
     let mut boxes: Vec<[f64; 4]> = rings
         .iter()
         .map(|&(s, n)| {
-            let mut b = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
+            let mut b = [
+                f64::INFINITY,
+                f64::INFINITY,
+                f64::NEG_INFINITY,
+                f64::NEG_INFINITY,
+            ];
             for q in &pts[s..s + n] {
-                b = [b[0].min(q[0]), b[1].min(q[1]), b[2].max(q[0]), b[3].max(q[1])];
+                b = [
+                    b[0].min(q[0]),
+                    b[1].min(q[1]),
+                    b[2].max(q[0]),
+                    b[3].max(q[1]),
+                ];
             }
             b.map(floor_f64)
         })
@@ -795,8 +828,17 @@ fn ring_is_y_monotone_simple(ring: &[Point]) -> bool {
     };
     // Where each side leaves the top and reaches the bottom: apart there too, or the same
     // point.
-    let leave = |s: &[Point]| s.iter().rev().find(|q| q[1] == ymin).map_or(s[0][0], |q| q[0]);
-    let reach = |s: &[Point]| s.iter().find(|q| q[1] == ymax).map_or(s[s.len() - 1][0], |q| q[0]);
+    let leave = |s: &[Point]| {
+        s.iter()
+            .rev()
+            .find(|q| q[1] == ymin)
+            .map_or(s[0][0], |q| q[0])
+    };
+    let reach = |s: &[Point]| {
+        s.iter()
+            .find(|q| q[1] == ymax)
+            .map_or(s[s.len() - 1][0], |q| q[0])
+    };
     let mut sign = 0.0f64;
     for d in [leave(&a) - leave(&b), reach(&a) - reach(&b)] {
         if d != 0.0 {
@@ -841,7 +883,11 @@ pub(crate) fn ring_is_convex(ring: &[Point]) -> bool {
     let mut turn = 0.0f64;
     let (mut changes, mut last_dy) = (0usize, prev[1]);
     if last_dy == 0.0 {
-        last_dy = (0..n).rev().map(|k| edge(k)[1]).find(|&d| d != 0.0).unwrap_or(0.0);
+        last_dy = (0..n)
+            .rev()
+            .map(|k| edge(k)[1])
+            .find(|&d| d != 0.0)
+            .unwrap_or(0.0);
     }
     for k in 0..n {
         let e = edge(k);
@@ -873,10 +919,10 @@ pub(crate) fn ring_is_convex(ring: &[Point]) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::raster::render::BandRenderer;
-    use crate::raster::{RenderOptions, prepare, render, render_backward};
-    use crate::scene::{Fill, FillRule, Node, Paint, Path, Scene};
     use crate::Image;
+    use crate::raster::render::BandRenderer;
+    use crate::raster::{RenderOptions, render, render_backward};
+    use crate::scene::{Fill, FillRule, Node, Paint, Path, Scene};
 
     /// The options with exact overlaps on.
     fn exact() -> RenderOptions {
@@ -1026,7 +1072,11 @@ mod tests {
                         "{name} even-odd {evenodd}: pixel {i} {g} vs sampled {r}"
                     );
                 }
-                let mae = got.iter().zip(&want).map(|(g, r)| (g - r).abs()).sum::<f64>()
+                let mae = got
+                    .iter()
+                    .zip(&want)
+                    .map(|(g, r)| (g - r).abs())
+                    .sum::<f64>()
                     / got.len() as f64;
                 assert!(mae < 2e-3, "{name} even-odd {evenodd}: MAE {mae}");
             }
@@ -1041,9 +1091,19 @@ mod tests {
         let s = scene(4, 4, &[a, b], false);
         assert_eq!(active_cells(&s), 0);
         let img = alpha(&s);
-        assert!((img[5] - 1.0).abs() < 1e-6 && (img[6] - 0.25).abs() < 1e-6, "{img:?}");
-        let p = prepare(&s, 0.02, None);
+        assert!(
+            (img[5] - 1.0).abs() < 1e-6 && (img[6] - 0.25).abs() < 1e-6,
+            "{img:?}"
+        );
+        let p = crate::raster::Prepared::new(&s, &exact());
         assert!(p.items[0].can_overlap);
+        let apart = scene(
+            4,
+            4,
+            &[rect(0.2, 0.2, 0.8, 0.8), rect(1.2, 1.2, 2.8, 2.8)],
+            false,
+        );
+        assert!(!crate::raster::Prepared::new(&apart, &exact()).items[0].can_overlap);
         // Off (the default), the clamped integral everywhere: the same values here.
         let off = render(&s, &RenderOptions::default());
         assert!((off.data[5][3] as f64 - img[5]).abs() < 1e-6);
@@ -1056,7 +1116,11 @@ mod tests {
             let rings = vec![rect(1.0, 1.0, 1.5, 3.0); copies];
             let a = alpha(&scene(4, 4, &rings, false));
             assert!(a.iter().all(|v| v.is_finite()));
-            let want = if copies <= SAMPLED_PIECES / 2 { 0.5 } else { 1.0 };
+            let want = if copies <= SAMPLED_PIECES / 2 {
+                0.5
+            } else {
+                1.0
+            };
             assert!((a[5] - want).abs() < 1e-6, "{copies}: {a:?}");
         }
     }
@@ -1153,19 +1217,47 @@ mod tests {
         assert!(!ring_is_convex(&star));
         let bowtie = [[0.0, 0.0], [2.0, 2.0], [2.0, 0.0], [0.0, 2.0]];
         assert!(!ring_is_convex(&bowtie));
-        let l = [[0.0, 0.0], [2.0, 0.0], [2.0, 1.0], [1.0, 1.0], [1.0, 2.0], [0.0, 2.0]];
+        let l = [
+            [0.0, 0.0],
+            [2.0, 0.0],
+            [2.0, 1.0],
+            [1.0, 1.0],
+            [1.0, 2.0],
+            [0.0, 2.0],
+        ];
         assert!(!ring_is_convex(&l));
         // Repeated and collinear vertices.
-        let sq2 = [[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0]];
+        let sq2 = [
+            [0.0, 0.0],
+            [1.0, 0.0],
+            [2.0, 0.0],
+            [2.0, 0.0],
+            [2.0, 2.0],
+            [0.0, 2.0],
+        ];
         assert!(ring_is_convex(&sq2));
         let back = [[0.0, 0.0], [2.0, 0.0], [1.0, 0.0], [1.0, 1.0]];
         assert!(!ring_is_convex(&back));
         // Monotone in y and simple: a chevron; its sides crossed: a bow-tie on its side.
-        let chevron = [[0.0, 0.0], [1.0, 1.0], [0.0, 2.0], [3.0, 2.0], [2.0, 1.0], [3.0, 0.0]];
+        let chevron = [
+            [0.0, 0.0],
+            [1.0, 1.0],
+            [0.0, 2.0],
+            [3.0, 2.0],
+            [2.0, 1.0],
+            [3.0, 0.0],
+        ];
         assert!(!ring_is_convex(&chevron) && ring_is_y_monotone_simple(&chevron));
         let crossed = [[0.0, 0.0], [3.0, 2.0], [0.0, 2.0], [3.0, 0.0]];
         assert!(!ring_is_y_monotone_simple(&crossed));
-        let hourglass = [[0.0, 0.0], [2.0, 0.0], [0.5, 1.0], [2.0, 2.0], [0.0, 2.0], [1.5, 1.0]];
+        let hourglass = [
+            [0.0, 0.0],
+            [2.0, 0.0],
+            [0.5, 1.0],
+            [2.0, 2.0],
+            [0.0, 2.0],
+            [1.5, 1.0],
+        ];
         assert!(!ring_is_y_monotone_simple(&hourglass));
         let star: Vec<Point> = (0..5)
             .map(|k| {
@@ -1176,11 +1268,23 @@ mod tests {
         assert!(!ring_is_y_monotone_simple(&star));
         // Rings apart, and rings sharing a pixel.
         let pts = [
-            [0.2, 0.2], [1.8, 0.2], [1.8, 1.8], [0.2, 1.8],
-            [3.2, 0.2], [4.8, 0.2], [4.8, 1.8],
+            [0.2, 0.2],
+            [1.8, 0.2],
+            [1.8, 1.8],
+            [0.2, 1.8],
+            [3.2, 0.2],
+            [4.8, 0.2],
+            [4.8, 1.8],
         ];
         assert!(rings_cannot_overlap(&pts, &[(0, 4), (4, 3)]));
-        let near = [[0.2, 0.2], [1.8, 0.2], [1.8, 1.8], [1.9, 0.2], [3.8, 0.2], [3.8, 1.8]];
+        let near = [
+            [0.2, 0.2],
+            [1.8, 0.2],
+            [1.8, 1.8],
+            [1.9, 0.2],
+            [3.8, 0.2],
+            [3.8, 1.8],
+        ];
         assert!(!rings_cannot_overlap(&near, &[(0, 3), (3, 3)]));
     }
 }

@@ -229,8 +229,19 @@ impl Prepared {
     /// `opts.tolerance` with chord counts chosen from the scene as it is now.
     pub fn new(scene: &Scene, opts: &super::RenderOptions) -> Prepared {
         let mut p = prepare(scene, opts.tolerance, None);
-        p.exact_overlaps = opts.exact_overlaps;
+        p.set_exact_overlaps(opts.exact_overlaps);
         p
+    }
+
+    /// Turns [`RenderOptions::exact_overlaps`](super::RenderOptions::exact_overlaps) on
+    /// or off; on, finds which items can overlap themselves ([`Item::can_overlap`]).
+    pub(crate) fn set_exact_overlaps(&mut self, on: bool) {
+        self.exact_overlaps = on;
+        if on {
+            for it in &mut self.items {
+                it.can_overlap = !super::overlap::rings_cannot_overlap(&it.pts, &it.rings);
+            }
+        }
     }
 
     /// Canvas size in pixels, `(width, height)`.
@@ -730,10 +741,10 @@ fn item(
                 || (a[1] == b[1] && a[1] == floor_f64(a[1]));
         }
     }
-    let can_overlap = !super::overlap::rings_cannot_overlap(&pts, &rings);
     Some(Item {
         grid_aligned,
-        can_overlap,
+        // Found by `Prepared::set_exact_overlaps` when it is asked for.
+        can_overlap: true,
         path,
         kind,
         runs: edge_runs(&pts, &rings),

@@ -40,7 +40,7 @@ pub(crate) const BAND_ROWS: usize = crate::loss::SUM_ROWS;
 /// inside the (flattened) shape.
 pub fn render(scene: &Scene, opts: &RenderOptions) -> Image {
     let mut p = prepare_forward(scene, opts.tolerance);
-    p.exact_overlaps = opts.exact_overlaps;
+    p.set_exact_overlaps(opts.exact_overlaps);
     render_prepared(&p)
 }
 

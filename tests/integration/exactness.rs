@@ -28,11 +28,7 @@ fn alpha_sum(s: &Scene) -> f64 {
 }
 
 fn alpha_sum_with(s: &Scene, opts: &RenderOptions) -> f64 {
-    render(s, opts)
-        .data
-        .iter()
-        .map(|p| p[3] as f64)
-        .sum()
+    render(s, opts).data.iter().map(|p| p[3] as f64).sum()
 }
 
 #[test]
