@@ -16,7 +16,7 @@ pub struct RenderOptions {
     /// Largest distance between a curve and its flattened chords, in device pixels.
     pub tolerance: f64,
     /// Integrate exactly the pixels where a path overlaps itself (issue 29,
-    /// [`overlap`](super::overlap)); off: the clamped winding integral there, as before.
+    /// `raster/overlap.rs`); off: the clamped winding integral there, as before.
     /// Off by default until its gradient agrees with finite differences at edges lying on
     /// pixel lines beside an overlap and in pixels of more than 32 edge pieces (see
     /// docs/parity.md).
