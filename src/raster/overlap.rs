@@ -6,8 +6,8 @@
 //! or two of its rings share a pixel, it can take three or more, and the clamped integral
 //! over-covers (two coincident half-covering rectangles in one path give 1.0, not 0.5).
 //!
-//! **Which cells.** Only items that can overlap look ([`Item::can_overlap`]: everything but
-//! a single convex ring). While a band is accumulated, each cell an edge crosses keeps the
+//! **Which cells.** Only items that can overlap look ([`Item::can_overlap`]: anything but
+//! simple rings, convex or monotone in y, that share no pixel with each other). While a band is accumulated, each cell an edge crosses keeps the
 //! chain of consecutive edges of one ring that passed through it: a second chain, or a
 //! chain that turns back in both x and y, makes the cell a candidate. (One chain monotone
 //! in x or in y crosses the cell once and splits it into two regions of adjacent winding:
