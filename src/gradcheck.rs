@@ -73,7 +73,9 @@ fn loss_fixed(
     counts: &[Vec<u32>],
     background: Option<[f32; 4]>,
 ) -> f64 {
-    let mut img = render_prepared(&prepare(scene, opts.tolerance, Some(counts)));
+    let mut p = prepare(scene, opts.tolerance, Some(counts));
+    p.set_exact_overlaps(opts.exact_overlaps);
+    let mut img = render_prepared(&p);
     if let Some(bg) = background {
         img.over_background(bg);
     }
@@ -89,7 +91,8 @@ pub fn analytic(
     opts: &RenderOptions,
     background: Option<[f32; 4]>,
 ) -> (f64, Vec<f64>) {
-    let p = prepare(scene, opts.tolerance, None);
+    let mut p = prepare(scene, opts.tolerance, None);
+    p.set_exact_overlaps(opts.exact_overlaps);
     let mut img = render_prepared(&p);
     if let Some(bg) = background {
         img.over_background(bg);

@@ -51,6 +51,17 @@ pub fn render_resvg_pixmap(
     sizing: Sizing,
 ) -> Result<tiny_skia::Pixmap> {
     let (w, h, t) = canvas_size(tree, sizing, name)?;
+    render_transformed(tree, name, w, h, t)
+}
+
+/// resvg's rendering of `tree` through the device transform `t` onto a `w × h` canvas.
+fn render_transformed(
+    tree: &usvg::Tree,
+    name: &Path,
+    w: u32,
+    h: u32,
+    t: crate::scene::Affine,
+) -> Result<tiny_skia::Pixmap> {
     let cannot = |why: String| Error::Unsupported {
         path: name.to_path_buf(),
         what: format!("resvg cannot render this file: {why}"),
@@ -154,6 +165,66 @@ impl std::fmt::Display for ParityError {
 }
 
 impl std::error::Error for ParityError {}
+
+/// A box-filtered reference: resvg renders the tree `factor` times larger in each
+/// direction and each pixel is the mean of its `factor × factor` pixels (premultiplied),
+/// at the canvas [`render_resvg`] gives. With `factor` 16 its own anti-aliasing errors
+/// shrink to a sixteenth of a pixel: what the exactness of both renderers is measured
+/// against (`diffsvg parity --supersampled 16`).
+pub fn render_resvg_supersampled(
+    tree: &usvg::Tree,
+    name: &Path,
+    sizing: Sizing,
+    factor: u32,
+) -> Result<Image> {
+    let (w, h, t) = canvas_size(tree, sizing, name)?;
+    let f = factor.clamp(1, 64);
+    let k = f as f64;
+    let big_t = [t[0] * k, t[1] * k, t[2] * k, t[3] * k, t[4] * k, t[5] * k];
+    let big = render_transformed(tree, name, w * f, h * f, big_t)?;
+    let bw = big.width() as usize;
+    let data = big.data();
+    let mut out = Image::new(w, h);
+    let scale = 1.0 / (255.0 * (f * f) as f32);
+    for y in 0..h as usize {
+        for x in 0..w as usize {
+            let mut acc = [0u32; 4];
+            for sy in 0..f as usize {
+                let row = (y * f as usize + sy) * bw;
+                for sx in 0..f as usize {
+                    let k = 4 * (row + x * f as usize + sx);
+                    for c in 0..4 {
+                        acc[c] += data[k + c] as u32;
+                    }
+                }
+            }
+            out.data[y * w as usize + x] = acc.map(|v| v as f32 * scale);
+        }
+    }
+    Ok(out)
+}
+
+/// Mean absolute difference in 0–255 levels of diffsvg's (with `opts`) and resvg's
+/// renderings of the file at `path` against [`render_resvg_supersampled`] with `factor`,
+/// as `(diffsvg, resvg)`; both are quantized to 8 bits first, as parity compares them.
+pub fn supersampled_mae(
+    path: &Path,
+    sizing: Sizing,
+    opts: &crate::raster::RenderOptions,
+    fonts: &Fonts,
+    factor: u32,
+) -> Result<(f64, f64)> {
+    let data = crate::image_io::read_bounded(path, crate::limits::MAX_FILE_BYTES)?;
+    let tree = crate::scene::svg_in::parse_tree_with(&data, path, fonts)?;
+    let scene = crate::scene::svg_in::from_tree(&tree, path, sizing)?;
+    let ours = crate::raster::render(&scene, opts).quantized();
+    let theirs = render_resvg(&tree, path, sizing)?;
+    let reference = render_resvg_supersampled(&tree, path, sizing, factor)?.quantized();
+    Ok((
+        crate::metrics::compare(&ours, &reference).mae,
+        crate::metrics::compare(&theirs, &reference).mae,
+    ))
+}
 
 /// Renders the SVG file at `path` with diffsvg and with resvg at the same size (`<text>`
 /// in the bundled fonts).

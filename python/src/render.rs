@@ -23,7 +23,10 @@ pub(crate) fn options(tolerance: f64) -> PyResult<RenderOptions> {
             "tolerance {tolerance} must be in (0, 10] pixels"
         )));
     }
-    Ok(RenderOptions { tolerance })
+    Ok(RenderOptions {
+        tolerance,
+        exact_overlaps: false,
+    })
 }
 
 /// Renders `scene` into a `(height, width, 4)` `float32` array of **premultiplied** RGBA

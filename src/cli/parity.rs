@@ -32,6 +32,12 @@ pub struct Args {
     /// Write `ours | resvg | difference` images of failing files into this folder.
     #[arg(long)]
     failures: Option<PathBuf>,
+    /// Instead of the pass rates: the MAE (0–255 levels) of diffsvg (as it renders by
+    /// default, and with `RenderOptions::exact_overlaps`) and of resvg against
+    /// resvg rendered N times larger and box-filtered down (N × N samples per pixel), one
+    /// row per file and the means, as a Markdown table (to `--report` as well).
+    #[arg(long, value_name = "N")]
+    supersampled: Option<u32>,
 }
 
 /// What happened to one file.
@@ -107,6 +113,72 @@ impl Args {
     }
 }
 
+/// `diffsvg parity --supersampled N`: both renderers' MAE against the box-filtered
+/// reference, per file.
+fn supersampled(
+    a: &Args,
+    files: &[PathBuf],
+    sizing: diffsvg::Sizing,
+    fonts: &Fonts,
+    factor: u32,
+) -> Result<()> {
+    use diffsvg::reference::supersampled_mae;
+    use rayon::prelude::*;
+    let (clamped, exact) = (
+        RenderOptions::default(),
+        RenderOptions {
+            exact_overlaps: true,
+            ..RenderOptions::default()
+        },
+    );
+    type Row = diffsvg::Result<[f64; 3]>;
+    let rows: Vec<(PathBuf, Row)> = files
+        .par_iter()
+        .map(|f| {
+            let r = supersampled_mae(f, sizing, &clamped, fonts, factor).and_then(|(a, c)| {
+                let (b, _) = supersampled_mae(f, sizing, &exact, fonts, factor)?;
+                Ok([a, b, c])
+            });
+            (f.clone(), r)
+        })
+        .collect();
+    let mut table = String::from(
+        "| file | diffsvg MAE | diffsvg, exact overlaps | resvg MAE |\n|---|---:|---:|---:|\n",
+    );
+    let (mut sums, mut n) = ([0.0f64; 3], 0usize);
+    for (f, r) in &rows {
+        match r {
+            Ok(m) => {
+                table += &format!(
+                    "| {} | {:.3} | {:.3} | {:.3} |\n",
+                    f.display(),
+                    m[0],
+                    m[1],
+                    m[2]
+                );
+                for k in 0..3 {
+                    sums[k] += m[k];
+                }
+                n += 1;
+            }
+            Err(e) => println!("SKIPPED {e}"),
+        }
+    }
+    if n > 0 {
+        let mean = sums.map(|v| v / n as f64);
+        table += &format!(
+            "| mean of {n} files | {:.3} | {:.3} | {:.3} |\n",
+            mean[0], mean[1], mean[2]
+        );
+    }
+    print!("{table}");
+    if let Some(path) = &a.report {
+        std::fs::write(path, &table)
+            .with_context(|| format!("{}: cannot write", path.display()))?;
+    }
+    Ok(())
+}
+
 /// Runs `diffsvg parity`.
 pub fn run(a: Args) -> Result<()> {
     use rayon::prelude::*;
@@ -115,6 +187,9 @@ pub fn run(a: Args) -> Result<()> {
     let fonts = a.fonts();
     // Built once, before the files are shared out, so that a bad font flag is one error.
     fonts.database()?;
+    if let Some(factor) = a.supersampled {
+        return supersampled(&a, &files, sizing, &fonts, factor);
+    }
     let outcomes: Vec<(PathBuf, Outcome)> = files
         .par_iter()
         .map(|f| (f.clone(), check(f, sizing, &fonts)))

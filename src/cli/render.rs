@@ -47,6 +47,7 @@ pub fn run(a: Args) -> Result<()> {
     let tree = parse_tree_with(&data, &a.input, &a.fonts.fonts())?;
     let scene = from_tree(&tree, &a.input, sizing)?;
     let opts = RenderOptions {
+        exact_overlaps: false,
         tolerance: a.tolerance,
     };
     super::util::warn_about(&scene, &a.input, &opts);

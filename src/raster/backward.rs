@@ -31,6 +31,7 @@ use rayon::prelude::*;
 
 use super::coverage::{Cells, backward_line, coverage_row, coverage_slopes_row};
 use super::layer::{apply_mask, apply_mask_backward, composite_backward, composite_layer};
+use super::overlap::{Overlaps, Portion, portion_weight};
 use super::paint::PaintEval;
 use super::prepare::{ItemKind, Op, Prepared, item_rect, prepare, stroke_outline};
 use super::render::{
@@ -49,7 +50,7 @@ pub fn render_and_backward(
     opts: &RenderOptions,
     loss: impl FnOnce(&Image) -> (f64, Image),
 ) -> (Image, f64, Vec<f64>) {
-    let prepared = prepare(scene, opts.tolerance, None);
+    let prepared = Prepared::new(scene, opts);
     let img = super::render::render_prepared(&prepared);
     let (l, d) = loss(&img);
     let g = backward_prepared(scene, &prepared, &d);
@@ -59,7 +60,7 @@ pub fn render_and_backward(
 /// The gradient of a loss with respect to every parameter of `scene` (in
 /// [`Scene::params`] order), given `d_image = ∂L/∂image`.
 pub fn render_backward(scene: &Scene, opts: &RenderOptions, d_image: &Image) -> Vec<f64> {
-    backward_prepared(scene, &prepare(scene, opts.tolerance, None), d_image)
+    backward_prepared(scene, &Prepared::new(scene, opts), d_image)
 }
 
 /// [`render_backward`] after [`check_backward_memory`], preparing the scene once for both:
@@ -70,7 +71,7 @@ pub fn render_backward_checked(
     d_image: &Image,
     name: &std::path::Path,
 ) -> crate::Result<Vec<f64>> {
-    let p = prepare(scene, opts.tolerance, None);
+    let p = Prepared::new(scene, opts);
     check_prepared(&p, name)?;
     Ok(backward_prepared(scene, &p, d_image))
 }
@@ -209,6 +210,9 @@ struct TapeCell {
     /// One-sided slopes of the coverage rule at the winding integral (−1, 0 or 1).
     up: i8,
     down: i8,
+    /// Whether the coverage is exact ([`overlap`](super::overlap)): the gradient goes
+    /// through the cell's portions, not its slopes.
+    exact: bool,
     /// Color below the item.
     below: [f32; 4],
 }
@@ -224,6 +228,8 @@ enum Rec {
         /// so that memory follows the pixels a shape's boundary and interior cover, not
         /// its box.
         cells: std::ops::Range<usize>,
+        /// The range of the band's exact cells ([`ExactRec`]) of this item.
+        exact: std::ops::Range<usize>,
     },
     Push,
     Pop {
@@ -248,6 +254,14 @@ enum Rec {
     },
     /// A mask drawing nothing in this band made the layer below it transparent.
     ZeroMask,
+}
+
+/// A cell of exact coverage kept by the replay: its winding level and its portions, a
+/// range of the band's record of portions.
+#[derive(Clone, Copy)]
+struct ExactRec {
+    w0: i32,
+    portions: (u32, u32),
 }
 
 /// Like [`render_backward`], reusing a prepared scene (which must come from `scene`).
@@ -691,6 +705,7 @@ fn record_row(
     item: &super::prepare::Item,
     wrow: &[f32],
     sc: &mut RowScratch,
+    ov: &mut Overlaps,
     dst: &mut [[f32; 4]],
     x0: usize,
     y: usize,
@@ -702,6 +717,19 @@ fn record_row(
     let colors = &mut sc.colors[..n];
     coverage_row(wrow, item.evenodd, covs);
     coverage_slopes_row(wrow, item.evenodd, ups, downs);
+    // Cells of exact coverage: recorded whatever their values, with no slopes (their
+    // gradient goes through their pieces' portions).
+    let exact = if ov.has_row(row) {
+        let range = ov.resolve_row(row, wrow, item.evenodd, covs);
+        &ov.cells[range]
+    } else {
+        &[]
+    };
+    let mut next_exact = exact
+        .iter()
+        .filter(|c| c.active)
+        .map(|c| c.col as usize)
+        .peekable();
     // A gradient's colors only where some coverage is (where `over` reads them), over
     // the same columns as the forward pass's `composite_row`, so the bits agree.
     match &item.paint {
@@ -713,11 +741,16 @@ fn record_row(
         }
     }
     for col in 0..n {
-        if wrow[col] == 0.0 && !item.grid_aligned {
+        let is_exact = next_exact.next_if_eq(&col).is_some();
+        if wrow[col] == 0.0 && !item.grid_aligned && !is_exact {
             continue;
         }
-        let (cov, up, down) = (covs[col], ups[col], downs[col]);
-        if cov == 0.0 && up == 0.0 && down == 0.0 {
+        let (cov, up, down) = if is_exact {
+            (covs[col], 0.0, 0.0)
+        } else {
+            (covs[col], ups[col], downs[col])
+        };
+        if cov == 0.0 && up == 0.0 && down == 0.0 && !is_exact {
             continue;
         }
         let d = &mut dst[col];
@@ -727,6 +760,7 @@ fn record_row(
             cov,
             up: up as i8,
             down: down as i8,
+            exact: is_exact,
             below: *d,
         });
         if cov > 0.0 {
@@ -746,6 +780,8 @@ fn band_backward(
 ) -> BandGrads {
     // 1. Render, recording.
     let mut r = BandRenderer::new(p, y0, rows);
+    r.for_backward = true;
+    let (mut ex_cells, mut ex_portions): (Vec<ExactRec>, Vec<Portion>) = (Vec::new(), Vec::new());
     let base_area = r.band_area();
     let mut layers: Vec<(Area, Vec<[f32; 4]>)> = Vec::new();
     let mut tape: Vec<Rec> = Vec::new();
@@ -774,14 +810,26 @@ fn band_backward(
                 let (x0, first) = (shape.x0 as usize, cells.len());
                 for row in 0..shape.h {
                     let y = shape.y0 as usize + row;
-                    let (wrow, sc) = r.take_row(row);
+                    let (wrow, sc, ov) = r.take_row(row);
                     let dst = &mut target[area.index(x0, y)..][..wrow.len()];
-                    record_row(item, wrow, sc, dst, x0, y, row, &mut cells);
+                    record_row(item, wrow, sc, ov, dst, x0, y, row, &mut cells);
+                }
+                let ex_first = ex_cells.len();
+                for c in r.overlaps.cells.iter().filter(|c| c.active) {
+                    let at = ex_portions.len() as u32;
+                    ex_portions.extend_from_slice(
+                        &r.overlaps.portions[c.portions.0 as usize..c.portions.1 as usize],
+                    );
+                    ex_cells.push(ExactRec {
+                        w0: c.w0,
+                        portions: (at, ex_portions.len() as u32),
+                    });
                 }
                 tape.push(Rec::Draw {
                     item: ix,
                     acc: shape,
                     cells: first..cells.len(),
+                    exact: ex_first..ex_cells.len(),
                 });
             }
             Op::Push | Op::PushMask => {
@@ -860,11 +908,15 @@ fn band_backward(
             })
             .sum::<usize>()
             + cells.len() * std::mem::size_of::<TapeCell>()
+            + ex_cells.len() * std::mem::size_of::<ExactRec>()
+            + ex_portions.len() * std::mem::size_of::<Portion>()
             + 2 * d_out.len() * 16,
         ..BandGrads::default()
     };
     let mut g_stack: Vec<(Area, Vec<[f32; 4]>)> = vec![(base_area, d_out)];
     let mut gw = Cells::<[f32; 2]>::default();
+    // `∂L/∂cov` of the current item's exact cells, in their order.
+    let mut exact_g: Vec<f32> = Vec::new();
     for rec in tape.iter().rev() {
         match rec {
             Rec::Pop {
@@ -919,7 +971,9 @@ fn band_backward(
                 item,
                 acc,
                 cells: range,
+                exact,
             } => {
+                exact_g.clear();
                 let it = &p.items[*item];
                 let (ga, g) = g_stack.last_mut().expect("layer gradient");
                 let ga = *ga;
@@ -957,7 +1011,10 @@ fn band_backward(
                     let d = cell.below;
                     let gd: f32 = (0..4).map(|c| go[c] * d[c]).sum();
                     // Inside a shape both slopes are 0: `gw` keeps its zero.
-                    if cell.up != 0 || cell.down != 0 {
+                    if cell.exact {
+                        let gsrc: f32 = (0..4).map(|c| go[c] * s[c]).sum();
+                        exact_g.push(gsrc - s[3] * gd);
+                    } else if cell.up != 0 || cell.down != 0 {
                         let gsrc: f32 = (0..4).map(|c| go[c] * s[c]).sum();
                         let g_cov = gsrc - s[3] * gd;
                         gw.data[row * acc.w + col] =
@@ -1004,6 +1061,25 @@ fn band_backward(
                         verts.push((ib as u32, db));
                     }
                 });
+                // Exact cells: each portion of a piece by its own weight.
+                for (e, &g_cov) in ex_cells[exact.clone()].iter().zip(&exact_g) {
+                    if g_cov == 0.0 {
+                        continue;
+                    }
+                    for q in &ex_portions[e.portions.0 as usize..e.portions.1 as usize] {
+                        let w = portion_weight(e.w0.saturating_add(q.rel_lo), it.evenodd);
+                        let scale = g_cov as f64 * w * if q.half { 0.5 } else { 1.0 };
+                        if scale == 0.0 {
+                            continue;
+                        }
+                        let (a, b) = (it.pts[q.a as usize], it.pts[q.b as usize]);
+                        let n = [-(b[1] - a[1]), b[0] - a[0]];
+                        let it1 = 0.5 * (q.t1 * q.t1 - q.t0 * q.t0);
+                        let (s0, s1) = (scale * ((q.t1 - q.t0) - it1), scale * it1);
+                        verts.push((q.a, [s0 * n[0], s0 * n[1]]));
+                        verts.push((q.b, [s1 * n[0], s1 * n[1]]));
+                    }
+                }
                 for cell in item_cells {
                     if cell.up != 0 || cell.down != 0 {
                         gw.data[cell.row as usize * acc.w + cell.col as usize] = [0.0; 2];

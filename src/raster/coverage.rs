@@ -4,7 +4,8 @@
 //! area to that cell and carries the rest of its height (the "cover") to the next cell;
 //! a prefix sum along each row then gives, per pixel, the integral of the winding number
 //! over the pixel square: the exact box-filtered coverage of the polygon wherever edges do
-//! not overlap inside a pixel. A segment going down (y increasing) counts +1.
+//! not overlap inside a pixel (where they do, [`overlap`](super::overlap) can integrate
+//! the pixel exactly instead). A segment going down (y increasing) counts +1.
 //!
 //! **Backward.** Let `G(p) = ∂L/∂w(p)` be the loss gradient with respect to the winding
 //! integral of pixel `p`. Moving the boundary by a velocity field `v` changes `Σ G·w` by
@@ -304,7 +305,12 @@ fn line_weights(g: &Cells<[f32; 2]>, p0: Point, p1: Point, dx: f64, dy: f64) -> 
 /// The parameter range `[t0, t1] ⊆ [0, 1]` of the segment from `p0` along `(dx, dy)` inside
 /// the closed box `[xlo, ylo, xhi, yhi]` (boundary lines count: the cell inside may see a
 /// piece lying on them); `None` when it has no length there.
-fn clip_to_box(p0: Point, dx: f64, dy: f64, [xlo, ylo, xhi, yhi]: [f64; 4]) -> Option<(f64, f64)> {
+pub(crate) fn clip_to_box(
+    p0: Point,
+    dx: f64,
+    dy: f64,
+    [xlo, ylo, xhi, yhi]: [f64; 4],
+) -> Option<(f64, f64)> {
     let (mut t0, mut t1) = (0.0f64, 1.0f64);
     for (o, d, lo, hi) in [(p0[0], dx, xlo, xhi), (p0[1], dy, ylo, yhi)] {
         if d == 0.0 {

@@ -34,6 +34,7 @@ pub(crate) mod flatten;
 pub(crate) mod image;
 pub(crate) mod jet;
 pub(crate) mod layer;
+pub(crate) mod overlap;
 pub(crate) mod paint;
 pub(crate) mod pixmap;
 pub(crate) mod prepare;

@@ -47,6 +47,11 @@ pub(crate) struct Item {
     /// horizontal at integer y). Only then do pixels with a zero winding integral take
     /// part in the backward pass.
     pub(crate) grid_aligned: bool,
+    /// Whether the winding number can take more than two adjacent values inside one
+    /// pixel: anything but simple rings (convex, or monotone in y) apart from each other
+    /// ([`rings_cannot_overlap`](super::overlap::rings_cannot_overlap)). Only such items look for the cells whose
+    /// coverage [`overlap`](super::overlap) computes exactly.
+    pub(crate) can_overlap: bool,
 }
 
 /// Edges per run of [`Item::runs`].
@@ -214,6 +219,8 @@ pub struct Prepared {
     pub(crate) for_backward: bool,
     /// The flattening tolerance used, in device pixels.
     pub(crate) tolerance: f64,
+    /// [`RenderOptions::exact_overlaps`](super::RenderOptions::exact_overlaps).
+    pub(crate) exact_overlaps: bool,
 }
 
 impl Prepared {
@@ -221,7 +228,20 @@ impl Prepared {
     /// and [`backward_with_stats`](super::backward_with_stats) calls, flattened at
     /// `opts.tolerance` with chord counts chosen from the scene as it is now.
     pub fn new(scene: &Scene, opts: &super::RenderOptions) -> Prepared {
-        prepare(scene, opts.tolerance, None)
+        let mut p = prepare(scene, opts.tolerance, None);
+        p.set_exact_overlaps(opts.exact_overlaps);
+        p
+    }
+
+    /// Turns [`RenderOptions::exact_overlaps`](super::RenderOptions::exact_overlaps) on
+    /// or off; on, finds which items can overlap themselves ([`Item::can_overlap`]).
+    pub(crate) fn set_exact_overlaps(&mut self, on: bool) {
+        self.exact_overlaps = on;
+        if on {
+            for it in &mut self.items {
+                it.can_overlap = !super::overlap::rings_cannot_overlap(&it.pts, &it.rings);
+            }
+        }
     }
 
     /// Canvas size in pixels, `(width, height)`.
@@ -298,6 +318,7 @@ fn prepare_with(
         solid_dashes: Vec::new(),
         for_backward,
         tolerance,
+        exact_overlaps: false,
     };
     // Each path's geometry and items depend on that path alone: built in parallel (in
     // paint order, so the result is the same on any thread count), then placed by the
@@ -722,6 +743,8 @@ fn item(
     }
     Some(Item {
         grid_aligned,
+        // Found by `Prepared::set_exact_overlaps` when it is asked for.
+        can_overlap: true,
         path,
         kind,
         runs: edge_runs(&pts, &rings),

@@ -4,6 +4,7 @@ use rayon::prelude::*;
 
 use super::coverage::{Cells, accumulate_line, ceil_f64, coverage_row, floor_f64, integrate_rows};
 use super::layer::{apply_mask, composite_layer};
+use super::overlap::Overlaps;
 use super::paint::PaintEval;
 use super::prepare::{GroupSpan, Item, Op, Prepared, prepare_forward};
 use crate::image_io::Image;
@@ -15,12 +16,19 @@ use crate::scene::Scene;
 pub struct RenderOptions {
     /// Largest distance between a curve and its flattened chords, in device pixels.
     pub tolerance: f64,
+    /// Integrate exactly the pixels where a path overlaps itself (issue 29,
+    /// `raster/overlap.rs`); off: the clamped winding integral there, as before.
+    /// Off by default until its gradient agrees with finite differences at edges lying on
+    /// pixel lines beside an overlap and in pixels of more than 32 edge pieces (see
+    /// docs/parity.md).
+    pub exact_overlaps: bool,
 }
 
 impl Default for RenderOptions {
     fn default() -> Self {
         RenderOptions {
             tolerance: crate::scene::geom::DEFAULT_TOLERANCE,
+            exact_overlaps: false,
         }
     }
 }
@@ -32,7 +40,9 @@ pub(crate) const BAND_ROWS: usize = crate::loss::SUM_ROWS;
 /// are evaluated at pixel centers and coverage is the exact area of each pixel square
 /// inside the (flattened) shape.
 pub fn render(scene: &Scene, opts: &RenderOptions) -> Image {
-    render_prepared(&prepare_forward(scene, opts.tolerance))
+    let mut p = prepare_forward(scene, opts.tolerance);
+    p.set_exact_overlaps(opts.exact_overlaps);
+    render_prepared(&p)
 }
 
 /// Renders an already prepared scene.
@@ -133,6 +143,10 @@ pub(crate) struct BandRenderer<'a> {
     row: Vec<f32>,
     /// Per-row scratch.
     scratch: RowScratch,
+    /// The current item's cells of exact coverage ([`deltas`](Self::deltas) finds them).
+    pub(crate) overlaps: Overlaps,
+    /// Whether [`overlaps`](Self::overlaps) keeps what the backward pass needs.
+    pub(crate) for_backward: bool,
 }
 
 /// A band renderer's buffers, kept on each thread from one band to the next: a small
@@ -143,6 +157,7 @@ struct BandBuffers {
     acc: Vec<f32>,
     row: Vec<f32>,
     scratch: RowScratch,
+    overlaps: Overlaps,
 }
 
 thread_local! {
@@ -176,6 +191,8 @@ impl<'a> BandRenderer<'a> {
             clean: true,
             row: b.row,
             scratch: b.scratch,
+            overlaps: b.overlaps,
+            for_backward: false,
         }
     }
 
@@ -257,7 +274,7 @@ impl<'a> BandRenderer<'a> {
     /// Accumulates the winding integrals of `item` over the band into `self.acc`.
     /// Returns `false` when the item does not touch the band.
     pub(crate) fn winding(&mut self, item: &Item) -> bool {
-        if !self.deltas(item) {
+        if !self.deltas_with(item, false) {
             return false;
         }
         integrate_rows(&mut self.acc);
@@ -269,6 +286,11 @@ impl<'a> BandRenderer<'a> {
     /// row with [`take_row`](Self::take_row) (every row, which leaves `acc` clear).
     /// Returns `false` when the item does not touch the band.
     pub(crate) fn deltas(&mut self, item: &Item) -> bool {
+        self.deltas_with(item, true)
+    }
+
+    /// [`deltas`](Self::deltas), finding the cells of exact coverage when `exact`.
+    fn deltas_with(&mut self, item: &Item, exact: bool) -> bool {
         let w = self.p.width as f64;
         let b = item.bbox;
         if b[2] <= 0.0 || b[0] >= w {
@@ -300,13 +322,21 @@ impl<'a> BandRenderer<'a> {
                 accumulate_line(acc, a, c, w);
             }
         });
+        if exact && item.can_overlap && self.p.exact_overlaps {
+            let cols = acc.w.min(self.p.width as usize - acc.x0 as usize);
+            let (origin, rows) = ((acc.x0, acc.y0), acc.h);
+            self.overlaps
+                .find(item, origin, cols, rows, self.for_backward);
+        } else {
+            self.overlaps.clear();
+        }
         true
     }
 
     /// The winding integrals of row `r` of `acc` (after [`deltas`](Self::deltas)), over
     /// its columns inside the canvas, and scratch rows at least as long; the row's deltas
     /// are cleared.
-    pub(crate) fn take_row(&mut self, r: usize) -> (&[f32], &mut RowScratch) {
+    pub(crate) fn take_row(&mut self, r: usize) -> (&[f32], &mut RowScratch, &mut Overlaps) {
         let acc = &mut self.acc;
         let cols = acc.w.min(self.p.width as usize - acc.x0 as usize);
         if self.row.len() < acc.w {
@@ -321,7 +351,7 @@ impl<'a> BandRenderer<'a> {
             &mut acc.data[r * acc.w..(r + 1) * acc.w],
             &mut self.row[..acc.w],
         );
-        (&self.row[..cols], &mut self.scratch)
+        (&self.row[..cols], &mut self.scratch, &mut self.overlaps)
     }
 
     /// Draws one item source-over onto `target`, a layer covering `area` (which holds
@@ -333,9 +363,16 @@ impl<'a> BandRenderer<'a> {
         let (x0, y0) = (self.acc.x0 as usize, self.acc.y0 as usize);
         for r in 0..self.acc.h {
             let y = y0 + r;
-            let (row, sc) = self.take_row(r);
+            let (row, sc, ov) = self.take_row(r);
             let dst = &mut target[area.index(x0, y)..][..row.len()];
-            composite_row(item, row, &mut sc.covs, &mut sc.colors, dst, x0, y);
+            if ov.has_row(r) {
+                let covs = &mut sc.covs[..row.len()];
+                coverage_row(row, item.evenodd, covs);
+                ov.resolve_row(r, row, item.evenodd, covs);
+                composite_covs(item, covs, &mut sc.colors, dst, x0, y);
+            } else {
+                composite_row(item, row, &mut sc.covs, &mut sc.colors, dst, x0, y);
+            }
         }
     }
 }
@@ -378,6 +415,7 @@ impl Drop for BandRenderer<'_> {
             acc,
             row: std::mem::take(&mut self.row),
             scratch: std::mem::take(&mut self.scratch),
+            overlaps: std::mem::take(&mut self.overlaps),
         };
         BAND_BUFFERS.with(|b| *b.borrow_mut() = kept);
     }
@@ -449,8 +487,21 @@ pub(crate) fn composite_row(
     y: usize,
 ) {
     let covs = &mut covs[..row.len()];
-    let colors = &mut colors[..row.len()];
     coverage_row(row, item.evenodd, covs);
+    composite_covs(item, covs, colors, dst, x0, y);
+}
+
+/// [`composite_row`] from the row's coverages `covs`.
+#[inline]
+pub(crate) fn composite_covs(
+    item: &Item,
+    covs: &[f32],
+    colors: &mut [[f32; 4]],
+    dst: &mut [[f32; 4]],
+    x0: usize,
+    y: usize,
+) {
+    let colors = &mut colors[..covs.len()];
     if let PaintEval::Solid(solid) = &item.paint {
         // One color: no per-pixel position or paint call. Eight pixels at a time, runs
         // outside the shape are skipped and runs of an opaque color fully inside it are

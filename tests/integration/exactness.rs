@@ -24,11 +24,11 @@ fn polygon_scene(w: u32, h: u32, rings: &[Vec<Point>], rule: FillRule) -> Scene 
 }
 
 fn alpha_sum(s: &Scene) -> f64 {
-    render(s, &RenderOptions::default())
-        .data
-        .iter()
-        .map(|p| p[3] as f64)
-        .sum()
+    alpha_sum_with(s, &RenderOptions::default())
+}
+
+fn alpha_sum_with(s: &Scene, opts: &RenderOptions) -> f64 {
+    render(s, opts).data.iter().map(|p| p[3] as f64).sum()
 }
 
 #[test]
@@ -148,11 +148,24 @@ fn check_against_supersampling(
     rings: Vec<Vec<Point>>,
     rule: FillRule,
 ) -> Result<(), TestCaseError> {
+    check_against_supersampling_with(rings, rule, &RenderOptions::default())
+}
+
+/// Issue 29's option: pixels where a path overlaps itself integrated exactly.
+fn exact_overlaps() -> RenderOptions {
+    RenderOptions {
+        exact_overlaps: true,
+        ..RenderOptions::default()
+    }
+}
+
+fn check_against_supersampling_with(
+    rings: Vec<Vec<Point>>,
+    rule: FillRule,
+    opts: &RenderOptions,
+) -> Result<(), TestCaseError> {
     let (w, h) = (12, 12);
-    let img = render(
-        &polygon_scene(w, h, &rings, rule),
-        &RenderOptions::default(),
-    );
+    let img = render(&polygon_scene(w, h, &rings, rule), opts);
     let reference = supersampled(w, h, &rings, rule);
     let mut sum = 0.0;
     for (i, (p, r)) in img.data.iter().zip(&reference).enumerate() {
@@ -207,4 +220,33 @@ proptest! {
         let rule = if evenodd { FillRule::EvenOdd } else { FillRule::NonZero };
         check_against_supersampling(vec![outer_ring, hole], rule)?;
     }
+
+    /// Issue 29: polygons whose vertices come in any order cross themselves; with a
+    /// second ring laid over them, pixels hold three or more winding values.
+    #[test]
+    fn self_overlapping_polygons_match_supersampling(
+        a in prop::collection::vec((0.5f64..11.5, 0.5f64..11.5), 4..8),
+        b in prop::collection::vec((0.5f64..11.5, 0.5f64..11.5), 3..5),
+        evenodd in any::<bool>(),
+    ) {
+        let ring = |v: &[(f64, f64)]| v.iter().map(|&(x, y)| [x, y]).collect::<Vec<Point>>();
+        let rule = if evenodd { FillRule::EvenOdd } else { FillRule::NonZero };
+        check_against_supersampling_with(vec![ring(&a), ring(&b)], rule, &exact_overlaps())?;
+    }
+}
+
+/// Issue 29: two coincident rectangles in one path, each covering the left half of a
+/// column of pixels, cover half of each (not 1.0); under even-odd the doubled part is empty.
+#[test]
+fn test_issue_29_coincident_rectangles_cover_half() {
+    let r = vec![[2.0, 1.0], [2.5, 1.0], [2.5, 5.0], [2.0, 5.0]];
+    let rings = vec![r.clone(), r];
+    let opts = exact_overlaps();
+    let nonzero = alpha_sum_with(&polygon_scene(8, 8, &rings, FillRule::NonZero), &opts);
+    assert!((nonzero - 2.0).abs() < 1e-4, "{nonzero}");
+    // Without the option, the clamped integral over-covers (the limit issue 29 names).
+    let clamped = alpha_sum(&polygon_scene(8, 8, &rings, FillRule::NonZero));
+    assert!((clamped - 4.0).abs() < 1e-4, "{clamped}");
+    let evenodd = alpha_sum_with(&polygon_scene(8, 8, &rings, FillRule::EvenOdd), &opts);
+    assert!(evenodd.abs() < 1e-4, "{evenodd}");
 }

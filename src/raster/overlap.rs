@@ -1,0 +1,1290 @@
+//! Exact coverage in the pixels where a path overlaps itself.
+//!
+//! The accumulated winding integral `I = ∫_pixel w` ([`coverage`](super::coverage)) gives
+//! the exact coverage of `{w ≠ 0}` (nonzero) or `{w odd}` (even-odd) wherever the winding
+//! number takes at most two adjacent values inside the pixel. Where a path crosses itself,
+//! or two of its rings share a pixel, it can take three or more, and the clamped integral
+//! over-covers (two coincident half-covering rectangles in one path give 1.0, not 0.5).
+//!
+//! **Which cells.** Only items that can overlap look ([`Item::can_overlap`]: anything but
+//! simple rings, convex or monotone in y, that share no pixel with each other). While a band is accumulated, each cell an edge crosses keeps the
+//! chain of consecutive edges of one ring that passed through it: a second chain, or a
+//! chain that turns back in both x and y, makes the cell a candidate. (One chain monotone
+//! in x or in y crosses the cell once and splits it into two regions of adjacent winding:
+//! the integral is exact there.)
+//!
+//! **Exact area.** In a candidate cell the edges are clipped to the cell and the cell is
+//! cut into horizontal strips at every piece's end and every crossing of two pieces. In a
+//! strip no pieces cross: ordered by x, each gap between neighbours has one winding,
+//! relative to the winding just inside the cell's left side (which changes only where a
+//! piece leaves that side). That gives the area of each relative winding value, and the
+//! absolute level comes from the accumulated integral itself: `I = Σ area_r (w0 + rel_r)`,
+//! so `w0 = round(I − Σ area_r rel_r)` with no extra winding pass. Where the cell's
+//! windings span at most two adjacent values after all (a false candidate: a ring's start,
+//! a thin hole) the accumulated value is kept, bit for bit.
+//!
+//! **Gradient.** Moving a piece along its normal `N = (−dy, dx)` turns the area it sweeps
+//! from the winding on the side `N` points to (`w`) into the other (`w + 1`). For the
+//! winding integral every piece counts +1 (`coverage::backward_line`); for the exact
+//! coverage each portion of a piece between two strip lines counts
+//! `f(w + 1) − f(w) ∈ {−1, 0, 1}`, with `f` the fill rule's indicator: a portion buried
+//! inside an overlap counts 0. A piece lying on a grid line counts half in each cell beside
+//! it (the mean of the one-sided derivatives, as the accumulated backward does).
+//!
+//! **Off by default** ([`RenderOptions::exact_overlaps`](super::RenderOptions)): where an
+//! edge lies exactly on a pixel line beside an overlap, the cell on the other side of it
+//! keeps its accumulated slope, which can assume the wrong pair of windings (a derivative
+//! of 1 where moving the edge turns winding 1 into 2 and adds nothing), and sampled cells
+//! (below) get the exact-area derivative of their pieces rather than the derivative of
+//! the sampled coverage; three gradient checks of `tests/hard_cases.rs` disagree with
+//! central differences with it on. See docs/parity.md.
+//!
+//! **Bounds.** A cell with up to [`EXACT_PIECES`] pieces is exact (its pairwise crossings
+//! are `O(k²)`, its strips `O(k²)` sorts of `k`). Up to [`SAMPLED_PIECES`] the cell is
+//! integrated on [`SAMPLE_ROWS`] horizontal scanlines instead (exact along x, the midpoint
+//! rule along y; horizontal pieces then get no gradient). Beyond that the clamped integral
+//! is kept. Nothing is recorded for such a cell's pieces, so 20,000 coincident rings of
+//! one path cost one counter per piece and per cell, no more.
+
+use super::coverage::{clip_to_box, floor_f64};
+use super::prepare::Item;
+use crate::scene::Point;
+
+/// Pieces in one cell up to which its coverage is exact.
+pub(crate) const EXACT_PIECES: usize = 32;
+/// Pieces in one cell up to which its coverage is sampled on [`SAMPLE_ROWS`] scanlines
+/// (beyond, the clamped winding integral is kept).
+pub(crate) const SAMPLED_PIECES: usize = 1024;
+/// Scanlines per cell for cells of more than [`EXACT_PIECES`] pieces.
+pub(crate) const SAMPLE_ROWS: usize = 16;
+
+/// No vertex.
+const NONE: u32 = u32::MAX;
+
+/// What the candidate search keeps per cell.
+#[derive(Clone, Copy)]
+struct CellState {
+    /// Vertex where the cell's chain starts, when its first piece starts there.
+    head: u32,
+    /// Vertex where the cell's chain ends, when its last piece ends there.
+    tail: u32,
+    /// Pieces seen.
+    count: u32,
+    /// Directions seen along the chain: bits for +x, −x, +y, −y.
+    dirs: u8,
+    /// More than one chain, or a chain monotone in neither x nor y.
+    candidate: bool,
+    /// Index among the band's candidate cells, once numbered.
+    slot: u32,
+}
+
+impl Default for CellState {
+    fn default() -> Self {
+        CellState {
+            head: NONE,
+            tail: NONE,
+            count: 0,
+            dirs: 0,
+            candidate: false,
+            slot: NONE,
+        }
+    }
+}
+
+/// A cell whose coverage is computed here.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct ExactCell {
+    /// Row in the band's cell box.
+    pub(crate) row: u32,
+    /// Column in the band's cell box.
+    pub(crate) col: u32,
+    /// Its areas by relative winding, a range of [`Overlaps::hist`].
+    hist: (u32, u32),
+    /// Its pieces' portions, a range of [`Overlaps::portions`].
+    pub(crate) portions: (u32, u32),
+    /// Winding just inside the cell's top left corner (from [`Overlaps::resolve_row`]).
+    pub(crate) w0: i32,
+    /// Whether the exact coverage replaced the accumulated one (windings spanning more
+    /// than two adjacent values).
+    pub(crate) active: bool,
+}
+
+/// A portion of an edge inside one cell along which the winding on either side is
+/// constant.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Portion {
+    /// The edge's first vertex (index into the item's points).
+    pub(crate) a: u32,
+    /// The edge's second vertex.
+    pub(crate) b: u32,
+    /// Parameter range along the edge.
+    pub(crate) t0: f64,
+    pub(crate) t1: f64,
+    /// The lower of the two windings beside it, relative to the cell's `w0`.
+    pub(crate) rel_lo: i32,
+    /// It lies on a grid line: half its weight belongs to the cell on the other side.
+    pub(crate) half: bool,
+}
+
+/// An edge's piece inside a candidate cell.
+#[derive(Clone, Copy)]
+struct Piece {
+    slot: u32,
+    a: u32,
+    b: u32,
+    ta: f64,
+    tb: f64,
+    half: bool,
+}
+
+/// A piece in cell coordinates, for the area computation.
+#[derive(Clone, Copy)]
+struct Seg {
+    q0: Point,
+    q1: Point,
+    /// `+1` going down, `−1` up, 0 horizontal.
+    dir: i32,
+    /// Sign of the x direction.
+    sx: i32,
+    ylo: f64,
+    yhi: f64,
+}
+
+impl Seg {
+    fn x_at(&self, y: f64) -> f64 {
+        let (q0, q1) = (self.q0, self.q1);
+        q0[0] + (y - q0[1]) * (q1[0] - q0[0]) / (q1[1] - q0[1])
+    }
+}
+
+/// The exact cells of one item in one band, and the scratch that finds them.
+#[derive(Default)]
+pub(crate) struct Overlaps {
+    /// Candidate cells, row-major.
+    pub(crate) cells: Vec<ExactCell>,
+    /// `(relative winding, area)` of every cell, back to back.
+    hist: Vec<(i32, f64)>,
+    /// Portions of every cell (when asked for), back to back.
+    pub(crate) portions: Vec<Portion>,
+    /// Next cell for [`resolve_row`](Self::resolve_row).
+    next: usize,
+    state: Vec<CellState>,
+    touched: Vec<u32>,
+    /// Every piece of the item in the box, its cell's index in `slot`.
+    all: Vec<Piece>,
+    pieces: Vec<Piece>,
+    cuts: Vec<f64>,
+    found: Vec<u32>,
+    segs: Vec<Seg>,
+    ys: Vec<f64>,
+    order: Vec<(f64, usize)>,
+    last_portion: Vec<u32>,
+    left: Vec<(f64, i32)>,
+}
+
+impl Overlaps {
+    /// Forgets the previous item's cells.
+    #[inline]
+    pub(crate) fn clear(&mut self) {
+        if !self.cells.is_empty() {
+            self.cells.clear();
+            self.hist.clear();
+            self.portions.clear();
+        }
+        self.next = 0;
+    }
+
+    /// Finds the candidate cells of `item` inside the box of cells `cols × rows` whose
+    /// first cell is device pixel `(x0, y0)`, and their areas by relative winding;
+    /// with `portions`, also what the backward pass needs.
+    pub(crate) fn find(
+        &mut self,
+        item: &Item,
+        origin: (i64, i64),
+        cols: usize,
+        rows: usize,
+        portions: bool,
+    ) {
+        self.clear();
+        if !item.can_overlap || cols == 0 || rows == 0 {
+            return;
+        }
+        let (x0, y0) = (origin.0 as f64, origin.1 as f64);
+        let bx = [x0, y0, x0 + cols as f64, y0 + rows as f64];
+        if self.state.len() < cols * rows {
+            self.state.resize(cols * rows, CellState::default());
+        }
+        // 1. Candidates; every piece is kept (its cell in `slot` for now).
+        let (state, touched) = (&mut self.state, &mut self.touched);
+        let all = &mut self.all;
+        all.clear();
+        item.for_each_edge_near(bx[1], bx[3], |ia, ib| {
+            let (p, q) = (item.pts[ia], item.pts[ib]);
+            let bits = dir_bits(q[0] - p[0], q[1] - p[1]);
+            walk(p, q, bx, &mut |col, row, ta, tb| {
+                let k = row * cols + col;
+                all.push(Piece {
+                    slot: k as u32,
+                    a: ia as u32,
+                    b: ib as u32,
+                    ta,
+                    tb,
+                    half: false,
+                });
+                let s = &mut state[k];
+                let (ia, ib) = (ia as u32, ib as u32);
+                if s.count == 0 {
+                    touched.push(k as u32);
+                    s.head = if ta == 0.0 { ia } else { NONE };
+                    s.tail = if tb == 1.0 { ib } else { NONE };
+                } else if s.tail != NONE && s.tail == ia && ta == 0.0 {
+                    s.tail = if tb == 1.0 { ib } else { NONE };
+                } else if s.head != NONE && s.head == ib && tb == 1.0 {
+                    s.head = if ta == 0.0 { ia } else { NONE };
+                } else {
+                    s.candidate = true;
+                }
+                s.count = s.count.saturating_add(1);
+                s.dirs |= bits;
+                if s.dirs == 0b1111 {
+                    s.candidate = true;
+                }
+            });
+        });
+        let found = &mut self.found;
+        found.clear();
+        for &k in touched.iter() {
+            let s = &state[k as usize];
+            if s.candidate && s.count as usize <= SAMPLED_PIECES {
+                found.push(k);
+            }
+        }
+        if !found.is_empty() {
+            found.sort_unstable();
+            for (slot, &k) in found.iter().enumerate() {
+                state[k as usize].slot = slot as u32;
+            }
+            // 2. The candidates' pieces; a piece on a grid line also counts (half) in the
+            // cell on the line's other side.
+            let pieces = &mut self.pieces;
+            pieces.clear();
+            for piece in &self.all {
+                let k = piece.slot as usize;
+                let (p, q) = (item.pts[piece.a as usize], item.pts[piece.b as usize]);
+                let on_v = p[0] == q[0] && p[0] == floor_f64(p[0]);
+                let on_h = p[1] == q[1] && p[1] == floor_f64(p[1]);
+                let half = on_v || on_h;
+                let mut push = |k: usize| {
+                    let slot = state[k].slot;
+                    if slot != NONE {
+                        pieces.push(Piece {
+                            slot,
+                            half,
+                            ..*piece
+                        });
+                    }
+                };
+                push(k);
+                let (row, col) = (k / cols, k % cols);
+                if on_v && col > 0 {
+                    push(k - 1);
+                } else if on_h && row > 0 {
+                    push(k - cols);
+                }
+            }
+            self.pieces.sort_by_key(|p| p.slot);
+            let mut at = 0;
+            for slot in 0..self.found.len() {
+                let k = self.found[slot];
+                let end = at
+                    + self.pieces[at..]
+                        .iter()
+                        .take_while(|p| p.slot == slot as u32)
+                        .count();
+                let (row, col) = (k as usize / cols, k as usize % cols);
+                let cell = [x0 + col as f64, y0 + row as f64];
+                self.cell(item, cell, at..end, portions);
+                let c = self.cells.last_mut().expect("a cell");
+                (c.row, c.col) = (row as u32, col as u32);
+                at = end;
+            }
+        }
+        for &k in &self.touched {
+            self.state[k as usize] = CellState::default();
+        }
+        self.touched.clear();
+    }
+
+    /// Areas (and portions) of one candidate cell at device pixel `cell` from
+    /// `self.pieces[range]`.
+    fn cell(
+        &mut self,
+        item: &Item,
+        cell: Point,
+        range: std::ops::Range<usize>,
+        want_portions: bool,
+    ) {
+        let [cx, cy] = cell;
+        let hist_start = self.hist.len();
+        let portions_start = self.portions.len();
+        let pieces = &self.pieces[range];
+        let segs = &mut self.segs;
+        segs.clear();
+        for p in pieces {
+            let (pa, pb) = (item.pts[p.a as usize], item.pts[p.b as usize]);
+            let at = |t: f64| [pa[0] + (pb[0] - pa[0]) * t, pa[1] + (pb[1] - pa[1]) * t];
+            let clamp = |q: Point| [q[0].clamp(cx, cx + 1.0), q[1].clamp(cy, cy + 1.0)];
+            let (q0, q1) = (clamp(at(p.ta)), clamp(at(p.tb)));
+            let dy = pb[1] - pa[1];
+            let dir = if q0[1] == q1[1] {
+                0
+            } else if dy > 0.0 {
+                1
+            } else {
+                -1
+            };
+            let dx = pb[0] - pa[0];
+            let sx = if dx > 0.0 {
+                1
+            } else if dx < 0.0 {
+                -1
+            } else {
+                0
+            };
+            segs.push(Seg {
+                q0,
+                q1,
+                dir,
+                sx,
+                ylo: q0[1].min(q1[1]),
+                yhi: q0[1].max(q1[1]),
+            });
+        }
+        let exact = pieces.len() <= EXACT_PIECES;
+        // Strip lines.
+        let ys = &mut self.ys;
+        ys.clear();
+        if exact {
+            ys.extend([cy, cy + 1.0]);
+            for s in segs.iter() {
+                ys.extend([s.q0[1], s.q1[1]]);
+            }
+            for i in 0..segs.len() {
+                let a = &segs[i];
+                if a.dir == 0 {
+                    continue;
+                }
+                for b in &segs[i + 1..] {
+                    if b.dir == 0 {
+                        continue;
+                    }
+                    let (lo, hi) = (a.ylo.max(b.ylo), a.yhi.min(b.yhi));
+                    if !(hi > lo) {
+                        continue;
+                    }
+                    let dlo = a.x_at(lo) - b.x_at(lo);
+                    let dhi = a.x_at(hi) - b.x_at(hi);
+                    if (dlo > 0.0 && dhi < 0.0) || (dlo < 0.0 && dhi > 0.0) {
+                        ys.push(lo + (hi - lo) * (dlo / (dlo - dhi)));
+                    }
+                }
+            }
+            ys.sort_by(|a, b| a.total_cmp(b));
+            ys.dedup();
+        } else {
+            ys.extend((0..=SAMPLE_ROWS).map(|k| cy + k as f64 / SAMPLE_ROWS as f64));
+        }
+        // Where pieces leave the cell's left side: the winding just inside it changes by
+        // `−sign(dx)` going down past them.
+        let left = &mut self.left;
+        left.clear();
+        const ON: f64 = 1e-9;
+        for s in segs.iter() {
+            let (near, far) = if s.q0[0] <= s.q1[0] {
+                (s.q0, s.q1)
+            } else {
+                (s.q1, s.q0)
+            };
+            if near[0] <= cx + ON && far[0] > cx + ON {
+                left.push((near[1], -s.sx));
+            }
+        }
+        let w_left = |y: f64| -> i32 { left.iter().filter(|l| l.0 < y).map(|l| l.1).sum() };
+        let last = &mut self.last_portion;
+        last.clear();
+        last.resize(segs.len(), NONE);
+        let hist = &mut self.hist;
+        let portions = &mut self.portions;
+        let order = &mut self.order;
+        let mut add_area = |rel: i32, area: f64| {
+            if area <= 0.0 {
+                return;
+            }
+            match hist[hist_start..].iter_mut().find(|e| e.0 == rel) {
+                Some(e) => e.1 += area,
+                None => hist.push((rel, area)),
+            }
+        };
+        let mut add_portion = |j: usize, y0: f64, y1: f64, rel_lo: i32| {
+            let p = &pieces[j];
+            let (pa, pb) = (item.pts[p.a as usize], item.pts[p.b as usize]);
+            let dy = pb[1] - pa[1];
+            let (u0, u1) = ((y0 - pa[1]) / dy, (y1 - pa[1]) / dy);
+            let (lo, hi) = (p.ta.min(p.tb), p.ta.max(p.tb));
+            let (t0, t1) = (u0.min(u1).clamp(lo, hi), u0.max(u1).clamp(lo, hi));
+            if !(t1 > t0) {
+                return;
+            }
+            let l = last[j];
+            if l != NONE {
+                let q = &mut portions[l as usize];
+                if q.rel_lo == rel_lo && (q.t1 == t0 || q.t0 == t1) {
+                    q.t0 = q.t0.min(t0);
+                    q.t1 = q.t1.max(t1);
+                    return;
+                }
+            }
+            last[j] = portions.len() as u32;
+            portions.push(Portion {
+                a: p.a,
+                b: p.b,
+                t0,
+                t1,
+                rel_lo,
+                half: p.half,
+            });
+        };
+        for k in 0..ys.len().saturating_sub(1) {
+            let (ya, yb) = (ys[k], ys[k + 1]);
+            let h = yb - ya;
+            if !(h > 1e-12) {
+                continue;
+            }
+            let ym = 0.5 * (ya + yb);
+            order.clear();
+            for (j, s) in segs.iter().enumerate() {
+                if s.dir != 0 && s.ylo < ym && ym < s.yhi {
+                    order.push((s.x_at(ym).clamp(cx, cx + 1.0), j));
+                }
+            }
+            order.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+            let mut w = w_left(ym);
+            let mut x_prev = cx;
+            for &(x, j) in order.iter() {
+                add_area(w, h * (x - x_prev));
+                let wl = w;
+                w += segs[j].dir;
+                if want_portions {
+                    let s = &segs[j];
+                    add_portion(j, ya.max(s.ylo), yb.min(s.yhi), wl.min(w));
+                }
+                x_prev = x;
+            }
+            add_area(w, h * (cx + 1.0 - x_prev));
+        }
+        if want_portions && exact {
+            // Horizontal pieces: the winding beside each portion from the strip next to
+            // it, coincident horizontal pieces stacked in their order.
+            for (j, s) in segs.iter().enumerate() {
+                if s.dir != 0 || s.q0[0] == s.q1[0] {
+                    continue;
+                }
+                let yh = s.q0[1];
+                let below = yh < cy + 1.0;
+                // The strip beside the piece.
+                let Some(k) = ys.iter().position(|&y| y >= yh) else {
+                    continue;
+                };
+                let (ya, yb) = if below {
+                    match ys.get(k + 1) {
+                        Some(&yb) => (ys[k], yb),
+                        None => continue,
+                    }
+                } else {
+                    if k == 0 {
+                        continue;
+                    }
+                    (ys[k - 1], ys[k])
+                };
+                let ym = 0.5 * (ya + yb);
+                let (xl, xr) = (s.q0[0].min(s.q1[0]), s.q0[0].max(s.q1[0]));
+                order.clear();
+                for (i, t) in segs.iter().enumerate() {
+                    if t.dir != 0 && t.ylo < ym && ym < t.yhi {
+                        order.push((t.x_at(yh), i));
+                    }
+                }
+                let cuts = &mut self.cuts;
+                cuts.clear();
+                cuts.extend([xl, xr]);
+                cuts.extend(order.iter().map(|o| o.0).filter(|&x| x > xl && x < xr));
+                cuts.sort_by(|a, b| a.total_cmp(b));
+                let wl = w_left(ym);
+                let p = &pieces[j];
+                let (pa, pb) = (item.pts[p.a as usize], item.pts[p.b as usize]);
+                let dx = pb[0] - pa[0];
+                for c in cuts.windows(2) {
+                    if !(c[1] > c[0]) {
+                        continue;
+                    }
+                    let xp = 0.5 * (c[0] + c[1]);
+                    let side: i32 = wl
+                        + order
+                            .iter()
+                            .filter(|o| o.0 < xp)
+                            .map(|o| segs[o.1].dir)
+                            .sum::<i32>();
+                    // Earlier coincident horizontal pieces covering `xp` lie between this
+                    // one and the strip.
+                    let stacked: i32 = segs[..j]
+                        .iter()
+                        .filter(|t| {
+                            t.dir == 0
+                                && t.q0[1] == yh
+                                && t.q0[0].min(t.q1[0]) < xp
+                                && xp < t.q0[0].max(t.q1[0])
+                        })
+                        .map(|t| t.sx)
+                        .sum();
+                    // Going up across a piece with `dx > 0` raises the winding by one.
+                    let (w_below, w_above) = if below {
+                        let wb = side + stacked;
+                        (wb, wb + s.sx)
+                    } else {
+                        let wa = side - stacked;
+                        (wa - s.sx, wa)
+                    };
+                    let (u0, u1) = ((c[0] - pa[0]) / dx, (c[1] - pa[0]) / dx);
+                    let (lo, hi) = (p.ta.min(p.tb), p.ta.max(p.tb));
+                    let (t0, t1) = (u0.min(u1).clamp(lo, hi), u0.max(u1).clamp(lo, hi));
+                    if t1 > t0 {
+                        portions.push(Portion {
+                            a: p.a,
+                            b: p.b,
+                            t0,
+                            t1,
+                            rel_lo: w_below.min(w_above),
+                            half: p.half,
+                        });
+                    }
+                }
+            }
+        }
+        self.cells.push(ExactCell {
+            row: 0,
+            col: 0,
+            hist: (hist_start as u32, self.hist.len() as u32),
+            portions: (portions_start as u32, self.portions.len() as u32),
+            w0: 0,
+            active: false,
+        });
+    }
+
+    /// Whether row `row` (of the band's cell box) holds a candidate cell not yet resolved.
+    #[inline]
+    pub(crate) fn has_row(&self, row: usize) -> bool {
+        self.cells
+            .get(self.next)
+            .is_some_and(|c| c.row as usize == row)
+    }
+
+    /// Resolves the candidate cells of row `row` from its winding integrals `wrow`:
+    /// where the windings inside span more than two adjacent values, `covs` gets the exact
+    /// coverage and the cell is marked active. Rows must come in order. Returns the range
+    /// of [`cells`](Self::cells) in this row.
+    pub(crate) fn resolve_row(
+        &mut self,
+        row: usize,
+        wrow: &[f32],
+        evenodd: bool,
+        covs: &mut [f32],
+    ) -> std::ops::Range<usize> {
+        let start = self.next;
+        while let Some(c) = self.cells.get_mut(self.next) {
+            if c.row as usize != row {
+                break;
+            }
+            self.next += 1;
+            let col = c.col as usize;
+            let Some(&integral) = wrow.get(col) else {
+                continue;
+            };
+            let hist = &self.hist[c.hist.0 as usize..c.hist.1 as usize];
+            let (mut lo, mut hi, mut moment) = (i32::MAX, i32::MIN, 0.0f64);
+            for &(rel, area) in hist {
+                moment += rel as f64 * area;
+                if area > 1e-9 {
+                    lo = lo.min(rel);
+                    hi = hi.max(rel);
+                }
+            }
+            let w0 = (integral as f64 - moment).round();
+            if hi <= lo.saturating_add(1) || !w0.is_finite() || w0.abs() > 1e9 {
+                continue;
+            }
+            let w0 = w0 as i32;
+            let cov: f64 = hist
+                .iter()
+                .filter(|e| inside(w0.saturating_add(e.0), evenodd))
+                .map(|e| e.1)
+                .sum();
+            covs[col] = cov.clamp(0.0, 1.0) as f32;
+            c.w0 = w0;
+            c.active = true;
+        }
+        start..self.next
+    }
+}
+
+/// The fill rule's indicator: whether winding `w` is inside.
+#[inline]
+pub(crate) fn inside(w: i32, evenodd: bool) -> bool {
+    if evenodd { w & 1 != 0 } else { w != 0 }
+}
+
+/// `f(w + 1) − f(w)` for the fill rule's indicator `f`: the weight of a portion whose
+/// lower side has winding `w`.
+#[inline]
+pub(crate) fn portion_weight(w: i32, evenodd: bool) -> f64 {
+    inside(w.saturating_add(1), evenodd) as i32 as f64 - inside(w, evenodd) as i32 as f64
+}
+
+/// Bits for the directions of `(dx, dy)`: +x, −x, +y, −y.
+#[inline]
+fn dir_bits(dx: f64, dy: f64) -> u8 {
+    (dx > 0.0) as u8 | ((dx < 0.0) as u8) << 1 | ((dy > 0.0) as u8) << 2 | ((dy < 0.0) as u8) << 3
+}
+
+/// Calls `f(col, row, ta, tb)` for each piece between grid lines of the segment `p0 → p1`
+/// inside the box `bx` (device pixels, whole numbers), with the cell of its midpoint
+/// relative to the box's first cell: a piece on a vertical grid line belongs to the cell
+/// on its right, one on a horizontal line to the cell below.
+fn walk(p0: Point, p1: Point, bx: [f64; 4], f: &mut impl FnMut(usize, usize, f64, f64)) {
+    let (dx, dy) = (p1[0] - p0[0], p1[1] - p0[1]);
+    if dx == 0.0 && dy == 0.0 {
+        return;
+    }
+    let (c0, r0) = (floor_f64(p0[0]), floor_f64(p0[1]));
+    if c0 == floor_f64(p1[0]) && r0 == floor_f64(p1[1]) {
+        // Inside one cell (most chords at a fine tolerance): one piece, as the walk below
+        // would give it without a sliver from rounding.
+        let (c, r) = (c0 - bx[0], r0 - bx[1]);
+        if c >= 0.0 && r >= 0.0 && c < bx[2] - bx[0] && r < bx[3] - bx[1] {
+            f(c as usize, r as usize, 0.0, 1.0);
+        }
+        return;
+    }
+    let Some((t0, t1)) = clip_to_box(p0, dx, dy, bx) else {
+        return;
+    };
+    let at = |t: f64| [p0[0] + dx * t, p0[1] + dy * t];
+    let next = |v: f64, o: f64, d: f64| -> f64 {
+        if d > 0.0 {
+            (floor_f64(v) + 1.0 - o) / d
+        } else if d < 0.0 {
+            (super::coverage::ceil_f64(v) - 1.0 - o) / d
+        } else {
+            f64::INFINITY
+        }
+    };
+    let start = at(t0);
+    let mut nx = next(start[0], p0[0], dx);
+    let mut ny = next(start[1], p0[1], dy);
+    let step_x = if dx != 0.0 {
+        1.0 / dx.abs()
+    } else {
+        f64::INFINITY
+    };
+    let step_y = if dy != 0.0 {
+        1.0 / dy.abs()
+    } else {
+        f64::INFINITY
+    };
+    let (cols, rows) = (bx[2] - bx[0], bx[3] - bx[1]);
+    let mut ta = t0;
+    let mut guard = 0usize;
+    while ta < t1 && guard < 1 << 24 {
+        guard += 1;
+        let tb = nx.min(ny).min(t1);
+        if tb > ta {
+            let m = at(0.5 * (ta + tb));
+            let (c, r) = (floor_f64(m[0]) - bx[0], floor_f64(m[1]) - bx[1]);
+            if c >= 0.0 && r >= 0.0 && c < cols && r < rows {
+                f(c as usize, r as usize, ta, tb);
+            }
+        }
+        ta = tb;
+        if nx <= tb {
+            nx += step_x;
+        }
+        if ny <= tb {
+            ny += step_y;
+        }
+    }
+}
+
+/// Whether no pixel can hold three winding values: every ring is simple (convex, or
+/// monotone in y with its two sides apart) and no two rings share a pixel. `false` when
+/// unsure (many rings close together, a ring neither convex nor y-monotone).
+pub(crate) fn rings_cannot_overlap(pts: &[Point], rings: &[(usize, usize)]) -> bool {
+    /// Pairs of rings compared at most, before giving up.
+    const MAX_PAIRS: usize = 4096;
+    if !rings
+        .iter()
+        .all(|&(s, n)| ring_is_convex(&pts[s..s + n]) || ring_is_y_monotone_simple(&pts[s..s + n]))
+    {
+        return false;
+    }
+    if rings.len() == 1 {
+        return true;
+    }
+    // The cells each ring's box touches, `[x0, y0, x1, y1]` inclusive.
+    let mut boxes: Vec<[f64; 4]> = rings
+        .iter()
+        .map(|&(s, n)| {
+            let mut b = [
+                f64::INFINITY,
+                f64::INFINITY,
+                f64::NEG_INFINITY,
+                f64::NEG_INFINITY,
+            ];
+            for q in &pts[s..s + n] {
+                b = [
+                    b[0].min(q[0]),
+                    b[1].min(q[1]),
+                    b[2].max(q[0]),
+                    b[3].max(q[1]),
+                ];
+            }
+            b.map(floor_f64)
+        })
+        .collect();
+    boxes.sort_by(|a, b| a[0].total_cmp(&b[0]));
+    let mut pairs = 0;
+    for i in 0..boxes.len() {
+        for j in i + 1..boxes.len() {
+            if boxes[j][0] > boxes[i][2] {
+                break;
+            }
+            pairs += 1;
+            if pairs > MAX_PAIRS {
+                return false;
+            }
+            if boxes[j][1] <= boxes[i][3] && boxes[i][1] <= boxes[j][3] {
+                return false;
+            }
+        }
+    }
+    true
+}
+
+/// Whether a ring is monotone in y (its direction's y component changes sign twice, with
+/// horizontal edges only at its top and bottom) with its two sides apart between them:
+/// then it is simple.
+fn ring_is_y_monotone_simple(ring: &[Point]) -> bool {
+    let n = ring.len();
+    if n < 3 {
+        return true;
+    }
+    let (mut top, mut bottom) = (0, 0);
+    for k in 0..n {
+        if ring[k][1] < ring[top][1] {
+            top = k;
+        }
+        if ring[k][1] > ring[bottom][1] {
+            bottom = k;
+        }
+    }
+    let (ymin, ymax) = (ring[top][1], ring[bottom][1]);
+    if !(ymax > ymin) {
+        return false;
+    }
+    // The two sides from `top` to `bottom`, each with y never decreasing.
+    let side = |step: usize| -> Option<Vec<Point>> {
+        let mut v = vec![ring[top]];
+        let mut k = top;
+        while k != bottom {
+            let next = (k + step) % n;
+            let (a, b) = (ring[k], ring[next]);
+            if b[1] < a[1] || (b[1] == a[1] && a[1] > ymin && a[1] < ymax) {
+                return None;
+            }
+            v.push(b);
+            k = next;
+        }
+        Some(v)
+    };
+    let (Some(a), Some(b)) = (side(1), side(n - 1)) else {
+        return false;
+    };
+    // x of a side at height y (first edge reaching it).
+    let x_at = |s: &[Point], y: f64| -> f64 {
+        for w in s.windows(2) {
+            if w[1][1] >= y && w[1][1] > w[0][1] {
+                return w[0][0] + (y - w[0][1]) / (w[1][1] - w[0][1]) * (w[1][0] - w[0][0]);
+            }
+        }
+        s[s.len() - 1][0]
+    };
+    // Where each side leaves the top and reaches the bottom: apart there too, or the same
+    // point.
+    let leave = |s: &[Point]| {
+        s.iter()
+            .rev()
+            .find(|q| q[1] == ymin)
+            .map_or(s[0][0], |q| q[0])
+    };
+    let reach = |s: &[Point]| {
+        s.iter()
+            .find(|q| q[1] == ymax)
+            .map_or(s[s.len() - 1][0], |q| q[0])
+    };
+    let mut sign = 0.0f64;
+    for d in [leave(&a) - leave(&b), reach(&a) - reach(&b)] {
+        if d != 0.0 {
+            if sign != 0.0 && (d > 0.0) != (sign > 0.0) {
+                return false;
+            }
+            sign = d;
+        }
+    }
+    for (s, o, flip) in [(&a, &b, 1.0), (&b, &a, -1.0)] {
+        for q in s.iter() {
+            if q[1] <= ymin || q[1] >= ymax {
+                continue;
+            }
+            let d = flip * (q[0] - x_at(o, q[1]));
+            if !(d != 0.0) || (sign != 0.0 && (d > 0.0) != (sign > 0.0)) {
+                return false;
+            }
+            sign = d;
+        }
+    }
+    true
+}
+
+/// Whether a ring is convex: turns all one way, with its direction's y component changing
+/// sign at most twice around it (a pentagram turns one way too, twice around).
+pub(crate) fn ring_is_convex(ring: &[Point]) -> bool {
+    let n = ring.len();
+    if n < 3 {
+        return true;
+    }
+    let edge = |k: usize| {
+        let (a, b) = (ring[k], ring[(k + 1) % n]);
+        [b[0] - a[0], b[1] - a[1]]
+    };
+    // The last edge of non-zero length, to start the cyclic comparison.
+    let Some(mut prev) = (0..n).rev().map(edge).find(|e| e[0] != 0.0 || e[1] != 0.0) else {
+        return true;
+    };
+    // Turns all one way, and the y direction changes sign at most twice around the ring
+    // (horizontal edges skipped).
+    let mut turn = 0.0f64;
+    let (mut changes, mut last_dy) = (0usize, prev[1]);
+    if last_dy == 0.0 {
+        last_dy = (0..n)
+            .rev()
+            .map(|k| edge(k)[1])
+            .find(|&d| d != 0.0)
+            .unwrap_or(0.0);
+    }
+    for k in 0..n {
+        let e = edge(k);
+        if e[0] == 0.0 && e[1] == 0.0 {
+            continue;
+        }
+        let cross = prev[0] * e[1] - prev[1] * e[0];
+        let dot = prev[0] * e[0] + prev[1] * e[1];
+        if cross == 0.0 && dot < 0.0 {
+            return false;
+        }
+        if cross != 0.0 {
+            if turn != 0.0 && (cross > 0.0) != (turn > 0.0) {
+                return false;
+            }
+            turn = cross;
+        }
+        if e[1] != 0.0 {
+            if (e[1] > 0.0) != (last_dy > 0.0) {
+                changes += 1;
+            }
+            last_dy = e[1];
+        }
+        prev = e;
+    }
+    changes <= 2
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::Image;
+    use crate::raster::render::BandRenderer;
+    use crate::raster::{RenderOptions, render, render_backward};
+    use crate::scene::{Fill, FillRule, Node, Paint, Path, Scene};
+
+    /// The options with exact overlaps on.
+    fn exact() -> RenderOptions {
+        RenderOptions {
+            exact_overlaps: true,
+            ..RenderOptions::default()
+        }
+    }
+
+    fn scene(w: u32, h: u32, rings: &[Vec<Point>], evenodd: bool) -> Scene {
+        let mut p = Path::new("p");
+        for ring in rings {
+            p.move_to(ring[0]);
+            for &q in &ring[1..] {
+                p.line_to(q);
+            }
+            p.close();
+        }
+        p.fill = Some(Fill {
+            paint: Paint::Solid([0.0, 0.0, 0.0]),
+            opacity: 1.0,
+            rule: if evenodd {
+                FillRule::EvenOdd
+            } else {
+                FillRule::NonZero
+            },
+        });
+        let mut s = Scene::new(w, h);
+        s.nodes.push(Node::Path(p));
+        s
+    }
+
+    fn alpha(s: &Scene) -> Vec<f64> {
+        render(s, &exact())
+            .data
+            .iter()
+            .map(|p| p[3] as f64)
+            .collect()
+    }
+
+    /// Winding number of `q` around `rings`.
+    fn winding(rings: &[Vec<Point>], q: Point) -> i32 {
+        let mut w = 0;
+        for ring in rings {
+            for i in 0..ring.len() {
+                let (a, b) = (ring[i], ring[(i + 1) % ring.len()]);
+                if (a[1] <= q[1]) != (b[1] <= q[1]) {
+                    let x = a[0] + (q[1] - a[1]) / (b[1] - a[1]) * (b[0] - a[0]);
+                    if x < q[0] {
+                        w += if b[1] > a[1] { 1 } else { -1 };
+                    }
+                }
+            }
+        }
+        w
+    }
+
+    /// Coverage of every pixel by `n × n` point samples.
+    fn sampled(w: u32, h: u32, rings: &[Vec<Point>], evenodd: bool, n: usize) -> Vec<f64> {
+        let mut out = Vec::new();
+        for py in 0..h {
+            for px in 0..w {
+                let mut hits = 0;
+                for sy in 0..n {
+                    for sx in 0..n {
+                        let q = [
+                            px as f64 + (sx as f64 + 0.5) / n as f64,
+                            py as f64 + (sy as f64 + 0.5) / n as f64,
+                        ];
+                        hits += inside(winding(rings, q), evenodd) as usize;
+                    }
+                }
+                out.push(hits as f64 / (n * n) as f64);
+            }
+        }
+        out
+    }
+
+    /// Cells whose exact coverage replaced the accumulated one, over the whole canvas.
+    fn active_cells(s: &Scene) -> usize {
+        let p = crate::raster::Prepared::new(s, &exact());
+        let mut count = 0;
+        for y0 in (0..p.height as usize).step_by(16) {
+            let rows = 16.min(p.height as usize - y0);
+            let mut r = BandRenderer::new(&p, y0, rows);
+            for item in &p.items {
+                if !r.deltas(item) {
+                    continue;
+                }
+                for row in 0..r.acc.h {
+                    let (wrow, sc, ov) = r.take_row(row);
+                    let covs = &mut sc.covs[..wrow.len()];
+                    ov.resolve_row(row, wrow, item.evenodd, covs);
+                }
+                count += r.overlaps.cells.iter().filter(|c| c.active).count();
+            }
+        }
+        count
+    }
+
+    fn rect(x0: f64, y0: f64, x1: f64, y1: f64) -> Vec<Point> {
+        vec![[x0, y0], [x1, y0], [x1, y1], [x0, y1]]
+    }
+
+    /// Issue 29: two coincident rectangles in one path, each covering the left half of
+    /// a column of pixels, cover half of each pixel (the clamped integral gave 1.0); under
+    /// even-odd the doubled part is empty.
+    #[test]
+    fn test_issue_29_coincident_half_rectangles() {
+        let r = rect(1.0, 1.0, 1.5, 3.0);
+        let nonzero = alpha(&scene(4, 4, &[r.clone(), r.clone()], false));
+        let evenodd = alpha(&scene(4, 4, &[r.clone(), r.clone()], true));
+        for y in 1..3 {
+            assert!((nonzero[y * 4 + 1] - 0.5).abs() < 1e-6, "{nonzero:?}");
+            assert!(evenodd[y * 4 + 1].abs() < 1e-6, "{evenodd:?}");
+        }
+        let total: f64 = nonzero.iter().sum();
+        assert!((total - 1.0).abs() < 1e-5, "{total}");
+        // A third copy reversed: winding 1 under both rules, half of each pixel.
+        let mut back = r.clone();
+        back.reverse();
+        for evenodd in [false, true] {
+            let a = alpha(&scene(4, 4, &[r.clone(), r.clone(), back.clone()], evenodd));
+            assert!((a[5] - 0.5).abs() < 1e-6, "{a:?}");
+        }
+    }
+
+    #[test]
+    fn figure_eight_and_star_match_sampling() {
+        let bowtie = vec![[1.2, 1.1], [6.3, 6.4], [6.1, 1.2], [1.1, 6.3]];
+        let star: Vec<Point> = (0..5)
+            .map(|k| {
+                let a = (k * 2) as f64 * std::f64::consts::TAU / 5.0 + 0.3;
+                [6.1 + 5.2 * a.cos(), 5.9 + 5.1 * a.sin()]
+            })
+            .collect();
+        for (name, ring, w) in [("bow-tie", bowtie, 8u32), ("pentagram", star, 12)] {
+            for evenodd in [false, true] {
+                let rings = vec![ring.clone()];
+                let s = scene(w, w, &rings, evenodd);
+                assert!(active_cells(&s) > 0, "{name}: no exact cells");
+                let got = alpha(&s);
+                let want = sampled(w, w, &rings, evenodd, 64);
+                for (i, (g, r)) in got.iter().zip(&want).enumerate() {
+                    assert!(
+                        (g - r).abs() < 0.03,
+                        "{name} even-odd {evenodd}: pixel {i} {g} vs sampled {r}"
+                    );
+                }
+                let mae = got
+                    .iter()
+                    .zip(&want)
+                    .map(|(g, r)| (g - r).abs())
+                    .sum::<f64>()
+                    / got.len() as f64;
+                assert!(mae < 2e-3, "{name} even-odd {evenodd}: MAE {mae}");
+            }
+        }
+    }
+
+    /// Two subpaths sharing a pixel without overlapping keep the accumulated value, bit
+    /// for bit: the cell is a candidate (two chains) but its windings span two values.
+    #[test]
+    fn subpaths_sharing_a_pixel_keep_their_bits() {
+        let (a, b) = (rect(1.0, 1.0, 1.5, 3.0), rect(1.5, 1.0, 2.25, 3.0));
+        let s = scene(4, 4, &[a, b], false);
+        assert_eq!(active_cells(&s), 0);
+        let img = alpha(&s);
+        assert!(
+            (img[5] - 1.0).abs() < 1e-6 && (img[6] - 0.25).abs() < 1e-6,
+            "{img:?}"
+        );
+        let p = crate::raster::Prepared::new(&s, &exact());
+        assert!(p.items[0].can_overlap);
+        let apart = scene(
+            4,
+            4,
+            &[rect(0.2, 0.2, 0.8, 0.8), rect(1.2, 1.2, 2.8, 2.8)],
+            false,
+        );
+        assert!(!crate::raster::Prepared::new(&apart, &exact()).items[0].can_overlap);
+        // Off (the default), the clamped integral everywhere: the same values here.
+        let off = render(&s, &RenderOptions::default());
+        assert!((off.data[5][3] as f64 - img[5]).abs() < 1e-6);
+    }
+
+    /// Many coincident rings in one cell: sampled, then kept clamped, always finite.
+    #[test]
+    fn many_coincident_rings_stay_bounded() {
+        for copies in [40, 2000] {
+            let rings = vec![rect(1.0, 1.0, 1.5, 3.0); copies];
+            let a = alpha(&scene(4, 4, &rings, false));
+            assert!(a.iter().all(|v| v.is_finite()));
+            let want = if copies <= SAMPLED_PIECES / 2 {
+                0.5
+            } else {
+                1.0
+            };
+            assert!((a[5] - want).abs() < 1e-6, "{copies}: {a:?}");
+        }
+    }
+
+    /// Degenerate pieces: zero-length edges, edges on pixel lines, a ring inside one cell.
+    #[test]
+    fn degenerate_pieces_stay_finite() {
+        let rings = vec![
+            vec![[1.0, 1.0], [1.0, 1.0], [3.0, 1.0], [3.0, 3.0], [1.0, 3.0]],
+            vec![[2.0, 1.0], [2.0, 3.0], [1.0, 2.0], [3.0, 2.0]],
+            vec![[1.2, 1.2], [1.4, 1.7], [1.7, 1.3], [1.2, 1.6]],
+        ];
+        for evenodd in [false, true] {
+            let s = scene(4, 4, &rings, evenodd);
+            let got = alpha(&s);
+            let want = sampled(4, 4, &rings, evenodd, 64);
+            for (g, r) in got.iter().zip(&want) {
+                assert!((g - r).abs() < 0.03, "{got:?} vs {want:?}");
+            }
+            let d = Image::filled(4, 4, [0.1, 0.2, 0.3, 0.4]);
+            let g = render_backward(&s, &exact(), &d);
+            assert!(g.iter().all(|v| v.is_finite()));
+        }
+    }
+
+    /// Central differences of `Σ d·image` on a self-overlapping path, at points where
+    /// exact cells exist, for both fill rules.
+    #[test]
+    fn exact_cells_gradient_matches_differences() {
+        let rings = vec![
+            vec![[1.3, 1.2], [8.7, 7.6], [8.2, 1.4], [1.6, 8.3]],
+            vec![[2.1, 2.6], [7.4, 2.2], [6.8, 6.9], [2.4, 7.3]],
+        ];
+        for evenodd in [false, true] {
+            let s = scene(10, 10, &rings, evenodd);
+            assert!(active_cells(&s) > 3, "{}", active_cells(&s));
+            let mut d = Image::new(10, 10);
+            for (i, px) in d.data.iter_mut().enumerate() {
+                let k = ((i * 7919) % 13) as f32 / 13.0 - 0.4;
+                *px = [0.0, 0.0, 0.0, k];
+            }
+            let opts = exact();
+            let loss = |s: &Scene| -> f64 {
+                let img = render(s, &opts);
+                img.data
+                    .iter()
+                    .zip(&d.data)
+                    .map(|(a, b)| a[3] as f64 * b[3] as f64)
+                    .sum()
+            };
+            let g = render_backward(&s, &opts, &d);
+            let p0 = s.params();
+            let layout = crate::scene::ParamLayout::new(&s);
+            let mut checked = 0;
+            for i in 0..p0.len() {
+                if layout.slots[i].group != crate::scene::ParamGroup::Points {
+                    continue;
+                }
+                let e = 1e-3;
+                let mut t = s.clone();
+                let mut p = p0.clone();
+                p[i] += e;
+                t.set_params(&p);
+                let lp = loss(&t);
+                p[i] -= 2.0 * e;
+                t.set_params(&p);
+                let lm = loss(&t);
+                let fd = (lp - lm) / (2.0 * e);
+                assert!(
+                    (fd - g[i]).abs() < 2e-3 + 1e-2 * fd.abs(),
+                    "even-odd {evenodd} param {i}: differences {fd}, analytic {}",
+                    g[i]
+                );
+                checked += 1;
+            }
+            assert!(checked >= 16);
+        }
+    }
+
+    #[test]
+    fn convexity() {
+        let sq = [[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0]];
+        assert!(ring_is_convex(&sq));
+        let mut rev = sq;
+        rev.reverse();
+        assert!(ring_is_convex(&rev));
+        // A pentagram turns one way but winds twice.
+        let star: Vec<Point> = (0..5)
+            .map(|k| {
+                let a = (k * 2) as f64 * std::f64::consts::TAU / 5.0;
+                [a.cos(), a.sin()]
+            })
+            .collect();
+        assert!(!ring_is_convex(&star));
+        let bowtie = [[0.0, 0.0], [2.0, 2.0], [2.0, 0.0], [0.0, 2.0]];
+        assert!(!ring_is_convex(&bowtie));
+        let l = [
+            [0.0, 0.0],
+            [2.0, 0.0],
+            [2.0, 1.0],
+            [1.0, 1.0],
+            [1.0, 2.0],
+            [0.0, 2.0],
+        ];
+        assert!(!ring_is_convex(&l));
+        // Repeated and collinear vertices.
+        let sq2 = [
+            [0.0, 0.0],
+            [1.0, 0.0],
+            [2.0, 0.0],
+            [2.0, 0.0],
+            [2.0, 2.0],
+            [0.0, 2.0],
+        ];
+        assert!(ring_is_convex(&sq2));
+        let back = [[0.0, 0.0], [2.0, 0.0], [1.0, 0.0], [1.0, 1.0]];
+        assert!(!ring_is_convex(&back));
+        // Monotone in y and simple: a chevron; its sides crossed: a bow-tie on its side.
+        let chevron = [
+            [0.0, 0.0],
+            [1.0, 1.0],
+            [0.0, 2.0],
+            [3.0, 2.0],
+            [2.0, 1.0],
+            [3.0, 0.0],
+        ];
+        assert!(!ring_is_convex(&chevron) && ring_is_y_monotone_simple(&chevron));
+        let crossed = [[0.0, 0.0], [3.0, 2.0], [0.0, 2.0], [3.0, 0.0]];
+        assert!(!ring_is_y_monotone_simple(&crossed));
+        let hourglass = [
+            [0.0, 0.0],
+            [2.0, 0.0],
+            [0.5, 1.0],
+            [2.0, 2.0],
+            [0.0, 2.0],
+            [1.5, 1.0],
+        ];
+        assert!(!ring_is_y_monotone_simple(&hourglass));
+        let star: Vec<Point> = (0..5)
+            .map(|k| {
+                let a = (k * 2) as f64 * std::f64::consts::TAU / 5.0 + 0.3;
+                [a.cos(), a.sin()]
+            })
+            .collect();
+        assert!(!ring_is_y_monotone_simple(&star));
+        // Rings apart, and rings sharing a pixel.
+        let pts = [
+            [0.2, 0.2],
+            [1.8, 0.2],
+            [1.8, 1.8],
+            [0.2, 1.8],
+            [3.2, 0.2],
+            [4.8, 0.2],
+            [4.8, 1.8],
+        ];
+        assert!(rings_cannot_overlap(&pts, &[(0, 4), (4, 3)]));
+        let near = [
+            [0.2, 0.2],
+            [1.8, 0.2],
+            [1.8, 1.8],
+            [1.9, 0.2],
+            [3.8, 0.2],
+            [3.8, 1.8],
+        ];
+        assert!(!rings_cannot_overlap(&near, &[(0, 3), (3, 3)]));
+    }
+}
