@@ -580,6 +580,12 @@ impl Overlaps {
         });
     }
 
+    /// Whether the current item has no candidate cell at all.
+    #[inline]
+    pub(crate) fn is_empty(&self) -> bool {
+        self.cells.is_empty()
+    }
+
     /// Whether row `row` (of the band's cell box) holds a candidate cell not yet resolved.
     #[inline]
     pub(crate) fn has_row(&self, row: usize) -> bool {

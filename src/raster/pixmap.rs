@@ -202,8 +202,9 @@ impl ChunkCanvas {
         }
     }
 
-    /// Draws a solid-paint item's rows straight from the accumulated deltas (clearing
-    /// them, as [`BandRenderer::take_row`] does): over runs of whole chunks without a
+    /// Draws a solid-paint item's rows (without cells of exact overlap coverage) straight
+    /// from the accumulated deltas (clearing them, as [`BandRenderer::take_row`] does):
+    /// over runs of whole chunks without a
     /// delta the winding integral, and so the coverage, is one value, applied chunk by
     /// chunk ([`span`](Self::span)); elsewhere the running sum and the coverage rule go
     /// pixel by pixel, with the same bits as [`coverage_row`].
@@ -259,8 +260,9 @@ impl ChunkCanvas {
         }
     }
 
-    /// Composites one row of a paint that is not one color from its coverages `covs`
-    /// (columns `x0 ..`, band row `r`, device row `y`), as
+    /// Composites one row from its coverages `covs` (a paint of more than one color, or a
+    /// row with cells of exact overlap coverage), columns `x0 ..`, band row `r`, device
+    /// row `y`, as
     /// [`composite_row`](super::render::composite_row) does onto `f32` pixels.
     fn composite_row(
         &mut self,
@@ -291,15 +293,20 @@ impl Canvas for ChunkCanvas {
         if !r.deltas(item) {
             return;
         }
-        if let PaintEval::Solid(solid) = &item.paint {
+        if let PaintEval::Solid(solid) = &item.paint
+            && r.overlaps.is_empty()
+        {
             return self.draw_solid(r, item, solid.premul);
         }
         let (x0, y0, band_y0) = (r.acc.x0 as usize, r.acc.y0 as usize, r.y0);
         for k in 0..r.acc.h {
             let y = y0 + k;
-            let (row, sc) = r.take_row(k);
+            let (row, sc, ov) = r.take_row(k);
             let n = row.len();
             coverage_row(row, item.evenodd, &mut sc.covs[..n]);
+            if ov.has_row(k) {
+                ov.resolve_row(k, row, item.evenodd, &mut sc.covs[..n]);
+            }
             self.composite_row(item, &sc.covs[..n], &mut sc.colors[..n], x0, y - band_y0, y);
         }
     }
@@ -324,14 +331,21 @@ mod tests {
     use crate::raster::{RenderOptions, render_prepared};
     use crate::scene::Scene;
 
-    /// `render_rgba8` against converting the `f32` image, both alpha forms.
+    /// `render_rgba8` against converting the `f32` image, both alpha forms, with and
+    /// without exact overlaps.
     fn same_bytes(svg: &str) {
         let scene = Scene::from_svg_str(svg, "t.svg", crate::Sizing::Natural).unwrap();
-        let p = Prepared::new(&scene, &RenderOptions::default());
-        let img = render_prepared(&p);
-        assert_eq!(render_rgba8(&p, Alpha::Straight), img.to_rgba8(), "{svg}");
-        let premul: Vec<u8> = img.data.iter().flatten().map(|&v| to_u8(v)).collect();
-        assert_eq!(render_rgba8(&p, Alpha::Premultiplied), premul, "{svg}");
+        for exact_overlaps in [false, true] {
+            let opts = RenderOptions {
+                exact_overlaps,
+                ..RenderOptions::default()
+            };
+            let p = Prepared::new(&scene, &opts);
+            let img = render_prepared(&p);
+            assert_eq!(render_rgba8(&p, Alpha::Straight), img.to_rgba8(), "{svg}");
+            let premul: Vec<u8> = img.data.iter().flatten().map(|&v| to_u8(v)).collect();
+            assert_eq!(render_rgba8(&p, Alpha::Premultiplied), premul, "{svg}");
+        }
     }
 
     #[test]
@@ -352,7 +366,8 @@ mod tests {
             </g>
             <linearGradient id="g"><stop offset="0" stop-color="red"/><stop offset="1" stop-color="blue" stop-opacity="0.3"/></linearGradient>
             <rect x="2" y="44" width="61" height="7.2" fill="url(#g)"/>
-            <rect x="0" y="52" width="64" height="8" fill="none" stroke="black" stroke-width="0.7"/>"##;
+            <rect x="0" y="52" width="64" height="8" fill="none" stroke="black" stroke-width="0.7"/>
+            <path d="M3.3 3 h5.2 v20 h-5.2 z M3.3 3 h5.2 v20 h-5.2 z M1 40 L20 44 L1 48 L20 36 Z" fill="#a0a"/>"##;
         // Widths around a chunk multiple, heights around a band.
         for (w, h) in [(64, 64), (61, 70), (1, 1), (9, 17), (8, 40), (130, 33)] {
             same_bytes(&wrap(w, h, body));
