@@ -33,6 +33,11 @@ pub struct Args {
     /// Flattening tolerance in pixels.
     #[arg(long, default_value_t = RenderOptions::default().tolerance)]
     tolerance: f64,
+    /// Integrate exactly the pixels where a path overlaps itself (two coincident
+    /// half-pixel rectangles in one path cover half the pixel, not all of it); the
+    /// default keeps the clamped winding integral there (see docs/parity.md).
+    #[arg(long)]
+    exact_overlaps: bool,
 }
 
 /// Runs `diffsvg render`.
@@ -47,7 +52,7 @@ pub fn run(a: Args) -> Result<()> {
     let tree = parse_tree_with(&data, &a.input, &a.fonts.fonts())?;
     let scene = from_tree(&tree, &a.input, sizing)?;
     let opts = RenderOptions {
-        exact_overlaps: false,
+        exact_overlaps: a.exact_overlaps,
         tolerance: a.tolerance,
     };
     super::util::warn_about(&scene, &a.input, &opts);

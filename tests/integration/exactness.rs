@@ -250,3 +250,28 @@ fn test_issue_29_coincident_rectangles_cover_half() {
     let evenodd = alpha_sum_with(&polygon_scene(8, 8, &rings, FillRule::EvenOdd), &opts);
     assert!(evenodd.abs() < 1e-4, "{evenodd}");
 }
+
+/// `diffsvg render --exact-overlaps`: one path of two coincident rectangles, each the left
+/// half of a 2-pixel-wide column, covers half of each pixel (alpha 128 of 255), where the
+/// default's clamped winding integral covers all of it.
+#[test]
+fn render_exact_overlaps_from_the_command_line() {
+    use super::common::{diffsvg, s, scratch, write};
+    let dir = scratch("exact-overlaps-cli");
+    let svg = write(
+        &dir,
+        "twice.svg",
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="4" height="4">
+        <path d="M1 0 h0.5 v4 h-0.5 z M1 0 h0.5 v4 h-0.5 z"/></svg>"#,
+    );
+    let alpha_at = |flag: Option<&str>| {
+        let png = dir.join(format!("out{}.png", flag.is_some()));
+        let mut args = vec!["render", s(&svg), "-o", s(&png)];
+        args.extend(flag);
+        let out = diffsvg(&args);
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        diffsvg::Image::load(&png).unwrap().get(1, 2)[3]
+    };
+    assert_eq!(alpha_at(None), 1.0);
+    assert!((alpha_at(Some("--exact-overlaps")) - 128.0 / 255.0).abs() < 1e-6);
+}
