@@ -42,10 +42,11 @@ pub struct Args {
     /// Shape counts for `--backward`.
     #[arg(long, value_delimiter = ',', default_value = "64,256,512")]
     shapes: Vec<usize>,
-    /// Time diffsvg's premultiplied `f32` image (`raster::render`) instead of an 8-bit
-    /// premultiplied pixmap like the one resvg renders into (`raster::render_rgba8`).
+    /// Time diffsvg's 8-bit premultiplied pixmap (`raster::render_rgba8`, like the one
+    /// resvg renders into) instead of its premultiplied `f32` image (`raster::render`).
+    /// Faster on large flat drawings, slower on small or busy ones (docs/performance.md).
     #[arg(long)]
-    f32: bool,
+    rgba8: bool,
     #[command(flatten)]
     fonts: FontArgs,
 }
@@ -228,11 +229,11 @@ pub fn run(a: Args) -> Result<()> {
                 Box::new(|| {
                     pool.install(|| {
                         timed_ms(|| {
-                            if a.f32 {
-                                let _ = diffsvg::raster::render(&scene, &opts);
-                            } else {
+                            if a.rgba8 {
                                 let p = Prepared::new(&scene, &opts);
                                 let _ = render_rgba8(&p, Alpha::Premultiplied);
+                            } else {
+                                let _ = diffsvg::raster::render(&scene, &opts);
                             }
                         })
                     })

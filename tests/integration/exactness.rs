@@ -269,7 +269,11 @@ fn render_exact_overlaps_from_the_command_line() {
         let mut args = vec!["render", s(&svg), "-o", s(&png)];
         args.extend(flag);
         let out = diffsvg(&args);
-        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
         diffsvg::Image::load(&png).unwrap().get(1, 2)[3]
     };
     assert_eq!(alpha_at(None), 1.0);
