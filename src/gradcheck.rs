@@ -25,9 +25,9 @@ pub struct GroupCheck {
     /// Parameters checked.
     pub checked: usize,
     /// Worst `max(|analytic − numeric| − bound, 0) / max(|numeric|, floor)`, where `bound`
-    /// is the numeric estimate's own error bound ([`Numeric::error`]) and `floor` is 1e-2
-    /// of the group's largest numeric gradient (so tiny gradients are held to an absolute
-    /// bound).
+    /// is the numeric estimate's own error bound ([`Numeric::error`]) and `floor` is the
+    /// larger of 1e-2 of the group's largest numeric gradient and 1e-4 of the largest of any
+    /// group checked (so tiny gradients are held to an absolute bound).
     pub worst: f64,
     /// Index (into the parameter vector) of the worst parameter.
     pub worst_index: usize,
@@ -120,7 +120,9 @@ fn bounds(group: ParamGroup) -> (f64, f64) {
     match group {
         ParamGroup::Color | ParamGroup::Opacity | ParamGroup::StopOffset => (0.0, 1.0),
         ParamGroup::StrokeWidth => (0.0, f64::INFINITY),
-        ParamGroup::Points | ParamGroup::PaintGeometry => (f64::NEG_INFINITY, f64::INFINITY),
+        ParamGroup::Points | ParamGroup::PaintGeometry | ParamGroup::Transform => {
+            (f64::NEG_INFINITY, f64::INFINITY)
+        }
     }
 }
 
@@ -249,6 +251,9 @@ pub fn compare(
     numeric: &Numeric,
 ) -> Vec<GroupCheck> {
     let (est, bound) = (&numeric.value, &numeric.error);
+    // A group whose gradient is all but zero (a rectangle's rotation on a symmetric
+    // picture) is compared in absolute terms, against the largest estimate of any group.
+    let overall = which.iter().map(|&i| est[i].abs()).fold(0.0, f64::max);
     let mut out = Vec::new();
     for group in ParamGroup::ALL {
         let ids: Vec<usize> = which
@@ -260,7 +265,7 @@ pub fn compare(
             continue;
         }
         let scale = ids.iter().map(|&i| est[i].abs()).fold(0.0, f64::max);
-        let floor = (1e-2 * scale).max(1e-12);
+        let floor = (1e-2 * scale).max(1e-4 * overall).max(1e-12);
         let mut gc = GroupCheck {
             group,
             checked: ids.len(),

@@ -40,6 +40,10 @@ pub struct OptimArgs {
     /// Learning rate of gradient stop offsets.
     #[arg(long, default_value_t = LearningRates::default().stops)]
     pub lr_stops: f64,
+    /// Learning rate of rotations (of circles, ellipses and rectangles), pixels of motion
+    /// at the shape's edge per step.
+    #[arg(long, default_value_t = LearningRates::default().transform)]
+    pub lr_transform: f64,
     /// Learning-rate schedule.
     #[arg(long, ignore_case = true, value_parser = choice::<Schedule>(), default_value = Schedule::default().name())]
     pub schedule: Schedule,
@@ -97,6 +101,7 @@ impl OptimArgs {
                 width: self.lr_width,
                 paint: self.lr_paint,
                 stops: self.lr_stops,
+                transform: self.lr_transform,
             },
             schedule: self.schedule,
             until_psnr: self.until_psnr,

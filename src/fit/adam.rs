@@ -56,12 +56,16 @@ pub struct LearningRates {
     pub paint: f64,
     /// Gradient stop offsets.
     pub stops: f64,
+    /// Transform parameters (a primitive's rotation), in pixels of motion at the shape's
+    /// edge: per slot the rate is divided by the shape's radius (half its diagonal for a
+    /// rectangle), so that a rotation moves the outline as fast as the points' rate does.
+    pub transform: f64,
 }
 
 impl Default for LearningRates {
     /// Rates that work for drawings of a few hundred pixels: 1 px for points (as DiffVG),
     /// 0.01 for colors and opacities, 0.1 for widths, 0.5 px for gradient geometry, 0.005
-    /// for stops.
+    /// for stops, 0.5 px (at the edge) for rotations.
     fn default() -> Self {
         LearningRates {
             points: 1.0,
@@ -70,6 +74,7 @@ impl Default for LearningRates {
             width: 0.1,
             paint: 0.5,
             stops: 0.005,
+            transform: 0.5,
         }
     }
 }
@@ -84,6 +89,7 @@ impl LearningRates {
             ParamGroup::StrokeWidth => self.width,
             ParamGroup::PaintGeometry => self.paint,
             ParamGroup::StopOffset => self.stops,
+            ParamGroup::Transform => self.transform,
         }
     }
 
@@ -96,6 +102,7 @@ impl LearningRates {
             ParamGroup::StrokeWidth => &mut self.width,
             ParamGroup::PaintGeometry => &mut self.paint,
             ParamGroup::StopOffset => &mut self.stops,
+            ParamGroup::Transform => &mut self.transform,
         }
     }
 
@@ -124,6 +131,18 @@ impl LearningRates {
             if let Some(Paint::Image(_)) = paints[0].0 {
                 for r in &mut rates[offsets.points..offsets.points + 2 * p.points.len()] {
                     *r = 0.0;
+                }
+            }
+            // A rotation's rate is the edge's motion over the shape's radius.
+            if let Some(prim) = &p.primitive {
+                let radius = prim.radius();
+                let last = offsets.points + prim.slot_count() - 1;
+                if layout.slots[last].group == ParamGroup::Transform {
+                    rates[last] = if radius > 0.0 {
+                        rates[last] / radius
+                    } else {
+                        0.0
+                    };
                 }
             }
             for (paint, at) in paints {

@@ -890,6 +890,7 @@ pub fn fit_glyph(target: &Image, opts: &GlyphOptions) -> GlyphOutcome {
             width: 0.0,
             paint: 0.0,
             stops: 0.0,
+            transform: 0.0,
         },
         schedule: Schedule::Cosine,
         render: opts.render,

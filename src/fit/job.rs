@@ -60,6 +60,7 @@ pub fn rate_name(g: ParamGroup) -> &'static str {
         ParamGroup::StrokeWidth => "lr_width",
         ParamGroup::PaintGeometry => "lr_paint",
         ParamGroup::StopOffset => "lr_stops",
+        ParamGroup::Transform => "lr_transform",
     }
 }
 

@@ -451,18 +451,29 @@ fn backward_bands(
         at = block.end;
     }
     jobs.into_par_iter().for_each(|(pi, mut block)| {
+        let (path, off) = (paths[pi], &layout.paths[pi]);
+        // A primitive's outline points are no slots: their gradient is chained to the
+        // primitive's parameters once the path's items are summed.
+        let mut outline_g = path
+            .primitive
+            .as_ref()
+            .map(|_| vec![0.0; 2 * path.points.len()]);
         for ii in items_of[pi].clone() {
             scatter_item(
                 p,
                 ii,
-                paths[pi],
-                &layout.paths[pi],
+                path,
+                off,
                 &vert_g,
                 &paint_g,
                 &mut block,
+                outline_g.as_deref_mut(),
             );
         }
-        join_closing_gradients(paths[pi], layout.paths[pi].points - block.base, block.g);
+        match (&path.primitive, outline_g) {
+            (Some(prim), Some(g)) => prim.chain(&g, &mut block.g[off.points - block.base..]),
+            _ => join_closing_gradients(path, off.points - block.base, block.g),
+        }
     });
     for (g, v) in group_g.iter().enumerate() {
         grad[layout.groups[g]] += v;
@@ -528,7 +539,7 @@ impl std::ops::IndexMut<usize> for Block<'_> {
 
 /// Adds item `ii`'s vertex and paint gradients to its path's parameters in `grad`:
 /// outline vertices back to the centerline (strokes), flattened vertices to control
-/// points.
+/// points (into `outline_g`, `x, y` per point, when the path is a primitive's outline).
 #[allow(clippy::too_many_arguments)]
 fn scatter_item(
     p: &Prepared,
@@ -538,6 +549,7 @@ fn scatter_item(
     vert_g: &[Vec<Point>],
     paint_g: &[Vec<f64>],
     grad: &mut Block<'_>,
+    mut outline_g: Option<&mut [f64]>,
 ) {
     let item = &p.items[ii];
     let geom = &p.geoms[item.path];
@@ -631,9 +643,13 @@ fn scatter_item(
         let s = geom.flat.src[k];
         for (m, wgt) in s.weights().iter().enumerate() {
             if *wgt != 0.0 {
-                let slot = off.points + 2 * (s.first as usize + m);
-                grad[slot] += wgt * g[0];
-                grad[slot + 1] += wgt * g[1];
+                let k = 2 * (s.first as usize + m);
+                let pair = match outline_g.as_deref_mut() {
+                    Some(og) => &mut og[k..k + 2],
+                    None => &mut grad.g[off.points + k - grad.base..][..2],
+                };
+                pair[0] += wgt * g[0];
+                pair[1] += wgt * g[1];
             }
         }
     }

@@ -42,6 +42,7 @@ pub(crate) mod geom;
 pub mod params;
 mod project;
 pub mod random;
+pub mod shape;
 pub mod structure;
 pub(crate) mod svg_in;
 pub(crate) mod svg_out;
@@ -49,6 +50,7 @@ pub(crate) mod svg_out;
 pub use fonts::Fonts;
 pub use params::{ParamGroup, ParamLayout, ParamSlot};
 pub use project::project;
+pub use shape::{Primitive, Shape};
 pub use structure::Structure;
 pub use svg_in::{Sizing, from_tree, parse_tree, parse_tree_with};
 pub use svg_out::escape;
@@ -600,6 +602,10 @@ pub struct Path {
     /// path of each text only): SVG out writes them back as a comment, so that the text
     /// stays recognisable once it is outlines.
     pub text: Option<String>,
+    /// The circle, ellipse or rectangle this path is drawn as, if any: then its
+    /// parameters are the primitive's, and `points` and `subpaths` are its outline, built
+    /// by [`Path::sync_primitive`] (see [`shape`]).
+    pub primitive: Option<Primitive>,
 }
 
 impl Path {
@@ -624,6 +630,7 @@ impl Path {
             stroke: None,
             stroke_first: false,
             text: None,
+            primitive: None,
         }
     }
 
@@ -798,6 +805,10 @@ impl Scene {
             for q in &mut p.points {
                 q[0] *= s;
                 q[1] *= s;
+            }
+            if let Some(prim) = &mut p.primitive {
+                prim.scale(s);
+                p.sync_primitive();
             }
             if let Some(f) = &mut p.fill {
                 scale_paint(&mut f.paint, &st);

@@ -4,8 +4,9 @@
 //! walk over the scene (`walk`) so that parameters, gradients and learning rates line up:
 //!
 //! * nodes in paint order, depth first; a [`Group`](super::Group) contributes its opacity;
-//! * per path: all control points (`x, y` per point, in [`Path::points`] order), then the
-//!   fill (paint, then opacity), then the stroke (paint, opacity, width);
+//! * per path: all control points (`x, y` per point, in [`Path::points`] order), or for
+//!   a circle, ellipse or rectangle its own parameters instead ([`shape`](super::shape)),
+//!   then the fill (paint, then opacity), then the stroke (paint, opacity, width);
 //! * a solid paint is `r, g, b`; a linear gradient is `x1, y1, x2, y2`, a radial one
 //!   `cx, cy, r, fx, fy, fr`, each followed by its stops as `offset, r, g, b, opacity`;
 //!   an image has no slots (its [`PaintOffsets`] start, empty, at the item's opacity).
@@ -56,17 +57,21 @@ pub enum ParamGroup {
     PaintGeometry,
     /// Gradient stop offsets, `[0, 1]`, kept ordered.
     StopOffset,
+    /// Transform parameters: the rotation of an ellipse or a rectangle
+    /// ([`Primitive::angle`](super::Primitive::angle)), radians.
+    Transform,
 }
 
 impl ParamGroup {
     /// All groups, in a fixed order.
-    pub const ALL: [ParamGroup; 6] = [
+    pub const ALL: [ParamGroup; 7] = [
         ParamGroup::Points,
         ParamGroup::Color,
         ParamGroup::Opacity,
         ParamGroup::StrokeWidth,
         ParamGroup::PaintGeometry,
         ParamGroup::StopOffset,
+        ParamGroup::Transform,
     ];
 
     /// Lower-case name used on the command line and in reports.
@@ -78,6 +83,7 @@ impl ParamGroup {
             ParamGroup::StrokeWidth => "widths",
             ParamGroup::PaintGeometry => "paint",
             ParamGroup::StopOffset => "stops",
+            ParamGroup::Transform => "transforms",
         }
     }
 }
@@ -234,6 +240,24 @@ fn walk_path(
     role: Role,
     f: &mut dyn FnMut(usize, ParamGroup, Part, &mut f64),
 ) {
+    if let Some(prim) = &mut p.primitive {
+        prim.walk(owner, Part::PathPoints(ix), f);
+    } else {
+        walk_points(p, ix, owner, f);
+    }
+    if role == Role::Clip {
+        return;
+    }
+    walk_paints(p, owner, ix, f);
+}
+
+/// A plain path's control points.
+fn walk_points(
+    p: &mut Path,
+    ix: usize,
+    owner: usize,
+    f: &mut dyn FnMut(usize, ParamGroup, Part, &mut f64),
+) {
     for (k, q) in p.points.iter_mut().enumerate() {
         let first = if k == 0 {
             Part::PathPoints(ix)
@@ -243,9 +267,15 @@ fn walk_path(
         f(owner, ParamGroup::Points, first, &mut q[0]);
         f(owner, ParamGroup::Points, Part::Point, &mut q[1]);
     }
-    if role == Role::Clip {
-        return;
-    }
+}
+
+/// A path's fill and stroke slots.
+fn walk_paints(
+    p: &mut Path,
+    owner: usize,
+    ix: usize,
+    f: &mut dyn FnMut(usize, ParamGroup, Part, &mut f64),
+) {
     if let Some(fill) = &mut p.fill {
         walk_paint(&mut fill.paint, owner, Part::FillPaint(ix), f);
         f(
@@ -441,7 +471,10 @@ impl Scene {
             i += 1;
         });
         assert_eq!(i, values.len(), "parameter vector length mismatch");
-        self.for_each_path_mut(Path::join_closing_points);
+        self.for_each_path_mut(|p| {
+            p.sync_primitive();
+            p.join_closing_points();
+        });
     }
 }
 
@@ -548,8 +581,14 @@ pub(crate) fn point_bound(p: &Path) -> f64 {
     crate::limits::MAX_COORDINATE / gain.max(1.0)
 }
 
-/// Clamps the control points of `p` into the readable range (see [`crate::scene::project`]).
+/// Clamps the control points of `p` into the readable range (see [`crate::scene::project`]),
+/// or a primitive's parameters into theirs (then rebuilds its outline).
 pub(crate) fn clamp_points(p: &mut Path) {
+    if let Some(prim) = &mut p.primitive {
+        prim.project();
+        p.sync_primitive();
+        return;
+    }
     let bound = point_bound(p);
     for q in &mut p.points {
         clamp_coordinate(&mut q[0], bound);
@@ -571,6 +610,7 @@ impl crate::choice::Choice for ParamGroup {
             Self::StrokeWidth => &["width"],
             Self::PaintGeometry => &[],
             Self::StopOffset => &["stop"],
+            Self::Transform => &["transform", "angle", "angles"],
         }
     }
 }

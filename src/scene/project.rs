@@ -5,7 +5,8 @@ use crate::scene::params::{clamp_coordinate, clamp_points};
 use crate::scene::{GradientKind, Node, Paint, Scene};
 
 /// Clamps every parameter back into its valid range: colors and opacities to `[0, 1]`,
-/// stroke widths and gradient radii to `[0, MAX_COORDINATE]`, gradient stop offsets to
+/// stroke widths, gradient radii and the sizes of circles, ellipses and rectangles to
+/// `[0, MAX_COORDINATE]` (a rectangle's corner radii to half its sides), gradient stop offsets to
 /// `[0, 1]` and non-decreasing (each offset at least the one before it). Control points
 /// and gradient end points are free within the readable range: ±[`MAX_COORDINATE`] in
 /// device pixels, and for a stroke drawn in a non-uniform frame tighter still, so that the

@@ -47,7 +47,9 @@ pub fn curved_paths(n: usize, size: u32, seed: u64) -> Scene {
 }
 
 /// A perturbed copy of `scene`: every control point moved by up to `max_px` pixels in x
-/// and y, and every color channel (solid and stop colors) shifted by up to `max_color`
+/// and y (a circle's, ellipse's or rectangle's position and sizes by up to `max_px / 4`,
+/// about as far as the mean of its outline's points moves, its sizes by at most half
+/// their value), and every color channel (solid and stop colors) shifted by up to `max_color`
 /// (then clamped to `[0, 1]`), uniformly at random. Used to test that refinement recovers.
 /// An image's rectangle is not moved. Moved points are kept within the readable range (±[`MAX_COORDINATE`] device pixels, see
 /// `super::params::clamp_points`), so the copy can always be written and read
@@ -58,10 +60,39 @@ pub fn perturb(scene: &Scene, max_px: f64, max_color: f64, seed: u64) -> Scene {
     let mut rng = Rng::new(seed);
     let layout = ParamLayout::new(scene);
     let mut p = scene.params();
-    for (v, slot) in p.iter_mut().zip(&layout.slots) {
-        match slot.group {
-            ParamGroup::Points => *v += rng.range(-max_px, max_px),
-            ParamGroup::Color => *v = (*v + rng.range(-max_color, max_color)).clamp(0.0, 1.0),
+    // A primitive's position and sizes move by up to a quarter of `max_px` (about as far
+    // as the mean of its outline's control points moves when they move independently),
+    // its sizes by at most half their value, so that none vanishes.
+    #[derive(Clone, Copy, PartialEq)]
+    enum Kind {
+        Point,
+        Position,
+        Size,
+    }
+    let mut kind = vec![Kind::Point; p.len()];
+    let mut k = 0;
+    scene.for_each_path(|q| {
+        if let Some(prim) = &q.primitive {
+            let at = layout.paths[k].points;
+            for j in 0..prim.slot_count() {
+                kind[at + j] = if prim.size_slots().contains(&j) {
+                    Kind::Size
+                } else {
+                    Kind::Position
+                };
+            }
+        }
+        k += 1;
+    });
+    for (i, (v, slot)) in p.iter_mut().zip(&layout.slots).enumerate() {
+        match (slot.group, kind[i]) {
+            (ParamGroup::Points, Kind::Size) => {
+                let m = (0.25 * max_px).min(0.5 * v.abs());
+                *v += rng.range(-m, m)
+            }
+            (ParamGroup::Points, Kind::Position) => *v += rng.range(-0.25 * max_px, 0.25 * max_px),
+            (ParamGroup::Points, Kind::Point) => *v += rng.range(-max_px, max_px),
+            (ParamGroup::Color, _) => *v = (*v + rng.range(-max_color, max_color)).clamp(0.0, 1.0),
             _ => {}
         }
     }

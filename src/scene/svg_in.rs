@@ -1030,6 +1030,8 @@ fn convert_text(text: &usvg::Text, ctx: &Ctx, t: &Affine, role: Role) -> Result<
     collect(&mut nodes, &mut paths);
     let several = paths.len() > 1;
     for (k, p) in paths.iter_mut().enumerate() {
+        // Glyph outlines stay paths, even a glyph that is a rectangle.
+        p.primitive = None;
         if p.id.is_empty() && !text.id().is_empty() {
             p.id = if several {
                 format!("{}-{}", text.id(), k + 1)
@@ -1209,7 +1211,46 @@ fn convert_path(p: &usvg::Path, ctx: &Ctx, t: &Affine, role: Role) -> Result<Opt
         return Ok(None);
     }
     out.stroke_first = p.paint_order() == usvg::PaintOrder::StrokeAndFill;
+    recognize_primitive(p, &mut out, &t);
     Ok(Some(out))
+}
+
+/// Makes `out` a circle, ellipse or rectangle with its own parameters when its outline is
+/// one (as usvg builds `<circle>`, `<ellipse>` and `<rect>`) under a transform that keeps
+/// it one, and the outline the primitive builds is the one loaded.
+fn recognize_primitive(p: &usvg::Path, out: &mut Path, t: &Affine) {
+    if !out.stroke_in_device_space() {
+        return;
+    }
+    let mut local = Path::new("");
+    for seg in p.data().segments() {
+        use usvg::tiny_skia_path::PathSegment as S;
+        let q = |a: usvg::tiny_skia_path::Point| [a.x as f64, a.y as f64];
+        match seg {
+            S::MoveTo(a) => local.move_to(q(a)),
+            S::LineTo(a) if !local.subpaths.is_empty() => local.line_to(q(a)),
+            S::CubicTo(a, b, c) if !local.subpaths.is_empty() => local.cubic_to(q(a), q(b), q(c)),
+            S::Close => local.close(),
+            _ => return,
+        }
+    }
+    let Some(prim) = super::Primitive::recognize(&local, t, out.stroke.is_some()) else {
+        return;
+    };
+    let (built, _) = prim.outline();
+    let scale = out
+        .points
+        .iter()
+        .fold(1.0f64, |m, q| m.max(q[0].abs()).max(q[1].abs()));
+    let same = built.len() == out.points.len()
+        && built
+            .iter()
+            .zip(&out.points)
+            .all(|(a, b)| (a[0] - b[0]).abs().max((a[1] - b[1]).abs()) <= 1e-6 * scale);
+    if same {
+        out.primitive = Some(prim);
+        out.sync_primitive();
+    }
 }
 
 /// usvg may emit a segment right after a close without a MoveTo: SVG starts the next

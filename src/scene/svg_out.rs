@@ -6,7 +6,8 @@
 //! `transform` on its path so that the pen keeps its shape. Coordinates are written with
 //! four decimals, colors as `#rrggbb`. The glyph outlines of a `<text>` are written as
 //! paths after a comment holding the text (`<!-- text: Hello -->`). An image-filled path is written as an
-//! `<image>` with its pixels embedded as a base64 PNG.
+//! `<image>` with its pixels embedded as a base64 PNG. A circle, ellipse or rectangle
+//! ([`Path::primitive`]) is written as its own element, rotated by a `rotate` transform.
 
 use std::collections::HashSet;
 use std::fmt::Write as _;
@@ -372,7 +373,33 @@ impl Writer {
             .as_ref()
             .map(|s| s.frame)
             .filter(|f| *f != FRAME_IDENTITY);
+        // A circle, ellipse or rectangle is written as itself, its rotation as a
+        // `rotate` about its center (its paints then in the rotated frame).
+        let primitive = p.primitive.as_ref().filter(|_| frame.is_none());
         let (to_local, transform_attr) = match frame {
+            None if primitive.is_some_and(|q| q.angle != 0.0) => {
+                let q = primitive.expect("checked");
+                let c = q.center();
+                let deg = q.angle.to_degrees();
+                let (s, co) = (-q.angle).sin_cos();
+                let inv = [
+                    co,
+                    s,
+                    -s,
+                    co,
+                    c[0] - co * c[0] + s * c[1],
+                    c[1] - s * c[0] - co * c[1],
+                ];
+                (
+                    inv,
+                    format!(
+                        " transform=\"rotate({} {} {})\"",
+                        num(deg),
+                        num(c[0]),
+                        num(c[1])
+                    ),
+                )
+            }
             Some([a, b, c, d]) => {
                 let m = [a, b, c, d, 0.0, 0.0];
                 match invert(&m) {
@@ -396,7 +423,12 @@ impl Writer {
             let _ = write!(attrs, " id=\"{}\"", escape(&p.id));
         }
         attrs.push_str(&transform_attr);
-        let _ = write!(attrs, " d=\"{}\"", path_data(p, &to_local));
+        match primitive {
+            Some(q) => attrs.push_str(&primitive_attrs(q)),
+            None => {
+                let _ = write!(attrs, " d=\"{}\"", path_data(p, &to_local));
+            }
+        }
         match &p.fill {
             Some(f) => {
                 let v = self.paint(&f.paint, &to_local);
@@ -471,8 +503,38 @@ impl Writer {
         if let Some(text) = &p.text {
             let _ = writeln!(self.body, "{pad}<!-- text: {} -->", comment_text(text));
         }
-        let _ = writeln!(self.body, "{pad}<path{attrs}/>");
+        let tag = primitive.map_or("path", |q| q.element());
+        let _ = writeln!(self.body, "{pad}<{tag}{attrs}/>");
     }
+}
+
+/// The geometry attributes of a primitive's element, before its rotation.
+fn primitive_attrs(q: &super::Primitive) -> String {
+    use super::Shape;
+    let attrs: Vec<(&str, f64)> = match q.shape {
+        Shape::Circle { center, r } => vec![("cx", center[0]), ("cy", center[1]), ("r", r)],
+        Shape::Ellipse { center, rx, ry } => {
+            vec![("cx", center[0]), ("cy", center[1]), ("rx", rx), ("ry", ry)]
+        }
+        Shape::Rect {
+            x,
+            y,
+            width,
+            height,
+            radii,
+        } => {
+            let mut v = vec![("x", x), ("y", y), ("width", width), ("height", height)];
+            if let Some([rx, ry]) = radii {
+                v.extend([("rx", rx), ("ry", ry)]);
+            }
+            v
+        }
+    };
+    let mut out = String::new();
+    for (name, v) in attrs {
+        let _ = write!(out, " {name}=\"{}\"", num(v));
+    }
+    out
 }
 
 /// Absolute path data (`M`, `L`, `Q`, `C`, `Z`) for a path, after mapping by `t`.

@@ -176,7 +176,7 @@ fn fit_bad_inputs_fail_cleanly() {
         "-o",
         s(&out),
         "--freeze",
-        "points,colors,opacities,widths,paint,stops",
+        "points,colors,opacities,widths,paint,stops,transforms",
     ]);
     assert_fails(&o, "perturbed.svg", "frozen", &out);
     let o = diffsvg(&["fit", s(&svg), s(&png), "-o", s(&out), "--freeze", "wings"]);
