@@ -27,8 +27,14 @@ if ! cmp -s python/requirements.txt "$VENV/requirements.txt" 2>/dev/null; then
 fi
 
 venv_s=$SECONDS
-# The command-line binary the tests compare with (built already by `cargo test --release`).
-cargo build --release --quiet
+# The command-line binary the tests compare with. `cargo test --release` (run first by
+# README's test command) leaves it fresh; built here when it is missing or older than the
+# sources (a plain build would compile the library again: the tests' dev-dependencies
+# turn on features of shared crates, so the two builds differ).
+bin=target/release/diffsvg
+if [ ! -x "$bin" ] || [ -n "$(find src Cargo.toml Cargo.lock -newer "$bin" -print -quit)" ]; then
+    cargo build --release --quiet
+fi
 # The wheel, as `pip install` would get it; installed over any earlier one.
 rm -rf target/wheels
 "$VENV/bin/maturin" build --release --quiet -m python/Cargo.toml \

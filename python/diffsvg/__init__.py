@@ -127,7 +127,8 @@ class Scene:
     """A vector scene: paths with fills and strokes (solid or gradient paints; an
     ``<image>`` is its rectangle filled with the image's fixed pixels) in groups.
 
-    Build one with :meth:`load` or :meth:`from_svg`; ``Scene(width, height)`` is empty.
+    Build one with :meth:`load` or :meth:`from_svg`, or start from ``Scene(width, height)``
+    (empty) and add shapes with :meth:`add_circle`, :meth:`add_ellipse`, :meth:`add_rect`.
     """
 
     __slots__ = ("_s", "_structure", "_params", "__weakref__")
@@ -161,6 +162,37 @@ class Scene:
         return cls(_native_scene=_native.Scene.from_svg(
             text, _whole_or_none(width, "width"), _whole_or_none(height, "height"), scale,
             name))
+
+    # ----- building in code ---------------------------------------------------------
+    def _add(self, kind: str, values, fill: Color, stroke: Color, stroke_width: float,
+             id: str) -> None:
+        vals = [float(v) for v in np.asarray(values, dtype=np.float64).ravel()]
+        self._s.add_shape(kind, vals, _color(fill, "fill"), _color(stroke, "stroke"),
+                          float(stroke_width), str(id))
+        self._structure = None
+        self._params = None
+
+    def add_circle(self, center, radius: float, *, fill: Color = (0, 0, 0, 1),
+                   stroke: Color = None, stroke_width: float = 1.0, id: str = "") -> None:
+        """Draws a circle on top: ``center`` (x, y) and ``radius`` in pixels are its
+        parameters (``arrays()`` names them so), and SVG out writes a ``<circle>``.
+        ``fill``/``stroke``: straight (r, g, b[, a]) in [0, 1], or None."""
+        self._add("circle", [*center, radius], fill, stroke, stroke_width, id)
+
+    def add_ellipse(self, center, radius, angle: float = 0.0, *, fill: Color = (0, 0, 0, 1),
+                    stroke: Color = None, stroke_width: float = 1.0, id: str = "") -> None:
+        """Draws an ellipse on top: ``center``, ``radius`` (rx, ry) and ``angle`` (radians,
+        its rotation about the center, clockwise on screen) are its parameters."""
+        self._add("ellipse", [*center, *radius, angle], fill, stroke, stroke_width, id)
+
+    def add_rect(self, corner, size, radii=None, angle: float = 0.0, *,
+                 fill: Color = (0, 0, 0, 1), stroke: Color = None, stroke_width: float = 1.0,
+                 id: str = "") -> None:
+        """Draws a rectangle on top: ``corner`` (x, y), ``size`` (width, height), the
+        corner ``radii`` (rx, ry) of a rounded one and ``angle`` (radians, about its
+        center) are its parameters."""
+        r = [] if radii is None else list(radii)
+        self._add("rect", [*corner, *size, *r, angle], fill, stroke, stroke_width, id)
 
     def save(self, path) -> None:
         """Writes the scene as SVG (to a temporary file, then renamed)."""
@@ -232,7 +264,7 @@ class Scene:
 
     def layout(self) -> Layout:
         """Per slot of :meth:`params`: ``group`` (index into ``group_names``: points,
-        colors, opacities, widths, paint, stops) and ``owner`` (index into ``owners``,
+        colors, opacities, widths, paint, stops, transforms) and ``owner`` (index into ``owners``,
         dicts with ``id`` and ``kind``)."""
         return self._s.layout()
 
@@ -249,8 +281,15 @@ class Scene:
         st = self.structure()
         out = []
         for i, sh in enumerate(st["shapes"]):
-            off, n = sh["points"]
-            out.append((off, 2 * n, ("shapes", i, "points"), (n, 2)))
+            prim = sh["primitive"]
+            if prim is None:
+                off, n = sh["points"]
+                out.append((off, 2 * n, ("shapes", i, "points"), (n, 2)))
+            else:
+                at = prim["offset"]
+                for name, size in prim["fields"]:
+                    out.append((at, size, ("shapes", i, name), () if size == 1 else (size,)))
+                    at += size
             for key in ("fill", "stroke"):
                 e = sh[key]
                 if e is None:
@@ -299,7 +338,10 @@ class Scene:
     def arrays(self, dtype=np.float32) -> Arrays:
         """The parameters per shape, as DiffVG names them::
 
-            {"shapes": [{"points": (n, 2),           # every control point, cubic segments
+            {"shapes": [{"points": (n, 2),           # a path: every control point
+                         # or a circle: "center": (2,), "radius": ()
+                         # an ellipse: "center": (2,), "radius": (2,), "angle": ()
+                         # a rect: "corner": (2,), "size": (2,), ["radii": (2,),] "angle": ()
                          "fill": (4,)                # solid: r, g, b, opacity
                               | {"geometry": (4,)    # linear: x1, y1, x2, y2
                                              (6,),   # radial: cx, cy, r, fx, fy, fr
@@ -310,7 +352,9 @@ class Scene:
                          "stroke_width": ()}, ...],
              "groups": [{"opacity": ()}, ...]}
 
-        A key is absent when the shape has no such paint. Every segment is a cubic:
+        A key is absent when the shape has no such paint. A circle, ellipse or
+        rectangle has its own parameters in place of ``points`` (device pixels; ``angle``
+        in radians, its rotation about its center). In a path every segment is a cubic:
         point ``3k`` starts segment ``k`` of a subpath and ``3k+1``, ``3k+2`` are its
         control points (a line's at 1/3 and 2/3). The structure is a pytree for JAX.
         """
@@ -378,6 +422,14 @@ class Scene:
         shapes = []
         for sh, pts in zip(st["shapes"], written):
             d = {"id": sh["id"], "points": pts.tolist()}
+            prim = sh["primitive"]
+            if prim is not None:
+                shape, at = {"kind": prim["kind"]}, prim["offset"]
+                for name, size in prim["fields"]:
+                    v = g[at:at + size]
+                    shape[name] = float(v[0]) if size == 1 else v.tolist()
+                    at += size
+                d["shape"] = shape
             for key in ("fill", "stroke"):
                 e = sh[key]
                 if e is None:
@@ -575,18 +627,19 @@ def _target_for(target, width: int, height: int) -> np.ndarray:
 
 def fit(scene: Scene, target, iters: int = 500, *, lr_points: float = 1.0,
         lr_color: float = 0.01, lr_opacity: float = 0.01, lr_width: float = 0.1,
-        lr_paint: float = 0.5, lr_stops: float = 0.005, schedule: str = "constant",
-        loss: str = "mse", background: Color = None, pyramid: int = 1,
-        until_psnr: Optional[float] = None, tolerance: float = 0.02,
+        lr_paint: float = 0.5, lr_stops: float = 0.005, lr_transform: float = 0.5,
+        schedule: str = "constant", loss: str = "mse", background: Color = None,
+        pyramid: int = 1, until_psnr: Optional[float] = None, tolerance: float = 0.02,
         progress: Progress = None) -> Tuple["Scene", FitInfo]:
     """Refines every parameter of ``scene`` toward ``target`` with exact gradients and
     Adam (as ``diffsvg fit``); returns ``(best scene, info)``.
 
     ``target``: a premultiplied ``(h, w, 4)`` array of the scene's size, or a file (PNG,
     JPEG or SVG), resampled to the scene's size. Learning rates are per step in each
-    group's units (pixels for points and gradient geometry). ``background`` (straight
-    RGB[A]) is composited under render and target before comparing (opaque: over RGB
-    only). ``progress(step)`` is called after every evaluation with ``iter``, ``loss``,
+    group's units (pixels for points and gradient geometry; ``lr_transform``, the
+    rotation of circles, ellipses and rectangles, in pixels of motion at the shape's
+    edge). ``background`` (straight RGB[A]) is composited under render and target before
+    comparing (opaque: over RGB only). ``progress(step)`` is called after every evaluation with ``iter``, ``loss``,
     ``psnr``, ``seconds``; returning ``False`` or raising stops the run (an exception is
     re-raised once the GIL is back; Ctrl-C raises KeyboardInterrupt the same way).
     ``info`` has ``loss``, ``psnr``, ``steps``, ``reason``, the median ``step_ms`` (render,
@@ -596,7 +649,8 @@ def fit(scene: Scene, target, iters: int = 500, *, lr_points: float = 1.0,
     t = _target_for(target, scene.width, scene.height)
     options = dict(lr_points=lr_points, lr_color=lr_color, lr_opacity=lr_opacity,
                    lr_width=lr_width, lr_paint=lr_paint, lr_stops=lr_stops,
-                   schedule=schedule, loss=loss, background=_color(background, "background"),
+                   lr_transform=lr_transform, schedule=schedule, loss=loss,
+                   background=_color(background, "background"),
                    pyramid=_whole(pyramid, "pyramid", _U64), tolerance=tolerance)
     s, info = _native.fit(_scene(scene), t, _whole(iters, "iters", _U64), until_psnr, options,
                           progress)
@@ -612,8 +666,8 @@ def vectorize(target, paths: int = 64, mode: str = "adaptive", iters: int = 1000
     ``mode``: "adaptive" (paths added in rounds where the error is largest, pruned),
     "fixed" (DiffVG's random blobs), "painterly" (random strokes) or "trace" (vtracer).
     ``target``: a premultiplied array or a file; ``width`` resamples a file to that width.
-    ``rates``: ``lr_points`` … ``lr_stops``, ``schedule``, ``loss``, ``pyramid``,
-    ``tolerance`` as in :func:`fit`. ``progress`` sees rounds (``round``, ``paths``) and
+    ``rates``: ``lr_points`` … ``lr_stops``, ``lr_transform``, ``schedule``, ``loss``,
+    ``pyramid``, ``tolerance`` as in :func:`fit`. ``progress`` sees rounds (``round``, ``paths``) and
     evaluations (``iter``, ``loss``, ``psnr``, ``seconds``, ``paths``).
     """
     width = _whole_or_none(width, "width")

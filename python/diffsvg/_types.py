@@ -43,10 +43,19 @@ class PaintEntry(TypedDict):
     stops: NotRequired[int]
 
 
+class PrimitiveEntry(TypedDict):
+    """Where a circle's, ellipse's or rectangle's own parameters lie: from ``offset``,
+    one run per field, in order."""
+    kind: str  # "circle", "ellipse" or "rect"
+    offset: int
+    fields: List[Tuple[str, int]]  # (name, length): center, radius, corner, size, radii, angle
+
+
 class ShapeEntry(TypedDict):
     """One path of ``Scene.structure()``."""
     id: str
-    points: Tuple[int, int]  # offset, count
+    points: Tuple[int, int]  # offset, count (0 for a primitive)
+    primitive: Optional[PrimitiveEntry]
     segments: List[int]
     closed: List[bool]
     kinds: List[str]  # per subpath, one letter per segment as written: "LCQ"
@@ -150,8 +159,17 @@ class PaintArrays(TypedDict, total=False):
 
 
 class ShapeArrays(TypedDict, total=False):
-    """One shape of ``Scene.arrays()``; keys absent when the shape has no such paint."""
+    """One shape of ``Scene.arrays()``; keys absent when the shape has no such paint. A
+    path has ``points``; a circle ``center`` and ``radius``; an ellipse ``center``,
+    ``radius`` (rx, ry) and ``angle``; a rectangle ``corner``, ``size``, ``radii`` (rounded
+    corners only) and ``angle``."""
     points: Array
+    center: Array
+    radius: Array
+    corner: Array
+    size: Array
+    radii: Array
+    angle: Array
     fill: Union[Array, PaintArrays]
     stroke: Union[Array, PaintArrays]
     stroke_width: Array

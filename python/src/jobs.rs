@@ -87,21 +87,22 @@ fn step_dict(d: &Bound<'_, PyDict>, s: &Step) -> PyResult<()> {
 }
 
 /// The options shared by `fit` and `vectorize`, from a dict (unknown keys refused):
-/// `lr_points`, `lr_color`, `lr_opacity`, `lr_width`, `lr_paint`, `lr_stops` (finite,
-/// ≥ 0), `schedule`, `loss`, `background` (straight RGBA), `pyramid`, `tolerance`.
+/// `lr_points`, `lr_color`, `lr_opacity`, `lr_width`, `lr_paint`, `lr_stops`,
+/// `lr_transform` (finite, ≥ 0), `schedule`, `loss`, `background` (straight RGBA), `pyramid`, `tolerance`.
 fn fit_setup(
     target: &PyReadonlyArrayDyn<'_, f32>,
     iters: usize,
     until_psnr: Option<f64>,
     options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<(Objective, FitOptions)> {
-    const KEYS: [&str; 11] = [
+    const KEYS: [&str; 12] = [
         "lr_points",
         "lr_color",
         "lr_opacity",
         "lr_width",
         "lr_paint",
         "lr_stops",
+        "lr_transform",
         "schedule",
         "loss",
         "background",
@@ -132,6 +133,7 @@ fn fit_setup(
         &mut rates.width,
         &mut rates.paint,
         &mut rates.stops,
+        &mut rates.transform,
     ]) {
         if let Some(v) = get(k)? {
             *r = v.extract()?;

@@ -79,6 +79,100 @@ impl PyScene {
         PyScene::from(Scene::new(width, height))
     }
 
+    /// Appends a circle, ellipse or rectangle (`kind`: "circle", "ellipse", "rect") drawn
+    /// on top, its parameters in `values` in slot order (circle `cx, cy, r`; ellipse
+    /// `cx, cy, rx, ry, angle`; rectangle `x, y, width, height, [rx, ry,] angle`; device
+    /// pixels, radians), with a solid `fill` and/or `stroke` (straight `r, g, b, opacity`
+    /// in `[0, 1]`) of `stroke_width` pixels.
+    #[pyo3(signature = (kind, values, fill=None, stroke=None, stroke_width=1.0, id=String::new()))]
+    fn add_shape(
+        &mut self,
+        kind: &str,
+        values: Vec<f64>,
+        fill: Option<[f64; 4]>,
+        stroke: Option<[f64; 4]>,
+        stroke_width: f64,
+        id: String,
+    ) -> PyResult<()> {
+        use diffsvg::scene::{Fill, FillRule, Node, Paint, Path, Primitive, Stroke};
+        let want = match (kind, values.len()) {
+            ("circle", 3) | ("ellipse", 5) | ("rect", 5) | ("rect", 7) => values.len(),
+            ("circle", _) => 3,
+            ("ellipse", _) => 5,
+            ("rect", _) => 5,
+            _ => {
+                return Err(bad(format!(
+                    "add_shape: unknown kind {kind:?}; expected \"circle\", \"ellipse\" or \"rect\""
+                )));
+            }
+        };
+        if values.len() != want {
+            return Err(bad(format!(
+                "add_shape: a {kind} takes {want} values{}, got {}",
+                if kind == "rect" {
+                    " (or 7 with corner radii)"
+                } else {
+                    ""
+                },
+                values.len()
+            )));
+        }
+        let bound = diffsvg::limits::MAX_COORDINATE / 8.0;
+        if let Some(v) = values.iter().find(|v| !(v.abs() <= bound)) {
+            return Err(bad(format!(
+                "add_shape: {v} is not a finite number within ±{bound:e}"
+            )));
+        }
+        let v = &values;
+        let sizes = match kind {
+            "circle" => 2..3,
+            _ => 2..v.len() - 1,
+        };
+        if v[sizes].iter().any(|x| *x < 0.0) {
+            return Err(bad(format!(
+                "add_shape: a {kind}'s sizes must be ≥ 0, got {v:?}"
+            )));
+        }
+        let prim = match kind {
+            "circle" => Primitive::circle([v[0], v[1]], v[2]),
+            "ellipse" => Primitive::ellipse([v[0], v[1]], v[2], v[3], v[4]),
+            _ if v.len() == 7 => Primitive::rect(v[0], v[1], v[2], v[3], Some([v[4], v[5]]), v[6]),
+            _ => Primitive::rect(v[0], v[1], v[2], v[3], None, v[4]),
+        };
+        let unit = |c: [f64; 4], name: &str| -> PyResult<[f64; 4]> {
+            if c.iter().all(|x| (0.0..=1.0).contains(x)) {
+                Ok(c)
+            } else {
+                Err(bad(format!("add_shape: {name} {c:?} must be in [0, 1]")))
+            }
+        };
+        if !(stroke_width.is_finite() && stroke_width >= 0.0) {
+            return Err(bad(format!(
+                "add_shape: stroke_width {stroke_width} must be ≥ 0"
+            )));
+        }
+        let mut path = Path::from_primitive(id, prim);
+        if let Some(c) = fill {
+            let c = unit(c, "fill")?;
+            path.fill = Some(Fill {
+                paint: Paint::Solid([c[0], c[1], c[2]]),
+                opacity: c[3],
+                rule: FillRule::NonZero,
+            });
+        }
+        if let Some(c) = stroke {
+            let c = unit(c, "stroke")?;
+            let mut st = Stroke::new(Paint::Solid([c[0], c[1], c[2]]), stroke_width);
+            st.opacity = c[3];
+            path.stroke = Some(st);
+        }
+        if path.fill.is_none() && path.stroke.is_none() {
+            return Err(bad("add_shape: give a fill, a stroke or both"));
+        }
+        self.inner.nodes.push(Node::Path(path));
+        Ok(())
+    }
+
     /// Loads an SVG or SVGZ file. `width` (with `height`: exactly that size) or `scale`
     /// resize the canvas; by default the SVG's own size. `<text>` is set in the bundled
     /// DejaVu fonts plus the font files `fonts` and the fonts under the folders
@@ -218,8 +312,9 @@ impl PyScene {
     }
 
     /// Where each shape's and group's arrays lie in `params()`: a dict with `shapes` (per
-    /// path: `id`, `points` = (offset, count), `segments` per subpath, `closed` per
-    /// subpath, `kinds` of the written segments ("L", "Q", "C"), `fill` and `stroke` paint
+    /// path: `id`, `points` = (offset, count), `primitive` (a circle's, ellipse's or
+    /// rectangle's `kind`, `offset` and `fields`, [(name, length)], or None), `segments`
+    /// per subpath, `closed` per subpath, `kinds` of the written segments ("L", "Q", "C"), `fill` and `stroke` paint
     /// entries or None, `stroke_width` offset or None) and `groups` (`id`, `offset`).
     fn structure<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let st = Structure::of(&self.inner);
@@ -228,6 +323,16 @@ impl PyScene {
             let d = PyDict::new(py);
             d.set_item("id", &sh.id)?;
             d.set_item("points", sh.points)?;
+            match &sh.primitive {
+                Some(ps) => {
+                    let e = PyDict::new(py);
+                    e.set_item("kind", ps.kind)?;
+                    e.set_item("offset", ps.offset)?;
+                    e.set_item("fields", &ps.fields)?;
+                    d.set_item("primitive", e)?;
+                }
+                None => d.set_item("primitive", py.None())?,
+            }
             d.set_item("segments", &sh.segments)?;
             d.set_item("closed", &sh.closed)?;
             d.set_item("kinds", &sh.kinds)?;
@@ -264,7 +369,11 @@ impl PyScene {
         let mut i = 0;
         self.inner.for_each_path(|p| {
             let off = l.paths[i].points;
-            let w = written_point_gradient(p, &g[off..off + 2 * p.points.len()]);
+            // A primitive's outline points are no parameters (its own are in `shape`).
+            let w = match p.primitive {
+                Some(_) => Vec::new(),
+                None => written_point_gradient(p, &g[off..off + 2 * p.points.len()]),
+            };
             out.push(w);
             i += 1;
         });

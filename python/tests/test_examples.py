@@ -7,6 +7,7 @@ import re
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from conftest import ROOT, SAMPLES, run_cli, shared_data
@@ -60,6 +61,42 @@ def test_single_curve(tmp_path):
     before, after = psnr_gain(out)
     assert before < 15 and after > 35, out
     assert "<path" in (tmp_path / "c.svg").read_text()
+
+
+@pytest.mark.skipif(importlib.util.find_spec("optax") is None
+                    or importlib.util.find_spec("jax") is None,
+                    reason="single_circle.py needs jax and optax")
+def test_single_circle_recovers_center_and_radius(tmp_path):
+    out = run("single_circle.py", "--size", 64, "--iters", 300, "-o", tmp_path / "c.svg",
+              cwd=tmp_path)
+    x, y, r = map(float, re.search(r"center \[([-\d.]+) +([-\d.]+)\] radius ([\d.]+)",
+                                   out).groups())
+    # At 64 px the target is the circle (35, 30) of radius 16.25.
+    assert max(abs(x - 35), abs(y - 30), abs(r - 16.25)) <= 1e-3, out
+    text = (tmp_path / "c.svg").read_text()
+    assert "<circle" in text and "<path" not in text, text
+
+
+def test_scene_built_in_code_round_trips(tmp_path):
+    import diffsvg
+    s = diffsvg.Scene(40, 30)
+    s.add_circle((10, 12), 5.5, fill=(1, 0, 0), id="c")
+    s.add_ellipse((25, 12), (8, 4), 0.3, fill=None, stroke=(0, 0, 1, 0.5), stroke_width=2)
+    s.add_rect((4, 20), (30, 6), radii=(2, 1.5), fill=(0, 0.4, 0))
+    a = s.arrays(np.float64)["shapes"]
+    assert a[0]["center"].tolist() == [10, 12] and float(a[0]["radius"]) == 5.5
+    assert a[1]["radius"].tolist() == [8, 4] and abs(float(a[1]["angle"]) - 0.3) < 1e-12
+    assert a[2]["radii"].tolist() == [2, 1.5]
+    text = s.to_svg()
+    assert text.count("<circle") == 1 and text.count("<ellipse") == 1 and text.count("<rect") == 1
+    back = diffsvg.Scene.from_svg(text)
+    assert np.allclose(back.params(), s.params(), atol=1e-4)
+    with pytest.raises(diffsvg.DiffsvgError, match="takes 3 values"):
+        s._s.add_shape("circle", [1.0, 2.0])
+    with pytest.raises(diffsvg.DiffsvgError, match="sizes must be"):
+        s.add_circle((1, 2), -1)
+    with pytest.raises(diffsvg.DiffsvgError, match="unknown kind"):
+        s._s.add_shape("star", [1.0])
 
 
 def test_single_gradient(tmp_path):

@@ -357,6 +357,25 @@ impl Primitive {
         }
     }
 
+    /// The parameters' names and lengths, in slot order: a circle's `center` (2) and
+    /// `radius` (1); an ellipse's `center`, `radius` (2: rx, ry) and `angle` (1); a
+    /// rectangle's `corner` (2: x, y), `size` (2: width, height), `radii` (2, rounded
+    /// corners only) and `angle`. As DiffVG's Python names a circle's.
+    pub fn fields(&self) -> Vec<(&'static str, usize)> {
+        match self.shape {
+            Shape::Circle { .. } => vec![("center", 2), ("radius", 1)],
+            Shape::Ellipse { .. } => vec![("center", 2), ("radius", 2), ("angle", 1)],
+            Shape::Rect { radii, .. } => {
+                let mut v = vec![("corner", 2), ("size", 2)];
+                if radii.is_some() {
+                    v.push(("radii", 2));
+                }
+                v.push(("angle", 1));
+                v
+            }
+        }
+    }
+
     /// Number of parameter slots.
     pub fn slot_count(&self) -> usize {
         match self.shape {

@@ -31,13 +31,27 @@ pub struct PaintSlots {
     pub opacity: usize,
 }
 
+/// Where a circle's, ellipse's or rectangle's own parameters lie.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PrimitiveSlots {
+    /// `"circle"`, `"ellipse"` or `"rect"`.
+    pub kind: &'static str,
+    /// First slot.
+    pub offset: usize,
+    /// Names and lengths in slot order ([`Primitive::fields`](super::Primitive::fields)).
+    pub fields: Vec<(&'static str, usize)>,
+}
+
 /// One path's slots.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ShapeSlots {
     /// The path's id.
     pub id: String,
-    /// First slot of the control points and their count (`2k`, `2k + 1`: point `k`).
+    /// First slot of the control points and their count (`2k`, `2k + 1`: point `k`); the
+    /// count is 0 for a primitive, whose outline is built from its own parameters.
     pub points: (usize, usize),
+    /// The circle's, ellipse's or rectangle's parameters, if the path is one.
+    pub primitive: Option<PrimitiveSlots>,
     /// Segments per subpath.
     pub segments: Vec<usize>,
     /// Whether each subpath is closed.
@@ -121,9 +135,20 @@ impl Structure {
                         .collect()
                 })
                 .collect();
+            let primitive = p.primitive.as_ref().map(|q| PrimitiveSlots {
+                kind: q.element(),
+                offset: off.points,
+                fields: q.fields(),
+            });
+            let n = if primitive.is_some() {
+                0
+            } else {
+                p.points.len()
+            };
             shapes.push(ShapeSlots {
                 id: p.id.clone(),
-                points: (off.points, p.points.len()),
+                points: (off.points, n),
+                primitive,
                 segments: p.subpaths.iter().map(|s| s.kinds.len()).collect(),
                 closed: p.subpaths.iter().map(|s| s.closed).collect(),
                 kinds,
@@ -150,7 +175,8 @@ impl Structure {
 
     /// A gradient (in [`Scene::params`] order) per shape, as `diffsvg grad --json` prints
     /// it: `{"loss", "shapes", "groups"}`, each shape with `id`, `points` (one `[x, y]`
-    /// per written point, chained from the cubics), `fill`/`stroke` (solid:
+    /// per written point, chained from the cubics; none for a primitive, which has
+    /// `shape`: its `kind` and one entry per [`PrimitiveSlots::fields`]), `fill`/`stroke` (solid:
     /// `[r, g, b, opacity]`; gradient: `kind`, `geometry`, `stops`, `opacity`) and
     /// `stroke_width`; each group with `id` and `opacity`.
     pub fn gradient_json(&self, scene: &Scene, loss: f64, grad: &[f64]) -> Value {
@@ -178,8 +204,24 @@ impl Structure {
             .zip(paths)
             .map(|(s, p)| {
                 let (o, n) = s.points;
-                let points = written_point_gradient(p, &grad[o..o + 2 * n]);
+                let points = match &s.primitive {
+                    Some(_) => Vec::new(),
+                    None => written_point_gradient(p, &grad[o..o + 2 * n]),
+                };
                 let mut v = json!({"id": s.id, "points": points});
+                if let Some(ps) = &s.primitive {
+                    let mut shape = json!({"kind": ps.kind});
+                    let mut at = ps.offset;
+                    for &(name, len) in &ps.fields {
+                        shape[name] = if len == 1 {
+                            json!(grad[at])
+                        } else {
+                            json!(grad[at..at + len].to_vec())
+                        };
+                        at += len;
+                    }
+                    v["shape"] = shape;
+                }
                 if p.fill.is_some() {
                     v["fill"] = paint(&s.fill);
                 }

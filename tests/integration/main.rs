@@ -16,6 +16,7 @@ mod images;
 mod layers;
 mod options;
 mod parity;
+mod primitives;
 mod regress_cli;
 mod regress_input;
 mod regress_raster;

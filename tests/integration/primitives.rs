@@ -1,0 +1,187 @@
+//! Circles, ellipses and rectangles with their own parameters: fitted from the command
+//! line, checked against finite differences, written back as themselves.
+
+use diffsvg::loss::Loss;
+use diffsvg::raster::{RenderOptions, render};
+use diffsvg::scene::{ParamGroup, ParamLayout, Shape};
+use diffsvg::{Scene, Sizing};
+
+use crate::common::{diffsvg, s, scratch, write};
+use crate::gradients::{assert_agrees, nudged_target};
+
+fn summary(out: &std::process::Output) -> serde_json::Value {
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    serde_json::from_str(text.lines().last().unwrap_or_default()).unwrap()
+}
+
+/// DiffVG's single_circle: a circle's center and radius recovered from a picture of it,
+/// to a thousandth of a pixel, and the SVG written back holds a `<circle>`.
+#[test]
+fn single_circle_recovers_center_and_radius() {
+    let dir = scratch("single-circle");
+    let target = write(
+        &dir,
+        "target.svg",
+        r##"<svg xmlns="http://www.w3.org/2000/svg" width="64" height="64">
+          <circle cx="30.3" cy="34.6" r="17.25" fill="#4c7fcc"/></svg>"##,
+    );
+    let png = dir.join("target.png");
+    let t = Scene::load(&target, Sizing::Natural).unwrap();
+    render(&t, &RenderOptions::default())
+        .save_png(&png)
+        .unwrap();
+    let start = write(
+        &dir,
+        "start.svg",
+        r##"<svg xmlns="http://www.w3.org/2000/svg" width="64" height="64">
+          <circle cx="26" cy="38" r="12" fill="#4c7fcc"/></svg>"##,
+    );
+    let out_svg = dir.join("fit.svg");
+    let sum = summary(&diffsvg(&[
+        "fit",
+        s(&start),
+        s(&png),
+        "-o",
+        s(&out_svg),
+        "--iters",
+        "400",
+        "--freeze",
+        "colors,opacities",
+        "--schedule",
+        "cosine",
+        "--lr-points",
+        "0.5",
+        "--json",
+    ]));
+    assert!(sum["psnr"].as_f64().unwrap() > 60.0, "{sum}");
+    let text = std::fs::read_to_string(&out_svg).unwrap();
+    assert!(
+        text.contains("<circle") && !text.contains("<path"),
+        "{text}"
+    );
+    let fitted = Scene::load(&out_svg, Sizing::Natural).unwrap();
+    // Read back through the file: four decimals.
+    let mut shapes = Vec::new();
+    fitted.for_each_path(|p| shapes.push(p.primitive.clone().map(|q| q.shape)));
+    let Some(Some(Shape::Circle { center, r })) = shapes.first().cloned() else {
+        panic!("{shapes:?}")
+    };
+    let err = (center[0] - 30.3)
+        .abs()
+        .max((center[1] - 34.6).abs())
+        .max((r - 17.25).abs());
+    assert!(err <= 1e-3, "center {center:?}, r {r}: off by {err:.2e} px");
+}
+
+const DRAWING: &str = r##"<svg xmlns="http://www.w3.org/2000/svg" width="96" height="80">
+  <rect id="ground" x="0" y="0" width="96" height="80" fill="#f4efe2"/>
+  <rect id="card" x="10" y="12" width="44" height="30" rx="6" fill="#2b6cb0"
+        stroke="#1a365d" stroke-width="2.5"/>
+  <g id="turned" transform="rotate(25 62 50)">
+    <rect id="bar" x="48" y="44" width="30" height="10" fill="#e53e3e" fill-opacity="0.85"/>
+    <ellipse id="leaf" cx="70" cy="28" rx="14" ry="7" fill="#38a169"/>
+  </g>
+  <circle id="sun" cx="30" cy="58" r="11" fill="#ecc94b" stroke="#b7791f" stroke-width="2"/>
+  <g transform="translate(4 2) scale(1.5)">
+    <circle id="dot" cx="50" cy="40" r="4" fill="#805ad5"/>
+  </g>
+</svg>"##;
+
+/// Every primitive parameter (positions, sizes, corner radii, rotations) and its paints
+/// against central differences, on shapes under rotated and scaled groups, with strokes.
+#[test]
+fn primitive_parameters_match_differences() {
+    let scene = Scene::from_svg_str(DRAWING, "drawing.svg", Sizing::Natural).unwrap();
+    let mut kinds = Vec::new();
+    scene.for_each_path(|p| kinds.push(p.primitive.as_ref().map(|q| q.element())));
+    assert_eq!(
+        kinds,
+        [
+            Some("rect"),
+            Some("rect"),
+            Some("rect"),
+            Some("ellipse"),
+            Some("circle"),
+            Some("circle")
+        ]
+    );
+    let layout = ParamLayout::new(&scene);
+    assert!(
+        layout
+            .slots
+            .iter()
+            .any(|s| s.group == ParamGroup::Transform),
+        "rotations are parameters"
+    );
+    let target = nudged_target(&scene, 1.0, None);
+    assert_agrees("primitives", &scene, &target, Loss::Mse, None);
+}
+
+/// A drawing of rectangles, circles and ellipses (rotated and scaled by their groups),
+/// perturbed in those parameters and fitted back: ≥ 45 dB, written back with the same
+/// elements.
+#[test]
+fn primitives_drawing_is_fitted_back_as_itself() {
+    let dir = scratch("primitives-fit");
+    let src = write(&dir, "drawing.svg", DRAWING);
+    let png = dir.join("drawing.png");
+    let scene = Scene::load(&src, Sizing::Natural).unwrap();
+    render(&scene, &RenderOptions::default())
+        .save_png(&png)
+        .unwrap();
+    let perturbed = dir.join("perturbed.svg");
+    let out = diffsvg(&[
+        "perturb",
+        s(&src),
+        "-o",
+        s(&perturbed),
+        "--seed",
+        "5",
+        "--points",
+        "8",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let out_svg = dir.join("fit.svg");
+    let sum = summary(&diffsvg(&[
+        "fit",
+        s(&perturbed),
+        s(&png),
+        "-o",
+        s(&out_svg),
+        "--iters",
+        "600",
+        "--until-psnr",
+        "50",
+        "--json",
+    ]));
+    let (initial, psnr) = (
+        sum["initial_psnr"].as_f64().unwrap(),
+        sum["psnr"].as_f64().unwrap(),
+    );
+    assert!(
+        initial < 30.0,
+        "the perturbation should hurt: {initial:.2} dB"
+    );
+    assert!(psnr >= 45.0, "{initial:.2} → {psnr:.2} dB");
+    let text = std::fs::read_to_string(&out_svg).unwrap();
+    let count = |tag: &str| text.matches(&format!("<{tag} ")).count();
+    assert_eq!(
+        (
+            count("rect"),
+            count("circle"),
+            count("ellipse"),
+            count("path")
+        ),
+        (3, 2, 1, 0),
+        "{text}"
+    );
+}
