@@ -85,7 +85,7 @@ def test_jit_and_float32_arrays():
     img = jax.jit(lambda a: djax.render(scene, a))(arrays)
     assert np.array_equal(np.asarray(img), diffsvg.render(scene))
     g = jax.grad(lambda a: jnp.sum(djax.render(scene, a)[..., 3]))(arrays)
-    assert g["shapes"][0]["points"].dtype == jnp.float32
+    assert g["shapes"][0]["corner"].dtype == jnp.float32  # a <rect>: its own parameters
     assert np.isfinite(np.asarray(scene.flatten(jax.tree.map(np.asarray, g)))).all()
 
 
@@ -124,16 +124,18 @@ def test_params_reads_per_shape_and_is_one_leaf():
         assert jax.tree.structure(mine) == jax.tree.structure(theirs)
         for x, y in zip(jax.tree.leaves(mine), jax.tree.leaves(theirs)):
             assert np.array_equal(np.asarray(x), y)
-    assert np.array_equal(p["shapes"][-1]["points"], a["shapes"][-1]["points"])
+    for key in a["shapes"][-1]:
+        if not isinstance(a["shapes"][-1][key], dict):
+            assert np.array_equal(p["shapes"][-1][key], a["shapes"][-1][key])
     q = p.set(("shapes", 0, "fill", "opacity"), 0.5)
     assert float(q["shapes"][0]["fill"]["opacity"]) == 0.5
     assert float(p["shapes"][0]["fill"]["opacity"]) == 1.0
-    with pytest.raises(diffsvg.DiffsvgError, match=r"shapes/0/points has shape \(25, 2\)"):
-        p.set(("shapes", 0, "points"), np.zeros(3))
+    with pytest.raises(diffsvg.DiffsvgError, match=r"shapes/0/size has shape \(2,\)"):
+        p.set(("shapes", 0, "size"), np.zeros(3))
     # From arrays, and the optimizer's view: one vector.
     assert np.array_equal(djax.params(scene, arrays=a).flat, p.flat)
     g = jax.grad(lambda q: jnp.sum(djax.render(scene, q)[..., 3]))(p)
-    assert isinstance(g, djax.Params) and g["shapes"][0]["points"].shape == (25, 2)
+    assert isinstance(g, djax.Params) and g["shapes"][0]["radii"].shape == (2,)
 
 
 def _step_jaxpr(n, how):

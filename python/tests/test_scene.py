@@ -56,6 +56,9 @@ def test_params_round_trip_and_arrays_structure(tmp_path):
     assert np.array_equal(s.flatten(s.arrays(np.float64)), p)
     assert sum(np.asarray(x).size for x in diffsvg._leaves(a)) == p.size
     for sh, info in zip(a["shapes"], s.structure()["shapes"]):
+        if info["primitive"] is not None:  # a circle or rectangle: its own parameters
+            assert "points" not in sh and sh[info["primitive"]["fields"][0][0]].shape == (2,)
+            continue
         assert sh["points"].shape == (info["points"][1], 2)
         assert sh["points"].dtype == np.float32
     # float32 round trips keep the float64 values.
@@ -64,9 +67,11 @@ def test_params_round_trip_and_arrays_structure(tmp_path):
     s.set_params(p.astype(np.float32))
     assert np.array_equal(s.params(), p)
     # A moved point moves; save and load keep it.
-    a["shapes"][1]["points"][0] += 3.0
+    k = next(i for i, sh in enumerate(a["shapes"]) if "points" in sh)
+    a["shapes"][k]["points"][0] += 3.0
     s.set_arrays(a)
-    assert s.params()[s.structure()["shapes"][1]["points"][0]] == np.float32(p[s.structure()["shapes"][1]["points"][0]] + 3.0)
+    at = s.structure()["shapes"][k]["points"][0]
+    assert s.params()[at] == np.float32(p[at] + 3.0)
     s.save(tmp_path / "moved.svg")
     back = diffsvg.Scene.load(tmp_path / "moved.svg")
     assert np.allclose(back.params(), s.params(), atol=1e-3)
@@ -91,20 +96,21 @@ def test_render_backward_matches_finite_differences():
     value, d = diffsvg.loss(img, target, grad=True)
     g = diffsvg.render_backward(s, d, structured=False)
     p = s.params()
-    # The square's left edge (x = 5, points 0 and the last before closing) moved right
-    # shrinks the red area: the loss falls.
+    # The square is a <rect>: corner, size, angle. Its width grown widens the red area
+    # (the loss, against a transparent target, rises).
+    assert s.structure()["shapes"][0]["primitive"]["kind"] == "rect"
     h = 1e-3
-    i = 0  # x of the first point
+    i = 2  # the width
     q = p.copy(); q[i] += h; s.set_params(q)
     up = diffsvg.loss(diffsvg.render(s), target)
     q[i] -= 2 * h; s.set_params(q)
     down = diffsvg.loss(diffsvg.render(s), target)
     s.set_params(p)
     numeric = (up - down) / (2 * h)
-    assert g[i] < 0 and abs(g[i] - numeric) < 1e-3 * abs(numeric) + 1e-9
+    assert g[i] > 0 and abs(g[i] - numeric) < 1e-3 * abs(numeric) + 1e-9
     # Structured gradients mirror the arrays.
     gs = diffsvg.render_backward(s, d)
-    assert gs["shapes"][0]["points"].shape == s.arrays()["shapes"][0]["points"].shape
+    assert gs["shapes"][0]["size"].shape == s.arrays()["shapes"][0]["size"].shape == (2,)
 
 
 def test_the_gil_is_released_while_rendering():
