@@ -129,6 +129,11 @@ pub struct Args {
     /// Also write `<output>.compare.png`: target, initial and fitted renderings side by side.
     #[arg(long)]
     compare: bool,
+    /// Fit circles, ellipses and rectangles as free paths (their outlines' control points
+    /// become the parameters, written back as `<path>`) instead of by their own
+    /// parameters (center, radii, sides, rotation).
+    #[arg(long)]
+    free_shapes: bool,
     #[command(flatten)]
     optim: OptimArgs,
     #[command(flatten)]
@@ -148,7 +153,10 @@ pub fn run(a: Args) -> Result<()> {
     let fonts = a.fonts.fonts();
     let target = load_target_with(&a.target, None, &fonts)?;
     let objective = a.optim.objective(&target)?;
-    let scene = Scene::load_with(&a.init, Sizing::Exact(target.width, target.height), &fonts)?;
+    let mut scene = Scene::load_with(&a.init, Sizing::Exact(target.width, target.height), &fonts)?;
+    if a.free_shapes {
+        scene.outline_primitives();
+    }
     super::util::warn_about(&scene, &a.init, &diffsvg::raster::RenderOptions::default());
     diffsvg::raster::check_backward_memory(&scene, &opts.render, &a.init)?;
     let layout = ParamLayout::new(&scene);

@@ -28,11 +28,14 @@
 //!   <rect x="4" y="4" width="8" height="8" fill="crimson"/></svg>"#;
 //! let scene = Scene::from_svg_str(svg, "square.svg", Sizing::Natural)?;
 //! assert_eq!((scene.width, scene.height, scene.path_count()), (16, 16, 1));
-//! let mut params = scene.params(); // points, then fill color and opacity
-//! params[0] += 1.0;                // move the first control point right by a pixel
+//! // A <rect> keeps its own parameters: x, y, width, height, rotation, then the fill's
+//! // color and opacity.
+//! let mut params = scene.params();
+//! assert_eq!(params[..5], [4.0, 4.0, 8.0, 8.0, 0.0]);
+//! params[0] += 1.0; // move it right by a pixel
 //! let mut moved = scene.clone();
 //! moved.set_params(&params);
-//! assert!(moved.to_svg_string().contains("<path"));
+//! assert!(moved.to_svg_string().contains(r#"<rect x="5" y="4" width="8" height="8""#));
 //! # Ok::<(), diffsvg::Error>(())
 //! ```
 

@@ -4,7 +4,7 @@
 //! primitive's (a circle's center and radius, …), not its control points, and its outline
 //! ([`Path::points`], [`Path::subpaths`]) is *built* from them by [`Path::sync_primitive`].
 //! The rasterizer sees only the outline; the backward pass chains the control points'
-//! gradient to the primitive's parameters ([`Primitive::chain`]), which is exact because
+//! gradient to the primitive's parameters (`Primitive::chain`), which is exact because
 //! every outline point is `center + R(angle)·o` with `o` linear in the sizes.
 //!
 //! # Conventions
@@ -695,6 +695,14 @@ pub(crate) fn arcs_per_quarter(r: f64) -> u32 {
         (n as u32).clamp(1, 64)
     } else {
         1
+    }
+}
+
+impl super::Scene {
+    /// Turns every circle, ellipse and rectangle into a plain path of its outline, whose
+    /// control points are then its parameters ([`Path::outline_primitive`]).
+    pub fn outline_primitives(&mut self) {
+        self.for_each_path_mut(Path::outline_primitive);
     }
 }
 

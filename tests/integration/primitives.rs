@@ -185,3 +185,35 @@ fn primitives_drawing_is_fitted_back_as_itself() {
         "{text}"
     );
 }
+
+/// `fit --free-shapes`: the same drawing fitted with its shapes' outlines as free paths,
+/// written back as `<path>`s.
+#[test]
+fn free_shapes_are_fitted_as_paths() {
+    let dir = scratch("primitives-free");
+    let src = write(&dir, "drawing.svg", DRAWING);
+    let png = dir.join("drawing.png");
+    let scene = Scene::load(&src, Sizing::Natural).unwrap();
+    render(&scene, &RenderOptions::default())
+        .save_png(&png)
+        .unwrap();
+    let out_svg = dir.join("fit.svg");
+    let sum = summary(&diffsvg(&[
+        "fit",
+        s(&src),
+        s(&png),
+        "-o",
+        s(&out_svg),
+        "--iters",
+        "5",
+        "--free-shapes",
+        "--json",
+    ]));
+    assert!(sum["psnr"].as_f64().unwrap() > 40.0, "{sum}");
+    let text = std::fs::read_to_string(&out_svg).unwrap();
+    assert_eq!(text.matches("<path ").count(), 6, "{text}");
+    assert!(
+        !text.contains("<circle") && !text.contains("<rect"),
+        "{text}"
+    );
+}
