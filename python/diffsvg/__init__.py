@@ -42,6 +42,7 @@ __all__ = [
     "Scene",
     "render",
     "render_backward",
+    "background_backward",
     "loss",
     "psnr",
     "unpremultiply",
@@ -538,6 +539,36 @@ def render_backward(scene: Scene, d_image, background: Color = None,
     g = _native.render_backward(_scene(scene), _image(d_image, "d_image"),
                                 _color(background, "background"), tolerance)
     return scene.unflatten(g, dtype) if structured else g
+
+
+def background_backward(image, d_image, background) -> np.ndarray:
+    """The gradient with respect to a background of a loss of ``image`` composited over
+    it (as :func:`render`'s ``background`` composites: ``image + (1 − alpha) ·
+    premultiplied background``), given ``d_image = dL/d(composited)``: an array of the
+    background's shape, a straight color ``(3,)``/``(4,)`` or a straight image
+    ``(h, w, 3|4)``. With :func:`render_backward` for the scene's parameters, a background
+    is a parameter like any other (``diffsvg.jax.render`` does both inside JAX)."""
+    img = _image(image, "image")
+    d = _image(d_image, "d_image")
+    bg = np.asarray(background, dtype=np.float64)
+    h, w = img.shape[:2]
+    if d.shape != img.shape:
+        raise DiffsvgError(f"d_image: shape {d.shape}, expected {img.shape}")
+    if not (bg.shape in ((3,), (4,)) or bg.shape in ((h, w, 3), (h, w, 4))):
+        raise DiffsvgError(f"background: shape {bg.shape}; expected (3,), (4,), "
+                           f"({h}, {w}, 3) or ({h}, {w}, 4)")
+    if not np.isfinite(bg).all():
+        raise DiffsvgError("background: values must be finite")
+    d_pm = (1.0 - img[..., 3:].astype(np.float64)) * d.astype(np.float64)
+    alpha = bg[..., 3:] if bg.shape[-1] == 4 else np.ones(bg.shape[:-1] + (1,))
+    d_color = d_pm[..., :3] * alpha
+    out = d_color
+    if bg.shape[-1] == 4:
+        d_alpha = (d_pm[..., :3] * bg[..., :3]).sum(-1, keepdims=True) + d_pm[..., 3:]
+        out = np.concatenate([d_color, d_alpha], axis=-1)
+    if bg.ndim == 1:
+        out = out.reshape(-1, out.shape[-1]).sum(0)
+    return out
 
 
 _CHANNELS = {"rgba": 4, "rgb": 3}

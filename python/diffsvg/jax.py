@@ -50,7 +50,7 @@ import numpy as np
 from . import DiffsvgError, Scene, _color, _native, _scene
 from ._types import Arrays
 
-__all__ = ["render", "render_flat", "params", "Params", "DiffsvgWarning"]
+__all__ = ["render", "render_flat", "over", "params", "Params", "DiffsvgWarning"]
 
 
 class DiffsvgWarning(UserWarning):
@@ -345,7 +345,7 @@ def _options(background, tolerance) -> Tuple[Optional[tuple], float]:
     return bg, t
 
 
-def render(scene: Scene, params: Any, background: Optional[Sequence[float]] = None,
+def render(scene: Scene, params: Any, background: Any = None,
            tolerance: float = 0.02) -> jax.Array:
     """Renders ``scene`` with the values of ``params``: a ``(height, width, 4)``
     ``float32`` premultiplied image, differentiable with respect to ``params``.
@@ -353,8 +353,34 @@ def render(scene: Scene, params: Any, background: Optional[Sequence[float]] = No
     ``params``: the flat vector (layout of :meth:`diffsvg.Scene.params`, ``float32`` or
     ``float64``; the fast path), a :class:`Params`, or a dict in the structure of
     :meth:`diffsvg.Scene.arrays` (numpy or JAX arrays; one leaf per array, so its compile
-    time grows with the number of shapes). ``background`` (straight RGB[A]) is composited
-    under the drawing. Under ``jax.vmap`` a batch of vectors is one call, rendered in
-    parallel."""
+    time grows with the number of shapes). ``background`` is composited under the
+    drawing: a tuple (straight RGB[A]) is a fixed color; a JAX array is a parameter, with
+    gradients — a straight color ``(3,)``/``(4,)`` or a straight image
+    ``(height, width, 3 or 4)`` (see :func:`over`). Under ``jax.vmap`` a batch of vectors
+    is one call, rendered in parallel."""
+    if isinstance(background, jax.Array):
+        _, t = _options(None, tolerance)
+        img = render_flat(scene, None, t, _flat_of(scene, params))
+        return over(img, background)
     bg, t = _options(background, tolerance)
     return render_flat(scene, bg, t, _flat_of(scene, params))
+
+
+def over(image: jax.Array, background: Any) -> jax.Array:
+    """``image`` (premultiplied ``(h, w, 4)``) composited over ``background``, in JAX so
+    that gradients reach both: a straight color ``(3,)`` or ``(4,)`` (RGB opaque), or a
+    straight image ``(h, w, 3)`` or ``(h, w, 4)`` of the same size. The formula of
+    :func:`diffsvg.render`'s ``background``: ``image + (1 − alpha) · premultiplied
+    background``."""
+    bg = jnp.asarray(background)
+    h, w = image.shape[-3], image.shape[-2]
+    if not (bg.shape in ((3,), (4,)) or bg.shape in ((h, w, 3), (h, w, 4))):
+        raise DiffsvgError(f"background: shape {tuple(bg.shape)}; expected (3,), (4,), "
+                           f"({h}, {w}, 3) or ({h}, {w}, 4)")
+    if not jnp.issubdtype(bg.dtype, jnp.floating):
+        raise DiffsvgError(f"background: dtype {bg.dtype}; colors are float in [0, 1]")
+    bg = bg.astype(image.dtype)
+    if bg.shape[-1] == 3:
+        bg = jnp.concatenate([bg, jnp.ones(bg.shape[:-1] + (1,), bg.dtype)], axis=-1)
+    pm = jnp.concatenate([bg[..., :3] * bg[..., 3:], bg[..., 3:]], axis=-1)
+    return image + (1.0 - image[..., 3:]) * pm

@@ -216,3 +216,48 @@ def test_errors_under_jit_are_the_packages_one_line():
     with pytest.warns(djax.DiffsvgWarning):
         g = jax.jit(jax.grad(lambda v: jnp.sum(djax.render(scene, v))))(jnp.asarray(x))
     assert np.isnan(np.asarray(g)).all()
+
+
+# ----- a background that is a parameter ----------------------------------------------
+def test_background_color_and_image_are_parameters():
+    scene = diffsvg.Scene(24, 16)
+    scene.add_circle((10, 8), 6, fill=(0.9, 0.2, 0.1, 0.7))
+    x = jnp.asarray(scene.params())
+    target = jnp.asarray(np.random.default_rng(1).uniform(0, 1, (16, 24, 4)), jnp.float32)
+    for bg in (jnp.asarray([0.2, 0.5, 0.7]), jnp.asarray([0.2, 0.5, 0.7, 0.6]),
+               jnp.asarray(np.random.default_rng(2).uniform(0, 1, (16, 24, 4)),
+                           jnp.float32)):
+        # A fixed color renders the same as the parameter.
+        if bg.shape == (3,):
+            fixed = djax.render(scene, x, tuple(float(c) for c in bg))
+            assert np.allclose(djax.render(scene, x, bg), fixed, atol=1e-6)
+        loss = lambda b, x: jnp.sum((djax.render(scene, x, b) - target) ** 2)
+        gb, gx = jax.grad(loss, argnums=(0, 1))(bg, x)
+        # The numpy gradient, and central differences in float64.
+        img = diffsvg.render(scene)
+        d = 2 * (np.asarray(djax.over(jnp.asarray(img), bg)) - np.asarray(target))
+        assert np.allclose(diffsvg.background_backward(img, d, np.asarray(bg)), gb,
+                           rtol=1e-4, atol=1e-4)
+        flat = np.asarray(bg, np.float64).ravel()
+        for k in (0, 1, flat.size - 1):
+            e = np.zeros_like(flat); e[k] = 1e-3
+            f = lambda v: float(np.sum((np.asarray(djax.over(
+                jnp.asarray(img, jnp.float64), jnp.asarray(v.reshape(bg.shape))),
+                np.float64) - np.asarray(target, np.float64)) ** 2))
+            num = (f(flat + e) - f(flat - e)) / 2e-3
+            assert abs(num - float(np.asarray(gb).ravel()[k])) < 1e-3 * (1 + abs(num))
+        assert np.isfinite(np.asarray(gx)).all()
+    with pytest.raises(diffsvg.DiffsvgError, match="background: shape"):
+        djax.render(scene, x, jnp.zeros((5, 5, 3)))
+
+
+def test_a_background_color_is_recovered():
+    scene = diffsvg.Scene(32, 32)
+    scene.add_rect((8, 8), (16, 12), fill=(0.1, 0.3, 0.8))
+    x = jnp.asarray(scene.params(), jnp.float32)
+    target = djax.render(scene, x, jnp.asarray([0.9, 0.6, 0.2]))
+    step = jax.jit(jax.grad(lambda b: jnp.mean((djax.render(scene, x, b) - target) ** 2)))
+    b = jnp.asarray([0.5, 0.5, 0.5])
+    for _ in range(200):
+        b = b - 2.0 * step(b)
+    assert np.allclose(np.asarray(b), [0.9, 0.6, 0.2], atol=1e-3), b
