@@ -195,6 +195,14 @@ class Scene:
         r = [] if radii is None else list(radii)
         self._add("rect", [*corner, *size, *r, angle], fill, stroke, stroke_width, id)
 
+    def outline_primitives(self) -> None:
+        """Turns every circle, ellipse and rectangle into a plain path of its outline:
+        its control points become its parameters (``arrays()`` then has ``points``), and
+        the SVG written holds ``<path>``s (``diffsvg fit --free-shapes``)."""
+        self._s.outline_primitives()
+        self._structure = None
+        self._params = None
+
     def save(self, path) -> None:
         """Writes the scene as SVG (to a temporary file, then renamed)."""
         self._s.save(os.fspath(path))

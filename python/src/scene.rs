@@ -173,6 +173,12 @@ impl PyScene {
         Ok(())
     }
 
+    /// Turns every circle, ellipse and rectangle into a plain path of its outline (its
+    /// control points become its parameters).
+    fn outline_primitives(&mut self) {
+        self.inner.outline_primitives();
+    }
+
     /// Loads an SVG or SVGZ file. `width` (with `height`: exactly that size) or `scale`
     /// resize the canvas; by default the SVG's own size. `<text>` is set in the bundled
     /// DejaVu fonts plus the font files `fonts` and the fonts under the folders

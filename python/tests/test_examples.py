@@ -91,6 +91,10 @@ def test_scene_built_in_code_round_trips(tmp_path):
     assert text.count("<circle") == 1 and text.count("<ellipse") == 1 and text.count("<rect") == 1
     back = diffsvg.Scene.from_svg(text)
     assert np.allclose(back.params(), s.params(), atol=1e-4)
+    free = s.copy()
+    free.outline_primitives()
+    assert "points" in free.arrays()["shapes"][0] and "<circle" not in free.to_svg()
+    assert np.array_equal(diffsvg.render(free), diffsvg.render(s))
     with pytest.raises(diffsvg.DiffsvgError, match="takes 3 values"):
         s._s.add_shape("circle", [1.0, 2.0])
     with pytest.raises(diffsvg.DiffsvgError, match="sizes must be"):
