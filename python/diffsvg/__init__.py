@@ -30,8 +30,8 @@ import numpy as np
 
 from . import _native
 from ._native import DiffsvgError
-from ._types import (Arrays, DigitInfo, FitInfo, GlyphInfo, GradJson, Layout, Progress,
-                     ReconInfo, Structure, VectorizeInfo, Views)
+from ._types import (Arrays, DigitInfo, FitInfo, GlyphInfo, GradientPaint, GradJson, Layout,
+                     Progress, ReconInfo, Structure, VectorizeInfo, Views)
 
 __version__: str = _native.__version__
 """The package's version: the Rust crates' (``diffsvg`` and its binding share it)."""
@@ -63,6 +63,8 @@ __all__ = [
 ]
 
 Color = Optional[Sequence[float]]
+#: A fill or stroke for the builder: straight (r, g, b[, a]), a gradient dict, or None.
+Paint = Union[Color, GradientPaint]
 
 
 def _image(x: Any, name: str) -> np.ndarray:
@@ -120,6 +122,13 @@ def _color(c: Color, name: str):
     return t
 
 
+def _paint(p: Paint, name: str):
+    """A paint as the native builder takes it: an RGBA tuple, a gradient dict, or None."""
+    if p is None or isinstance(p, Mapping):
+        return None if p is None else dict(p)
+    return _color(p, name)
+
+
 def _paint_size(entry: dict) -> int:
     return entry["len"]
 
@@ -165,29 +174,70 @@ class Scene:
             name))
 
     # ----- building in code ---------------------------------------------------------
-    def _add(self, kind: str, values, fill: Color, stroke: Color, stroke_width: float,
-             id: str) -> None:
-        vals = [float(v) for v in np.asarray(values, dtype=np.float64).ravel()]
-        self._s.add_shape(kind, vals, _color(fill, "fill"), _color(stroke, "stroke"),
-                          float(stroke_width), str(id))
+    def _changed(self) -> None:
         self._structure = None
         self._params = None
 
-    def add_circle(self, center, radius: float, *, fill: Color = (0, 0, 0, 1),
-                   stroke: Color = None, stroke_width: float = 1.0, id: str = "") -> None:
+    def _add(self, kind: str, values, fill: Paint, stroke: Paint, stroke_width: float,
+             id: str) -> None:
+        vals = [float(v) for v in np.asarray(values, dtype=np.float64).ravel()]
+        self._s.add_shape(kind, vals, _paint(fill, "fill"), _paint(stroke, "stroke"),
+                          float(stroke_width), str(id))
+        self._changed()
+
+    def add_path(self, points, segments=None, closed=True, *, fill: Paint = (0, 0, 0, 1),
+                 stroke: Paint = None, stroke_width: float = 1.0, evenodd: bool = False,
+                 id: str = "") -> None:
+        """Draws a path of cubic segments on top (DiffVG's ``Path``): ``points`` ``(n, 2)``,
+        each subpath its start then three points per segment; ``segments``: cubics per
+        subpath (default: one subpath of ``(n − 1) / 3``); ``closed``: one flag, or one
+        per subpath. Paints: straight (r, g, b[, a]), or a gradient
+        ``{"kind": "linear"|"radial", "geometry": [...], "stops": [[offset, r, g, b, a],
+        ...]}`` in pixels (the layout of ``arrays()``), or None."""
+        pts = np.asarray(points, dtype=np.float64)
+        if pts.ndim != 2 or pts.shape[1] != 2:
+            raise DiffsvgError(f"add_path: points must be (n, 2), got shape {pts.shape}")
+        if segments is None:
+            segments = [(len(pts) - 1) // 3]
+        segments = [_whole(n, "segments") for n in np.atleast_1d(segments)]
+        flags = [bool(closed)] * len(segments) if np.ndim(closed) == 0 else \
+            [bool(c) for c in closed]
+        self._s.add_path([tuple(p) for p in pts.tolist()], segments, flags,
+                         _paint(fill, "fill"), _paint(stroke, "stroke"), float(stroke_width),
+                         bool(evenodd), str(id))
+        self._changed()
+
+    @property
+    def node_count(self) -> int:
+        """Top-level nodes (shapes and groups), as :meth:`remove` and :meth:`reorder`
+        index them."""
+        return self._s.node_count
+
+    def remove(self, index: int) -> None:
+        """Removes top-level node ``index`` (0 is drawn first)."""
+        self._s.remove(_whole(index, "index"))
+        self._changed()
+
+    def reorder(self, order) -> None:
+        """Redraws the top-level nodes in ``order`` (a permutation; ``order[0]`` first)."""
+        self._s.reorder([_whole(i, "order") for i in order])
+        self._changed()
+
+    def add_circle(self, center, radius: float, *, fill: Paint = (0, 0, 0, 1),
+                   stroke: Paint = None, stroke_width: float = 1.0, id: str = "") -> None:
         """Draws a circle on top: ``center`` (x, y) and ``radius`` in pixels are its
         parameters (``arrays()`` names them so), and SVG out writes a ``<circle>``.
         ``fill``/``stroke``: straight (r, g, b[, a]) in [0, 1], or None."""
         self._add("circle", [*center, radius], fill, stroke, stroke_width, id)
 
-    def add_ellipse(self, center, radius, angle: float = 0.0, *, fill: Color = (0, 0, 0, 1),
-                    stroke: Color = None, stroke_width: float = 1.0, id: str = "") -> None:
+    def add_ellipse(self, center, radius, angle: float = 0.0, *, fill: Paint = (0, 0, 0, 1),
+                    stroke: Paint = None, stroke_width: float = 1.0, id: str = "") -> None:
         """Draws an ellipse on top: ``center``, ``radius`` (rx, ry) and ``angle`` (radians,
         its rotation about the center, clockwise on screen) are its parameters."""
         self._add("ellipse", [*center, *radius, angle], fill, stroke, stroke_width, id)
 
     def add_rect(self, corner, size, radii=None, angle: float = 0.0, *,
-                 fill: Color = (0, 0, 0, 1), stroke: Color = None, stroke_width: float = 1.0,
+                 fill: Paint = (0, 0, 0, 1), stroke: Paint = None, stroke_width: float = 1.0,
                  id: str = "") -> None:
         """Draws a rectangle on top: ``corner`` (x, y), ``size`` (width, height), the
         corner ``radii`` (rx, ry) of a rounded one and ``angle`` (radians, about its
@@ -200,8 +250,7 @@ class Scene:
         its control points become its parameters (``arrays()`` then has ``points``), and
         the SVG written holds ``<path>``s (``diffsvg fit --free-shapes``)."""
         self._s.outline_primitives()
-        self._structure = None
-        self._params = None
+        self._changed()
 
     def save(self, path) -> None:
         """Writes the scene as SVG (to a temporary file, then renamed)."""

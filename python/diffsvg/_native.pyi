@@ -5,13 +5,13 @@ Use the wrappers in ``diffsvg``; these are their native counterparts. Images are
 """
 
 from os import PathLike
-from typing import Optional, Sequence, Tuple
+from typing import Optional, Sequence, Tuple, Union
 
 import numpy as np
 import numpy.typing as npt
 
-from ._types import (DigitInfo, FitInfo, GlyphInfo, Layout, Progress, ReconInfo, Structure,
-                     VectorizeInfo, Views)
+from ._types import (DigitInfo, FitInfo, GlyphInfo, GradientPaint, Layout, Progress,
+                     ReconInfo, Structure, VectorizeInfo, Views)
 
 F32 = npt.NDArray[np.float32]
 F64 = npt.NDArray[np.float64]
@@ -20,6 +20,10 @@ Color4 = Optional[Tuple[float, float, float, float]]
 __version__: str
 
 class DiffsvgError(ValueError): ...
+
+#: A builder's paint: straight (r, g, b, a), or a gradient dict (kind, geometry, stops,
+#: opacity, spread).
+Paint = Union[Tuple[float, float, float, float], GradientPaint]
 
 class Scene:
     def __init__(self, width: int, height: int) -> None: ...
@@ -33,9 +37,16 @@ class Scene:
     def from_svg(text: str, width: Optional[int] = None, height: Optional[int] = None,
                  scale: Optional[float] = None, name: str = "<string>") -> Scene: ...
     def add_shape(self, kind: str, values: Sequence[float],
-                  fill: Optional[Tuple[float, float, float, float]] = None,
-                  stroke: Optional[Tuple[float, float, float, float]] = None,
+                  fill: Optional[Paint] = None, stroke: Optional[Paint] = None,
                   stroke_width: float = 1.0, id: str = "") -> None: ...
+    def add_path(self, points: Sequence[Tuple[float, float]], segments: Sequence[int],
+                 closed: Sequence[bool], fill: Optional[Paint] = None,
+                 stroke: Optional[Paint] = None, stroke_width: float = 1.0,
+                 evenodd: bool = False, id: str = "") -> None: ...
+    @property
+    def node_count(self) -> int: ...
+    def remove(self, index: int) -> None: ...
+    def reorder(self, order: Sequence[int]) -> None: ...
     def outline_primitives(self) -> None: ...
     def save(self, path: str) -> None: ...
     def to_svg(self) -> str: ...

@@ -4,7 +4,7 @@ checkers and readers; at run time they are plain dicts)."""
 from __future__ import annotations
 
 import sys
-from typing import Callable, List, Optional, Tuple, Union
+from typing import Callable, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -49,6 +49,18 @@ class PrimitiveEntry(TypedDict):
     kind: str  # "circle", "ellipse" or "rect"
     offset: int
     fields: List[Tuple[str, int]]  # (name, length): center, radius, corner, size, radii, angle
+
+
+class GradientPaint(TypedDict, total=False):
+    """A gradient for the scene builder (``Scene.add_path``, ``add_circle``, …), in
+    pixels: ``kind`` "linear" (``geometry`` x1, y1, x2, y2) or "radial" (cx, cy, r, fx,
+    fy, fr), ``stops`` rows of (offset, r, g, b, opacity), ``opacity`` (default 1) and
+    ``spread`` ("pad", "reflect", "repeat")."""
+    kind: str
+    geometry: Sequence[float]
+    stops: Sequence[Sequence[float]]
+    opacity: float
+    spread: str
 
 
 class ShapeEntry(TypedDict):

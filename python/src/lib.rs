@@ -9,6 +9,7 @@
 
 mod array;
 mod batch;
+mod build;
 mod error;
 mod jobs;
 mod output;

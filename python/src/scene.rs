@@ -82,94 +82,86 @@ impl PyScene {
     /// Appends a circle, ellipse or rectangle (`kind`: "circle", "ellipse", "rect") drawn
     /// on top, its parameters in `values` in slot order (circle `cx, cy, r`; ellipse
     /// `cx, cy, rx, ry, angle`; rectangle `x, y, width, height, [rx, ry,] angle`; device
-    /// pixels, radians), with a solid `fill` and/or `stroke` (straight `r, g, b, opacity`
-    /// in `[0, 1]`) of `stroke_width` pixels.
+    /// pixels, radians), with a `fill` and/or `stroke` (straight `r, g, b, opacity` in
+    /// `[0, 1]`, or a gradient dict, see `build::paint_in`) of `stroke_width` pixels.
     #[pyo3(signature = (kind, values, fill=None, stroke=None, stroke_width=1.0, id=String::new()))]
     fn add_shape(
         &mut self,
         kind: &str,
         values: Vec<f64>,
-        fill: Option<[f64; 4]>,
-        stroke: Option<[f64; 4]>,
+        fill: Option<&Bound<'_, PyAny>>,
+        stroke: Option<&Bound<'_, PyAny>>,
         stroke_width: f64,
         id: String,
     ) -> PyResult<()> {
-        use diffsvg::scene::{Fill, FillRule, Node, Paint, Path, Primitive, Stroke};
-        let want = match (kind, values.len()) {
-            ("circle", 3) | ("ellipse", 5) | ("rect", 5) | ("rect", 7) => values.len(),
-            ("circle", _) => 3,
-            ("ellipse", _) => 5,
-            ("rect", _) => 5,
-            _ => {
-                return Err(bad(format!(
-                    "add_shape: unknown kind {kind:?}; expected \"circle\", \"ellipse\" or \"rect\""
-                )));
-            }
-        };
-        if values.len() != want {
+        let prim = crate::build::primitive(kind, &values)?;
+        let path = diffsvg::scene::Path::from_primitive(id, prim);
+        let node = crate::build::paint_path(path, fill, stroke, stroke_width, false)?;
+        self.inner.nodes.push(node);
+        Ok(())
+    }
+
+    /// Appends a path of cubic segments drawn on top: `points` (start, then three per
+    /// segment, per subpath), `segments` per subpath and `closed` per subpath, with paints
+    /// as in `add_shape`; `evenodd` picks the fill rule.
+    #[pyo3(signature = (points, segments, closed, fill=None, stroke=None, stroke_width=1.0, evenodd=false, id=String::new()))]
+    #[allow(clippy::too_many_arguments)]
+    fn add_path(
+        &mut self,
+        points: Vec<[f64; 2]>,
+        segments: Vec<usize>,
+        closed: Vec<bool>,
+        fill: Option<&Bound<'_, PyAny>>,
+        stroke: Option<&Bound<'_, PyAny>>,
+        stroke_width: f64,
+        evenodd: bool,
+        id: String,
+    ) -> PyResult<()> {
+        let path = crate::build::cubic_path(&points, &segments, &closed, id)?;
+        let node = crate::build::paint_path(path, fill, stroke, stroke_width, evenodd)?;
+        self.inner.nodes.push(node);
+        Ok(())
+    }
+
+    /// Number of top-level nodes (shapes and groups), the ones `remove` and `reorder`
+    /// index.
+    #[getter]
+    fn node_count(&self) -> usize {
+        self.inner.nodes.len()
+    }
+
+    /// Removes top-level node `index` (paint order, 0 first drawn).
+    fn remove(&mut self, index: usize) -> PyResult<()> {
+        if index >= self.inner.nodes.len() {
             return Err(bad(format!(
-                "add_shape: a {kind} takes {want} values{}, got {}",
-                if kind == "rect" {
-                    " (or 7 with corner radii)"
-                } else {
-                    ""
-                },
-                values.len()
+                "remove: index {index} out of range (the scene has {} top-level nodes)",
+                self.inner.nodes.len()
             )));
         }
-        let bound = diffsvg::limits::MAX_COORDINATE / 8.0;
-        if let Some(v) = values.iter().find(|v| !(v.abs() <= bound)) {
+        self.inner.nodes.remove(index);
+        Ok(())
+    }
+
+    /// Puts the top-level nodes in the order `order` (a permutation of their indices):
+    /// `order[0]` is drawn first.
+    fn reorder(&mut self, order: Vec<usize>) -> PyResult<()> {
+        let n = self.inner.nodes.len();
+        let mut seen = vec![false; n];
+        if order.len() != n
+            || order
+                .iter()
+                .any(|&i| i >= n || std::mem::replace(&mut seen[i], true))
+        {
             return Err(bad(format!(
-                "add_shape: {v} is not a finite number within ±{bound:e}"
+                "reorder: {order:?} is not a permutation of 0..{n}"
             )));
         }
-        let v = &values;
-        let sizes = match kind {
-            "circle" => 2..3,
-            _ => 2..v.len() - 1,
-        };
-        if v[sizes].iter().any(|x| *x < 0.0) {
-            return Err(bad(format!(
-                "add_shape: a {kind}'s sizes must be ≥ 0, got {v:?}"
-            )));
-        }
-        let prim = match kind {
-            "circle" => Primitive::circle([v[0], v[1]], v[2]),
-            "ellipse" => Primitive::ellipse([v[0], v[1]], v[2], v[3], v[4]),
-            _ if v.len() == 7 => Primitive::rect(v[0], v[1], v[2], v[3], Some([v[4], v[5]]), v[6]),
-            _ => Primitive::rect(v[0], v[1], v[2], v[3], None, v[4]),
-        };
-        let unit = |c: [f64; 4], name: &str| -> PyResult<[f64; 4]> {
-            if c.iter().all(|x| (0.0..=1.0).contains(x)) {
-                Ok(c)
-            } else {
-                Err(bad(format!("add_shape: {name} {c:?} must be in [0, 1]")))
-            }
-        };
-        if !(stroke_width.is_finite() && stroke_width >= 0.0) {
-            return Err(bad(format!(
-                "add_shape: stroke_width {stroke_width} must be ≥ 0"
-            )));
-        }
-        let mut path = Path::from_primitive(id, prim);
-        if let Some(c) = fill {
-            let c = unit(c, "fill")?;
-            path.fill = Some(Fill {
-                paint: Paint::Solid([c[0], c[1], c[2]]),
-                opacity: c[3],
-                rule: FillRule::NonZero,
-            });
-        }
-        if let Some(c) = stroke {
-            let c = unit(c, "stroke")?;
-            let mut st = Stroke::new(Paint::Solid([c[0], c[1], c[2]]), stroke_width);
-            st.opacity = c[3];
-            path.stroke = Some(st);
-        }
-        if path.fill.is_none() && path.stroke.is_none() {
-            return Err(bad("add_shape: give a fill, a stroke or both"));
-        }
-        self.inner.nodes.push(Node::Path(path));
+        let old = std::mem::take(&mut self.inner.nodes);
+        let mut slots: Vec<Option<diffsvg::scene::Node>> = old.into_iter().map(Some).collect();
+        self.inner.nodes = order
+            .iter()
+            .map(|&i| slots[i].take().expect("a permutation"))
+            .collect();
         Ok(())
     }
 

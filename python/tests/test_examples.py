@@ -103,6 +103,41 @@ def test_scene_built_in_code_round_trips(tmp_path):
         s._s.add_shape("star", [1.0])
 
 
+def test_paths_gradients_and_order_built_in_code():
+    import diffsvg
+    s = diffsvg.Scene(32, 24)
+    # DiffVG's single_curve shape: one closed subpath of three cubics.
+    pts = [(4, 4), (12, 2), (20, 6), (24, 12), (20, 18), (10, 22), (6, 16), (3, 10), (2, 6),
+           (4, 4)]
+    grad = {"kind": "linear", "geometry": [0, 0, 32, 0],
+            "stops": [[0, 1, 0, 0, 1], [1, 0, 0, 1, 1]]}
+    s.add_path(pts, fill=grad, id="curve")
+    s.add_rect((10, 8), (16, 10), fill=(0, 0.4, 0, 0.8), id="box")
+    a = s.arrays(np.float64)["shapes"]
+    assert a[0]["points"].shape == (10, 2) and a[0]["fill"]["stops"].shape == (2, 5)
+    assert s.node_count == 2
+    text = s.to_svg()
+    assert 'id="curve"' in text and "<linearGradient" in text and "<rect" in text
+    back = diffsvg.Scene.from_svg(text)
+    assert np.allclose(back.params(), s.params(), atol=1e-4)
+    # The rectangle drawn first instead: the picture changes where they overlap.
+    before = diffsvg.render(s)
+    s.reorder([1, 0])
+    assert s.structure()["shapes"][0]["id"] == "box"
+    assert not np.array_equal(diffsvg.render(s), before)
+    s.remove(0)
+    assert s.node_count == 1 and s.structure()["shapes"][0]["id"] == "curve"
+    for bad, match in [(lambda: s.reorder([0, 0]), "not a permutation"),
+                       (lambda: s.remove(3), "out of range"),
+                       (lambda: s.add_path(pts[:-1], segments=[3]), "expected 10"),
+                       (lambda: s.add_path(pts, fill={"kind": "conic", "geometry": [0],
+                                                      "stops": [[0, 0, 0, 0, 1]]}), "conic"),
+                       (lambda: s.add_path(pts, fill=(2, 0, 0)), r"in \[0, 1\]"),
+                       (lambda: s.add_path(pts, fill=None), "fill, a stroke")]:
+        with pytest.raises(diffsvg.DiffsvgError, match=match):
+            bad()
+
+
 def test_single_gradient(tmp_path):
     out = run("single_gradient.py", "--size", 64, "--iters", 150, "-o", tmp_path / "g.svg",
               cwd=tmp_path)
