@@ -306,4 +306,39 @@ mod tests {
         );
         assert!(v["shapes"][1].get("fill").is_none());
     }
+
+    /// A circle's and a rounded rectangle's own parameters: their fields cover their slots,
+    /// and `grad --json` reads them by name.
+    #[test]
+    fn primitives_are_read_by_field() {
+        let svg = r##"<svg xmlns="http://www.w3.org/2000/svg" width="40" height="40">
+            <circle id="c" cx="10" cy="12" r="6" fill="red"/>
+            <rect id="r" x="4" y="20" width="30" height="12" rx="3" fill="blue"
+                  transform="rotate(10 19 26)"/></svg>"##;
+        let scene = Scene::from_svg_str(svg, "p.svg", Sizing::Natural).unwrap();
+        let st = Structure::of(&scene);
+        let n = scene.params().len();
+        let (c, r) = (&st.shapes[0], &st.shapes[1]);
+        let (cp, rp) = (c.primitive.as_ref().unwrap(), r.primitive.as_ref().unwrap());
+        assert_eq!(
+            (cp.kind, rp.kind, c.points.1, r.points.1),
+            ("circle", "rect", 0, 0)
+        );
+        let len = |p: &PrimitiveSlots| p.fields.iter().map(|f| f.1).sum::<usize>();
+        assert_eq!((len(cp), len(rp)), (3, 7));
+        assert_eq!(cp.offset + 3, c.fill.as_ref().unwrap().offset);
+        let grad: Vec<f64> = (0..n).map(|i| i as f64).collect();
+        let v = st.gradient_json(&scene, 0.0, &grad);
+        let shape = &v["shapes"][1]["shape"];
+        assert_eq!(shape["kind"], "rect");
+        let at = rp.offset as f64;
+        assert_eq!(shape["corner"], json!([at, at + 1.0]));
+        assert_eq!(shape["radii"], json!([at + 4.0, at + 5.0]));
+        assert_eq!(shape["angle"], json!(at + 6.0));
+        assert_eq!(
+            v["shapes"][0]["shape"]["radius"],
+            json!(cp.offset as f64 + 2.0)
+        );
+        assert_eq!(v["shapes"][0]["points"], json!([]));
+    }
 }
