@@ -30,6 +30,21 @@
 //! Positions and sizes are in the [`Points`](super::ParamGroup::Points) group, the angle
 //! in [`Transform`](super::ParamGroup::Transform). A circle's angle only says where its
 //! outline starts (it matters to dashes); it is no parameter.
+//!
+//! Built in code:
+//!
+//! ```
+//! use diffsvg::scene::{Fill, FillRule, Node, Paint, Path, Primitive, Scene};
+//! let mut scene = Scene::new(64, 64);
+//! let mut disc = Path::from_primitive("disc", Primitive::circle([30.0, 34.0], 12.0));
+//! disc.fill = Some(Fill { paint: Paint::Solid([0.3, 0.5, 0.8]), opacity: 1.0, rule: FillRule::NonZero });
+//! scene.nodes.push(Node::Path(disc));
+//! assert_eq!(scene.params(), [30.0, 34.0, 12.0, 0.3, 0.5, 0.8, 1.0]);
+//! let mut p = scene.params();
+//! p[2] = 15.0; // the radius
+//! scene.set_params(&p);
+//! assert!(scene.to_svg_string().contains(r#"<circle id="disc" cx="30" cy="34" r="15""#));
+//! ```
 
 use super::params::Part;
 use super::{Affine, FRAME_IDENTITY, ParamGroup, Path, Point, SegmentKind, Subpath};
