@@ -30,13 +30,23 @@ fn non_negative(v: &mut f64) {
     };
 }
 
+/// A group's opacity and children, and its clip path's shapes and mask's content (which
+/// are parameters too).
+fn project_group(g: &mut crate::scene::Group) {
+    unit(&mut g.opacity);
+    project_nodes(&mut g.children);
+    if let Some(c) = &mut g.clip {
+        project_group(&mut c.content);
+    }
+    if let Some(m) = &mut g.mask {
+        project_group(&mut m.content);
+    }
+}
+
 fn project_nodes(nodes: &mut [Node]) {
     for n in nodes {
         match n {
-            Node::Group(g) => {
-                unit(&mut g.opacity);
-                project_nodes(&mut g.children);
-            }
+            Node::Group(g) => project_group(g),
             Node::Path(p) => {
                 clamp_points(p);
                 if let Some(f) = &mut p.fill {
@@ -158,6 +168,25 @@ mod tests {
         let mut p = scene.params();
         for (k, v) in p.iter_mut().enumerate() {
             *v += if k % 2 == 0 { 1e308 } else { -1e308 };
+        }
+        scene.set_params(&p);
+        project(&mut scene);
+        assert!(crate::scene::svg_out::check_numbers(&scene).is_ok());
+        let text = scene.to_svg_string();
+        crate::Scene::from_svg_str(&text, "back.svg", crate::Sizing::Natural).unwrap();
+    }
+
+    #[test]
+    fn clip_shapes_and_mask_content_are_projected() {
+        let svg = r##"<svg xmlns="http://www.w3.org/2000/svg" width="20" height="20">
+            <clipPath id="c"><circle cx="10" cy="10" r="6"/></clipPath>
+            <mask id="m"><rect x="2" y="2" width="16" height="16" fill="white"/></mask>
+            <g clip-path="url(#c)" mask="url(#m)"><rect x="0" y="0" width="20" height="20"/></g>
+            </svg>"##;
+        let mut scene = crate::Scene::from_svg_str(svg, "c.svg", crate::Sizing::Natural).unwrap();
+        let mut p = scene.params();
+        for v in p.iter_mut() {
+            *v = -1e31;
         }
         scene.set_params(&p);
         project(&mut scene);
