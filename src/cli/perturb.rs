@@ -18,7 +18,8 @@ pub struct Args {
     #[arg(short, long)]
     output: PathBuf,
     /// Largest control-point move in pixels (x and y each), at most 1e30; moved points are
-    /// kept within ±1e30 pixels.
+    /// kept within ±1e30 pixels. A circle's, ellipse's or rectangle's position and sizes
+    /// move by up to a quarter of it (sizes by at most half their value).
     #[arg(long, default_value_t = 8.0)]
     points: f64,
     /// Largest color channel shift.
