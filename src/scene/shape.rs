@@ -100,6 +100,17 @@ pub struct Primitive {
     pub arcs_per_quarter: u32,
 }
 
+/// What a parameter slot of a primitive is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Slot {
+    /// A center's or corner's coordinate.
+    Position,
+    /// A radius, side or corner radius (≥ `MIN_SIZE` once projected).
+    Size,
+    /// The rotation.
+    Angle,
+}
+
 /// How each outline point depends on the sizes: its offset from the center before the
 /// rotation is `(ax·W + bx·RX, ay·H + by·RY)` (see [`Primitive::sizes`]).
 type Coef = [f64; 4];
@@ -318,6 +329,40 @@ impl Primitive {
         (points, sub)
     }
 
+    /// Every parameter in slot order (module docs), with what it is.
+    fn slots_mut(&mut self) -> Vec<(Slot, &mut f64)> {
+        use Slot::{Angle, Position, Size};
+        let mut out: Vec<(Slot, &mut f64)> = match &mut self.shape {
+            Shape::Circle {
+                center: [cx, cy],
+                r,
+            } => {
+                // A circle's angle only places its outline's start: no slot.
+                return vec![(Position, cx), (Position, cy), (Size, r)];
+            }
+            Shape::Ellipse {
+                center: [cx, cy],
+                rx,
+                ry,
+            } => vec![(Position, cx), (Position, cy), (Size, rx), (Size, ry)],
+            Shape::Rect {
+                x,
+                y,
+                width,
+                height,
+                radii,
+            } => {
+                let mut v = vec![(Position, x), (Position, y), (Size, width), (Size, height)];
+                if let Some([rx, ry]) = radii {
+                    v.extend([(Size, rx), (Size, ry)]);
+                }
+                v
+            }
+        };
+        out.push((Angle, &mut self.angle));
+        out
+    }
+
     /// Visits the parameters in slot order (module docs); `first` marks the first slot.
     pub(crate) fn walk(
         &mut self,
@@ -326,50 +371,23 @@ impl Primitive {
         f: &mut dyn FnMut(usize, ParamGroup, Part, &mut f64),
     ) {
         let mut first = Some(first);
-        let mut slot = |f: &mut dyn FnMut(usize, ParamGroup, Part, &mut f64), g, v: &mut f64| {
-            f(owner, g, first.take().unwrap_or(Part::Point), v)
-        };
-        let pts = ParamGroup::Points;
-        match &mut self.shape {
-            Shape::Circle { center, r } => {
-                let [cx, cy] = center;
-                for v in [cx, cy, r] {
-                    slot(f, pts, v);
-                }
-                return;
-            }
-            Shape::Ellipse { center, rx, ry } => {
-                let [cx, cy] = center;
-                for v in [cx, cy, rx, ry] {
-                    slot(f, pts, v);
-                }
-            }
-            Shape::Rect {
-                x,
-                y,
-                width,
-                height,
-                radii,
-            } => {
-                for v in [x, y, width, height] {
-                    slot(f, pts, v);
-                }
-                if let Some([rx, ry]) = radii {
-                    slot(f, pts, rx);
-                    slot(f, pts, ry);
-                }
-            }
+        for (what, v) in self.slots_mut() {
+            let group = match what {
+                Slot::Angle => ParamGroup::Transform,
+                _ => ParamGroup::Points,
+            };
+            f(owner, group, first.take().unwrap_or(Part::Point), v);
         }
-        slot(f, ParamGroup::Transform, &mut self.angle);
     }
 
     /// The slots (from the first, see [`slot_count`](Self::slot_count)) that are sizes:
     /// radii, widths, heights and corner radii.
     pub fn size_slots(&self) -> std::ops::Range<usize> {
-        match self.shape {
-            Shape::Circle { .. } => 2..3,
-            _ => 2..self.slot_count() - 1,
-        }
+        2..2 + self.fields()[1..]
+            .iter()
+            .filter(|f| f.0 != "angle")
+            .map(|f| f.1)
+            .sum::<usize>()
     }
 
     /// The parameters' names and lengths, in slot order: a circle's `center` (2) and
@@ -393,12 +411,7 @@ impl Primitive {
 
     /// Number of parameter slots.
     pub fn slot_count(&self) -> usize {
-        match self.shape {
-            Shape::Circle { .. } => 3,
-            Shape::Ellipse { .. } => 5,
-            Shape::Rect { radii: None, .. } => 5,
-            Shape::Rect { radii: Some(_), .. } => 7,
-        }
+        self.fields().iter().map(|f| f.1).sum()
     }
 
     /// Chains the gradient of the outline's points (`x, y` per point of
@@ -462,74 +475,37 @@ impl Primitive {
     /// radii at most half its sides, the angle finite; NaN becomes 0 (a size `MIN_SIZE`).
     pub(crate) fn project(&mut self) {
         const BOUND: f64 = MAX_COORDINATE / 8.0;
-        let pos = |v: &mut f64| super::params::clamp_coordinate(v, BOUND);
-        let size = |v: &mut f64| {
-            *v = if v.is_nan() {
-                MIN_SIZE
-            } else {
-                v.clamp(MIN_SIZE, BOUND)
-            }
-        };
-        match &mut self.shape {
-            Shape::Circle { center, r } => {
-                center.iter_mut().for_each(pos);
-                size(r);
-            }
-            Shape::Ellipse { center, rx, ry } => {
-                center.iter_mut().for_each(pos);
-                size(rx);
-                size(ry);
-            }
-            Shape::Rect {
-                x,
-                y,
-                width,
-                height,
-                radii,
-            } => {
-                pos(x);
-                pos(y);
-                size(width);
-                size(height);
-                if let Some([rx, ry]) = radii {
-                    *rx = rx.min(0.5 * *width);
-                    *ry = ry.min(0.5 * *height);
-                    size(rx);
-                    size(ry);
+        for (what, v) in self.slots_mut() {
+            match what {
+                Slot::Position => super::params::clamp_coordinate(v, BOUND),
+                Slot::Size => {
+                    *v = if v.is_nan() {
+                        MIN_SIZE
+                    } else {
+                        v.clamp(MIN_SIZE, BOUND)
+                    }
                 }
+                Slot::Angle => *v = if v.is_finite() { *v } else { 0.0 },
             }
         }
-        if !self.angle.is_finite() {
-            self.angle = 0.0;
+        if let Shape::Rect {
+            width,
+            height,
+            radii: Some([rx, ry]),
+            ..
+        } = &mut self.shape
+        {
+            // Sides are at least MIN_SIZE, so half of one is a valid radius too.
+            *rx = rx.min(0.5 * *width).max(MIN_SIZE.min(0.5 * *width));
+            *ry = ry.min(0.5 * *height).max(MIN_SIZE.min(0.5 * *height));
         }
     }
 
-    /// Scales about the origin by `s > 0`.
+    /// Scales about the origin by `s > 0` (every position and size; not the angle).
     pub(crate) fn scale(&mut self, s: f64) {
-        match &mut self.shape {
-            Shape::Circle { center, r } => {
-                *center = [center[0] * s, center[1] * s];
-                *r *= s;
-            }
-            Shape::Ellipse { center, rx, ry } => {
-                *center = [center[0] * s, center[1] * s];
-                *rx *= s;
-                *ry *= s;
-            }
-            Shape::Rect {
-                x,
-                y,
-                width,
-                height,
-                radii,
-            } => {
-                for v in [x, y, width, height] {
-                    *v *= s;
-                }
-                if let Some(r) = radii {
-                    r[0] *= s;
-                    r[1] *= s;
-                }
+        for (what, v) in self.slots_mut() {
+            if what != Slot::Angle {
+                *v *= s;
             }
         }
     }

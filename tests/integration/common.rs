@@ -99,3 +99,16 @@ pub fn assert_fails(out: &Output, needle: &str, what: &str, output: &Path) {
         .collect();
     assert!(stray.is_empty(), "temporary files left behind: {stray:?}");
 }
+
+/// The JSON summary a `--json` run prints last, once the run succeeded (its stderr
+/// shown otherwise).
+pub fn json_summary(out: &Output) -> serde_json::Value {
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    serde_json::from_str(text.lines().last().unwrap_or_default())
+        .unwrap_or_else(|e| panic!("{e}: {text}"))
+}

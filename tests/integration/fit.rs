@@ -5,7 +5,7 @@ use diffsvg::raster::{RenderOptions, render};
 use diffsvg::scene::random::perturb;
 use diffsvg::{Scene, Sizing};
 
-use super::common::{assert_fails, diffsvg, root, s, scratch, write};
+use super::common::{assert_fails, diffsvg, json_summary, root, s, scratch, write};
 
 /// Target PNG of a sample at `width` and a perturbed SVG of it (points moved by up to 8 px,
 /// colors by up to 0.2); returns (svg, png).
@@ -24,12 +24,6 @@ fn perturbed_case(
     let svg = dir.join(format!("{name}.perturbed.svg"));
     perturb(&scene, 8.0, 0.2, seed).save_svg(&svg).unwrap();
     (svg, png)
-}
-
-fn summary(out: &std::process::Output) -> serde_json::Value {
-    let text = String::from_utf8_lossy(&out.stdout);
-    let last = text.lines().last().unwrap_or_default();
-    serde_json::from_str(last).unwrap_or_else(|e| panic!("{e}: {text}"))
 }
 
 /// Per path, how many closed subpaths end on their start point.
@@ -68,7 +62,7 @@ fn refinement_recovers_perturbed_samples() {
             "{}",
             String::from_utf8_lossy(&out.stderr)
         );
-        let sum = summary(&out);
+        let sum = json_summary(&out);
         let psnr = sum["psnr"].as_f64().unwrap();
         let initial = sum["initial_psnr"].as_f64().unwrap();
         assert!(psnr >= 40.0, "{name}: {initial:.2} → {psnr:.2} dB");

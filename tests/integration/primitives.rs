@@ -5,18 +5,21 @@ use diffsvg::loss::Loss;
 use diffsvg::raster::{RenderOptions, render};
 use diffsvg::scene::{ParamGroup, ParamLayout, Shape};
 use diffsvg::{Scene, Sizing};
+use std::path::PathBuf;
 
-use crate::common::{diffsvg, s, scratch, write};
+use crate::common::{diffsvg, json_summary, s, scratch, write};
 use crate::gradients::{assert_agrees, nudged_target};
 
-fn summary(out: &std::process::Output) -> serde_json::Value {
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let text = String::from_utf8_lossy(&out.stdout);
-    serde_json::from_str(text.lines().last().unwrap_or_default()).unwrap()
+/// Writes `svg` as `NAME.svg` into `dir` and its rendering as `NAME.png`: the start and
+/// the target of a fit.
+fn svg_and_picture(dir: &std::path::Path, name: &str, svg: &str) -> (PathBuf, PathBuf) {
+    let src = write(dir, &format!("{name}.svg"), svg);
+    let png = dir.join(format!("{name}.png"));
+    let scene = Scene::load(&src, Sizing::Natural).unwrap();
+    render(&scene, &RenderOptions::default())
+        .save_png(&png)
+        .unwrap();
+    (src, png)
 }
 
 /// DiffVG's single_circle: a circle's center and radius recovered from a picture of it,
@@ -24,17 +27,12 @@ fn summary(out: &std::process::Output) -> serde_json::Value {
 #[test]
 fn single_circle_recovers_center_and_radius() {
     let dir = scratch("single-circle");
-    let target = write(
+    let (_, png) = svg_and_picture(
         &dir,
-        "target.svg",
+        "target",
         r##"<svg xmlns="http://www.w3.org/2000/svg" width="64" height="64">
           <circle cx="30.3" cy="34.6" r="17.25" fill="#4c7fcc"/></svg>"##,
     );
-    let png = dir.join("target.png");
-    let t = Scene::load(&target, Sizing::Natural).unwrap();
-    render(&t, &RenderOptions::default())
-        .save_png(&png)
-        .unwrap();
     let start = write(
         &dir,
         "start.svg",
@@ -42,7 +40,7 @@ fn single_circle_recovers_center_and_radius() {
           <circle cx="26" cy="38" r="12" fill="#4c7fcc"/></svg>"##,
     );
     let out_svg = dir.join("fit.svg");
-    let sum = summary(&diffsvg(&[
+    let sum = json_summary(&diffsvg(&[
         "fit",
         s(&start),
         s(&png),
@@ -128,12 +126,7 @@ fn primitive_parameters_match_differences() {
 #[test]
 fn primitives_drawing_is_fitted_back_as_itself() {
     let dir = scratch("primitives-fit");
-    let src = write(&dir, "drawing.svg", DRAWING);
-    let png = dir.join("drawing.png");
-    let scene = Scene::load(&src, Sizing::Natural).unwrap();
-    render(&scene, &RenderOptions::default())
-        .save_png(&png)
-        .unwrap();
+    let (src, png) = svg_and_picture(&dir, "drawing", DRAWING);
     let perturbed = dir.join("perturbed.svg");
     let out = diffsvg(&[
         "perturb",
@@ -151,7 +144,7 @@ fn primitives_drawing_is_fitted_back_as_itself() {
         String::from_utf8_lossy(&out.stderr)
     );
     let out_svg = dir.join("fit.svg");
-    let sum = summary(&diffsvg(&[
+    let sum = json_summary(&diffsvg(&[
         "fit",
         s(&perturbed),
         s(&png),
@@ -191,14 +184,9 @@ fn primitives_drawing_is_fitted_back_as_itself() {
 #[test]
 fn free_shapes_are_fitted_as_paths() {
     let dir = scratch("primitives-free");
-    let src = write(&dir, "drawing.svg", DRAWING);
-    let png = dir.join("drawing.png");
-    let scene = Scene::load(&src, Sizing::Natural).unwrap();
-    render(&scene, &RenderOptions::default())
-        .save_png(&png)
-        .unwrap();
+    let (src, png) = svg_and_picture(&dir, "drawing", DRAWING);
     let out_svg = dir.join("fit.svg");
-    let sum = summary(&diffsvg(&[
+    let sum = json_summary(&diffsvg(&[
         "fit",
         s(&src),
         s(&png),

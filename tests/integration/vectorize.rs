@@ -4,18 +4,7 @@
 use diffsvg::raster::{RenderOptions, render};
 use diffsvg::{Image, Scene, Sizing};
 
-use super::common::{assert_fails, diffsvg, root, s, scratch, shared_data};
-
-fn summary(out: &std::process::Output) -> serde_json::Value {
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let text = String::from_utf8_lossy(&out.stdout);
-    serde_json::from_str(text.lines().last().unwrap_or_default())
-        .unwrap_or_else(|e| panic!("{e}: {text}"))
-}
+use super::common::{assert_fails, diffsvg, json_summary, root, s, scratch, shared_data};
 
 /// PSNR over RGB of an SVG rendered over white against a picture.
 fn psnr_of(svg: &std::path::Path, target: &Image) -> f64 {
@@ -67,7 +56,7 @@ fn vectorizes_a_drawing_in_every_mode() {
         } else {
             args.extend(["--mode", mode]);
         }
-        let sum = summary(&diffsvg(&args));
+        let sum = json_summary(&diffsvg(&args));
         let paths = sum["paths"].as_u64().unwrap();
         assert!(paths <= 12, "{mode}: {paths} paths");
         let psnr = sum["psnr"].as_f64().unwrap();
@@ -81,7 +70,7 @@ fn vectorizes_a_drawing_in_every_mode() {
     }
     // Same inputs and seed, same bits.
     let again = dir.join("again.svg");
-    summary(&diffsvg(&[
+    json_summary(&diffsvg(&[
         "vectorize",
         s(&png),
         "-o",
@@ -124,7 +113,7 @@ fn target_psnr_uses_only_the_paths_it_needs() {
     let png = dir.join("tri.png");
     t.save_png(&png).unwrap();
     let out = dir.join("tri.svg");
-    let sum = summary(&diffsvg(&[
+    let sum = json_summary(&diffsvg(&[
         "vectorize",
         s(&png),
         "-o",
@@ -156,7 +145,7 @@ fn adaptive_beats_painterly_on_a_photo() {
     let mut mse = Vec::new();
     for mode in ["adaptive", "painterly"] {
         let out = dir.join(format!("{mode}.svg"));
-        let sum = summary(&diffsvg(&[
+        let sum = json_summary(&diffsvg(&[
             "vectorize",
             s(&photo),
             "--width",
