@@ -191,18 +191,19 @@ impl Image {
     }
 }
 
-/// A premultiplied pixel as straight 8-bit RGBA (rounded, clamped), as files hold it.
+/// A premultiplied pixel as straight 8-bit RGBA (rounded, clamped), as files hold it. A
+/// pixel whose alpha rounds to 0 is `[0, 0, 0, 0]`: an invisible pixel keeps no color
+/// (and the 8-bit render may leave a coverage of a few `2⁻²⁴` out, see
+/// [`render_rgba8`](crate::raster::render_rgba8)).
 #[inline]
 pub(crate) fn straight_rgba8(p: [f32; 4]) -> [u8; 4] {
     let a = p[3].clamp(0.0, 1.0);
-    let un = |c: f32| {
-        if a > 0.0 {
-            (c / a).clamp(0.0, 1.0)
-        } else {
-            0.0
-        }
-    };
-    [to_u8(un(p[0])), to_u8(un(p[1])), to_u8(un(p[2])), to_u8(a)]
+    let alpha = to_u8(a);
+    if alpha == 0 {
+        return [0; 4];
+    }
+    let un = |c: f32| (c / a).clamp(0.0, 1.0);
+    [to_u8(un(p[0])), to_u8(un(p[1])), to_u8(un(p[2])), alpha]
 }
 
 /// `[0, 1]` → `0..=255`, rounded.

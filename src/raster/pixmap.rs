@@ -16,13 +16,11 @@
 
 use rayon::prelude::*;
 
-use super::coverage::{coverage, coverage_row};
+use super::coverage::{ceil_f64, coverage, coverage_row, floor_f64};
 use super::layer::composite_layer;
 use super::paint::PaintEval;
 use super::prepare::{Item, Prepared};
-use super::render::{
-    Area, BAND_ROWS, BandRenderer, Canvas, all_zero, covered_span, opaque_start, over,
-};
+use super::render::{Area, BAND_ROWS, BandRenderer, Canvas, covered_span, opaque_start, over};
 use crate::image_io::{straight_rgba8, to_u8};
 use crate::scene::BlendMode;
 
@@ -50,12 +48,22 @@ impl Alpha {
 }
 
 /// Columns per chunk.
-const CHUNK: usize = 8;
+const CHUNK: usize = 16;
 
 /// Renders an already prepared scene straight to 8-bit RGBA, row-major, 4 bytes a pixel,
-/// top row first: the same bytes as converting
-/// [`render_prepared`](super::render_prepared)'s `f32` image, without holding that image.
+/// top row first: the bytes of converting
+/// [`render_prepared`](super::render_prepared)'s `f32` image, without holding that image,
+/// except that a run of pixels whose coverage is within a few `f32` steps of 0 or 1 is
+/// taken as exactly 0 or 1 (its true value inside or outside a shape; see [`SLACK`]),
+/// which moves a byte by one level where the `f32` value sits on a rounding boundary
+/// (an opacity of 0.7 is 178.5 of 255).
 pub fn render_rgba8(p: &Prepared, alpha: Alpha) -> Vec<u8> {
+    render_rgba8_with(p, alpha, SLACK)
+}
+
+/// [`render_rgba8`] with coverages within `slack` of 0 or 1 taken as 0 or 1 (with `0.0`,
+/// exactly the bytes of converting the `f32` image).
+fn render_rgba8_with(p: &Prepared, alpha: Alpha, slack: f32) -> Vec<u8> {
     let (w, h) = (p.width as usize, p.height as usize);
     let (start, group, fill) = opaque_start(p);
     let mut out = vec![0u8; w * h * 4];
@@ -70,6 +78,7 @@ pub fn render_rgba8(p: &Prepared, alpha: Alpha) -> Vec<u8> {
             BAND_CANVAS.with(|canvas| {
                 let mut canvas = canvas.borrow_mut();
                 canvas.reset(w, rows, fill);
+                canvas.slack = slack;
                 BandRenderer::new(p, band * BAND_ROWS, rows).run(&mut *canvas, start, group);
                 canvas.write_bytes(bytes, alpha);
             });
@@ -97,6 +106,10 @@ pub(crate) struct ChunkCanvas {
     color: Vec<[f32; 4]>,
     /// Per chunk: whether it is solid.
     solid: Vec<bool>,
+    /// Scratch for [`touched_chunks`].
+    touched: Vec<(u32, u32, u32)>,
+    /// How far from 0 or 1 a run's coverage may be and count as 0 or 1 ([`snap_run`]).
+    slack: f32,
 }
 
 impl ChunkCanvas {
@@ -137,11 +150,23 @@ impl ChunkCanvas {
 
     /// Converts the band to bytes (`w × rows × 4`).
     fn write_bytes(&self, bytes: &mut [u8], alpha: Alpha) {
+        let n = self.per_row;
         for r in 0..self.rows {
+            let solid = &self.solid[r * n..][..n];
+            let color = &self.color[r * n..][..n];
+            // A row of solid chunks with the colors of the row above, itself all solid (the
+            // inside of a flag's stripe): the same bytes, copied.
+            if r > 0
+                && !solid.contains(&false)
+                && !self.solid[(r - 1) * n..][..n].contains(&false)
+                && same_bits(color, &self.color[(r - 1) * n..][..n])
+            {
+                let row_bytes = self.w * 4;
+                bytes.copy_within((r - 1) * row_bytes..r * row_bytes, r * row_bytes);
+                continue;
+            }
             let line = &mut bytes[r * self.w * 4..][..self.w * 4];
             let px = &self.px[r * self.w..][..self.w];
-            let solid = &self.solid[r * self.per_row..][..self.per_row];
-            let color = &self.color[r * self.per_row..][..self.per_row];
             let mut k = 0;
             while k < self.per_row {
                 let (x0, x1) = (k * CHUNK, ((k + 1) * CHUNK).min(self.w));
@@ -203,60 +228,100 @@ impl ChunkCanvas {
     }
 
     /// Draws a solid-paint item's rows (without cells of exact overlap coverage) straight
-    /// from the accumulated deltas (clearing them, as [`BandRenderer::take_row`] does):
-    /// over runs of whole chunks without a
-    /// delta the winding integral, and so the coverage, is one value, applied chunk by
-    /// chunk ([`span`](Self::span)); elsewhere the running sum and the coverage rule go
-    /// pixel by pixel, with the same bits as [`coverage_row`].
+    /// from the accumulated deltas (clearing them, as [`BandRenderer::take_row`] does).
+    ///
+    /// Only the chunks an edge can have touched ([`touched_chunks`]) are read, pixel by
+    /// pixel, with the running sum and the coverage rule of [`coverage_row`] (the same
+    /// bits); such a chunk whose pixels all get one coverage is still drawn as a chunk
+    /// ([`span`](Self::span), the same bits as pixel by pixel). Between them the winding
+    /// integral, and so the coverage, is one value over the whole stretch
+    /// ([`stretch`](Self::stretch)). So a row of a big fill costs its edges, not its width.
     fn draw_solid(&mut self, r: &mut BandRenderer<'_>, item: &Item, s: [f32; 4]) {
         let acc = &mut r.acc;
         let (x0, aw) = (acc.x0 as usize, acc.w);
         let cols = aw.min(self.w - x0);
         let band_row0 = acc.y0 as usize - r.y0;
         let end = x0 + cols;
+        let mut touched = std::mem::take(&mut self.touched);
+        touched_chunks(item, acc, self.w, &mut touched);
+        let mut next = touched.iter().peekable();
+        let mut covs = [0.0f32; CHUNK];
         for k in 0..acc.h {
             let row = band_row0 + k;
             let deltas = &mut acc.data[k * aw..(k + 1) * aw];
             let mut sum = 0.0f32;
             let mut x = x0;
-            while x < end {
-                if x % CHUNK == 0 {
-                    // Four chunks a test while they last (one reduction for 32 values).
-                    let mut e = x;
-                    while e + 4 * CHUNK <= end && all_zero(&deltas[e - x0..][..4 * CHUNK]) {
-                        e += 4 * CHUNK;
-                    }
-                    while e + CHUNK <= end && all_zero(&deltas[e - x0..][..CHUNK]) {
-                        e += CHUNK;
-                    }
-                    if e > x {
-                        let cov = coverage(sum, item.evenodd).0;
-                        if cov > 0.0 {
-                            self.span(row, x / CHUNK, e / CHUNK, s, cov);
-                        }
-                        x = e;
-                        continue;
-                    }
+            while let Some(&(_, ka, kb)) = next.next_if(|t| t.0 as usize == k) {
+                let (lo, hi) = ((ka as usize * CHUNK).max(x), (kb as usize * CHUNK).min(end));
+                if lo >= hi {
+                    continue;
                 }
-                // Pixel by pixel up to the next chunk boundary.
-                let next = ((x / CHUNK + 1) * CHUNK).min(end);
-                let mut mixed = false;
-                for (i, dv) in deltas[x - x0..next - x0].iter_mut().enumerate() {
-                    sum += *dv;
-                    *dv = 0.0;
-                    let cov = coverage(sum, item.evenodd).0;
-                    if cov > 0.0 {
-                        if !mixed {
-                            self.mix(row, x / CHUNK);
-                            mixed = true;
-                        }
-                        over(&mut self.px[row * self.w + x + i], s, cov);
+                self.stretch(
+                    row,
+                    x,
+                    lo,
+                    s,
+                    snap_run(coverage(sum, item.evenodd).0, self.slack),
+                );
+                let mut a = lo;
+                while a < hi {
+                    let b = ((a / CHUNK + 1) * CHUNK).min(hi);
+                    let n = b - a;
+                    // The running sum is a chain of dependent additions: run it only up
+                    // to the chunk's last delta; past it the coverage holds.
+                    let ds = &mut deltas[a - x0..b - x0];
+                    let m = ds.iter().rposition(|&d| d != 0.0).map_or(0, |j| j + 1);
+                    for (c, dv) in covs.iter_mut().zip(&mut ds[..m]) {
+                        sum += *dv;
+                        *dv = 0.0;
+                        *c = coverage(sum, item.evenodd).0;
                     }
+                    covs[m..n].fill(coverage(sum, item.evenodd).0);
+                    if n == CHUNK && covs.iter().all(|c| c.to_bits() == covs[0].to_bits()) {
+                        if covs[0] > 0.0 {
+                            self.span(row, a / CHUNK, a / CHUNK + 1, s, covs[0]);
+                        }
+                    } else {
+                        for (i, &cov) in covs[..n].iter().enumerate() {
+                            if cov > 0.0 {
+                                self.mix(row, a / CHUNK);
+                                over(&mut self.px[row * self.w + a + i], s, cov);
+                            }
+                        }
+                    }
+                    a = b;
                 }
-                x = next;
+                x = hi;
             }
+            self.stretch(
+                row,
+                x,
+                end,
+                s,
+                snap_run(coverage(sum, item.evenodd).0, self.slack),
+            );
             // Columns right of the canvas hold deltas too; leave them cleared.
             deltas[cols..].fill(0.0);
+        }
+        self.touched = touched;
+    }
+
+    /// Composites columns `xa..xb` of band row `row` with one solid color `s` at one
+    /// coverage `cov`: whole chunks with [`span`](Self::span), the ends pixel by pixel.
+    fn stretch(&mut self, row: usize, xa: usize, xb: usize, s: [f32; 4], cov: f32) {
+        if cov <= 0.0 || xa >= xb {
+            return;
+        }
+        let (ka, kb) = (xa.div_ceil(CHUNK), xb / CHUNK);
+        let (pa, pb) = if ka < kb {
+            self.span(row, ka, kb, s, cov);
+            ((xa, ka * CHUNK), (kb * CHUNK, xb))
+        } else {
+            ((xa, xb), (xb, xb))
+        };
+        for x in (pa.0..pa.1).chain(pb.0..pb.1) {
+            self.mix(row, x / CHUNK);
+            over(&mut self.px[row * self.w + x], s, cov);
         }
     }
 
@@ -287,6 +352,98 @@ impl ChunkCanvas {
         }
     }
 }
+
+/// The chunks of `acc`'s rows an item's edges can have written deltas into: sorted
+/// `(row of acc, first chunk, end chunk)` triples (chunks of the canvas, ends exclusive),
+/// overlapping or adjacent ones merged.
+///
+/// An edge crossing row `y` writes into the columns from the floor of its least `x` in
+/// that row to one past the floor of its greatest (the guard column), after clamping to
+/// `0 ..= canvas_w` as [`accumulate_line`](super::coverage::accumulate_line) does; each
+/// range is widened by a column on either side so that rounding can never hide a delta.
+/// Horizontal edges write none.
+fn touched_chunks(
+    item: &Item,
+    acc: &super::coverage::Cells<f32>,
+    canvas_w: usize,
+    out: &mut Vec<(u32, u32, u32)>,
+) {
+    out.clear();
+    let (ylo, yhi) = (acc.y0 as f64, (acc.y0 as usize + acc.h) as f64);
+    let xmax = canvas_w as f64;
+    let first = acc.x0 as f64;
+    let last = (acc.x0 as usize + acc.w) as f64;
+    let chunk = CHUNK as f64;
+    item.for_each_edge_near(ylo, yhi, |ia, ic| {
+        let (a, c) = (item.pts[ia], item.pts[ic]);
+        if a[1] == c[1] || a[1].max(c[1]) <= ylo || a[1].min(c[1]) >= yhi {
+            return;
+        }
+        let (a, c) = if a[1] < c[1] { (a, c) } else { (c, a) };
+        let slope = (c[0] - a[0]) / (c[1] - a[1]);
+        let x_at = |y: f64| a[0] + (y - a[1]) * slope;
+        let r1 = ceil_f64(c[1].min(yhi));
+        let mut y = floor_f64(a[1].max(ylo));
+        while y < r1 {
+            let (ya, yb) = (y.max(a[1]), (y + 1.0).min(c[1]));
+            let (xa, xb) = (x_at(ya).clamp(0.0, xmax), x_at(yb).clamp(0.0, xmax));
+            let lo = (floor_f64(xa.min(xb)) - 1.0).max(first);
+            let hi = (floor_f64(xa.max(xb)) + 3.0).min(last);
+            if lo < hi {
+                let (ka, kb) = (floor_f64(lo / chunk), ceil_f64(hi / chunk));
+                out.push(((y - ylo) as u32, ka as u32, kb as u32));
+            }
+            y += 1.0;
+        }
+    });
+    out.sort_unstable();
+    // Merge a row's overlapping or adjacent ranges in place.
+    let mut n = 0;
+    for i in 0..out.len() {
+        let t = out[i];
+        if n > 0 && out[n - 1].0 == t.0 && t.1 <= out[n - 1].2 {
+            out[n - 1].2 = out[n - 1].2.max(t.2);
+        } else {
+            out[n] = t;
+            n += 1;
+        }
+    }
+    out.truncate(n);
+}
+
+/// Whether two rows of colors hold the same bits: one OR over the differences, without
+/// early exits, which the compiler turns into vector instructions (as
+/// [`all_zero`](super::render::all_zero)).
+fn same_bits(a: &[[f32; 4]], b: &[[f32; 4]]) -> bool {
+    a.as_flattened()
+        .iter()
+        .zip(b.as_flattened())
+        .fold(0u32, |acc, (x, y)| acc | (x.to_bits() ^ y.to_bits()))
+        == 0
+}
+
+/// A run's coverage within `slack` of 1 taken as 1, and within it of 0 as 0, so that a
+/// fill beside a slanted edge sets (or leaves) its chunks rather than blending them.
+///
+/// A row crossed by a slanted edge sums the edge's pieces to `1 − 2⁻²⁴` rather than 1
+/// inside the shape, and to a few `2⁻²⁴` rather than 0 outside it. This 8-bit path is
+/// forward only (never differentiated), so the exact 0 or 1 costs nothing; the `f32`
+/// render keeps the unsnapped value, since a snap there is a discontinuity that finite
+/// differences see.
+#[inline]
+fn snap_run(cov: f32, slack: f32) -> f32 {
+    if cov >= 1.0 - slack {
+        1.0
+    } else if cov <= slack {
+        0.0
+    } else {
+        cov
+    }
+}
+
+/// How far from 0 or 1 a run's coverage may fall from rounding and still count as 0 or 1
+/// in [`render_rgba8`]: four `f32` steps below 1 (each `2⁻²⁴`).
+const SLACK: f32 = 2.0 * f32::EPSILON;
 
 impl Canvas for ChunkCanvas {
     fn draw(&mut self, r: &mut BandRenderer<'_>, item: &Item, _area: Area) {
@@ -329,10 +486,12 @@ impl Canvas for ChunkCanvas {
 mod tests {
     use super::*;
     use crate::raster::{RenderOptions, render_prepared};
+    use crate::rng::Rng;
     use crate::scene::Scene;
 
     /// `render_rgba8` against converting the `f32` image, both alpha forms, with and
-    /// without exact overlaps.
+    /// without exact overlaps: the same bytes without snapping, and within one level
+    /// with it.
     fn same_bytes(svg: &str) {
         let scene = Scene::from_svg_str(svg, "t.svg", crate::Sizing::Natural).unwrap();
         for exact_overlaps in [false, true] {
@@ -342,9 +501,30 @@ mod tests {
             };
             let p = Prepared::new(&scene, &opts);
             let img = render_prepared(&p);
-            assert_eq!(render_rgba8(&p, Alpha::Straight), img.to_rgba8(), "{svg}");
             let premul: Vec<u8> = img.data.iter().flatten().map(|&v| to_u8(v)).collect();
-            assert_eq!(render_rgba8(&p, Alpha::Premultiplied), premul, "{svg}");
+            for (slack, tolerance) in [(0.0, 0), (SLACK, 1)] {
+                for (ours, theirs) in [
+                    (
+                        render_rgba8_with(&p, Alpha::Straight, slack),
+                        img.to_rgba8(),
+                    ),
+                    (
+                        render_rgba8_with(&p, Alpha::Premultiplied, slack),
+                        premul.clone(),
+                    ),
+                ] {
+                    assert_eq!(ours.len(), theirs.len());
+                    let off = |i: usize| ours[i].abs_diff(theirs[i]) > tolerance;
+                    if let Some(i) = (0..ours.len()).find(|&i| off(i)) {
+                        let (x, y) = ((i / 4) % p.width as usize, i / 4 / p.width as usize);
+                        panic!(
+                            "slack {slack}: pixel ({x}, {y}): {:?}, the f32 image's {:?}\n{svg}",
+                            &ours[i / 4 * 4..][..4],
+                            &theirs[i / 4 * 4..][..4]
+                        );
+                    }
+                }
+            }
         }
     }
 
@@ -375,5 +555,53 @@ mod tests {
             same_bytes(&wrap(w, h, &bg));
         }
         same_bytes(&wrap(5, 5, ""));
+    }
+
+    /// The bundled drawings and the flags (big fills beside slanted and axis-aligned edges
+    /// on and off chunk boundaries), where the 8-bit path reads only touched chunks and
+    /// snaps runs' coverages: still the bytes of the `f32` image.
+    #[test]
+    fn bytes_of_bundled_drawings_and_flags() {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+        let mut n = 0;
+        for dir in ["svg-samples", "benches/flags"] {
+            let mut files: Vec<_> = std::fs::read_dir(root.join(dir))
+                .unwrap()
+                .map(|e| e.unwrap().path())
+                .filter(|p| p.extension().is_some_and(|e| e == "svg"))
+                .collect();
+            files.sort();
+            for f in files {
+                same_bytes(&std::fs::read_to_string(&f).unwrap());
+                n += 1;
+            }
+        }
+        assert!(n >= 15, "{n} drawings");
+    }
+
+    /// Random polygons of a few big solid fills, slanted and straight, on a canvas whose
+    /// width is not a chunk multiple.
+    #[test]
+    fn bytes_of_random_fills() {
+        let mut rng = Rng::new(7);
+        for case in 0..40 {
+            let mut body = String::new();
+            for _ in 0..4 {
+                let mut d = String::from("M");
+                for k in 0..(3 + case % 4) {
+                    let (x, y) = (rng.uniform() * 140.0 - 10.0, rng.uniform() * 90.0 - 5.0);
+                    d += &format!("{}{x:.3} {y:.3} ", if k == 0 { "" } else { "L" });
+                }
+                let opacity = if case % 3 == 0 { 0.7 } else { 1.0 };
+                body += &format!(
+                    r##"<path d="{d}Z" fill="#{:06x}" fill-opacity="{opacity}" fill-rule="{}"/>"##,
+                    (rng.uniform() * 16_777_215.0) as u32,
+                    if case % 2 == 0 { "nonzero" } else { "evenodd" }
+                );
+            }
+            same_bytes(&format!(
+                r#"<svg xmlns="http://www.w3.org/2000/svg" width="123" height="77">{body}</svg>"#
+            ));
+        }
     }
 }
