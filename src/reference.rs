@@ -226,6 +226,59 @@ pub fn supersampled_mae(
     ))
 }
 
+/// Samples per pixel side of the reference that settles a file where diffsvg and resvg
+/// differ ([`closer_to_exact`]): resvg rendered this many times larger and box-filtered
+/// down, 256 samples per pixel.
+pub const EXACT_FACTOR: u32 = 16;
+
+/// For a file where diffsvg and resvg differ: whose rendering is nearer the exact one?
+/// The MAE (0–255 levels) of diffsvg's and of resvg's rendering against
+/// [`render_resvg_supersampled`] with [`EXACT_FACTOR`], as `[diffsvg, resvg]`.
+///
+/// resvg anti-aliases with 4 samples per pixel vertically and exact spans horizontally,
+/// and draws thin strokes as hairlines by its own rules, where diffsvg computes each
+/// pixel's covered area; a difference between the two is then resvg's approximation
+/// when diffsvg is the nearer of the two to 256 samples per pixel. `None` where the
+/// drawing turns anti-aliasing off anywhere (`shape-rendering: crispEdges` or
+/// `optimizeSpeed`, `text-rendering: optimizeSpeed`, an `image-rendering` other than
+/// smooth): there the larger rendering is no reference.
+pub fn closer_to_exact(path: &Path, sizing: Sizing, fonts: &Fonts) -> Result<Option<[f64; 2]>> {
+    let data = crate::image_io::read_bounded(path, crate::limits::MAX_FILE_BYTES)?;
+    let tree = crate::scene::svg_in::parse_tree_with(&data, path, fonts)?;
+    if turns_off_antialiasing(tree.root()) {
+        return Ok(None);
+    }
+    let (ours, theirs) = supersampled_mae(
+        path,
+        sizing,
+        &crate::raster::RenderOptions::default(),
+        fonts,
+        EXACT_FACTOR,
+    )?;
+    Ok(Some([ours, theirs]))
+}
+
+/// Whether anything under `g` (clip paths, masks, patterns and text included) is drawn
+/// without anti-aliasing or with an image filter other than smooth.
+fn turns_off_antialiasing(g: &usvg::Group) -> bool {
+    g.children().iter().any(|node| {
+        let own = match node {
+            usvg::Node::Path(p) => !p.rendering_mode().use_shape_antialiasing(),
+            usvg::Node::Image(i) => !matches!(
+                i.rendering_mode(),
+                usvg::ImageRendering::OptimizeQuality
+                    | usvg::ImageRendering::Smooth
+                    | usvg::ImageRendering::HighQuality
+            ),
+            usvg::Node::Text(t) => turns_off_antialiasing(t.flattened()),
+            usvg::Node::Group(child) => turns_off_antialiasing(child),
+        };
+        let mut sub = false;
+        node.subroots(|r| sub |= turns_off_antialiasing(r));
+        own || sub
+    })
+}
+
 /// Renders the SVG file at `path` with diffsvg and with resvg at the same size (`<text>`
 /// in the bundled fonts).
 pub fn parity(path: &Path, sizing: Sizing, opts: &crate::raster::RenderOptions) -> Result<Parity> {
