@@ -6,7 +6,7 @@ use super::{Adam, AdamConfig, LearningRates, Objective};
 use crate::metrics::{median, psnr_from_mse};
 use crate::optim::Schedule;
 use crate::raster::prepare::prepare_forward;
-use crate::raster::{RenderOptions, prepare, render_prepared};
+use crate::raster::{Prepared, RenderOptions, render_prepared};
 use crate::scene::Scene;
 use crate::scene::project;
 
@@ -126,11 +126,13 @@ pub fn refine(
         // Every evaluation but the last is followed by a step: rendered and differentiated
         // together. The last one only renders.
         let (loss, mse, grads) = if it < opts.iters {
-            let prepared = prepare(&scene, opts.render.tolerance, None);
+            let prepared = Prepared::new(&scene, &opts.render);
             let (_, loss, mse, g) = objective.render_and_backward(&scene, &prepared);
             (loss, mse, Some(g))
         } else {
-            let img = render_prepared(&prepare_forward(&scene, opts.render.tolerance));
+            let mut forward = prepare_forward(&scene, opts.render.tolerance);
+            forward.set_exact_overlaps(opts.render.exact_overlaps);
+            let img = render_prepared(&forward);
             let (loss, mse, _) = objective.eval_with_mse(&img);
             (loss, mse, None)
         };
@@ -196,10 +198,8 @@ mod tests {
 
     /// A scene refined toward a moved copy of itself gets close to it, monotonically
     /// better than where it started, and the best result is reported.
-    #[test]
-    fn recovers_a_perturbed_scene() {
-        let truth = curved_paths(4, 48, 11);
-        let target = render(&truth, &RenderOptions::default());
+    /// `truth` with every point moved by 1.5 to 2 px.
+    fn perturbed(truth: &Scene) -> Scene {
         let mut init = truth.clone();
         let mut p = init.params();
         let layout = ParamLayout::new(&init);
@@ -209,6 +209,36 @@ mod tests {
             }
         }
         init.set_params(&p);
+        init
+    }
+
+    /// The fit renders with its own render options (here exact overlaps), so the best
+    /// PSNR it reports is that of rendering its result with them.
+    #[test]
+    fn renders_with_its_options() {
+        let render_opts = RenderOptions {
+            exact_overlaps: true,
+            ..RenderOptions::default()
+        };
+        let truth = curved_paths(4, 48, 11);
+        let target = render(&truth, &render_opts);
+        let obj = Objective::new(&target, Loss::Mse, None, 1);
+        let opts = FitOptions {
+            iters: 10,
+            render: render_opts,
+            ..FitOptions::default()
+        };
+        let out = refine(perturbed(&truth), &obj, &opts, &mut |_, _| {
+            Control::Continue
+        });
+        assert_eq!(obj.psnr(&render(&out.best, &render_opts)), out.best_psnr);
+    }
+
+    #[test]
+    fn recovers_a_perturbed_scene() {
+        let truth = curved_paths(4, 48, 11);
+        let target = render(&truth, &RenderOptions::default());
+        let init = perturbed(&truth);
         let obj = Objective::new(&target, Loss::Mse, None, 1);
         let opts = FitOptions {
             iters: 150,
