@@ -732,7 +732,13 @@ fn record_row(
     let (covs, ups, downs) = (&mut sc.covs[..n], &mut sc.ups[..n], &mut sc.downs[..n]);
     let colors = &mut sc.colors[..n];
     coverage_row(wrow, item.evenodd, covs);
-    coverage_slopes_row(wrow, item.evenodd, ups, downs);
+    if item.crisp {
+        // Coverage by pixel centers: piecewise constant in the points.
+        ups.fill(0.0);
+        downs.fill(0.0);
+    } else {
+        coverage_slopes_row(wrow, item.evenodd, ups, downs);
+    }
     // Cells of exact coverage: recorded whatever their values, with no slopes (their
     // gradient goes through their pieces' portions).
     let exact = if ov.has_row(row) {

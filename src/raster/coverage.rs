@@ -79,6 +79,45 @@ pub(crate) fn accumulate_line(acc: &mut Cells<f32>, p0: Point, p1: Point, x_max:
     }
 }
 
+/// Accumulates segment `p0 → p1` of a shape drawn without anti-aliasing
+/// (`shape-rendering: crispEdges`): its running sums are then the winding number at each
+/// pixel's center, so a pixel is covered (0 or 1) by whether its center is inside.
+///
+/// Where the segment crosses the center line `y = r + ½` of row `r` at `x`, its
+/// direction (+1 going down) is added to the first column whose center lies right of
+/// `x`, `⌊x − ½⌋ + 1`; `x` is clamped to `0 ..= x_max` first, as [`accumulate_line`]
+/// does. A center exactly on an edge counts as inside below or right of it and outside
+/// above or left of it (`min(y) < r + ½ ≤ max(y)`, so a vertex shared by two edges counts
+/// once), which is tiny-skia's rounding of the ends to the nearest pixel line, halves
+/// up. Rows and columns outside `acc` are skipped.
+pub(crate) fn accumulate_centers(acc: &mut Cells<f32>, p0: Point, p1: Point, x_max: f64) {
+    if p0[1] == p1[1] {
+        return;
+    }
+    let (dir, a, b) = if p0[1] < p1[1] {
+        (1.0f32, p0, p1)
+    } else {
+        (-1.0, p1, p0)
+    };
+    let (ox, oy) = (acc.x0 as f64, acc.y0 as f64);
+    // Rows whose center lies in (a.y, b.y], within the buffer.
+    let first = (floor_f64(a[1] - 0.5) + 1.0).max(oy);
+    let end = (floor_f64(b[1] - 0.5) + 1.0).min(oy + acc.h as f64);
+    if first >= end {
+        return;
+    }
+    let slope = (b[0] - a[0]) / (b[1] - a[1]);
+    let mut y = first;
+    while y < end {
+        let x = (a[0] + (y + 0.5 - a[1]) * slope).clamp(0.0, x_max);
+        let col = floor_f64(x - 0.5) + 1.0 - ox;
+        if col >= 0.0 && col < acc.w as f64 {
+            acc.data[to_index(y - oy) * acc.w + to_index(col)] += dir;
+        }
+        y += 1.0;
+    }
+}
+
 /// Calls `f` with the pieces of `p0 → p1` cut at `x = lo` and `x = hi`, in order.
 fn split_x(p0: Point, p1: Point, lo: f64, hi: f64, f: &mut dyn FnMut(Point, Point)) {
     let mut ts = [0.0f64, 1.0, 1.0, 1.0];
@@ -1033,5 +1072,27 @@ mod tests {
         assert!((c - 0.25).abs() < 1e-6 && d == -1.0);
         let (c, _) = coverage(2.0, true);
         assert_eq!(c, 0.0);
+    }
+
+    /// Crisp coverage: rows and columns whose centers lie inside, a center on the top or
+    /// left edge outside and one on the bottom or right edge inside (tiny-skia's rule).
+    #[test]
+    fn centers_inside_a_rectangle() {
+        let mut acc = Cells::<f32>::default();
+        acc.reset(0, 0, 12, 10);
+        let (x0, y0, x1, y1) = (2.5, 1.2, 7.5, 6.5);
+        let ring = [[x0, y0], [x1, y0], [x1, y1], [x0, y1]];
+        for k in 0..4 {
+            accumulate_centers(&mut acc, ring[k], ring[(k + 1) % 4], 12.0);
+        }
+        for r in 0..10 {
+            let mut w = 0.0;
+            for c in 0..12 {
+                w += acc.data[r * 12 + c];
+                let (cx, cy) = (c as f64 + 0.5, r as f64 + 0.5);
+                let inside = cx > x0 && cx <= x1 && cy > y0 && cy <= y1;
+                assert_eq!(w.abs() == 1.0, inside, "pixel ({c}, {r}): winding {w}");
+            }
+        }
     }
 }

@@ -52,6 +52,11 @@ pub(crate) struct Item {
     /// ([`rings_cannot_overlap`](super::overlap::rings_cannot_overlap)). Only such items look for the cells whose
     /// coverage [`overlap`](super::overlap) computes exactly.
     pub(crate) can_overlap: bool,
+    /// Drawn without anti-aliasing ([`Path::crisp`](crate::scene::Path::crisp)): the
+    /// deltas are winding numbers at pixel centers
+    /// ([`accumulate_centers`](super::coverage::accumulate_centers)), and its edges get
+    /// no gradient.
+    pub(crate) crisp: bool,
 }
 
 /// Edges per run of [`Item::runs`].
@@ -695,13 +700,17 @@ fn build_path(
         // Only the chord counts are read after a forward render (gradient checks).
         geom.flat = Flattened::default();
     }
+    let mut items = if path.stroke_first {
+        [stroke_item, fill_item]
+    } else {
+        [fill_item, stroke_item]
+    };
+    for it in items.iter_mut().flatten() {
+        it.crisp = path.crisp;
+    }
     Built {
         geom,
-        items: if path.stroke_first {
-            [stroke_item, fill_item]
-        } else {
-            [fill_item, stroke_item]
-        },
+        items,
         solid_dash: solid,
     }
 }
@@ -745,6 +754,7 @@ fn item(
         grid_aligned,
         // Found by `Prepared::set_exact_overlaps` when it is asked for.
         can_overlap: true,
+        crisp: false,
         path,
         kind,
         runs: edge_runs(&pts, &rings),

@@ -2,7 +2,9 @@
 
 use rayon::prelude::*;
 
-use super::coverage::{Cells, accumulate_line, ceil_f64, coverage_row, floor_f64, integrate_rows};
+use super::coverage::{
+    Cells, accumulate_centers, accumulate_line, ceil_f64, coverage_row, floor_f64, integrate_rows,
+};
 use super::layer::{apply_mask, composite_layer};
 use super::overlap::Overlaps;
 use super::paint::PaintEval;
@@ -316,13 +318,19 @@ impl<'a> BandRenderer<'a> {
         }
         let (ylo, yhi) = (top as f64, bottom as f64);
         let acc = &mut self.acc;
+        let accumulate = if item.crisp {
+            accumulate_centers
+        } else {
+            accumulate_line
+        };
         item.for_each_edge_near(ylo, yhi, |ia, ic| {
             let (a, c) = (item.pts[ia], item.pts[ic]);
             if a[1].max(c[1]) > ylo && a[1].min(c[1]) < yhi {
-                accumulate_line(acc, a, c, w);
+                accumulate(acc, a, c, w);
             }
         });
-        if exact && item.can_overlap && self.p.exact_overlaps {
+        // A crisp item's winding numbers at pixel centers are exact already.
+        if exact && item.can_overlap && !item.crisp && self.p.exact_overlaps {
             let cols = acc.w.min(self.p.width as usize - acc.x0 as usize);
             let (origin, rows) = ((acc.x0, acc.y0), acc.h);
             self.overlaps

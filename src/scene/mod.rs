@@ -609,6 +609,11 @@ pub struct Path {
     /// parameters are the primitive's, and `points` and `subpaths` are its outline, built
     /// by [`Path::sync_primitive`] (see [`shape`]).
     pub primitive: Option<Primitive>,
+    /// Drawn without anti-aliasing (`shape-rendering: crispEdges` or `optimizeSpeed`): a
+    /// pixel is covered, wholly, when its center is inside. Its coverage is then
+    /// piecewise constant in the points, so they get no gradient from it (its paint
+    /// still does).
+    pub crisp: bool,
 }
 
 impl Path {
@@ -634,6 +639,7 @@ impl Path {
             stroke_first: false,
             text: None,
             primitive: None,
+            crisp: false,
         }
     }
 

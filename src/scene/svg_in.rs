@@ -1113,6 +1113,7 @@ fn convert_path(p: &usvg::Path, ctx: &Ctx, t: &Affine, role: Role) -> Result<Opt
     }
     let t = *t;
     let mut out = Path::new(p.id());
+    out.crisp = !p.rendering_mode().use_shape_antialiasing();
     let tp = |q: usvg::tiny_skia_path::Point| -> Result<[f64; 2]> {
         let d = apply(&t, [q.x as f64, q.y as f64]);
         if d[0].is_finite() && d[1].is_finite() {

@@ -499,6 +499,9 @@ impl Writer {
                 attrs.push_str(" paint-order=\"stroke\"");
             }
         }
+        if p.crisp {
+            attrs.push_str(" shape-rendering=\"crispEdges\"");
+        }
         let pad = "  ".repeat(indent);
         if let Some(text) = &p.text {
             let _ = writeln!(self.body, "{pad}<!-- text: {} -->", comment_text(text));

@@ -325,3 +325,61 @@ fn fused_pass_has_the_bits_of_the_separate_passes() {
         }
     }
 }
+
+/// `shape-rendering: crispEdges`: a pixel is covered wholly when its center is inside, so
+/// the crisp path's points get exactly no gradient while its color and the anti-aliased
+/// path beside it agree with finite differences; the written SVG keeps the attribute.
+#[test]
+fn crisp_edges_color_gradient_and_no_point_gradient() {
+    let s = scene(
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="40" height="32">
+        <path id="crisp" d="M 4.3 3.7 C 20 0 36 9 33.2 27.4 L 8.6 29.1 Z" fill="rgb(200,40,30)"
+              fill-opacity="0.8" shape-rendering="crispEdges"/>
+        <path id="smooth" d="M 14 6 L 37 20 L 12 26 Z" fill="rgb(20,90,200)" fill-opacity="0.6"/>
+        </svg>"#,
+    );
+    let bg = Some([1.0, 1.0, 1.0, 1.0]);
+    let target = nudged_target(&s, 1.0, bg);
+    let layout = diffsvg::scene::ParamLayout::new(&s);
+    let crisp_point = |k: usize| {
+        let slot = &layout.slots[k];
+        slot.group == ParamGroup::Points && layout.owners[slot.owner].id == "crisp"
+    };
+    // Finite differences of the crisp points jump where a step crosses a pixel center:
+    // every other parameter is compared.
+    let others: Vec<usize> = (0..layout.slots.len())
+        .filter(|&k| !crisp_point(k))
+        .collect();
+    let opts = RenderOptions::default();
+    let (grad, _, groups) = check(&s, &target, Loss::Mse, &opts, bg, Some(&others));
+    for g in &groups {
+        println!("crisp_edges: {g}");
+        assert!(g.worst <= 1e-2, "crisp_edges: {g}");
+    }
+    let points_of = |id: &str| -> Vec<f64> {
+        layout
+            .slots
+            .iter()
+            .zip(&grad)
+            .filter(|(slot, _)| {
+                slot.group == ParamGroup::Points && layout.owners[slot.owner].id == id
+            })
+            .map(|(_, g)| *g)
+            .collect()
+    };
+    assert!(points_of("crisp").iter().all(|g| *g == 0.0));
+    assert!(points_of("smooth").iter().any(|g| *g != 0.0));
+    // Every pixel of the crisp path alone is 0 or its color: no partial coverage.
+    let alone = scene(
+        r##"<svg xmlns="http://www.w3.org/2000/svg" width="40" height="32">
+        <path d="M 4.3 3.7 C 20 0 36 9 33.2 27.4 L 8.6 29.1 Z" fill="#fff"
+              shape-rendering="crispEdges"/></svg>"##,
+    );
+    let img = render(&alone, &RenderOptions::default());
+    assert!(img.data.iter().all(|p| p[3] == 0.0 || p[3] == 1.0));
+    assert!(img.data.iter().any(|p| p[3] == 1.0));
+    assert!(
+        s.to_svg_string()
+            .contains(r#"shape-rendering="crispEdges""#)
+    );
+}
