@@ -134,6 +134,11 @@ pub struct Args {
     /// parameters (center, radii, sides, rotation).
     #[arg(long)]
     free_shapes: bool,
+    /// Fit the background's color too, starting from `--background` (which must be
+    /// opaque; `auto` is white for an opaque target); the fitted color is written as a
+    /// canvas-sized `<rect>` under the drawing.
+    #[arg(long)]
+    fit_background: bool,
     #[command(flatten)]
     optim: OptimArgs,
     #[command(flatten)]
@@ -149,10 +154,18 @@ pub fn run(a: Args) -> Result<()> {
     if a.compare {
         check_output(&compare_path, "png")?;
     }
-    let opts = a.optim.fit_options(a.iters)?;
+    let mut opts = a.optim.fit_options(a.iters)?;
+    opts.fit_background = a.fit_background;
     let fonts = a.fonts.fonts();
     let target = load_target_with(&a.target, None, &fonts)?;
     let objective = a.optim.objective(&target)?;
+    if a.fit_background && !objective.background().is_some_and(|b| b[3] >= 1.0) {
+        bail!(
+            "--fit-background needs an opaque background: {} has transparent pixels, so give \
+             --background a color such as white",
+            a.target.display()
+        );
+    }
     let mut scene = Scene::load_with(&a.init, Sizing::Exact(target.width, target.height), &fonts)?;
     if a.free_shapes {
         scene.outline_primitives();
@@ -185,13 +198,21 @@ pub fn run(a: Args) -> Result<()> {
     let out = refine(scene, &objective, &opts, &mut |s, sc| reporter.step(s, sc));
     // A snapshot that could not be written fails the run before anything is written.
     reporter.finish()?;
+    // The fitted background, under the drawing: what it was compared over.
+    let (fitted, objective) = match out.background {
+        Some(bg) => (
+            with_background(&out.best, bg),
+            objective.with_background(bg),
+        ),
+        None => (out.best.clone(), objective),
+    };
     let compare = a.compare.then(|| {
         let opts = RenderOptions::default();
         let before = objective.composite(&render(&initial, &opts));
-        let after = objective.composite(&render(&out.best, &opts));
+        let after = objective.composite(&render(&fitted, &opts));
         side_by_side(&[objective.target(), &before, &after])
     });
-    out.best.save_svg(&a.output)?;
+    fitted.save_svg(&a.output)?;
     // All or nothing: no SVG without the comparison asked for.
     if let Some(Err(e)) = compare.map(|img| img.save_png(&compare_path)) {
         let _ = std::fs::remove_file(&a.output);
@@ -204,14 +225,23 @@ pub fn run(a: Args) -> Result<()> {
         StopReason::ReachedPsnr => "reached the PSNR goal",
         StopReason::Interrupted => "interrupted",
     };
+    let background = out.background.map(|b| [b[0], b[1], b[2]]);
     if a.report.json {
         println!(
             "{}",
             json!({"done": true, "output": a.output, "steps": out.steps, "stop": reason,
                 "initial_psnr": first, "psnr": out.best_psnr, "loss": out.best_loss,
-                "seconds": secs, "step_ms": out.median_step_ms})
+                "seconds": secs, "step_ms": out.median_step_ms, "background": background})
         );
     } else {
+        if let Some(c) = background {
+            println!(
+                "fit: background rgb({:.1}, {:.1}, {:.1})",
+                255.0 * c[0],
+                255.0 * c[1],
+                255.0 * c[2]
+            );
+        }
         println!(
             "fit: {} steps ({reason}), PSNR {first:.2} → {:.2} dB, loss {:.4e}, {secs:.2} s \
              (median step {:.2} ms); wrote {}",
@@ -226,4 +256,20 @@ pub fn run(a: Args) -> Result<()> {
         eprintln!("interrupted: the best result so far was written");
     }
     Ok(())
+}
+
+/// `scene` with an opaque canvas-sized rectangle of `background` (straight RGBA) under
+/// everything, named `background`.
+fn with_background(scene: &Scene, background: [f32; 4]) -> Scene {
+    use diffsvg::scene::{Fill, FillRule, Node, Paint, Path, Primitive};
+    let (w, h) = (scene.width as f64, scene.height as f64);
+    let mut rect = Path::from_primitive("background", Primitive::rect(0.0, 0.0, w, h, None, 0.0));
+    rect.fill = Some(Fill {
+        paint: Paint::Solid([0, 1, 2].map(|c| background[c] as f64)),
+        opacity: 1.0,
+        rule: FillRule::NonZero,
+    });
+    let mut out = scene.clone();
+    out.nodes.insert(0, Node::Path(rect));
+    out
 }

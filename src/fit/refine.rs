@@ -25,6 +25,10 @@ pub struct FitOptions {
     pub until_psnr: Option<f64>,
     /// Rasterizer settings.
     pub render: RenderOptions,
+    /// Fit the background's color too (an opaque background only; its rate is
+    /// 5 times `rates.color`): the drawing is compared over it, so a backdrop the drawing does
+    /// not cover is matched by the background rather than by stretching shapes.
+    pub fit_background: bool,
 }
 
 impl Default for FitOptions {
@@ -36,9 +40,16 @@ impl Default for FitOptions {
             adam: AdamConfig::default(),
             until_psnr: None,
             render: RenderOptions::default(),
+            fit_background: false,
         }
     }
 }
+
+/// The background's rate as a multiple of `rates.color`: it is one color under every
+/// uncovered pixel, and at the colors' rate a drawing's shapes grow over a wrong backdrop
+/// faster than the backdrop changes (a circle fitted from a white start toward a blue
+/// backdrop covered the canvas, and the backdrop stopped moving).
+const BACKGROUND_RATE: f64 = 5.0;
 
 /// What the observer sees after each evaluation.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -95,6 +106,9 @@ pub struct FitOutcome {
     /// Median milliseconds per optimizer step: preparation, rendering, objective and
     /// gradient (the evaluations that a step followed).
     pub median_step_ms: f64,
+    /// With [`FitOptions::fit_background`] (and an opaque background): the background,
+    /// straight RGBA, that went with the best scene.
+    pub background: Option<[f32; 4]>,
 }
 
 /// Refines `scene` toward `objective`: `opts.iters` Adam steps, each preceded by an
@@ -121,14 +135,33 @@ pub fn refine(
     let mut step_ms = Vec::new();
     let mut reason = StopReason::Finished;
     let mut steps = 0;
+    // The background as a parameter: its own objective, moved by its own Adam.
+    let mut bg = opts
+        .fit_background
+        .then(|| objective.background())
+        .flatten()
+        .filter(|b| b[3] >= 1.0)
+        .map(|b| {
+            let own = objective.clone();
+            (
+                own,
+                [b[0] as f64, b[1] as f64, b[2] as f64],
+                Adam::new(3, opts.adam),
+            )
+        });
+    let mut best_bg = None;
     for it in 0..=opts.iters {
+        let objective = bg.as_ref().map_or(objective, |b| &b.0);
         let t0 = Instant::now();
         // Every evaluation but the last is followed by a step: rendered and differentiated
         // together. The last one only renders.
         let (loss, mse, grads) = if it < opts.iters {
             let prepared = Prepared::new(&scene, &opts.render);
-            let (_, loss, mse, g) = objective.render_and_backward(&scene, &prepared);
-            (loss, mse, Some(g))
+            let (img, loss, mse, g) = objective.render_and_backward(&scene, &prepared);
+            let g_bg = bg
+                .as_ref()
+                .and_then(|_| objective.background_gradient(&img));
+            (loss, mse, Some((g, g_bg)))
         } else {
             let mut forward = prepare_forward(&scene, opts.render.tolerance);
             forward.set_exact_overlaps(opts.render.exact_overlaps);
@@ -142,6 +175,7 @@ pub fn refine(
             best_loss = loss;
             best_psnr = psnr;
             best_params = Some(scene.params());
+            best_bg = objective.background().filter(|_| bg.is_some());
         }
         let step = Step {
             iter: it,
@@ -159,17 +193,20 @@ pub fn refine(
             reason = StopReason::ReachedPsnr;
             break;
         }
-        let Some(grads) = grads else {
+        let Some((grads, g_bg)) = grads else {
             break;
         };
+        let scale = opts.schedule.factor(it, opts.iters);
+        if let (Some((own, color, bg_adam)), Some(g)) = (bg.as_mut(), g_bg) {
+            bg_adam.step(color, &g, &[BACKGROUND_RATE * opts.rates.color; 3], scale);
+            for c in color.iter_mut() {
+                *c = c.clamp(0.0, 1.0);
+            }
+            *own = own.with_background([color[0] as f32, color[1] as f32, color[2] as f32, 1.0]);
+        }
         step_ms.push(ms);
         let mut params = scene.params();
-        adam.step(
-            &mut params,
-            &grads,
-            &rates,
-            opts.schedule.factor(it, opts.iters),
-        );
+        adam.step(&mut params, &grads, &rates, scale);
         scene.set_params(&params);
         project(&mut scene);
         steps += 1;
@@ -185,6 +222,7 @@ pub fn refine(
         history,
         reason,
         median_step_ms: median(&mut step_ms),
+        background: best_bg,
     }
 }
 

@@ -183,3 +183,91 @@ fn fit_bad_inputs_fail_cleanly() {
     let o = diffsvg(&["fit", s(&svg), s(&png), "-o", s(&dir.join("out.png"))]);
     assert_fails(&o, "out.png", "must be a .svg", &out);
 }
+
+/// `fit --fit-background`: a drawing over a blue backdrop, fitted from the drawing alone
+/// over white, recovers the backdrop's color (written as a canvas-sized `<rect>` that the
+/// SVG reads back) along with the drawing; a target with transparent pixels and no opaque
+/// `--background` is refused.
+#[test]
+fn fit_background_recovers_the_backdrop() {
+    let dir = scratch("fit-background");
+    let target = write(
+        &dir,
+        "target.svg",
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="64" height="48">
+        <rect width="64" height="48" fill="rgb(40,120,200)"/>
+        <circle cx="30" cy="22" r="12" fill="rgb(230,180,20)"/></svg>"#,
+    );
+    let init = write(
+        &dir,
+        "init.svg",
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="64" height="48">
+        <circle cx="33" cy="24" r="10" fill="rgb(200,150,60)"/></svg>"#,
+    );
+    let out = dir.join("fitted.svg");
+    let o = diffsvg(&[
+        "fit",
+        s(&init),
+        s(&target),
+        "-o",
+        s(&out),
+        "--iters",
+        "300",
+        "--fit-background",
+        "--json",
+    ]);
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let summary = json_summary(&o);
+    let bg: Vec<f64> = summary["background"]
+        .as_array()
+        .expect("background in the summary")
+        .iter()
+        .map(|v| v.as_f64().unwrap() * 255.0)
+        .collect();
+    for (got, want) in bg.iter().zip([40.0, 120.0, 200.0]) {
+        assert!((got - want).abs() < 2.0, "background {bg:?}");
+    }
+    assert!(summary["psnr"].as_f64().unwrap() > 35.0, "{summary}");
+    // The written SVG holds the backdrop and renders like the target.
+    let fitted = Scene::load(&out, Sizing::Natural).unwrap();
+    let want = Scene::load(&target, Sizing::Natural).unwrap();
+    let (a, b) = (
+        render(&fitted, &RenderOptions::default()),
+        render(&want, &RenderOptions::default()),
+    );
+    let psnr = diffsvg::metrics::compare(&a.quantized(), &b.quantized()).psnr;
+    assert!(psnr > 35.0, "written SVG against the target: {psnr} dB");
+    assert!(
+        std::fs::read_to_string(&out)
+            .unwrap()
+            .contains("id=\"background\"")
+    );
+    // Transparent target, transparent background: refused before any work.
+    let png = dir.join("transparent.png");
+    render(
+        &Scene::load(&init, Sizing::Natural).unwrap(),
+        &RenderOptions::default(),
+    )
+    .save_png(&png)
+    .unwrap();
+    let refused = dir.join("refused.svg");
+    let o = diffsvg(&[
+        "fit",
+        s(&init),
+        s(&png),
+        "-o",
+        s(&refused),
+        "--fit-background",
+    ]);
+    assert_fails(
+        &o,
+        "--fit-background needs an opaque background",
+        "fit",
+        &refused,
+    );
+}
