@@ -718,7 +718,7 @@ def fit(scene: Scene, target, iters: int = 500, *, lr_points: float = 1.0,
         lr_paint: float = 0.5, lr_stops: float = 0.005, lr_transform: float = 0.5,
         schedule: str = "constant", loss: str = "mse", background: Color = None,
         pyramid: int = 1, until_psnr: Optional[float] = None, tolerance: float = 0.02,
-        progress: Progress = None) -> Tuple["Scene", FitInfo]:
+        fit_background: bool = False, progress: Progress = None) -> Tuple["Scene", FitInfo]:
     """Refines every parameter of ``scene`` toward ``target`` with exact gradients and
     Adam (as ``diffsvg fit``); returns ``(best scene, info)``.
 
@@ -727,7 +727,9 @@ def fit(scene: Scene, target, iters: int = 500, *, lr_points: float = 1.0,
     group's units (pixels for points and gradient geometry; ``lr_transform``, the
     rotation of circles, ellipses and rectangles, in pixels of motion at the shape's
     edge). ``background`` (straight RGB[A]) is composited under render and target before
-    comparing (opaque: over RGB only). ``progress(step)`` is called after every evaluation with ``iter``, ``loss``,
+    comparing (opaque: over RGB only); with ``fit_background`` an opaque background's
+    color is fitted too (as ``diffsvg fit --fit-background``) and returned as
+    ``info["background"]`` (straight RGBA; ``None`` otherwise). ``progress(step)`` is called after every evaluation with ``iter``, ``loss``,
     ``psnr``, ``seconds``; returning ``False`` or raising stops the run (an exception is
     re-raised once the GIL is back; Ctrl-C raises KeyboardInterrupt the same way).
     ``info`` has ``loss``, ``psnr``, ``steps``, ``reason``, the median ``step_ms`` (render,
@@ -739,7 +741,8 @@ def fit(scene: Scene, target, iters: int = 500, *, lr_points: float = 1.0,
                    lr_width=lr_width, lr_paint=lr_paint, lr_stops=lr_stops,
                    lr_transform=lr_transform, schedule=schedule, loss=loss,
                    background=_color(background, "background"),
-                   pyramid=_whole(pyramid, "pyramid", _U64), tolerance=tolerance)
+                   pyramid=_whole(pyramid, "pyramid", _U64), tolerance=tolerance,
+                   fit_background=bool(fit_background))
     s, info = _native.fit(_scene(scene), t, _whole(iters, "iters", _U64), until_psnr, options,
                           progress)
     return Scene(_native_scene=s), info

@@ -98,6 +98,7 @@ class FitInfo(TypedDict):
     final_loss: Optional[float]
     seconds: Optional[float]
     history: F64  # rows of iter, loss, psnr, seconds
+    background: Optional[List[float]]  # the fitted background, straight RGBA
 
 
 class VectorizeInfo(TypedDict):

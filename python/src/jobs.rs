@@ -88,14 +88,15 @@ fn step_dict(d: &Bound<'_, PyDict>, s: &Step) -> PyResult<()> {
 
 /// The options shared by `fit` and `vectorize`, from a dict (unknown keys refused):
 /// `lr_points`, `lr_color`, `lr_opacity`, `lr_width`, `lr_paint`, `lr_stops`,
-/// `lr_transform` (finite, ≥ 0), `schedule`, `loss`, `background` (straight RGBA), `pyramid`, `tolerance`.
+/// `lr_transform` (finite, ≥ 0), `schedule`, `loss`, `background` (straight RGBA), `pyramid`, `tolerance`,
+/// `fit_background` (bool; `fit` only).
 fn fit_setup(
     target: &PyReadonlyArrayDyn<'_, f32>,
     iters: usize,
     until_psnr: Option<f64>,
     options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<(Objective, FitOptions)> {
-    const KEYS: [&str; 12] = [
+    const KEYS: [&str; 13] = [
         "lr_points",
         "lr_color",
         "lr_opacity",
@@ -108,6 +109,7 @@ fn fit_setup(
         "background",
         "pyramid",
         "tolerance",
+        "fit_background",
     ];
     let get = |k: &str| -> PyResult<Option<Bound<'_, PyAny>>> {
         match options {
@@ -144,6 +146,7 @@ fn fit_setup(
     let background: Option<[f32; 4]> = get("background")?.map(|v| v.extract()).transpose()?;
     let pyramid: usize = get("pyramid")?.map_or(Ok(1), |v| v.extract())?;
     let tolerance: f64 = get("tolerance")?.map_or(Ok(0.02), |v| v.extract())?;
+    let fit_background: bool = get("fit_background")?.map_or(Ok(false), |v| v.extract())?;
     let target = image_in(target, "target")?;
     if target.width == 0 || target.height == 0 {
         return Err(bad("target: the image is empty"));
@@ -155,9 +158,15 @@ fn fit_setup(
         schedule: schedule.parse::<Schedule>().map_err(bad)?,
         until_psnr,
         render: options_for(tolerance)?,
+        fit_background,
         ..FitOptions::default()
     };
     opts.validate().map_err(to_py)?;
+    if fit_background && !bg.is_some_and(|b| b[3] >= 1.0) {
+        return Err(bad(
+            "fit_background: needs an opaque background, e.g. background=(1, 1, 1)",
+        ));
+    }
     let objective = ObjectiveOptions {
         loss: loss.parse::<Loss>().map_err(bad)?,
         pyramid,
@@ -226,6 +235,7 @@ pub(crate) fn fit<'py>(
         "final_loss" => last.map(|s| s.loss),
         "seconds" => last.map(|s| s.elapsed.as_secs_f64()),
         "history" => history,
+        "background" => out.background.map(|b| b.to_vec()),
     };
     Ok((PyScene::from(out.best), info))
 }
@@ -250,6 +260,9 @@ pub(crate) fn vectorize<'py>(
     progress: Option<Py<PyAny>>,
 ) -> PyResult<(PyScene, Bound<'py, PyDict>)> {
     let (objective, fit) = fit_setup(&target, iters, None, options.as_ref())?;
+    if fit.fit_background {
+        return Err(bad("fit_background is an option of fit, not of vectorize"));
+    }
     let mode: Mode = mode.parse().map_err(bad)?;
     let opts = VectorizeOptions {
         mode,

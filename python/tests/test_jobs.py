@@ -25,6 +25,23 @@ def test_fit_recovers_a_perturbed_drawing(tmp_path):
     assert info["history"].shape == (31, 4)
 
 
+def test_fit_background_recovers_the_backdrop():
+    svg = ('<svg xmlns="http://www.w3.org/2000/svg" width="64" height="48">'
+           '<rect width="64" height="48" fill="rgb(40,120,200)"/>'
+           '<circle cx="30" cy="22" r="12" fill="rgb(230,180,20)"/></svg>')
+    target = diffsvg.render(diffsvg.Scene.from_svg(svg))
+    start = diffsvg.Scene.from_svg(
+        '<svg xmlns="http://www.w3.org/2000/svg" width="64" height="48">'
+        '<circle cx="33" cy="24" r="10" fill="rgb(200,150,60)"/></svg>')
+    _, info = diffsvg.fit(start, target, iters=300, background=(1, 1, 1),
+                          fit_background=True)
+    assert np.allclose(np.array(info["background"][:3]) * 255, [40, 120, 200], atol=2)
+    _, plain = diffsvg.fit(start, target, iters=2)
+    assert plain["background"] is None
+    with pytest.raises(diffsvg.DiffsvgError, match="opaque background"):
+        diffsvg.fit(start, target, iters=2, fit_background=True, background=(1, 1, 1, 0.5))
+
+
 def test_progress_false_or_exception_stops():
     scene = diffsvg.random_blobs(4, 32, 32, seed=2)
     target = np.ones((32, 32, 4), np.float32)
