@@ -8,9 +8,13 @@
 //! the chunk's color, a translucent one composites onto it once (the `over` of each pixel
 //! would give the same bits). Anything else turns the chunk mixed first (its color is
 //! written out) and composites pixel by pixel as [`render_prepared`] does. At the end of
-//! the band, solid chunks are converted once and copied; mixed ones pixel by pixel. So the
-//! bytes are those of converting [`render_prepared`]'s image (tested), while a drawing of
-//! a few big fills writes each byte of the result once, plus a few values per chunk.
+//! the band, solid chunks are converted once and copied, mixed ones pixel by pixel, and a
+//! row of solid chunks equal to the row above is copied whole. A solid paint reads only
+//! the chunks its edges can touch ([`touched_chunks`]); between them its coverage is one
+//! value, snapped to an exact 0 or 1 within a few `f32` steps ([`SLACK`]). So the bytes
+//! are those of converting [`render_prepared`]'s image (tested; within one level where the
+//! snap meets a rounding boundary), while a drawing of a few big fills writes each byte of
+//! the result once, plus a few values per chunk, and a row costs its edges, not its width.
 //!
 //! [`render_prepared`]: super::render_prepared
 
@@ -53,8 +57,8 @@ const CHUNK: usize = 16;
 /// Renders an already prepared scene straight to 8-bit RGBA, row-major, 4 bytes a pixel,
 /// top row first: the bytes of converting
 /// [`render_prepared`](super::render_prepared)'s `f32` image, without holding that image,
-/// except that a run of pixels whose coverage is within a few `f32` steps of 0 or 1 is
-/// taken as exactly 0 or 1 (its true value inside or outside a shape; see [`SLACK`]),
+/// except that a run of pixels whose coverage is within four `f32` steps of 0 or 1 is
+/// taken as exactly 0 or 1 (its true value inside or outside a shape),
 /// which moves a byte by one level where the `f32` value sits on a rounding boundary
 /// (an opacity of 0.7 is 178.5 of 255).
 pub fn render_rgba8(p: &Prepared, alpha: Alpha) -> Vec<u8> {
