@@ -383,6 +383,16 @@ pub(crate) fn cameras(
 
 // ---- binary files ------------------------------------------------------------------------
 
+/// A regular file opened for reading, and its length in bytes.
+fn open_regular(path: &Path) -> Result<(std::fs::File, u64)> {
+    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let meta = file.metadata().map_err(|e| Error::io(path, e))?;
+    if !meta.is_file() {
+        return Err(invalid(path, "not a regular file".into()));
+    }
+    Ok((file, meta.len()))
+}
+
 /// A little-endian reader that knows how much of its file is left.
 struct Bin {
     r: BufReader<std::fs::File>,
@@ -392,15 +402,11 @@ struct Bin {
 
 impl Bin {
     fn open(path: &Path) -> Result<Bin> {
-        let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
-        let meta = file.metadata().map_err(|e| Error::io(path, e))?;
-        if !meta.is_file() {
-            return Err(invalid(path, "not a regular file".into()));
-        }
+        let (file, len) = open_regular(path)?;
         Ok(Bin {
             r: BufReader::new(file),
             pos: 0,
-            len: meta.len(),
+            len,
         })
     }
 
@@ -664,11 +670,7 @@ struct Lines {
 
 impl Lines {
     fn open(path: &Path) -> Result<Lines> {
-        let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
-        let meta = file.metadata().map_err(|e| Error::io(path, e))?;
-        if !meta.is_file() {
-            return Err(invalid(path, "not a regular file".into()));
-        }
+        let (file, _) = open_regular(path)?;
         Ok(Lines {
             r: BufReader::new(file),
             number: 0,
@@ -1411,7 +1413,10 @@ mod tests {
             bytes[..8].copy_from_slice(&1000u64.to_le_bytes());
             std::fs::write(&path, &bytes).unwrap();
             let e = read_err(&sparse, Form::Binary);
-            assert!(e.contains("1000") && e.contains("are left of the file"), "{e}");
+            assert!(
+                e.contains("1000") && e.contains("are left of the file"),
+                "{e}"
+            );
             std::fs::write(&path, &good).unwrap();
         }
         // A hostile count of 2D points (first image) and of track elements (first point).
@@ -1850,5 +1855,43 @@ mod tests {
             std::fs::remove_dir_all(&dst).unwrap();
         }
         std::fs::remove_dir_all(&src).unwrap();
+    }
+
+    #[test]
+    fn real_lego_and_fox_convert_to_the_same_cameras_when_present() {
+        let test = "real_lego_and_fox_convert_to_the_same_cameras_when_present";
+        let Some(scenes) = super::super::dataset::tests::scenes(test) else {
+            return;
+        };
+        for (scene, k) in [("nerf_synthetic_lego_400", 2), ("fox", 4)] {
+            let src = scenes.join(scene);
+            if !src.is_dir() {
+                println!("SKIPPED {test} for {scene}: {} not found", src.display());
+                continue;
+            }
+            let original = Dataset::load(&src, k).unwrap();
+            for form in [Form::Binary, Form::Text] {
+                let dst = scratch(&format!("real-{scene}-{form:?}"));
+                let t = std::time::Instant::now();
+                convert(
+                    &src,
+                    &dst,
+                    &Convert {
+                        form,
+                        points: 100,
+                        seed: 0,
+                    },
+                )
+                .unwrap();
+                let ds = Dataset::load(&dst, k).unwrap();
+                println!(
+                    "{scene} {form:?}: converted and loaded in {:.1} s",
+                    t.elapsed().as_secs_f64()
+                );
+                same_cameras(&original, &ds);
+                assert_eq!(ds.white_background, original.white_background, "{scene}");
+                std::fs::remove_dir_all(&dst).unwrap();
+            }
+        }
     }
 }
