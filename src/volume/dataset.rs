@@ -175,34 +175,32 @@ impl Dataset {
 /// [`Dataset::focus`] of a set of cameras.
 pub(crate) fn focus<'a>(cameras: impl Iterator<Item = &'a Camera>) -> (glam::Vec3, f32) {
     let cameras: Vec<&Camera> = cameras.collect();
-    {
-        // Σ (I − d dᵀ) p = Σ (I − d dᵀ) o over the axes o + t d.
-        let mut a = glam::DMat3::ZERO;
-        let mut b = glam::DVec3::ZERO;
-        let mut mean = glam::DVec3::ZERO;
-        for c in &cameras {
-            let o = c.position().as_dvec3();
-            let d = c.forward().as_dvec3().normalize_or_zero();
-            let m = glam::DMat3::IDENTITY - glam::DMat3::from_cols(d * d.x, d * d.y, d * d.z);
-            a += m;
-            b += m * o;
-            mean += o;
-        }
-        mean /= cameras.len().max(1) as f64;
-        let center = if a.determinant().abs() > 1e-9 {
-            a.inverse() * b
-        } else {
-            mean
-        };
-        let center = center.as_vec3();
-        let mut dist: Vec<f32> = cameras
-            .iter()
-            .map(|c| c.position().distance(center))
-            .collect();
-        dist.sort_by(|x, y| x.total_cmp(y));
-        let median = dist.get(dist.len() / 2).copied().unwrap_or(1.0);
-        (center, median)
+    // Σ (I − d dᵀ) p = Σ (I − d dᵀ) o over the axes o + t d.
+    let mut a = glam::DMat3::ZERO;
+    let mut b = glam::DVec3::ZERO;
+    let mut mean = glam::DVec3::ZERO;
+    for c in &cameras {
+        let o = c.position().as_dvec3();
+        let d = c.forward().as_dvec3().normalize_or_zero();
+        let m = glam::DMat3::IDENTITY - glam::DMat3::from_cols(d * d.x, d * d.y, d * d.z);
+        a += m;
+        b += m * o;
+        mean += o;
     }
+    mean /= cameras.len().max(1) as f64;
+    let center = if a.determinant().abs() > 1e-9 {
+        a.inverse() * b
+    } else {
+        mean
+    };
+    let center = center.as_vec3();
+    let mut dist: Vec<f32> = cameras
+        .iter()
+        .map(|c| c.position().distance(center))
+        .collect();
+    dist.sort_by(|x, y| x.total_cmp(y));
+    let median = dist.get(dist.len() / 2).copied().unwrap_or(1.0);
+    (center, median)
 }
 
 /// Every `HOLDOUT`-th present frame of an instant-ngp dataset is a test view.
