@@ -99,6 +99,7 @@ pub(crate) fn recon_voxel<'py>(
         sparsity,
         seed,
         eval_every,
+        test_every: None,
     };
     job.validate().map_err(to_py)?;
     let mut prog = Progress::new(progress);
@@ -171,6 +172,7 @@ pub(crate) fn recon_splat<'py>(
         bound,
         seed,
         eval_every,
+        test_every: None,
     };
     job.validate().map_err(to_py)?;
     let mut prog = Progress::new(progress);
@@ -243,7 +245,13 @@ pub(crate) fn view<'py>(
             crate::on_pool(|| {
                 let mut m = Model::load(&model, step)?;
                 let data = match &scene {
-                    Some(d) => Some(m.load_dataset(d, downscale)?.0),
+                    Some(d) => {
+                        let loading = diffsvg::volume::dataset::Loading {
+                            downscale,
+                            test_every: None,
+                        };
+                        Some(m.load_dataset(d, &loading)?.0)
+                    }
                     None => None,
                 };
                 let mut views = Vec::new();

@@ -91,7 +91,11 @@ pub(super) fn undistortion_note(dir: &Path, outside: f64) {
 /// Loads a dataset for splatting ([`load_for_splat`]), with its warnings and a note on
 /// stderr when its photos were undistorted.
 pub(super) fn load_splat_dataset(dir: &Path, downscale: u32) -> Result<Dataset> {
-    let (data, undistorted) = load_for_splat(dir, downscale)?;
+    let loading = diffsvg::volume::dataset::Loading {
+        downscale,
+        test_every: None,
+    };
+    let (data, undistorted) = load_for_splat(dir, &loading)?;
     super::util::print_warnings(&data.warnings);
     if let Some(outside) = undistorted {
         undistortion_note(dir, outside);

@@ -17,8 +17,9 @@ use diffsvg::volume::splat::{self, TrainStep};
 /// Arguments of `diffsvg recon splat`.
 #[derive(clap::Args, Debug)]
 pub struct SplatArgs {
-    /// Dataset folder: NeRF-synthetic (transforms_train.json) or instant-ngp
-    /// (transforms.json; photos with lens distortion are undistorted once, in memory).
+    /// Dataset folder: NeRF-synthetic (transforms_train.json), instant-ngp
+    /// (transforms.json) or COLMAP (sparse/0/cameras.bin or .txt, photos in images/);
+    /// photos with lens distortion are undistorted once, in memory.
     #[arg(long)]
     scene: PathBuf,
     /// Model file to write (.ply, the layout Gaussian-splatting viewers read).
@@ -34,7 +35,8 @@ pub struct SplatArgs {
     #[arg(long, default_value_t = 300_000)]
     max_gaussians: usize,
     /// Gaussians to start from when the folder has no point cloud (points3d.ply,
-    /// sparse_pc.ply or points.ply): placed at random in the scene's box.
+    /// sparse_pc.ply or points.ply, or COLMAP's points3D): placed at random in the scene's
+    /// box.
     #[arg(long, default_value_t = 50_000)]
     initial: usize,
     /// Highest spherical-harmonic degree of the color, 0 to 3 (raised from 0 over the
@@ -49,6 +51,11 @@ pub struct SplatArgs {
     /// Random seed of the initial points, the view order and the splits.
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// Instant-ngp and COLMAP folders: hold out the views at positions 0, N, 2N, … (file
+    /// order for instant-ngp, sorted by name for COLMAP) as test views; 0: none (default:
+    /// every 8th). NeRF-synthetic folders use transforms_test.json.
+    #[arg(long, value_name = "N")]
+    test_every: Option<usize>,
     #[command(flatten)]
     report: Reporting,
 }
@@ -65,6 +72,7 @@ pub fn run(a: SplatArgs) -> Result<()> {
         bound: a.bound,
         seed: a.seed,
         eval_every: a.report.eval_every,
+        test_every: a.test_every,
     };
     job.validate().map_err(flag_error)?;
     install_interrupt_handler();

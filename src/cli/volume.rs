@@ -39,8 +39,8 @@ enum ReconModel {
 /// Arguments of `diffsvg recon voxel`.
 #[derive(clap::Args, Debug)]
 pub struct VoxelArgs {
-    /// Dataset folder: NeRF-synthetic (transforms_train.json) or instant-ngp
-    /// (transforms.json).
+    /// Dataset folder: NeRF-synthetic (transforms_train.json), instant-ngp
+    /// (transforms.json) or COLMAP (sparse/0/cameras.bin or .txt, photos in images/).
     #[arg(long)]
     scene: PathBuf,
     /// Model file to write (.vox).
@@ -84,6 +84,11 @@ pub struct VoxelArgs {
     /// Random seed of the ray batches.
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// Instant-ngp and COLMAP folders: hold out the views at positions 0, N, 2N, … (file
+    /// order for instant-ngp, sorted by name for COLMAP) as test views; 0: none (default:
+    /// every 8th). NeRF-synthetic folders use transforms_test.json.
+    #[arg(long, value_name = "N")]
+    test_every: Option<usize>,
     #[command(flatten)]
     report: Reporting,
 }
@@ -106,6 +111,9 @@ pub struct ViewArgs {
     /// Divide image sizes by this integer (as in training).
     #[arg(long, default_value_t = 1)]
     downscale: u32,
+    /// Which views are test views (as in training): see `recon splat --help`.
+    #[arg(long, value_name = "N")]
+    test_every: Option<usize>,
     /// Also render this many views on a circle around the model: orbit-NNN.png,
     /// orbit.gif and (from 2 views) orbit.png, a contact sheet of the first half of the
     /// circle above the second.
@@ -151,6 +159,7 @@ fn run_voxel(a: VoxelArgs) -> Result<()> {
         sparsity: a.sparsity,
         seed: a.seed,
         eval_every: a.report.eval_every,
+        test_every: a.test_every,
     };
     job.validate().map_err(flag_error)?;
     install_interrupt_handler();
@@ -278,7 +287,11 @@ pub fn run_view(a: ViewArgs) -> Result<()> {
     check_downscale(a.downscale).map_err(flag_error)?;
     let data = match &a.scene {
         Some(d) => {
-            let (data, undistorted) = model.load_dataset(d, a.downscale).map_err(flag_error)?;
+            let loading = diffsvg::volume::dataset::Loading {
+                downscale: a.downscale,
+                test_every: a.test_every,
+            };
+            let (data, undistorted) = model.load_dataset(d, &loading).map_err(flag_error)?;
             super::util::print_warnings(&data.warnings);
             if let Some(outside) = undistorted {
                 undistortion_note(d, outside);

@@ -1,5 +1,6 @@
-//! Posed-photo datasets: NeRF-synthetic (`transforms_{train,test}.json`) and instant-ngp
-//! (`transforms.json`) folders, loaded into cameras and RGB images.
+//! Posed-photo datasets: NeRF-synthetic (`transforms_{train,test}.json`), instant-ngp
+//! (`transforms.json`) and COLMAP (`sparse/0/`, see [`colmap`](super::colmap)) folders,
+//! loaded into cameras and RGB images; tried in that order.
 //!
 //! * **NeRF-synthetic** (detected by `transforms_train.json`): train views from
 //!   `transforms_train.json`, test views from `transforms_test.json` when it exists (none
@@ -7,7 +8,9 @@
 //!   appended. Every listed image must exist.
 //! * **instant-ngp** (`transforms.json`): frames whose image is missing are skipped with one
 //!   warning on stderr naming them all; of the frames present, in file order, those at
-//!   positions 0, 8, 16, … are the test views and the rest are train views.
+//!   positions 0, 8, 16, … are the test views and the rest are train views
+//!   ([`Loading::test_every`] chooses another interval). nerfstudio's `transforms.json`
+//!   reads the same way (its `applied_transform` is informational and ignored).
 //!
 //! Both formats share one reader. Intrinsics come from the top level and may be
 //! overridden per frame: `fl_x`, `fl_y` (pixels) or `camera_angle_x`, `camera_angle_y`
@@ -62,6 +65,7 @@ use serde_json::{Map, Value};
 use super::camera::{
     Camera, MAX_FOCAL_RATIO, MIN_FOCAL_RATIO, focal_from_fov, fov_range, pose_from_rows,
 };
+use super::splat::PointCloud;
 use crate::error::{Error, Result};
 use crate::limits::{MAX_FILE_BYTES, MAX_IMAGE_PIXELS, MAX_SIDE};
 
@@ -106,12 +110,53 @@ pub struct Dataset {
     /// What was read other than the folder says, one line each, for the caller to show
     /// (the library prints nothing): frames skipped because their image is missing.
     pub warnings: Vec<String>,
+    /// The capture's sparse points (COLMAP's `points3D`), world units, colors linear in
+    /// `[0, 1]`; `None` for formats that carry none (a point-cloud file beside them is
+    /// found by [`find_point_cloud`](super::splat::find_point_cloud)).
+    pub points: Option<PointCloud>,
+}
+
+/// How to load a dataset: [`Dataset::load_with`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Loading {
+    /// Divide image sizes by this integer, at least 1 (COLMAP: read `images_K/` when it
+    /// exists).
+    pub downscale: u32,
+    /// Instant-ngp and COLMAP folders: the views at positions 0, N, 2N, … (file order
+    /// for instant-ngp, sorted by name for COLMAP) are held out as test views; `Some(0)`:
+    /// none; `None`: every 8th. NeRF-synthetic folders have their own test split and
+    /// refuse `Some`.
+    pub test_every: Option<usize>,
+}
+
+impl Default for Loading {
+    fn default() -> Self {
+        Loading {
+            downscale: 1,
+            test_every: None,
+        }
+    }
+}
+
+impl Loading {
+    /// Whether the view at `position` is a test view.
+    pub(crate) fn is_test(&self, position: usize) -> bool {
+        match self.test_every.unwrap_or(HOLDOUT) {
+            0 => false,
+            n => position.is_multiple_of(n),
+        }
+    }
 }
 
 impl Dataset {
     /// Loads a dataset folder; see [`load`].
     pub fn load(dir: &Path, downscale: u32) -> Result<Dataset> {
         load(dir, downscale)
+    }
+
+    /// Loads a dataset folder with a choice of test split; see [`load_with`].
+    pub fn load_with(dir: &Path, loading: &Loading) -> Result<Dataset> {
+        load_with(dir, loading)
     }
 
     /// Where the cameras look: the point closest (in least squares) to every training
@@ -123,46 +168,66 @@ impl Dataset {
         } else {
             &self.train
         };
-        // Σ (I − d dᵀ) p = Σ (I − d dᵀ) o over the axes o + t d.
-        let mut a = glam::DMat3::ZERO;
-        let mut b = glam::DVec3::ZERO;
-        let mut mean = glam::DVec3::ZERO;
-        for v in views {
-            let o = v.camera.position().as_dvec3();
-            let d = v.camera.forward().as_dvec3().normalize_or_zero();
-            let m = glam::DMat3::IDENTITY - glam::DMat3::from_cols(d * d.x, d * d.y, d * d.z);
-            a += m;
-            b += m * o;
-            mean += o;
-        }
-        mean /= views.len().max(1) as f64;
-        let center = if a.determinant().abs() > 1e-9 {
-            a.inverse() * b
-        } else {
-            mean
-        };
-        let center = center.as_vec3();
-        let mut dist: Vec<f32> = views
-            .iter()
-            .map(|v| v.camera.position().distance(center))
-            .collect();
-        dist.sort_by(|x, y| x.total_cmp(y));
-        let median = dist.get(dist.len() / 2).copied().unwrap_or(1.0);
-        (center, median)
+        focus(views.iter().map(|v| &v.camera))
     }
+}
+
+/// [`Dataset::focus`] of a set of cameras.
+pub(crate) fn focus<'a>(cameras: impl Iterator<Item = &'a Camera>) -> (glam::Vec3, f32) {
+    let cameras: Vec<&Camera> = cameras.collect();
+    // Σ (I − d dᵀ) p = Σ (I − d dᵀ) o over the axes o + t d.
+    let mut a = glam::DMat3::ZERO;
+    let mut b = glam::DVec3::ZERO;
+    let mut mean = glam::DVec3::ZERO;
+    for c in &cameras {
+        let o = c.position().as_dvec3();
+        let d = c.forward().as_dvec3().normalize_or_zero();
+        let m = glam::DMat3::IDENTITY - glam::DMat3::from_cols(d * d.x, d * d.y, d * d.z);
+        a += m;
+        b += m * o;
+        mean += o;
+    }
+    mean /= cameras.len().max(1) as f64;
+    let center = if a.determinant().abs() > 1e-9 {
+        a.inverse() * b
+    } else {
+        mean
+    };
+    let center = center.as_vec3();
+    let mut dist: Vec<f32> = cameras
+        .iter()
+        .map(|c| c.position().distance(center))
+        .collect();
+    dist.sort_by(|x, y| x.total_cmp(y));
+    let median = dist.get(dist.len() / 2).copied().unwrap_or(1.0);
+    (center, median)
 }
 
 /// Every `HOLDOUT`-th present frame of an instant-ngp dataset is a test view.
 pub(crate) const HOLDOUT: usize = 8;
 
-/// Loads a NeRF-synthetic or instant-ngp folder (see the module documentation), with
-/// images and cameras downscaled by the integer `downscale ≥ 1`.
+/// Loads a NeRF-synthetic, instant-ngp or COLMAP folder (see the module documentation),
+/// with images and cameras downscaled by the integer `downscale ≥ 1` and the default
+/// test split: [`load_with`] with `test_every: None`.
+pub fn load(dir: &Path, downscale: u32) -> Result<Dataset> {
+    load_with(
+        dir,
+        &Loading {
+            downscale,
+            test_every: None,
+        },
+    )
+}
+
+/// Loads a NeRF-synthetic, instant-ngp or COLMAP folder (see the module documentation).
 ///
 /// Errors name the file and the problem: a missing folder or transforms file, malformed
 /// JSON or fields (`"frame 3 (./train/r_3): transform_matrix must be 4×4 (or 3×4)
 /// numbers"`, frames counted from 0), degenerate poses, missing or unreadable images, an
-/// image whose size differs from the first one, no frames with images.
-pub fn load(dir: &Path, downscale: u32) -> Result<Dataset> {
+/// image whose size differs from the first one, no frames with images, `test_every`
+/// given for a NeRF-synthetic folder.
+pub fn load_with(dir: &Path, loading: &Loading) -> Result<Dataset> {
+    let downscale = loading.downscale;
     if downscale == 0 {
         return Err(Error::InvalidValue {
             path: dir.to_path_buf(),
@@ -192,6 +257,16 @@ pub fn load(dir: &Path, downscale: u32) -> Result<Dataset> {
     let mut frames: Vec<(Frame, bool)> = Vec::new();
     let mut warnings = Vec::new();
     if synthetic.is_file() {
+        if let Some(n) = loading.test_every {
+            return Err(Error::Setting {
+                name: "test_every".into(),
+                message: format!(
+                    "{n}: {} is a NeRF-synthetic folder, whose test views are those of \
+                     transforms_test.json",
+                    dir.display()
+                ),
+            });
+        }
         let train = parse_transforms(&synthetic)?;
         require_images(&synthetic, &train)?;
         frames.extend(train.into_iter().map(|f| (f, false)));
@@ -234,42 +309,30 @@ pub fn load(dir: &Path, downscale: u32) -> Result<Dataset> {
             present
                 .into_iter()
                 .enumerate()
-                .map(|(i, f)| (f, i % HOLDOUT == 0)),
+                .map(|(i, f)| (f, loading.is_test(i))),
         );
+    } else if let Some((sparse, form)) = super::colmap::find(dir) {
+        return super::colmap::load(dir, &sparse, form, loading, name);
     } else {
         return Err(not_found(
             dir,
-            "no transforms_train.json (NeRF-synthetic) or transforms.json (instant-ngp) here",
+            "no transforms_train.json (NeRF-synthetic), transforms.json (instant-ngp) or \
+             sparse/0/cameras.bin or .txt (COLMAP) here",
         ));
     }
     if frames.is_empty() {
         return Err(not_found(dir, "no frames"));
     }
 
-    // Sizes from the headers, before anything is decoded.
-    let mut total: u64 = 0;
-    for (f, _) in &frames {
-        let path = f.image.as_deref().expect("present");
-        let (w, h) = header_size(path)?;
-        total += (w / downscale) as u64 * (h / downscale) as u64;
-    }
-    if total > MAX_DATASET_PIXELS {
-        return Err(Error::InvalidValue {
-            path: dir.to_path_buf(),
-            what: format!(
-                "the {} images hold {total} pixels at downscale {downscale}, more than the \
-                 limit of {MAX_DATASET_PIXELS}: give a larger --downscale",
-                frames.len()
-            ),
-        });
-    }
-
-    // Decode in parallel; report the first failure in file order.
-    let images: Vec<Result<Decoded>> = frames
-        .par_iter()
-        .map(|(f, _)| decode(f.image.as_deref().expect("present"), downscale))
+    let paths: Vec<&Path> = frames
+        .iter()
+        .map(|(f, _)| f.image.as_deref().expect("present"))
         .collect();
-    let images: Vec<Decoded> = images.into_iter().collect::<Result<_>>()?;
+    let sizes = paths
+        .iter()
+        .map(|p| header_size(p))
+        .collect::<Result<Vec<_>>>()?;
+    let images = decode_all(dir, &paths, &sizes, downscale)?;
 
     let (rw, rh) = (images[0].width, images[0].height);
     let first = frames[0].0.image.clone().expect("present");
@@ -315,10 +378,95 @@ pub fn load(dir: &Path, downscale: u32) -> Result<Dataset> {
         name,
         white_background: synthetic.is_file(),
         warnings,
+        points: None,
     })
 }
 
-fn not_found(path: &Path, message: &str) -> Error {
+/// One photo of a NeRF-synthetic or instant-ngp folder, for the COLMAP converter: its
+/// path relative to the folder (with its extension), its file and its full-size camera.
+pub(super) struct SourceFrame {
+    pub name: String,
+    pub image: PathBuf,
+    pub camera: Camera,
+}
+
+/// The photos of a NeRF-synthetic (train, then test) or instant-ngp folder (those
+/// present, in file order), read as [`load`] reads them but not decoded; and whether the
+/// folder is NeRF-synthetic.
+pub(super) fn source_frames(dir: &Path) -> Result<(Vec<SourceFrame>, bool)> {
+    let synthetic = dir.join("transforms_train.json");
+    let mut frames = Vec::new();
+    if synthetic.is_file() {
+        for json in [synthetic.clone(), dir.join("transforms_test.json")] {
+            if json == synthetic || json.is_file() {
+                let f = parse_transforms(&json)?;
+                require_images(&json, &f)?;
+                frames.extend(f);
+            }
+        }
+    } else {
+        let ngp = dir.join("transforms.json");
+        if !ngp.is_file() {
+            return Err(not_found(
+                dir,
+                "no transforms_train.json (NeRF-synthetic) or transforms.json (instant-ngp) here",
+            ));
+        }
+        frames.extend(
+            parse_transforms(&ngp)?
+                .into_iter()
+                .filter(|f| f.image.is_some()),
+        );
+    }
+    let out = frames
+        .iter()
+        .map(|f| {
+            let image = f.image.clone().expect("present");
+            let (w, h) = header_size(&image)?;
+            let name = image
+                .strip_prefix(dir)
+                .unwrap_or(&image)
+                .to_string_lossy()
+                .replace('\\', "/");
+            let name = name.trim_start_matches("./").to_string();
+            Ok(SourceFrame {
+                name,
+                camera: f.camera(w, h)?,
+                image,
+            })
+        })
+        .collect::<Result<Vec<_>>>()?;
+    Ok((out, synthetic.is_file()))
+}
+
+/// Decodes `paths` (whose header sizes are `sizes`) downscaled by `k`, in parallel,
+/// after checking that all of them together stay within [`MAX_DATASET_PIXELS`]; the
+/// first failure in order is reported.
+pub(super) fn decode_all(
+    dir: &Path,
+    paths: &[&Path],
+    sizes: &[(u32, u32)],
+    k: u32,
+) -> Result<Vec<Decoded>> {
+    let total: u64 = sizes
+        .iter()
+        .map(|&(w, h)| (w / k) as u64 * (h / k) as u64)
+        .sum();
+    if total > MAX_DATASET_PIXELS {
+        return Err(Error::InvalidValue {
+            path: dir.to_path_buf(),
+            what: format!(
+                "the {} images hold {total} pixels at downscale {k}, more than the \
+                 limit of {MAX_DATASET_PIXELS}: give a larger --downscale",
+                paths.len()
+            ),
+        });
+    }
+    let images: Vec<Result<Decoded>> = paths.par_iter().map(|p| decode(p, k)).collect();
+    images.into_iter().collect()
+}
+
+pub(super) fn not_found(path: &Path, message: &str) -> Error {
     Error::io(
         path,
         std::io::Error::new(std::io::ErrorKind::NotFound, message.to_string()),
@@ -580,7 +728,7 @@ fn non_json_number(bytes: &[u8], e: &serde_json::Error) -> &'static str {
 }
 
 /// Whether a `file_path` is absolute or climbs above its folder with `..`.
-fn escapes(file_path: &str) -> bool {
+pub(super) fn escapes(file_path: &str) -> bool {
     use std::path::Component;
     let mut depth = 0i64;
     for c in Path::new(file_path).components() {
@@ -629,7 +777,7 @@ fn read_bounded(path: &Path) -> Result<Vec<u8>> {
 }
 
 /// An image's size from its header, checked against the limits, before decoding.
-fn header_size(path: &Path) -> Result<(u32, u32)> {
+pub(super) fn header_size(path: &Path) -> Result<(u32, u32)> {
     let bad = |message: String| Error::Image {
         path: path.to_path_buf(),
         message,
@@ -740,14 +888,16 @@ fn check_supported(path: &Path, obj: &Map<String, Value>, prefix: &str) -> Resul
 }
 
 /// A decoded image: its size before downscaling and its downscaled RGB pixels.
-struct Decoded {
-    width: u32,
-    height: u32,
-    rgb: Vec<[f32; 3]>,
+pub(super) struct Decoded {
+    pub width: u32,
+    pub height: u32,
+    pub rgb: Vec<[f32; 3]>,
+    /// Whether the file has an alpha channel (composited over white).
+    pub alpha: bool,
 }
 
 /// Reads an image, composites alpha over white and averages `k × k` blocks.
-fn decode(path: &Path, k: u32) -> Result<Decoded> {
+pub(super) fn decode(path: &Path, k: u32) -> Result<Decoded> {
     let bytes = read_bounded(path)?;
     let img = image::load_from_memory(&bytes).map_err(|e| Error::Image {
         path: path.to_path_buf(),
@@ -757,6 +907,7 @@ fn decode(path: &Path, k: u32) -> Result<Decoded> {
     let lut: [f32; 256] = std::array::from_fn(|i| i as f32 / 255.0);
     let over_white = |c: f32, a: f32| c * a + (1.0 - a);
     let color = img.color();
+    let alpha = color.has_alpha();
     let full: Vec<[f32; 3]> = match img {
         image::DynamicImage::ImageRgb8(b) => b
             .as_raw()
@@ -788,6 +939,7 @@ fn decode(path: &Path, k: u32) -> Result<Decoded> {
         width: w,
         height: h,
         rgb,
+        alpha,
     })
 }
 
@@ -984,6 +1136,60 @@ pub(crate) mod tests {
         write_json(&dir.join("transforms.json"), &j);
         let e = err(&dir, 1);
         assert!(e.contains("10×6") && e.contains("w = 20"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn nerfstudio_transforms_load_as_instant_ngp() {
+        let dir = scratch("nerfstudio");
+        let frames: Vec<Value> = (0..3)
+            .map(|i| {
+                write_png(&dir.join(format!("images/frame_{i:05}.png")), 8, 6, 5);
+                json!({"file_path": format!("images/frame_{i:05}.png"), "fl_x": 9.0 + i as f64,
+                       "fl_y": 9.5, "cx": 4.0, "cy": 3.0, "w": 8, "h": 6, "k1": 0.01,
+                       "k2": 0.0, "p1": 0.0, "p2": 0.0, "colmap_im_id": i + 1,
+                       "transform_matrix": rows(&pose(i))})
+            })
+            .collect();
+        write_json(
+            &dir.join("transforms.json"),
+            &json!({"camera_model": "OPENCV", "ply_file_path": "sparse_pc.ply",
+                    "applied_transform": [[0, 1, 0, 0], [1, 0, 0, 0], [0, 0, -1, 0]],
+                    "frames": frames}),
+        );
+        let ds = load_with(
+            &dir,
+            &Loading {
+                downscale: 1,
+                test_every: Some(2),
+            },
+        )
+        .unwrap();
+        assert_eq!((ds.train.len(), ds.test.len()), (1, 2));
+        assert_eq!(ds.train[0].camera.fx, 10.0);
+        assert_eq!(ds.train[0].camera.k1, 0.01);
+        assert_eq!(ds.train[0].camera.c2w, pose(1));
+        // Fisheye is refused in one line; NeRF-synthetic refuses test_every.
+        let mut j: Value =
+            serde_json::from_slice(&std::fs::read(dir.join("transforms.json")).unwrap()).unwrap();
+        j["camera_model"] = json!("OPENCV_FISHEYE");
+        write_json(&dir.join("transforms.json"), &j);
+        assert!(err(&dir, 1).contains("camera_model OPENCV_FISHEYE"));
+        std::fs::remove_dir_all(&dir).unwrap();
+        let dir = synthetic("synthetic-test-every");
+        let e = load_with(
+            &dir,
+            &Loading {
+                downscale: 1,
+                test_every: Some(4),
+            },
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("test_every") && e.contains("transforms_test.json"),
+            "{e}"
+        );
         std::fs::remove_dir_all(&dir).unwrap();
     }
 

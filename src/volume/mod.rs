@@ -20,6 +20,7 @@
 //! ```
 
 pub mod camera;
+pub mod colmap;
 pub mod dataset;
 pub mod metrics;
 

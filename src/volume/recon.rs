@@ -29,7 +29,7 @@ use glam::Vec3;
 use crate::error::{Error, Result};
 use crate::limits::MAX_GAUSSIANS;
 use crate::volume::Ray;
-use crate::volume::dataset::{Dataset, View};
+use crate::volume::dataset::{Dataset, Loading, View};
 use crate::volume::metrics::psnr;
 use crate::volume::splat::{self, Gaussians};
 use crate::volume::voxel::{self, Grid, RenderSettings};
@@ -67,6 +67,8 @@ pub struct VoxelJob {
     /// Every this many iterations, evaluate the test views (not counted as training
     /// time); 0: only at the end.
     pub eval_every: usize,
+    /// Which views are held out ([`Loading::test_every`]); `None`: the format's default.
+    pub test_every: Option<usize>,
 }
 
 impl Default for VoxelJob {
@@ -84,6 +86,7 @@ impl Default for VoxelJob {
             sparsity: None,
             seed: 0,
             eval_every: 0,
+            test_every: None,
         }
     }
 }
@@ -111,6 +114,8 @@ pub struct SplatJob {
     pub seed: u64,
     /// Every this many iterations, evaluate the test views; 0: only at the end.
     pub eval_every: usize,
+    /// Which views are held out ([`Loading::test_every`]); `None`: the format's default.
+    pub test_every: Option<usize>,
 }
 
 impl Default for SplatJob {
@@ -124,6 +129,7 @@ impl Default for SplatJob {
             bound: None,
             seed: 0,
             eval_every: 0,
+            test_every: None,
         }
     }
 }
@@ -194,6 +200,14 @@ fn check_degree(degree: u32) -> Result<()> {
 }
 
 impl VoxelJob {
+    /// How the job loads its dataset.
+    pub fn loading(&self) -> Loading {
+        Loading {
+            downscale: self.downscale,
+            test_every: self.test_every,
+        }
+    }
+
     /// Checks every option that does not depend on the photos.
     pub fn validate(&self) -> Result<()> {
         if !(8..=voxel::MAX_RES).contains(&self.res) {
@@ -233,6 +247,14 @@ impl VoxelJob {
 }
 
 impl SplatJob {
+    /// How the job loads its dataset.
+    pub fn loading(&self) -> Loading {
+        Loading {
+            downscale: self.downscale,
+            test_every: self.test_every,
+        }
+    }
+
     /// Checks every option that does not depend on the photos.
     pub fn validate(&self) -> Result<()> {
         if self.max_gaussians == 0 || self.max_gaussians > MAX_GAUSSIANS {
@@ -289,7 +311,7 @@ pub fn recon_voxel(
     job.validate()?;
     let render = job.render()?;
     let t_load = Instant::now();
-    let data = Dataset::load(scene, job.downscale)?;
+    let data = Dataset::load_with(scene, &job.loading())?;
     if data.train.is_empty() {
         return Err(no_training_views(scene));
     }
@@ -363,7 +385,8 @@ pub fn recon_voxel(
 
 /// Fits 3D Gaussians to the photos in `scene` (photos with lens distortion are first
 /// undistorted, see [`load_for_splat`]). The model starts from the folder's point cloud
-/// ([`splat::find_point_cloud`]) or from `initial` random Gaussians in the scene's box;
+/// ([`splat::find_point_cloud`]), else the dataset's sparse points ([`Dataset::points`],
+/// COLMAP's `points3D`), else `initial` random Gaussians in the scene's box;
 /// the reference schedule (30 000 iterations: densify from 500 to 15 000 every 100,
 /// opacity reset every 3000, SH degree up every 1000) is scaled to `iters`.
 ///
@@ -378,16 +401,17 @@ pub fn recon_splat(
 ) -> Result<SplatResult> {
     job.validate()?;
     let t_load = Instant::now();
-    let (data, undistorted) = load_for_splat(scene, job.downscale)?;
+    let (data, undistorted) = load_for_splat(scene, &job.loading())?;
     let settings = splat::RenderSettings {
         background: background(&data),
         ..splat::RenderSettings::default()
     };
     let box_factor = Defaults::for_dataset(&data).box_factor;
     let (center, half) = scene_box(scene, &data, job.bound, box_factor)?;
-    let mut model = match splat::find_point_cloud(scene) {
-        Some(path) => splat::from_point_cloud(&path, job.degree)?,
-        None => splat::random_init(
+    let mut model = match (splat::find_point_cloud(scene), &data.points) {
+        (Some(path), _) => splat::from_point_cloud(&path, job.degree)?,
+        (None, Some(points)) => splat::from_points(points, job.degree),
+        (None, None) => splat::random_init(
             center,
             half,
             job.initial.min(job.max_gaussians),
@@ -471,9 +495,9 @@ fn no_training_views(scene: &Path) -> Error {
 /// undistorted, the fraction of pixels that fell outside the photos.
 ///
 /// # Errors
-/// As [`Dataset::load`], and a dataset without training views.
-pub fn load_for_splat(dir: &Path, downscale: u32) -> Result<(Dataset, Option<f64>)> {
-    let data = Dataset::load(dir, downscale)?;
+/// As [`Dataset::load_with`], and a dataset without training views.
+pub fn load_for_splat(dir: &Path, loading: &Loading) -> Result<(Dataset, Option<f64>)> {
+    let data = Dataset::load_with(dir, loading)?;
     if data.train.is_empty() {
         return Err(no_training_views(dir));
     }

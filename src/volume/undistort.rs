@@ -74,6 +74,7 @@ pub fn undistort_dataset(data: &Dataset) -> (Dataset, usize) {
             name: data.name.clone(),
             white_background: data.white_background,
             warnings: data.warnings.clone(),
+            points: data.points.clone(),
         },
         a + b,
     )
@@ -273,6 +274,7 @@ mod tests {
             name: "d".into(),
             white_background: false,
             warnings: Vec::new(),
+            points: None,
         };
         let (u, outside) = undistort_dataset(&data);
         assert_eq!((u.train.len(), u.test.len()), (2, 1));

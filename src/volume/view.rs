@@ -12,7 +12,7 @@ use std::path::Path;
 use glam::Vec3;
 
 use super::camera::{Camera, orbit};
-use super::dataset::{Dataset, View};
+use super::dataset::{Dataset, Loading, View};
 use super::recon::{background, load_for_splat};
 use super::splat::{self, Gaussians};
 use super::voxel::{self, Grid};
@@ -86,13 +86,18 @@ impl Model {
 
     /// Loads the dataset the model is compared with, as its trainer saw it (photos with
     /// lens distortion undistorted for Gaussians), and takes its background for Gaussians.
-    /// `downscale` (at least 1) divides the photos' sizes, as in training.
+    /// `loading.downscale` (at least 1) divides the photos' sizes and
+    /// `loading.test_every` chooses the test views, as in training.
     /// Also returns, for undistorted photos, the fraction of pixels that fell outside them.
-    pub fn load_dataset(&mut self, dir: &Path, downscale: u32) -> Result<(Dataset, Option<f64>)> {
-        check_downscale(downscale)?;
+    pub fn load_dataset(
+        &mut self,
+        dir: &Path,
+        loading: &Loading,
+    ) -> Result<(Dataset, Option<f64>)> {
+        check_downscale(loading.downscale)?;
         let (data, outside) = match self {
-            Model::Splat(..) => load_for_splat(dir, downscale)?,
-            Model::Voxel(..) => (Dataset::load(dir, downscale)?, None),
+            Model::Splat(..) => load_for_splat(dir, loading)?,
+            Model::Voxel(..) => (Dataset::load_with(dir, loading)?, None),
         };
         if let Model::Splat(_, s) = self {
             s.background = background(&data);

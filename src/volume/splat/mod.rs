@@ -34,10 +34,11 @@ pub mod train;
 
 pub use backward::{Gradients, backward, backward_into};
 pub use ply::{load, save};
+pub use points::PointCloud;
 pub use render::{RenderSettings, Rendered, render};
 pub use train::{
     Densify, TrainOptions, TrainOutcome, TrainStep, find_point_cloud, from_point_cloud,
-    random_init, train,
+    from_points, random_init, train,
 };
 
 use glam::{Quat, Vec3};

@@ -30,9 +30,9 @@ use std::path::{Path, PathBuf};
 use super::ply::{Format, Header, PropertyType, Scalar, header_text, parse_header};
 use crate::limits::{MAX_GAUSSIANS, MAX_PLY_HEADER_BYTES};
 
-/// Points and optional colors of a PLY point cloud.
+/// Points and optional colors of a point cloud (a PLY file, COLMAP's `points3D`).
 #[derive(Clone, Debug, Default, PartialEq)]
-pub(crate) struct PointCloud {
+pub struct PointCloud {
     /// Positions, world units.
     pub positions: Vec<[f32; 3]>,
     /// Linear RGB per point in `[0, 1]` (integer colors divided by their type's maximum,

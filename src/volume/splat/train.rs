@@ -249,6 +249,18 @@ pub fn from_point_cloud(path: &Path, sh_degree: u32) -> Result<Gaussians> {
             what: "the point cloud has no points".into(),
         });
     }
+    Ok(from_points(&cloud, sh_degree))
+}
+
+/// Gaussians at the points of `cloud`, as [`from_point_cloud`] makes them (an empty
+/// cloud gives no Gaussians).
+///
+/// # Panics
+/// If `sh_degree > 3`, or `cloud.colors` has fewer entries than `cloud.positions`.
+pub fn from_points(cloud: &super::PointCloud, sh_degree: u32) -> Gaussians {
+    if cloud.positions.is_empty() {
+        return Gaussians::new(sh_degree);
+    }
     let scales = nearest_distances(&cloud.positions);
     let mut g = Gaussians::new(sh_degree);
     let k = g.coeffs_per_channel();
@@ -266,7 +278,7 @@ pub fn from_point_cloud(path: &Path, sh_degree: u32) -> Result<Gaussians> {
             &coeffs,
         );
     }
-    Ok(g)
+    g
 }
 
 /// Per point, the mean distance to its three nearest other points (found in a uniform
