@@ -357,9 +357,9 @@ mod tests {
             (w - 1, h / 3, 2),
             (w / 3, h - 1, 0),
             (1, 1, 1),
-            (w - 2, h - 2, 2),
+            (w.saturating_sub(2), h.saturating_sub(2), 2),
             (w / 2, h / 2, 0),
-            (w / 2 + 1, h / 2 - 1, 1),
+            (w / 2 + 1, (h / 2).saturating_sub(1), 1),
             (4, 5, 2),
         ];
         s.retain(|&(x, y, _)| x < w && y < h);
