@@ -237,6 +237,15 @@ impl<'a> BandRenderer<'a> {
                 Op::Push | Op::PushMask => {
                     let span = self.p.groups[group];
                     match self.layer_area(&span) {
+                        Some(a) if span.filter.is_some() => {
+                            // A filtered layer, computed when prepared: its children's
+                            // ops are skipped.
+                            let fl = &self.p.filters[span.filter.unwrap_or_default()];
+                            layers.push((a, fl.rows(a.y0, a.h)));
+                            group = fl.groups_end;
+                            i = fl.body_end;
+                            continue;
+                        }
                         Some(a) => {
                             layers.push((a, vec![[0.0; 4]; a.w * a.h]));
                             group += 1;
