@@ -626,29 +626,13 @@ impl Builder<'_> {
         let mut rect: Option<[usize; 4]> = None;
         for it in &self.out.items[first_item..] {
             if let Some(r) = item_rect(it.bbox, w, h) {
-                rect = Some(match rect {
-                    None => r,
-                    Some(u) => [
-                        u[0].min(r[0]),
-                        u[1].min(r[1]),
-                        u[2].max(r[2]),
-                        u[3].max(r[3]),
-                    ],
-                });
+                rect = Some(union(rect, r));
             }
         }
         // A filtered group inside reaches as far as its filter region.
         for g in &self.out.groups[span + 1..] {
             if let (Some(_), Some(r)) = (g.filter, g.rect) {
-                rect = Some(match rect {
-                    None => r,
-                    Some(u) => [
-                        u[0].min(r[0]),
-                        u[1].min(r[1]),
-                        u[2].max(r[2]),
-                        u[3].max(r[3]),
-                    ],
-                });
+                rect = Some(union(rect, r));
             }
         }
         self.out.groups[span] = GroupSpan {
@@ -670,6 +654,19 @@ impl Builder<'_> {
             self.out.items.push(it);
         }
         self.out.geoms.push(built.geom);
+    }
+}
+
+/// The smallest rectangle `[x0, y0, x1, y1]` holding `u` (if any) and `r`.
+fn union(u: Option<[usize; 4]>, r: [usize; 4]) -> [usize; 4] {
+    match u {
+        None => r,
+        Some(u) => [
+            u[0].min(r[0]),
+            u[1].min(r[1]),
+            u[2].max(r[2]),
+            u[3].max(r[3]),
+        ],
     }
 }
 

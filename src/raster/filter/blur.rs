@@ -172,7 +172,7 @@ fn kernel_line(src: &[[f32; 4]], taps: &[f32], mut put: impl FnMut(usize, [f32; 
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
     use crate::rng::Rng;
 
@@ -183,7 +183,8 @@ mod tests {
             .collect()
     }
 
-    fn dot(a: &[[f32; 4]], b: &[[f32; 4]]) -> f64 {
+    /// The sum of the products of all channels.
+    pub(in crate::raster::filter) fn dot(a: &[[f32; 4]], b: &[[f32; 4]]) -> f64 {
         a.iter()
             .zip(b)
             .map(|(x, y)| (0..4).map(|c| x[c] as f64 * y[c] as f64).sum::<f64>())
@@ -207,8 +208,8 @@ mod tests {
         }
     }
 
-    /// Inside a large image the blur keeps the total and has the asked variance (within
-    /// the box approximation's rounding of widths).
+    /// Inside a large image the blur keeps the total and has about the asked deviation
+    /// (within the box approximation's rounding of widths).
     #[test]
     fn variance_is_near_sigma_squared() {
         for sigma in [1.0f64, 2.0, 5.0, 12.5] {
@@ -223,8 +224,10 @@ mod tests {
                 .map(|(i, v)| v[0] as f64 * ((i as f64 - (n / 2) as f64).powi(2)))
                 .sum();
             assert!((total - 1.0).abs() < 1e-5, "{sigma}: total {total}");
+            // resvg's box widths are odd: at σ = 2 its five boxes have a deviation of
+            // 1.83 (9 % under); the error shrinks as σ grows.
             let rel = (var.sqrt() - sigma).abs() / sigma;
-            assert!(rel < 0.08, "σ {sigma}: measured {}", var.sqrt());
+            assert!(rel < 0.1, "σ {sigma}: measured {}", var.sqrt());
         }
     }
 }

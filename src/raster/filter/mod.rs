@@ -624,3 +624,306 @@ impl<'a> Back<'a> {
         self.add_input(i2, Some(cs), gb);
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::blur::tests::dot;
+    use super::*;
+    use crate::loss::Loss;
+    use crate::raster::RenderOptions;
+    use crate::rng::Rng;
+    use crate::scene::BlendMode;
+    use crate::scene::filter::{
+        CompositeOp, FilterPrimitive, TransferFunction, hue_rotate_matrix, saturate_matrix,
+    };
+    use crate::{Scene, Sizing};
+
+    const RECT: [usize; 4] = [2, 1, 11, 8];
+
+    fn prim(kind: FilterKind, linear_rgb: bool) -> FilterPrimitive {
+        FilterPrimitive {
+            subregion: [0, 0, 100, 100],
+            linear_rgb,
+            result: String::new(),
+            kind,
+        }
+    }
+
+    fn filter(primitives: Vec<FilterPrimitive>) -> Filter {
+        Filter {
+            id: String::new(),
+            region: [0, 0, 100, 100],
+            primitives,
+        }
+    }
+
+    /// A premultiplied image with alphas away from 0 and colors away from the clamps.
+    fn image(seed: u64) -> Vec<[f32; 4]> {
+        let mut r = Rng::new(seed);
+        let n = (RECT[2] - RECT[0]) * (RECT[3] - RECT[1]);
+        (0..n)
+            .map(|_| {
+                let a = 0.3 + 0.6 * r.uniform();
+                [
+                    0.1 + 0.8 * r.uniform(),
+                    0.1 + 0.8 * r.uniform(),
+                    0.1 + 0.8 * r.uniform(),
+                    1.0,
+                ]
+                .map(|c| c * a)
+                .map(|c| if c == a { a } else { c })
+            })
+            .map(|mut p: [f32; 4]| {
+                p[3] = p[3].max(p[0]).max(p[1]).max(p[2]);
+                p
+            })
+            .collect()
+    }
+
+    /// `d/dt ⟨g, F(x + t·v)⟩` by central differences against `⟨Fᵀ g, v⟩`.
+    fn check(name: &str, filters: &[Filter]) {
+        let (x, g, v) = (image(1), image(2), image(3));
+        let h = 1e-3f32;
+        let at = |t: f32| {
+            let y: Vec<[f32; 4]> = x
+                .iter()
+                .zip(&v)
+                .map(|(a, b)| std::array::from_fn(|c| a[c] + t * b[c]))
+                .collect();
+            dot(&g, &apply(filters, RECT, y))
+        };
+        let numeric = (at(h) - at(-h)) / (2.0 * h as f64);
+        let analytic = dot(&adjoint(filters, RECT, x.clone(), g.clone()), &v);
+        let err = (numeric - analytic).abs() / numeric.abs().max(1e-2);
+        assert!(err < 1e-2, "{name}: numeric {numeric}, analytic {analytic}");
+    }
+
+    use FilterInput::{Result as R, SourceAlpha, SourceGraphic as Src};
+
+    #[test]
+    fn each_primitive_agrees_with_finite_differences() {
+        let flood = FilterKind::Flood {
+            color: [0.2, 0.5, 0.9],
+            opacity: 0.6,
+        };
+        let cases: Vec<(&str, Vec<FilterPrimitive>)> = vec![
+            (
+                "offset",
+                vec![prim(
+                    FilterKind::Offset {
+                        input: Src,
+                        dx: 2.7,
+                        dy: -1.2,
+                    },
+                    true,
+                )],
+            ),
+            (
+                "box blur",
+                vec![prim(
+                    FilterKind::Blur {
+                        input: Src,
+                        std_dev: [2.5, 3.0],
+                    },
+                    true,
+                )],
+            ),
+            (
+                "small blur, sRGB",
+                vec![prim(
+                    FilterKind::Blur {
+                        input: Src,
+                        std_dev: [0.8, 1.1],
+                    },
+                    false,
+                )],
+            ),
+            (
+                "drop shadow",
+                vec![prim(
+                    FilterKind::DropShadow {
+                        input: Src,
+                        dx: 2.0,
+                        dy: 1.0,
+                        std_dev: [1.0, 1.5],
+                        color: [0.3, 0.1, 0.7],
+                        opacity: 0.8,
+                    },
+                    true,
+                )],
+            ),
+            (
+                "merge with flood and source alpha",
+                vec![
+                    prim(flood.clone(), true),
+                    prim(
+                        FilterKind::Merge {
+                            inputs: vec![R(0), SourceAlpha, Src],
+                        },
+                        true,
+                    ),
+                ],
+            ),
+            (
+                "color matrix",
+                vec![prim(
+                    FilterKind::ColorMatrix {
+                        input: Src,
+                        matrix: hue_rotate_matrix(40.0),
+                    },
+                    true,
+                )],
+            ),
+            (
+                "saturate, sRGB",
+                vec![prim(
+                    FilterKind::ColorMatrix {
+                        input: Src,
+                        matrix: saturate_matrix(0.3),
+                    },
+                    false,
+                )],
+            ),
+            (
+                "component transfer",
+                vec![prim(
+                    FilterKind::ComponentTransfer {
+                        input: Src,
+                        funcs: Box::new([
+                            TransferFunction::Table(vec![0.1, 0.8, 0.3, 0.9]),
+                            TransferFunction::Linear {
+                                slope: 0.7,
+                                intercept: 0.1,
+                            },
+                            TransferFunction::Gamma {
+                                amplitude: 0.9,
+                                exponent: 1.7,
+                                offset: 0.05,
+                            },
+                            TransferFunction::Identity,
+                        ]),
+                    },
+                    true,
+                )],
+            ),
+        ];
+        for (name, prims) in cases {
+            check(name, &[filter(prims)]);
+        }
+        for op in [
+            CompositeOp::Over,
+            CompositeOp::In,
+            CompositeOp::Out,
+            CompositeOp::Atop,
+            CompositeOp::Xor,
+            CompositeOp::Arithmetic([0.5, 0.3, 0.4, 0.05]),
+        ] {
+            let blurred = prim(
+                FilterKind::Blur {
+                    input: Src,
+                    std_dev: [1.0, 1.0],
+                },
+                true,
+            );
+            let c = prim(
+                FilterKind::Composite {
+                    input1: Src,
+                    input2: R(0),
+                    op,
+                },
+                true,
+            );
+            check(&format!("composite {op:?}"), &[filter(vec![blurred, c])]);
+        }
+        for mode in [
+            BlendMode::Normal,
+            BlendMode::Multiply,
+            BlendMode::Screen,
+            BlendMode::Darken,
+        ] {
+            let moved = prim(
+                FilterKind::Offset {
+                    input: Src,
+                    dx: 1.0,
+                    dy: 1.0,
+                },
+                false,
+            );
+            let b = prim(
+                FilterKind::Blend {
+                    input1: Src,
+                    input2: R(0),
+                    mode,
+                },
+                false,
+            );
+            check(&format!("blend {mode:?}"), &[filter(vec![moved, b])]);
+        }
+        // Two filters in a row, a subregion and a region smaller than the layer.
+        let mut cut = prim(
+            FilterKind::Blur {
+                input: Src,
+                std_dev: [1.5, 0.5],
+            },
+            true,
+        );
+        cut.subregion = [3, 2, 9, 7];
+        let mut second = filter(vec![prim(
+            FilterKind::ColorMatrix {
+                input: Src,
+                matrix: saturate_matrix(1.6),
+            },
+            true,
+        )]);
+        second.region = [2, 2, 10, 8];
+        check("chain", &[filter(vec![cut]), second]);
+    }
+
+    /// The scene's gradient reaches the points, colors and opacities under a filtered
+    /// group, and the group's own opacity.
+    #[test]
+    fn gradients_reach_the_content_under_a_filter() {
+        let svg = r#"<svg xmlns="http://www.w3.org/2000/svg" width="32" height="28">
+            <filter id="f" x="-20%" y="-20%" width="140%" height="140%">
+              <feGaussianBlur stdDeviation="1.5" result="b"/>
+              <feOffset dx="2" dy="1" in="b" result="o"/>
+              <feColorMatrix type="saturate" values="0.4" in="SourceGraphic" result="s"/>
+              <feComposite operator="arithmetic" k1="0.2" k2="0.6" k3="0.5" k4="0" in="s" in2="o"/>
+            </filter>
+            <g filter="url(#f)" opacity="0.9">
+              <path d="M 6 5 C 14 2 24 6 25 20 L 8 22 Z" fill="rgb(200,60,40)" fill-opacity="0.8"/>
+              <rect x="12.3" y="9.6" width="9.2" height="7.5" fill="rgb(30,120,210)"/>
+            </g></svg>"#;
+        let scene = Scene::from_svg_str(svg, "filter.svg", Sizing::Natural).unwrap();
+        let mut moved = scene.clone();
+        let mut p = moved.params();
+        for (k, v) in p.iter_mut().enumerate() {
+            *v += 0.3 * (k as f64 * 1.3).sin();
+        }
+        moved.set_params(&p);
+        let opts = RenderOptions::default();
+        let target = crate::raster::render(&moved, &opts);
+        let (grad, _, groups) =
+            crate::gradcheck::check(&scene, &target, Loss::Mse, &opts, None, None);
+        assert!(grad.iter().any(|g| *g != 0.0));
+        assert!(groups.len() >= 3, "{groups:?}");
+        for g in groups {
+            assert!(g.passes(2e-2), "{g}");
+        }
+    }
+
+    /// Filters usvg resolves but diffsvg does not render are refused, naming the file and
+    /// the primitive.
+    #[test]
+    fn unsupported_primitives_are_refused_by_name() {
+        let svg = r#"<svg xmlns="http://www.w3.org/2000/svg" width="10" height="10">
+            <filter id="t"><feTurbulence baseFrequency="0.1"/></filter>
+            <rect width="5" height="5" filter="url(#t)"/></svg>"#;
+        let err = Scene::from_svg_str(svg, "noise.svg", Sizing::Natural).unwrap_err();
+        let msg = err.to_string();
+        assert!(
+            msg.contains("noise.svg") && msg.contains("feTurbulence"),
+            "{msg}"
+        );
+    }
+}
