@@ -212,7 +212,8 @@ impl<'a> BandRenderer<'a> {
         let r = span.rect?;
         let y0 = r[1].max(self.y0);
         let y1 = r[3].min(self.y0 + self.rows);
-        (y0 < y1).then_some(Area {
+        // Lazily: `y1 - y0` underflows where the band misses the layer.
+        (y0 < y1).then(|| Area {
             x0: r[0],
             y0,
             w: r[2] - r[0],
