@@ -30,6 +30,7 @@
 use rayon::prelude::*;
 
 use super::coverage::{Cells, backward_line, coverage_row, coverage_slopes_row};
+use super::filter::{self, FilterLayer};
 use super::layer::{apply_mask, apply_mask_backward, composite_backward, composite_layer};
 use super::overlap::{Overlaps, Portion, portion_weight};
 use super::paint::PaintEval;
@@ -159,6 +160,8 @@ struct BandGrads {
     paint_vals: Vec<f64>,
     /// Per group: ∂L/∂opacity.
     groups: Vec<(u32, f64)>,
+    /// Per filtered layer drawn in this band: `(filter, area, ∂L/∂layer)`.
+    filters: Vec<(usize, Area, Vec<[f32; 4]>)>,
     /// Bytes the replay kept for this band.
     tape_bytes: usize,
     /// The loss's partial sums over this band.
@@ -232,6 +235,8 @@ enum Rec {
         exact: std::ops::Range<usize>,
     },
     Push,
+    /// A filtered group's layer (its index in [`Prepared::filters`]) was opened, filled.
+    PushFilter(usize),
     Pop {
         group: Option<usize>,
         opacity: f32,
@@ -374,6 +379,8 @@ fn backward_bands(
         .map(|it| vec![0.0; it.paint.grad_len()])
         .collect();
     let mut group_g: Vec<f64> = vec![0.0; layout.groups.len()];
+    // Per filtered layer: ∂L/∂layer over its rect, gathered from the bands.
+    let mut filter_g: Vec<Option<Vec<[f32; 4]>>> = vec![None; p.filters.len()];
     let bands = h.div_ceil(BAND_ROWS);
     // Bands are computed in parallel a chunk at a time and summed strictly in band order.
     // A chunk holds at most 4 bands per thread, and no more than `TAPE_BUDGET_BYTES` of
@@ -414,6 +421,16 @@ fn backward_bands(
             sums[1] += r.sums[1];
             for &(g, v) in &r.groups {
                 group_g[g as usize] += v;
+            }
+            for (f, a, g) in &r.filters {
+                let rect = p.filters[*f].rect;
+                let rw = rect[2] - rect[0];
+                let dst =
+                    filter_g[*f].get_or_insert_with(|| vec![[0.0; 4]; rw * (rect[3] - rect[1])]);
+                for row in 0..a.h {
+                    let at = (a.y0 + row - rect[1]) * rw + (a.x0 - rect[0]);
+                    dst[at..at + a.w].copy_from_slice(&g[row * a.w..][..a.w]);
+                }
             }
         }
         add_band_grads(&results, &mut vert_g, &mut paint_g);
@@ -478,7 +495,41 @@ fn backward_bands(
     for (g, v) in group_g.iter().enumerate() {
         grad[layout.groups[g]] += v;
     }
+    for (fl, g) in p.filters.iter().zip(filter_g) {
+        if let Some(g) = g {
+            filter_backward(p, fl, g, &layout, &mut grad);
+        }
+    }
     BandsOut { grad, stats, sums }
+}
+
+/// Adds to `grad` the gradient of a filtered layer's children, given `∂L/∂layer` over
+/// its rect: back through the filters, then through the children's own backward pass
+/// (whose parameters are the slots after the group's opacity).
+fn filter_backward(
+    p: &Prepared,
+    fl: &FilterLayer,
+    g: Vec<[f32; 4]>,
+    layout: &ParamLayout,
+    grad: &mut [f64],
+) {
+    let (w, h) = (p.width as usize, p.height as usize);
+    let opts = RenderOptions {
+        tolerance: p.tolerance,
+        exact_overlaps: p.exact_overlaps,
+    };
+    let src = super::render::render(&fl.content, &opts);
+    let g_src = filter::adjoint(&fl.filters, fl.rect, filter::crop(&src.data, w, fl.rect), g);
+    let mut d = Image::new(w as u32, h as u32);
+    let rw = fl.rect[2] - fl.rect[0];
+    for (row, y) in (fl.rect[1]..fl.rect[3]).enumerate() {
+        d.data[y * w + fl.rect[0]..y * w + fl.rect[2]].copy_from_slice(&g_src[row * rw..][..rw]);
+    }
+    let sub = render_backward(&fl.content, &opts, &d);
+    let base = layout.groups[fl.param_group] + 1;
+    for (k, v) in sub.iter().enumerate() {
+        grad[base + k] += v;
+    }
 }
 
 /// The slots of path `k` (paint order) in `layout`: one run each, in walk order.
@@ -858,6 +909,15 @@ fn band_backward(
                 let span = p.groups[group_ix];
                 let mask = p.ops[i] == Op::PushMask;
                 match r.layer_area(&span) {
+                    Some(a) if span.filter.is_some() => {
+                        let f = span.filter.unwrap_or_default();
+                        let fl = &p.filters[f];
+                        layers.push((a, fl.rows(a.y0, a.h)));
+                        tape.push(Rec::PushFilter(f));
+                        group_ix = fl.groups_end;
+                        i = fl.body_end;
+                        continue;
+                    }
                     Some(a) => {
                         layers.push((a, vec![[0.0; 4]; a.len()]));
                         tape.push(if mask { Rec::PushMask } else { Rec::Push });
@@ -924,7 +984,11 @@ fn band_backward(
         tape_bytes: tape
             .iter()
             .map(|r| match r {
-                Rec::Draw { .. } | Rec::Push | Rec::PushMask | Rec::ZeroMask => 0,
+                Rec::Draw { .. }
+                | Rec::Push
+                | Rec::PushFilter(_)
+                | Rec::PushMask
+                | Rec::ZeroMask => 0,
                 Rec::Pop { top, below, .. } => (top.len() + below.len()) * 16,
                 Rec::PopMask { mask, content, .. } => (mask.len() + content.len()) * 16,
             })
@@ -974,6 +1038,10 @@ fn band_backward(
             }
             Rec::Push | Rec::PushMask => {
                 g_stack.pop();
+            }
+            Rec::PushFilter(f) => {
+                let (a, g) = g_stack.pop().expect("layer gradient");
+                out.filters.push((*f, a, g));
             }
             Rec::ZeroMask => {
                 let (_, g) = g_stack.last_mut().expect("layer gradient");

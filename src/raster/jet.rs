@@ -31,6 +31,8 @@ pub(crate) trait Scalar:
     fn cos(self) -> Self;
     /// `atan2(self, x)`.
     fn atan2(self, x: Self) -> Self;
+    /// `self^e` for a constant exponent (derivative 0 at 0 where it is not finite).
+    fn powf(self, e: f64) -> Self;
 }
 
 impl Scalar for f64 {
@@ -57,6 +59,10 @@ impl Scalar for f64 {
     #[inline]
     fn atan2(self, x: Self) -> Self {
         f64::atan2(self, x)
+    }
+    #[inline]
+    fn powf(self, e: f64) -> Self {
+        f64::powf(self, e)
     }
 }
 
@@ -170,6 +176,11 @@ impl<const K: usize> Scalar for Jet<K> {
             *o = (x.v * self.d[i] - self.v * x.d[i]) / r2;
         }
         Jet { v, d }
+    }
+    fn powf(self, e: f64) -> Self {
+        let v = self.v.powf(e);
+        let dv = e * self.v.powf(e - 1.0);
+        self.chain(v, if dv.is_finite() { dv } else { 0.0 })
     }
 }
 

@@ -30,6 +30,7 @@
 pub(crate) mod backward;
 pub(crate) mod coverage;
 pub(crate) mod dash;
+pub(crate) mod filter;
 pub(crate) mod flatten;
 pub(crate) mod image;
 pub(crate) mod jet;

@@ -2,6 +2,7 @@
 
 use super::coverage::floor_f64;
 use super::dash::{Dashed, Visible, dash, dash_count};
+use super::filter::{self, FilterLayer, crop, layer_rect};
 use super::flatten::{ChordCounts, Flattened, flatten};
 use super::paint::PaintEval;
 use super::stroke::{Style, outline};
@@ -197,6 +198,9 @@ pub(crate) struct GroupSpan {
     /// the canvas): the union of the boxes of the items drawn inside. `None` when
     /// nothing inside reaches the canvas.
     pub(crate) rect: Option<[usize; 4]>,
+    /// For a group with filters, its index in [`Prepared::filters`]; `rect` is then the
+    /// filter layer's.
+    pub(crate) filter: Option<usize>,
 }
 
 /// A scene ready to be rasterized.
@@ -226,6 +230,8 @@ pub struct Prepared {
     pub(crate) tolerance: f64,
     /// [`RenderOptions::exact_overlaps`](super::RenderOptions::exact_overlaps).
     pub(crate) exact_overlaps: bool,
+    /// The groups with filters, in the order of their [`Op::Push`]es.
+    pub(crate) filters: Vec<FilterLayer>,
 }
 
 impl Prepared {
@@ -324,6 +330,7 @@ fn prepare_with(
         for_backward,
         tolerance,
         exact_overlaps: false,
+        filters: Vec::new(),
     };
     // Each path's geometry and items depend on that path alone: built in parallel (in
     // paint order, so the result is the same on any thread count), then placed by the
@@ -344,6 +351,7 @@ fn prepare_with(
         built: built.into_iter(),
         out: &mut p,
         param_groups: 0,
+        filter_depth: 0,
     };
     b.nodes(&scene.nodes, Role::Paint);
     p
@@ -487,6 +495,9 @@ struct Builder<'a> {
     out: &'a mut Prepared,
     /// Groups with an opacity parameter opened so far.
     param_groups: usize,
+    /// Filtered groups open around the current node: inside one, a filtered group's
+    /// layer is not computed (the outer group's content scene renders it).
+    filter_depth: usize,
 }
 
 /// One path prepared: its geometry and items (in drawing order).
@@ -509,6 +520,10 @@ impl Builder<'_> {
                         self.param_groups - 1
                     });
                     let span = self.open(Op::Push);
+                    if role == Role::Paint && !g.filters.is_empty() {
+                        self.filtered(g, span, group.unwrap_or(0));
+                        continue;
+                    }
                     self.layer(g, role);
                     self.out.ops.push(Op::Pop {
                         opacity: g.opacity.clamp(0.0, 1.0) as f32,
@@ -525,6 +540,61 @@ impl Builder<'_> {
     /// mask layer multiplying the layer.
     fn layer(&mut self, g: &Group, role: Role) {
         self.nodes(&g.children, role);
+        self.clip_and_mask(g, role);
+    }
+
+    /// A group with filters (its [`Op::Push`] opened as `span`, `param_group` its
+    /// opacity's group index): its children's ops stay in the program for the backward
+    /// pass's numbering but are skipped when drawing; the layer is the filtered
+    /// rendering of the children, computed here.
+    fn filtered(&mut self, g: &Group, span: (usize, usize), param_group: usize) {
+        let fi = self.out.filters.len();
+        let (w, h) = (self.out.width, self.out.height);
+        let content = Scene {
+            width: w,
+            height: h,
+            nodes: g.children.clone(),
+        };
+        let rect = layer_rect(&g.filters, w, h);
+        let image = match rect {
+            Some(r) if self.filter_depth == 0 => {
+                let opts = super::RenderOptions {
+                    tolerance: self.out.tolerance,
+                    exact_overlaps: false,
+                };
+                let src = super::render(&content, &opts);
+                filter::apply(&g.filters, r, crop(&src.data, w as usize, r))
+            }
+            _ => Vec::new(),
+        };
+        self.out.filters.push(FilterLayer {
+            rect: rect.unwrap_or([0; 4]),
+            image,
+            body_end: 0,
+            groups_end: 0,
+            content,
+            filters: g.filters.clone(),
+            param_group,
+        });
+        self.filter_depth += 1;
+        self.nodes(&g.children, Role::Paint);
+        self.filter_depth -= 1;
+        self.out.filters[fi].body_end = self.out.ops.len();
+        self.out.filters[fi].groups_end = self.out.groups.len();
+        self.clip_and_mask(g, Role::Paint);
+        self.out.ops.push(Op::Pop {
+            opacity: g.opacity.clamp(0.0, 1.0) as f32,
+            group: Some(param_group),
+            blend: g.blend,
+        });
+        self.close(span);
+        let s = &mut self.out.groups[span.0];
+        s.rect = rect;
+        s.filter = Some(fi);
+    }
+
+    /// A layer's clip path and mask, each a mask layer multiplying the layer.
+    fn clip_and_mask(&mut self, g: &Group, role: Role) {
         if let Some(c) = &g.clip {
             let span = self.open(Op::PushMask);
             self.layer(&c.content, Role::Clip);
@@ -548,6 +618,7 @@ impl Builder<'_> {
             end: 0,
             groups_end: 0,
             rect: None,
+            filter: None,
         });
         self.out.ops.push(op);
         (span, self.out.items.len())
@@ -560,21 +631,20 @@ impl Builder<'_> {
         let mut rect: Option<[usize; 4]> = None;
         for it in &self.out.items[first_item..] {
             if let Some(r) = item_rect(it.bbox, w, h) {
-                rect = Some(match rect {
-                    None => r,
-                    Some(u) => [
-                        u[0].min(r[0]),
-                        u[1].min(r[1]),
-                        u[2].max(r[2]),
-                        u[3].max(r[3]),
-                    ],
-                });
+                rect = Some(union(rect, r));
+            }
+        }
+        // A filtered group inside reaches as far as its filter region.
+        for g in &self.out.groups[span + 1..] {
+            if let (Some(_), Some(r)) = (g.filter, g.rect) {
+                rect = Some(union(rect, r));
             }
         }
         self.out.groups[span] = GroupSpan {
             end: self.out.ops.len() - 1,
             groups_end: self.out.groups.len(),
             rect,
+            filter: None,
         };
     }
 
@@ -589,6 +659,19 @@ impl Builder<'_> {
             self.out.items.push(it);
         }
         self.out.geoms.push(built.geom);
+    }
+}
+
+/// The smallest rectangle `[x0, y0, x1, y1]` holding `u` (if any) and `r`.
+fn union(u: Option<[usize; 4]>, r: [usize; 4]) -> [usize; 4] {
+    match u {
+        None => r,
+        Some(u) => [
+            u[0].min(r[0]),
+            u[1].min(r[1]),
+            u[2].max(r[2]),
+            u[3].max(r[3]),
+        ],
     }
 }
 

@@ -214,7 +214,8 @@ impl<'a> BandRenderer<'a> {
         let r = span.rect?;
         let y0 = r[1].max(self.y0);
         let y1 = r[3].min(self.y0 + self.rows);
-        (y0 < y1).then_some(Area {
+        // Lazily: `y1 - y0` underflows where the band misses the layer.
+        (y0 < y1).then(|| Area {
             x0: r[0],
             y0,
             w: r[2] - r[0],
@@ -239,6 +240,15 @@ impl<'a> BandRenderer<'a> {
                 Op::Push | Op::PushMask => {
                     let span = self.p.groups[group];
                     match self.layer_area(&span) {
+                        Some(a) if span.filter.is_some() => {
+                            // A filtered layer, computed when prepared: its children's
+                            // ops are skipped.
+                            let fl = &self.p.filters[span.filter.unwrap_or_default()];
+                            layers.push((a, fl.rows(a.y0, a.h)));
+                            group = fl.groups_end;
+                            i = fl.body_end;
+                            continue;
+                        }
                         Some(a) => {
                             layers.push((a, vec![[0.0; 4]; a.w * a.h]));
                             group += 1;

@@ -40,6 +40,7 @@
 //! ```
 
 mod check;
+pub mod filter;
 pub mod fonts;
 pub(crate) mod geom;
 pub mod params;
@@ -145,6 +146,9 @@ pub struct Group {
     /// layer), not what lies below the group. A group with an opacity, clip path, mask or
     /// blend mode is isolated anyway.
     pub isolate: bool,
+    /// Filters applied to the layer in order, before the clip path and the mask
+    /// ([`filter`]); the layer then covers the filter region.
+    pub filters: Vec<filter::Filter>,
 }
 
 impl Group {
@@ -158,16 +162,18 @@ impl Group {
             mask: None,
             blend: BlendMode::Normal,
             isolate: false,
+            filters: Vec::new(),
         }
     }
 
-    /// Whether the group is only a layer with an opacity (no clip, mask, blend mode or
-    /// isolation).
+    /// Whether the group is only a layer with an opacity (no clip, mask, blend mode,
+    /// isolation or filter).
     pub fn is_plain(&self) -> bool {
         self.clip.is_none()
             && self.mask.is_none()
             && self.blend == BlendMode::Normal
             && !self.isolate
+            && self.filters.is_empty()
     }
 }
 

@@ -868,10 +868,13 @@ fn convert_group_children(g: &usvg::Group, ctx: &Ctx, t: &Affine, role: Role) ->
         match child {
             usvg::Node::Group(g) => {
                 let what = |f: &str| describe("g", Some(g.id())).replace("element", f);
-                if !g.filters().is_empty() && role == Role::Paint {
-                    return Err(ctx.unsupported(what("element with filter")));
-                }
                 let gt = concat(t, &to_affine(g.transform()));
+                // Inside a clip path resvg draws shapes only: filters play no part.
+                let filters = match role {
+                    Role::Paint => super::filter::from_usvg(g.filters(), &gt, convert_blend)
+                        .map_err(|fe| ctx.unsupported(what(&format!("element with {fe}"))))?,
+                    Role::Clip => Vec::new(),
+                };
                 let children = convert_group_children(g, ctx, &gt, role)?;
                 let clip = match g.clip_path() {
                     Some(c) => Some(Box::new(convert_clip(c, ctx, &gt)?)),
@@ -899,6 +902,7 @@ fn convert_group_children(g: &usvg::Group, ctx: &Ctx, t: &Affine, role: Role) ->
                     blend,
                     // Isolation matters only to children that blend.
                     isolate: g.isolate() && role == Role::Paint,
+                    filters,
                 };
                 // A layer composited source-over at full opacity, unclipped and
                 // unmasked, changes nothing (`isolation: isolate` alone).

@@ -1,0 +1,929 @@
+//! SVG filters as differentiable image operators (issue 34).
+//!
+//! A group with filters is a layer covering the filters' regions (cut to the canvas).
+//! Its children are rendered on their own ([`FilterLayer::content`], the whole canvas),
+//! the layer is cut out of that rendering, each filter's primitives run over it in
+//! order, and the result is what the band renderer composites (with the group's clip
+//! path, mask, opacity and blend mode, as for any layer). The backward pass collects
+//! `∂L/∂layer` band by band, runs it back through the primitives ([`adjoint`]) and then
+//! through the children's own backward pass.
+//!
+//! Images here are premultiplied `f32`, layer-sized and row-major; each result carries
+//! its color space (sRGB or linearRGB) and inputs are converted to a primitive's
+//! `color-interpolation-filters` when they are read, as resvg does. Semantics follow
+//! resvg's `crates/resvg/src/filter/` (feOffset by whole pixels, feDropShadow's color
+//! conversion, feFlood's result in sRGB, a primitive's result cleared outside its
+//! subregion except feOffset's). One file per family: [`blur`] (feGaussianBlur and
+//! feDropShadow's blur) and [`pixel`] (the per-pixel operators); offsets and merges here.
+
+mod blur;
+mod pixel;
+
+use crate::raster::jet::{Jet, Scalar};
+use crate::scene::Scene;
+use crate::scene::filter::{Filter, FilterInput, FilterKind};
+
+/// A filtered group of a prepared scene.
+#[derive(Clone, Debug)]
+pub(crate) struct FilterLayer {
+    /// The layer, `[x0, y0, x1, y1]` in canvas pixels (end exclusive, not empty).
+    pub(crate) rect: [usize; 4],
+    /// The filtered layer, `rect`-sized, row-major; empty for a group inside another
+    /// filtered group (never drawn: the outer group's layer holds it).
+    pub(crate) image: Vec<[f32; 4]>,
+    /// Index in [`Prepared::ops`](super::Prepared) of the first op after the children.
+    pub(crate) body_end: usize,
+    /// Group spans opened up to the end of the children.
+    pub(crate) groups_end: usize,
+    /// The children on the canvas, as a scene of their own.
+    pub(crate) content: Scene,
+    /// The filters, in order.
+    pub(crate) filters: Vec<Filter>,
+    /// The group's index among the groups with an opacity parameter
+    /// ([`ParamLayout::groups`](crate::scene::ParamLayout::groups)): its children's
+    /// parameters follow that slot.
+    pub(crate) param_group: usize,
+}
+
+impl FilterLayer {
+    /// The layer's rows `y0 .. y0 + rows` (canvas rows inside [`rect`](Self::rect)).
+    pub(crate) fn rows(&self, y0: usize, rows: usize) -> Vec<[f32; 4]> {
+        let w = self.rect[2] - self.rect[0];
+        let from = (y0 - self.rect[1]) * w;
+        self.image[from..from + rows * w].to_vec()
+    }
+}
+
+/// The layer of a group with `filters` on a `width × height` canvas: the union of their
+/// regions, cut to the canvas; `None` when that is empty.
+pub(crate) fn layer_rect(filters: &[Filter], width: u32, height: u32) -> Option<[usize; 4]> {
+    let mut u = [i64::MAX, i64::MAX, i64::MIN, i64::MIN];
+    for f in filters {
+        let r = f.region;
+        u = [
+            u[0].min(r[0]),
+            u[1].min(r[1]),
+            u[2].max(r[2]),
+            u[3].max(r[3]),
+        ];
+    }
+    let (w, h) = (width as i64, height as i64);
+    let r = [
+        u[0].clamp(0, w),
+        u[1].clamp(0, h),
+        u[2].clamp(0, w),
+        u[3].clamp(0, h),
+    ];
+    (r[0] < r[2] && r[1] < r[3]).then(|| r.map(|v| v as usize))
+}
+
+/// The `rect` part of a canvas-sized image.
+pub(crate) fn crop(img: &[[f32; 4]], width: usize, rect: [usize; 4]) -> Vec<[f32; 4]> {
+    let mut out = Vec::with_capacity((rect[2] - rect[0]) * (rect[3] - rect[1]));
+    for y in rect[1]..rect[3] {
+        out.extend_from_slice(&img[y * width + rect[0]..y * width + rect[2]]);
+    }
+    out
+}
+
+/// The layer's frame: its size and where it lies on the canvas.
+#[derive(Clone, Copy)]
+struct Frame {
+    w: usize,
+    h: usize,
+    x0: i64,
+    y0: i64,
+}
+
+impl Frame {
+    fn of(rect: [usize; 4]) -> Frame {
+        Frame {
+            w: rect[2] - rect[0],
+            h: rect[3] - rect[1],
+            x0: rect[0] as i64,
+            y0: rect[1] as i64,
+        }
+    }
+
+    /// A device rectangle in layer pixels, cut to the layer.
+    fn local(&self, r: [i64; 4]) -> [usize; 4] {
+        let cx = |v: i64| (v - self.x0).clamp(0, self.w as i64) as usize;
+        let cy = |v: i64| (v - self.y0).clamp(0, self.h as i64) as usize;
+        [cx(r[0]), cy(r[1]), cx(r[2]), cy(r[3])]
+    }
+
+    /// Clears the pixels outside `r` (layer pixels).
+    fn clear_outside(&self, px: &mut [[f32; 4]], r: [usize; 4]) {
+        for y in 0..self.h {
+            for x in 0..self.w {
+                if x < r[0] || x >= r[2] || y < r[1] || y >= r[3] {
+                    px[y * self.w + x] = [0.0; 4];
+                }
+            }
+        }
+    }
+
+    /// `px` moved by `(dx, dy)` whole pixels, transparent where nothing lands.
+    fn shift(&self, px: &[[f32; 4]], dx: i64, dy: i64) -> Vec<[f32; 4]> {
+        let mut out = vec![[0.0; 4]; px.len()];
+        let (w, h) = (self.w as i64, self.h as i64);
+        for y in 0..h {
+            let ty = y + dy;
+            if ty < 0 || ty >= h {
+                continue;
+            }
+            for x in 0..w {
+                let tx = x + dx;
+                if tx >= 0 && tx < w {
+                    out[(ty * w + tx) as usize] = px[(y * w + x) as usize];
+                }
+            }
+        }
+        out
+    }
+}
+
+/// A primitive's result with its color space.
+#[derive(Clone)]
+struct Res {
+    px: Vec<[f32; 4]>,
+    linear: bool,
+}
+
+/// resvg's whole-pixel offset (`dx as i32`), `None` when both are zero.
+fn whole_offset(dx: f64, dy: f64) -> Option<(i64, i64)> {
+    let (x, y) = (dx.trunc() as i64, dy.trunc() as i64);
+    (x != 0 || y != 0).then_some((x, y))
+}
+
+/// `s` source-over `d`, premultiplied.
+#[inline]
+fn over(s: [f32; 4], d: [f32; 4]) -> [f32; 4] {
+    std::array::from_fn(|c| s[c] + d[c] * (1.0 - s[3]))
+}
+
+/// The adjoint of [`over`]: `(∂L/∂s, ∂L/∂d)`.
+#[inline]
+fn over_adjoint(s: [f32; 4], d: [f32; 4], g: [f32; 4]) -> ([f32; 4], [f32; 4]) {
+    let mut gs = g;
+    gs[3] -= (0..4).map(|c| g[c] * d[c]).sum::<f32>();
+    (gs, g.map(|v| v * (1.0 - s[3])))
+}
+
+/// feFlood's (and feDropShadow's) color at alpha `a`, premultiplied.
+fn flood<S: Scalar>(color: [f64; 3], opacity: f64, a: S) -> [S; 4] {
+    let al = a * S::c(opacity);
+    [
+        S::c(color[0]) * al,
+        S::c(color[1]) * al,
+        S::c(color[2]) * al,
+        al,
+    ]
+}
+
+/// One filter's primitives run over `src`, keeping every result.
+struct Run<'a> {
+    f: &'a Filter,
+    fr: Frame,
+    src: Res,
+    alpha: Res,
+    results: Vec<Res>,
+}
+
+impl<'a> Run<'a> {
+    fn new(f: &'a Filter, fr: Frame, src: &[[f32; 4]]) -> Self {
+        let src = Res {
+            px: src.to_vec(),
+            linear: false,
+        };
+        let alpha = Res {
+            px: src.px.iter().map(|p| [0.0, 0.0, 0.0, p[3]]).collect(),
+            linear: false,
+        };
+        let mut run = Run {
+            f,
+            fr,
+            src,
+            alpha,
+            results: Vec::with_capacity(f.primitives.len()),
+        };
+        for k in 0..f.primitives.len() {
+            let r = run.primitive(k);
+            run.results.push(r);
+        }
+        run
+    }
+
+    fn input(&self, i: &FilterInput) -> &Res {
+        match i {
+            FilterInput::SourceGraphic => &self.src,
+            FilterInput::SourceAlpha => &self.alpha,
+            FilterInput::Result(k) => &self.results[*k],
+        }
+    }
+
+    /// An input in color space `linear`.
+    fn input_in(&self, i: &FilterInput, linear: bool) -> Vec<[f32; 4]> {
+        let r = self.input(i);
+        if r.linear == linear {
+            r.px.clone()
+        } else {
+            r.px.iter()
+                .map(|&p| pixel::eval1(&|v| pixel::convert(v, linear), p))
+                .collect()
+        }
+    }
+
+    /// Primitive `k`'s result (earlier results known).
+    fn primitive(&self, k: usize) -> Res {
+        let p = &self.f.primitives[k];
+        let cs = p.linear_rgb;
+        let fr = self.fr;
+        let mut res = match &p.kind {
+            FilterKind::Flood { color, opacity } => Res {
+                px: vec![flood(*color, *opacity, 1.0f64).map(|v| v as f32); fr.w * fr.h],
+                linear: false,
+            },
+            FilterKind::Offset { input, dx, dy } => {
+                let r = self.input(input);
+                match whole_offset(*dx, *dy) {
+                    Some((x, y)) => Res {
+                        px: fr.shift(&r.px, x, y),
+                        linear: r.linear,
+                    },
+                    None => r.clone(),
+                }
+            }
+            FilterKind::Blur { input, std_dev } => {
+                let passes = blur::passes(*std_dev);
+                if passes.is_empty() {
+                    self.input(input).clone()
+                } else {
+                    let mut px = self.input_in(input, cs);
+                    blur::apply(&mut px, fr.w, fr.h, &passes);
+                    Res { px, linear: cs }
+                }
+            }
+            FilterKind::DropShadow { input, .. } => {
+                let (x, _, shifted) = self.drop_shadow(p, input);
+                let px = x.iter().zip(&shifted).map(|(&s, &d)| over(s, d)).collect();
+                Res { px, linear: cs }
+            }
+            FilterKind::Merge { inputs } => {
+                let mut px = vec![[0.0f32; 4]; fr.w * fr.h];
+                for i in inputs {
+                    for (d, s) in px.iter_mut().zip(self.input_in(i, cs)) {
+                        *d = over(s, *d);
+                    }
+                }
+                Res { px, linear: cs }
+            }
+            FilterKind::Blend {
+                input1,
+                input2,
+                mode,
+            } => self.binary(input1, input2, cs, |a, b| pixel::blend(*mode, a, b)),
+            FilterKind::Composite { input1, input2, op } => {
+                self.binary(input1, input2, cs, |a, b| pixel::composite(*op, a, b))
+            }
+            FilterKind::ColorMatrix { input, matrix } => {
+                self.unary(input, cs, |v| pixel::color_matrix(v, matrix))
+            }
+            FilterKind::ComponentTransfer { input, funcs } => {
+                self.unary(input, cs, |v| pixel::component_transfer(v, funcs))
+            }
+        };
+        if !matches!(p.kind, FilterKind::Offset { .. }) {
+            fr.clear_outside(&mut res.px, fr.local(p.subregion));
+        }
+        res
+    }
+
+    fn unary(&self, i: &FilterInput, cs: bool, f: impl Fn([f64; 4]) -> [f64; 4]) -> Res {
+        let px = self
+            .input_in(i, cs)
+            .into_iter()
+            .map(|p| pixel::eval1(&f, p))
+            .collect();
+        Res { px, linear: cs }
+    }
+
+    fn binary(
+        &self,
+        i1: &FilterInput,
+        i2: &FilterInput,
+        cs: bool,
+        f: impl Fn([f64; 4], [f64; 4]) -> [f64; 4],
+    ) -> Res {
+        let b = self.input_in(i2, cs);
+        let px = self
+            .input_in(i1, cs)
+            .into_iter()
+            .zip(b)
+            .map(|(a, b)| pixel::eval2(&f, a, b))
+            .collect();
+        Res { px, linear: cs }
+    }
+
+    /// feDropShadow's parts: the input in the primitive's color space, its blurred copy,
+    /// and the shadow (flooded, converted as resvg converts it, moved).
+    #[allow(clippy::type_complexity)]
+    fn drop_shadow(
+        &self,
+        p: &crate::scene::filter::FilterPrimitive,
+        input: &FilterInput,
+    ) -> (Vec<[f32; 4]>, Vec<[f32; 4]>, Vec<[f32; 4]>) {
+        let FilterKind::DropShadow {
+            dx,
+            dy,
+            std_dev,
+            color,
+            opacity,
+            ..
+        } = &p.kind
+        else {
+            unreachable!("a drop shadow")
+        };
+        let cs = p.linear_rgb;
+        let x = self.input_in(input, cs);
+        let mut blurred = x.clone();
+        blur::apply(&mut blurred, self.fr.w, self.fr.h, &blur::passes(*std_dev));
+        // resvg floods the shadow with the sRGB color, then converts it "into" the
+        // primitive's space: to linearRGB, or (its quirk) from linear to sRGB.
+        let shadow: Vec<[f32; 4]> = blurred
+            .iter()
+            .map(|b| {
+                let fl = flood(*color, *opacity, b[3] as f64);
+                pixel::convert(fl, cs).map(|v| v as f32)
+            })
+            .collect();
+        let shifted = match whole_offset(*dx, *dy) {
+            Some((ox, oy)) => self.fr.shift(&shadow, ox, oy),
+            None => shadow,
+        };
+        (x, blurred, shifted)
+    }
+
+    /// The filter's output: the last result in sRGB, cleared outside the region.
+    fn output(&self) -> Vec<[f32; 4]> {
+        let Some(last) = self.results.last() else {
+            return vec![[0.0; 4]; self.fr.w * self.fr.h];
+        };
+        let mut px: Vec<[f32; 4]> = if last.linear {
+            last.px
+                .iter()
+                .map(|&p| pixel::eval1(&|v| pixel::convert(v, false), p))
+                .collect()
+        } else {
+            last.px.clone()
+        };
+        self.fr.clear_outside(&mut px, self.fr.local(self.f.region));
+        px
+    }
+}
+
+/// Runs `filters` in order over `src`, the layer `rect` (canvas pixels) of a group's
+/// rendered children; returns the filtered layer.
+pub(crate) fn apply(filters: &[Filter], rect: [usize; 4], src: Vec<[f32; 4]>) -> Vec<[f32; 4]> {
+    let fr = Frame::of(rect);
+    filters
+        .iter()
+        .fold(src, |px, f| Run::new(f, fr, &px).output())
+}
+
+/// The adjoint of [`apply`] at `src`: `∂L/∂src` from `∂L/∂output`.
+pub(crate) fn adjoint(
+    filters: &[Filter],
+    rect: [usize; 4],
+    src: Vec<[f32; 4]>,
+    g_out: Vec<[f32; 4]>,
+) -> Vec<[f32; 4]> {
+    let fr = Frame::of(rect);
+    let mut sources = vec![src];
+    for f in &filters[..filters.len().saturating_sub(1)] {
+        let next = Run::new(f, fr, sources.last().expect("a source")).output();
+        sources.push(next);
+    }
+    let mut g = g_out;
+    for (f, src) in filters.iter().zip(&sources).rev() {
+        g = Back::new(Run::new(f, fr, src)).run(g);
+    }
+    g
+}
+
+/// The reverse walk of one filter's [`Run`].
+struct Back<'a> {
+    run: Run<'a>,
+    /// `∂L/∂result`, per primitive (`None`: zero).
+    g_res: Vec<Option<Vec<[f32; 4]>>>,
+    g_src: Vec<[f32; 4]>,
+}
+
+fn add_into(acc: &mut Option<Vec<[f32; 4]>>, g: &[[f32; 4]]) {
+    match acc {
+        Some(a) => {
+            for (x, y) in a.iter_mut().zip(g) {
+                for c in 0..4 {
+                    x[c] += y[c];
+                }
+            }
+        }
+        None => *acc = Some(g.to_vec()),
+    }
+}
+
+impl<'a> Back<'a> {
+    fn new(run: Run<'a>) -> Self {
+        let n = run.fr.w * run.fr.h;
+        let g_res = vec![None; run.results.len()];
+        Back {
+            run,
+            g_res,
+            g_src: vec![[0.0; 4]; n],
+        }
+    }
+
+    fn run(mut self, g_out: Vec<[f32; 4]>) -> Vec<[f32; 4]> {
+        let fr = self.run.fr;
+        let Some(last) = self.run.results.last() else {
+            return self.g_src;
+        };
+        let mut g = g_out;
+        fr.clear_outside(&mut g, fr.local(self.run.f.region));
+        if last.linear {
+            for (gv, &p) in g.iter_mut().zip(&last.px) {
+                *gv = pixel::adjoint1(&|v| pixel::convert(v, false), p, *gv);
+            }
+        }
+        let k_last = self.run.results.len() - 1;
+        self.g_res[k_last] = Some(g);
+        for k in (0..=k_last).rev() {
+            if let Some(g) = self.g_res[k].take() {
+                self.primitive(k, g);
+            }
+        }
+        self.g_src
+    }
+
+    /// Adds `g`, the gradient of input `i` read in color space `cs` (`None`: as it is),
+    /// to that input's gradient.
+    fn add_input(&mut self, i: &FilterInput, cs: Option<bool>, mut g: Vec<[f32; 4]>) {
+        let r = self.run.input(i);
+        if let Some(cs) = cs.filter(|&cs| cs != r.linear) {
+            for (gv, &p) in g.iter_mut().zip(&r.px) {
+                *gv = pixel::adjoint1(&|v| pixel::convert(v, cs), p, *gv);
+            }
+        }
+        match i {
+            FilterInput::SourceGraphic => {
+                for (a, b) in self.g_src.iter_mut().zip(&g) {
+                    for c in 0..4 {
+                        a[c] += b[c];
+                    }
+                }
+            }
+            FilterInput::SourceAlpha => {
+                for (a, b) in self.g_src.iter_mut().zip(&g) {
+                    a[3] += b[3];
+                }
+            }
+            FilterInput::Result(j) => add_into(&mut self.g_res[*j], &g),
+        }
+    }
+
+    fn primitive(&mut self, k: usize, mut g: Vec<[f32; 4]>) {
+        let run = &self.run;
+        let fr = run.fr;
+        let p = &run.f.primitives[k];
+        let cs = p.linear_rgb;
+        if !matches!(p.kind, FilterKind::Offset { .. }) {
+            fr.clear_outside(&mut g, fr.local(p.subregion));
+        }
+        match &p.kind {
+            // No parameters yet: the flood's color and opacity get no gradient.
+            FilterKind::Flood { .. } => {}
+            FilterKind::Offset { input, dx, dy } => {
+                let g = match whole_offset(*dx, *dy) {
+                    Some((x, y)) => fr.shift(&g, -x, -y),
+                    None => g,
+                };
+                self.add_input(&input.clone(), None, g);
+            }
+            FilterKind::Blur { input, std_dev } => {
+                let passes = blur::passes(*std_dev);
+                if passes.is_empty() {
+                    self.add_input(&input.clone(), None, g);
+                } else {
+                    blur::adjoint(&mut g, fr.w, fr.h, &passes);
+                    self.add_input(&input.clone(), Some(cs), g);
+                }
+            }
+            FilterKind::DropShadow {
+                input,
+                dx,
+                dy,
+                std_dev,
+                color,
+                opacity,
+            } => {
+                let (x, blurred, shifted) = run.drop_shadow(p, input);
+                let mut gx = vec![[0.0f32; 4]; g.len()];
+                let mut gsh = vec![[0.0f32; 4]; g.len()];
+                for i in 0..g.len() {
+                    (gx[i], gsh[i]) = over_adjoint(x[i], shifted[i], g[i]);
+                }
+                let gsh = match whole_offset(*dx, *dy) {
+                    Some((ox, oy)) => fr.shift(&gsh, -ox, -oy),
+                    None => gsh,
+                };
+                let (color, opacity) = (*color, *opacity);
+                let shade = |v: [Jet<4>; 4]| pixel::convert(flood(color, opacity, v[3]), cs);
+                let mut gb: Vec<[f32; 4]> = blurred
+                    .iter()
+                    .zip(&gsh)
+                    .map(|(&b, &gv)| pixel::adjoint1(&shade, b, gv))
+                    .collect();
+                blur::adjoint(&mut gb, fr.w, fr.h, &blur::passes(*std_dev));
+                for (a, b) in gx.iter_mut().zip(&gb) {
+                    for c in 0..4 {
+                        a[c] += b[c];
+                    }
+                }
+                self.add_input(&input.clone(), Some(cs), gx);
+            }
+            FilterKind::Merge { inputs } => {
+                // The running composite under each input, bottom first.
+                let xs: Vec<Vec<[f32; 4]>> = inputs.iter().map(|i| run.input_in(i, cs)).collect();
+                let mut below = vec![vec![[0.0f32; 4]; g.len()]];
+                for x in &xs[..xs.len().saturating_sub(1)] {
+                    let prev = below.last().expect("a layer");
+                    let next = x.iter().zip(prev).map(|(&s, &d)| over(s, d)).collect();
+                    below.push(next);
+                }
+                let mut grads = Vec::with_capacity(xs.len());
+                for (x, d) in xs.iter().zip(&below).rev() {
+                    let mut gx = vec![[0.0f32; 4]; g.len()];
+                    for i in 0..g.len() {
+                        (gx[i], g[i]) = over_adjoint(x[i], d[i], g[i]);
+                    }
+                    grads.push(gx);
+                }
+                let inputs = inputs.clone();
+                for (i, gx) in inputs.iter().rev().zip(grads) {
+                    self.add_input(i, Some(cs), gx);
+                }
+            }
+            FilterKind::Blend {
+                input1,
+                input2,
+                mode,
+            } => {
+                let mode = *mode;
+                let (a, b) = (input1.clone(), input2.clone());
+                self.binary(&a, &b, cs, g, |s, d| pixel::blend(mode, s, d));
+            }
+            FilterKind::Composite { input1, input2, op } => {
+                let op = *op;
+                let (a, b) = (input1.clone(), input2.clone());
+                self.binary(&a, &b, cs, g, |s, d| pixel::composite(op, s, d));
+            }
+            FilterKind::ColorMatrix { input, matrix } => {
+                let (i, m) = (input.clone(), *matrix);
+                let x = run.input_in(&i, cs);
+                for (gv, &p) in g.iter_mut().zip(&x) {
+                    *gv = pixel::adjoint1(&|v| pixel::color_matrix(v, &m), p, *gv);
+                }
+                self.add_input(&i, Some(cs), g);
+            }
+            FilterKind::ComponentTransfer { input, funcs } => {
+                let (i, funcs) = (input.clone(), funcs.clone());
+                let x = run.input_in(&i, cs);
+                for (gv, &p) in g.iter_mut().zip(&x) {
+                    *gv = pixel::adjoint1(&|v| pixel::component_transfer(v, &funcs), p, *gv);
+                }
+                self.add_input(&i, Some(cs), g);
+            }
+        }
+    }
+
+    fn binary(
+        &mut self,
+        i1: &FilterInput,
+        i2: &FilterInput,
+        cs: bool,
+        g: Vec<[f32; 4]>,
+        f: impl Fn([Jet<8>; 4], [Jet<8>; 4]) -> [Jet<8>; 4],
+    ) {
+        let (a, b) = (self.run.input_in(i1, cs), self.run.input_in(i2, cs));
+        let mut ga = vec![[0.0f32; 4]; g.len()];
+        let mut gb = vec![[0.0f32; 4]; g.len()];
+        for i in 0..g.len() {
+            (ga[i], gb[i]) = pixel::adjoint2(&f, a[i], b[i], g[i]);
+        }
+        self.add_input(i1, Some(cs), ga);
+        self.add_input(i2, Some(cs), gb);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::blur::tests::dot;
+    use super::*;
+    use crate::loss::Loss;
+    use crate::raster::RenderOptions;
+    use crate::rng::Rng;
+    use crate::scene::BlendMode;
+    use crate::scene::filter::{
+        CompositeOp, FilterPrimitive, TransferFunction, hue_rotate_matrix, saturate_matrix,
+    };
+    use crate::{Scene, Sizing};
+
+    const RECT: [usize; 4] = [2, 1, 11, 8];
+
+    fn prim(kind: FilterKind, linear_rgb: bool) -> FilterPrimitive {
+        FilterPrimitive {
+            subregion: [0, 0, 100, 100],
+            linear_rgb,
+            result: String::new(),
+            kind,
+        }
+    }
+
+    fn filter(primitives: Vec<FilterPrimitive>) -> Filter {
+        Filter {
+            id: String::new(),
+            region: [0, 0, 100, 100],
+            primitives,
+        }
+    }
+
+    /// A premultiplied image with alphas away from 0 and colors away from the clamps.
+    fn image(seed: u64) -> Vec<[f32; 4]> {
+        let mut r = Rng::new(seed);
+        let n = (RECT[2] - RECT[0]) * (RECT[3] - RECT[1]);
+        (0..n)
+            .map(|_| {
+                let a = 0.3 + 0.6 * r.uniform();
+                [
+                    0.1 + 0.8 * r.uniform(),
+                    0.1 + 0.8 * r.uniform(),
+                    0.1 + 0.8 * r.uniform(),
+                    1.0,
+                ]
+                .map(|c| c * a)
+                .map(|c| if c == a { a } else { c })
+            })
+            .map(|mut p: [f32; 4]| {
+                p[3] = p[3].max(p[0]).max(p[1]).max(p[2]);
+                p
+            })
+            .collect()
+    }
+
+    /// `d/dt ⟨g, F(x + t·v)⟩` by central differences against `⟨Fᵀ g, v⟩`.
+    fn check(name: &str, filters: &[Filter]) {
+        let (x, g, v) = (image(1), image(2), image(3));
+        let h = 1e-3f32;
+        let at = |t: f32| {
+            let y: Vec<[f32; 4]> = x
+                .iter()
+                .zip(&v)
+                .map(|(a, b)| std::array::from_fn(|c| a[c] + t * b[c]))
+                .collect();
+            dot(&g, &apply(filters, RECT, y))
+        };
+        let numeric = (at(h) - at(-h)) / (2.0 * h as f64);
+        let analytic = dot(&adjoint(filters, RECT, x.clone(), g.clone()), &v);
+        let err = (numeric - analytic).abs() / numeric.abs().max(1e-2);
+        assert!(err < 1e-2, "{name}: numeric {numeric}, analytic {analytic}");
+    }
+
+    use FilterInput::{Result as R, SourceAlpha, SourceGraphic as Src};
+
+    #[test]
+    fn each_primitive_agrees_with_finite_differences() {
+        let flood = FilterKind::Flood {
+            color: [0.2, 0.5, 0.9],
+            opacity: 0.6,
+        };
+        let cases: Vec<(&str, Vec<FilterPrimitive>)> = vec![
+            (
+                "offset",
+                vec![prim(
+                    FilterKind::Offset {
+                        input: Src,
+                        dx: 2.7,
+                        dy: -1.2,
+                    },
+                    true,
+                )],
+            ),
+            (
+                "box blur",
+                vec![prim(
+                    FilterKind::Blur {
+                        input: Src,
+                        std_dev: [2.5, 3.0],
+                    },
+                    true,
+                )],
+            ),
+            (
+                "small blur, sRGB",
+                vec![prim(
+                    FilterKind::Blur {
+                        input: Src,
+                        std_dev: [0.8, 1.1],
+                    },
+                    false,
+                )],
+            ),
+            (
+                "drop shadow",
+                vec![prim(
+                    FilterKind::DropShadow {
+                        input: Src,
+                        dx: 2.0,
+                        dy: 1.0,
+                        std_dev: [1.0, 1.5],
+                        color: [0.3, 0.1, 0.7],
+                        opacity: 0.8,
+                    },
+                    true,
+                )],
+            ),
+            (
+                "merge with flood and source alpha",
+                vec![
+                    prim(flood.clone(), true),
+                    prim(
+                        FilterKind::Merge {
+                            inputs: vec![R(0), SourceAlpha, Src],
+                        },
+                        true,
+                    ),
+                ],
+            ),
+            (
+                "color matrix",
+                vec![prim(
+                    FilterKind::ColorMatrix {
+                        input: Src,
+                        matrix: hue_rotate_matrix(40.0),
+                    },
+                    true,
+                )],
+            ),
+            (
+                "saturate, sRGB",
+                vec![prim(
+                    FilterKind::ColorMatrix {
+                        input: Src,
+                        matrix: saturate_matrix(0.3),
+                    },
+                    false,
+                )],
+            ),
+            (
+                "component transfer",
+                vec![prim(
+                    FilterKind::ComponentTransfer {
+                        input: Src,
+                        funcs: Box::new([
+                            TransferFunction::Table(vec![0.1, 0.8, 0.3, 0.9]),
+                            TransferFunction::Linear {
+                                slope: 0.7,
+                                intercept: 0.1,
+                            },
+                            TransferFunction::Gamma {
+                                amplitude: 0.9,
+                                exponent: 1.7,
+                                offset: 0.05,
+                            },
+                            TransferFunction::Identity,
+                        ]),
+                    },
+                    true,
+                )],
+            ),
+        ];
+        for (name, prims) in cases {
+            check(name, &[filter(prims)]);
+        }
+        for op in [
+            CompositeOp::Over,
+            CompositeOp::In,
+            CompositeOp::Out,
+            CompositeOp::Atop,
+            CompositeOp::Xor,
+            CompositeOp::Arithmetic([0.5, 0.3, 0.4, 0.05]),
+        ] {
+            let blurred = prim(
+                FilterKind::Blur {
+                    input: Src,
+                    std_dev: [1.0, 1.0],
+                },
+                true,
+            );
+            let c = prim(
+                FilterKind::Composite {
+                    input1: Src,
+                    input2: R(0),
+                    op,
+                },
+                true,
+            );
+            check(&format!("composite {op:?}"), &[filter(vec![blurred, c])]);
+        }
+        for mode in [
+            BlendMode::Normal,
+            BlendMode::Multiply,
+            BlendMode::Screen,
+            BlendMode::Darken,
+        ] {
+            let moved = prim(
+                FilterKind::Offset {
+                    input: Src,
+                    dx: 1.0,
+                    dy: 1.0,
+                },
+                false,
+            );
+            let b = prim(
+                FilterKind::Blend {
+                    input1: Src,
+                    input2: R(0),
+                    mode,
+                },
+                false,
+            );
+            check(&format!("blend {mode:?}"), &[filter(vec![moved, b])]);
+        }
+        // Two filters in a row, a subregion and a region smaller than the layer.
+        let mut cut = prim(
+            FilterKind::Blur {
+                input: Src,
+                std_dev: [1.5, 0.5],
+            },
+            true,
+        );
+        cut.subregion = [3, 2, 9, 7];
+        let mut second = filter(vec![prim(
+            FilterKind::ColorMatrix {
+                input: Src,
+                matrix: saturate_matrix(1.6),
+            },
+            true,
+        )]);
+        second.region = [2, 2, 10, 8];
+        check("chain", &[filter(vec![cut]), second]);
+    }
+
+    /// The scene's gradient reaches the points, colors and opacities under a filtered
+    /// group, and the group's own opacity.
+    #[test]
+    fn gradients_reach_the_content_under_a_filter() {
+        let svg = r#"<svg xmlns="http://www.w3.org/2000/svg" width="32" height="28">
+            <filter id="f" x="-20%" y="-20%" width="140%" height="140%">
+              <feGaussianBlur stdDeviation="1.5" result="b"/>
+              <feOffset dx="2" dy="1" in="b" result="o"/>
+              <feColorMatrix type="saturate" values="0.4" in="SourceGraphic" result="s"/>
+              <feComposite operator="arithmetic" k1="0.2" k2="0.6" k3="0.5" k4="0" in="s" in2="o"/>
+            </filter>
+            <g filter="url(#f)" opacity="0.9">
+              <path d="M 6 5 C 14 2 24 6 25 20 L 8 22 Z" fill="rgb(200,60,40)" fill-opacity="0.8"/>
+              <rect x="12.3" y="9.6" width="9.2" height="7.5" fill="rgb(30,120,210)"/>
+            </g></svg>"#;
+        let scene = Scene::from_svg_str(svg, "filter.svg", Sizing::Natural).unwrap();
+        let mut moved = scene.clone();
+        let mut p = moved.params();
+        for (k, v) in p.iter_mut().enumerate() {
+            *v += 0.3 * (k as f64 * 1.3).sin();
+        }
+        moved.set_params(&p);
+        let opts = RenderOptions::default();
+        let target = crate::raster::render(&moved, &opts);
+        let (grad, _, groups) =
+            crate::gradcheck::check(&scene, &target, Loss::Mse, &opts, None, None);
+        assert!(grad.iter().any(|g| *g != 0.0));
+        assert!(groups.len() >= 3, "{groups:?}");
+        for g in groups {
+            assert!(g.passes(2e-2), "{g}");
+        }
+    }
+
+    /// Filters usvg resolves but diffsvg does not render are refused, naming the file and
+    /// the primitive.
+    #[test]
+    fn unsupported_primitives_are_refused_by_name() {
+        let svg = r#"<svg xmlns="http://www.w3.org/2000/svg" width="10" height="10">
+            <filter id="t"><feTurbulence baseFrequency="0.1"/></filter>
+            <rect width="5" height="5" filter="url(#t)"/></svg>"#;
+        let err = Scene::from_svg_str(svg, "noise.svg", Sizing::Natural).unwrap_err();
+        let msg = err.to_string();
+        assert!(
+            msg.contains("noise.svg") && msg.contains("feTurbulence"),
+            "{msg}"
+        );
+    }
+}

@@ -1,0 +1,431 @@
+//! SVG filters on a [`Group`](super::Group): a chain of image operators applied to the
+//! group's layer before it is clipped, masked and composited (resvg's order).
+//!
+//! Everything is in device pixels, as in the rest of the scene: the filter region and the
+//! primitives' subregions are whole-pixel rectangles `[x0, y0, x1, y1]` (end exclusive),
+//! found as resvg finds them (the user-space rectangle's bounding box under the group's
+//! transform, its corner floored and its size rounded up); blur deviations and offsets are
+//! scaled by the transform's axis scales. Colors are straight sRGB in `[0, 1]`.
+//!
+//! Filters have no parameters of their own yet: the gradient reaches the content beneath
+//! (its points, colors and opacities) through each operator's adjoint
+//! (`raster/filter/`).
+
+use super::BlendMode;
+
+/// One `<filter>` (or CSS filter function) applied to a group.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Filter {
+    /// The SVG id of the `<filter>` element (empty for a CSS filter function).
+    pub id: String,
+    /// The filter region in device pixels, `[x0, y0, x1, y1]`, end exclusive.
+    pub region: [i64; 4],
+    /// The primitives, applied in order; the last one's result is the filter's output.
+    pub primitives: Vec<FilterPrimitive>,
+}
+
+/// One filter primitive with its subregion and working color space.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FilterPrimitive {
+    /// The primitive subregion in device pixels, `[x0, y0, x1, y1]`: the result is
+    /// transparent outside it (except feOffset's, as in resvg).
+    pub subregion: [i64; 4],
+    /// `color-interpolation-filters: linearRGB` (the default) rather than `sRGB`.
+    pub linear_rgb: bool,
+    /// The `result` name (written back by the SVG writer; inputs refer to results by
+    /// index).
+    pub result: String,
+    /// What the primitive does.
+    pub kind: FilterKind,
+}
+
+/// Where a primitive's input comes from.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum FilterInput {
+    /// The group's layer.
+    SourceGraphic,
+    /// The group's layer with its color channels set to zero.
+    SourceAlpha,
+    /// The result of an earlier primitive, by index.
+    Result(usize),
+}
+
+/// A feComposite operator.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum CompositeOp {
+    /// `in` over `in2`.
+    Over,
+    /// `in` where `in2` is.
+    In,
+    /// `in` where `in2` is not.
+    Out,
+    /// `in` over `in2` where `in2` is.
+    Atop,
+    /// Each where the other is not.
+    Xor,
+    /// The sum, clamped.
+    Lighter,
+    /// `k1·i1·i2 + k2·i1 + k3·i2 + k4` per premultiplied channel, clamped.
+    Arithmetic([f64; 4]),
+}
+
+/// A feComponentTransfer function of one channel (straight values in `[0, 1]`).
+#[derive(Clone, Debug, PartialEq)]
+pub enum TransferFunction {
+    /// Unchanged.
+    Identity,
+    /// Piecewise linear through the values.
+    Table(Vec<f64>),
+    /// Piecewise constant.
+    Discrete(Vec<f64>),
+    /// `slope · c + intercept`.
+    Linear {
+        /// Slope.
+        slope: f64,
+        /// Intercept.
+        intercept: f64,
+    },
+    /// `amplitude · c^exponent + offset`.
+    Gamma {
+        /// Amplitude.
+        amplitude: f64,
+        /// Exponent.
+        exponent: f64,
+        /// Offset.
+        offset: f64,
+    },
+}
+
+/// What a primitive does.
+#[derive(Clone, Debug, PartialEq)]
+pub enum FilterKind {
+    /// feFlood: the subregion filled with one color.
+    Flood {
+        /// Straight sRGB color.
+        color: [f64; 3],
+        /// Opacity.
+        opacity: f64,
+    },
+    /// feOffset: the input moved by whole pixels (`dx`, `dy` truncated, as resvg does).
+    Offset {
+        /// Input.
+        input: FilterInput,
+        /// Device pixels.
+        dx: f64,
+        /// Device pixels.
+        dy: f64,
+    },
+    /// feGaussianBlur.
+    Blur {
+        /// Input.
+        input: FilterInput,
+        /// Standard deviations along x and y, device pixels.
+        std_dev: [f64; 2],
+    },
+    /// feDropShadow: the input over its blurred, flooded and offset alpha.
+    DropShadow {
+        /// Input.
+        input: FilterInput,
+        /// Device pixels.
+        dx: f64,
+        /// Device pixels.
+        dy: f64,
+        /// Standard deviations along x and y, device pixels.
+        std_dev: [f64; 2],
+        /// Straight sRGB color.
+        color: [f64; 3],
+        /// Opacity.
+        opacity: f64,
+    },
+    /// feMerge: the inputs composited source-over, first at the bottom.
+    Merge {
+        /// Inputs.
+        inputs: Vec<FilterInput>,
+    },
+    /// feBlend: `input1` blended onto `input2`.
+    Blend {
+        /// `in`.
+        input1: FilterInput,
+        /// `in2`.
+        input2: FilterInput,
+        /// Blend mode.
+        mode: BlendMode,
+    },
+    /// feComposite: `input1` composited with `input2`.
+    Composite {
+        /// `in`.
+        input1: FilterInput,
+        /// `in2`.
+        input2: FilterInput,
+        /// Operator.
+        op: CompositeOp,
+    },
+    /// feColorMatrix as a 4 × 5 matrix on straight colors (`saturate`, `hueRotate` and
+    /// `luminanceToAlpha` are turned into theirs).
+    ColorMatrix {
+        /// Input.
+        input: FilterInput,
+        /// Row-major, as SVG's `values`.
+        matrix: [f64; 20],
+    },
+    /// feComponentTransfer: one function per channel, R, G, B, A.
+    ComponentTransfer {
+        /// Input.
+        input: FilterInput,
+        /// Functions of R, G, B and A.
+        funcs: Box<[TransferFunction; 4]>,
+    },
+}
+
+impl FilterKind {
+    /// The inputs the primitive reads.
+    pub fn inputs(&self) -> Vec<&FilterInput> {
+        match self {
+            FilterKind::Flood { .. } => Vec::new(),
+            FilterKind::Offset { input, .. }
+            | FilterKind::Blur { input, .. }
+            | FilterKind::DropShadow { input, .. }
+            | FilterKind::ColorMatrix { input, .. }
+            | FilterKind::ComponentTransfer { input, .. } => vec![input],
+            FilterKind::Merge { inputs } => inputs.iter().collect(),
+            FilterKind::Blend { input1, input2, .. }
+            | FilterKind::Composite { input1, input2, .. } => vec![input1, input2],
+        }
+    }
+}
+
+/// The saturate matrix of feColorMatrix (`values` clamped at 0, as resvg does).
+pub(crate) fn saturate_matrix(v: f64) -> [f64; 20] {
+    let v = v.max(0.0);
+    rgb_matrix([
+        0.213 + 0.787 * v,
+        0.715 - 0.715 * v,
+        0.072 - 0.072 * v,
+        0.213 - 0.213 * v,
+        0.715 + 0.285 * v,
+        0.072 - 0.072 * v,
+        0.213 - 0.213 * v,
+        0.715 - 0.715 * v,
+        0.072 + 0.928 * v,
+    ])
+}
+
+/// The hueRotate matrix of feColorMatrix, for an angle in degrees.
+pub(crate) fn hue_rotate_matrix(degrees: f64) -> [f64; 20] {
+    let (a2, a1) = degrees.to_radians().sin_cos();
+    rgb_matrix([
+        0.213 + 0.787 * a1 - 0.213 * a2,
+        0.715 - 0.715 * a1 - 0.715 * a2,
+        0.072 - 0.072 * a1 + 0.928 * a2,
+        0.213 - 0.213 * a1 + 0.143 * a2,
+        0.715 + 0.285 * a1 + 0.140 * a2,
+        0.072 - 0.072 * a1 - 0.283 * a2,
+        0.213 - 0.213 * a1 - 0.787 * a2,
+        0.715 - 0.715 * a1 + 0.715 * a2,
+        0.072 + 0.928 * a1 + 0.072 * a2,
+    ])
+}
+
+/// The luminanceToAlpha matrix of feColorMatrix.
+pub(crate) fn luminance_to_alpha_matrix() -> [f64; 20] {
+    let mut m = [0.0; 20];
+    m[15..18].copy_from_slice(&[0.2125, 0.7154, 0.0721]);
+    m
+}
+
+/// A 4 × 5 matrix that maps the color channels by `m` and keeps alpha.
+fn rgb_matrix(m: [f64; 9]) -> [f64; 20] {
+    let mut out = [0.0; 20];
+    for r in 0..3 {
+        out[r * 5..r * 5 + 3].copy_from_slice(&m[r * 3..r * 3 + 3]);
+    }
+    out[18] = 1.0;
+    out
+}
+
+/// The axis scales resvg applies to blur deviations and offsets (tiny-skia's
+/// `Transform::get_scale`): the norms of the matrix rows.
+fn axis_scales(t: &super::Affine) -> (f64, f64) {
+    (t[0].hypot(t[2]), t[1].hypot(t[3]))
+}
+
+/// A user-space rectangle's device box under `t`, whole pixels as resvg rounds it
+/// (`Rect::to_int_rect`: the corner floored, the size rounded up, at least 1).
+fn device_rect(r: usvg::NonZeroRect, t: &super::Affine) -> [i64; 4] {
+    let corners = [
+        [r.left() as f64, r.top() as f64],
+        [r.right() as f64, r.top() as f64],
+        [r.left() as f64, r.bottom() as f64],
+        [r.right() as f64, r.bottom() as f64],
+    ]
+    .map(|p| super::apply(t, p));
+    let (mut x0, mut y0, mut x1, mut y1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
+    for [x, y] in corners {
+        (x0, y0, x1, y1) = (x0.min(x), y0.min(y), x1.max(x), y1.max(y));
+    }
+    // In f32 as resvg computes it; bounded so that no later sum overflows (a region is
+    // cut to the canvas before anything is allocated).
+    let lim = 1e12;
+    let (x, y) = ((x0 as f32).floor() as f64, (y0 as f32).floor() as f64);
+    let w = (((x1 - x0) as f32).ceil() as f64).max(1.0);
+    let h = (((y1 - y0) as f32).ceil() as f64).max(1.0);
+    let c = |v: f64| v.clamp(-lim, lim) as i64;
+    [c(x), c(y), c(x + w), c(y + h)]
+}
+
+fn color(c: usvg::Color) -> [f64; 3] {
+    [c.red, c.green, c.blue].map(|v| v as f64 / 255.0)
+}
+
+fn transfer(f: &usvg::filter::TransferFunction) -> TransferFunction {
+    use usvg::filter::TransferFunction as U;
+    let vals = |v: &[f32]| v.iter().map(|&x| x as f64).collect::<Vec<f64>>();
+    match f {
+        U::Identity => TransferFunction::Identity,
+        // An empty table changes nothing (resvg skips it).
+        U::Table(v) if v.is_empty() => TransferFunction::Identity,
+        U::Discrete(v) if v.is_empty() => TransferFunction::Identity,
+        U::Table(v) => TransferFunction::Table(vals(v)),
+        U::Discrete(v) => TransferFunction::Discrete(vals(v)),
+        U::Linear { slope, intercept } => TransferFunction::Linear {
+            slope: *slope as f64,
+            intercept: *intercept as f64,
+        },
+        U::Gamma {
+            amplitude,
+            exponent,
+            offset,
+        } => TransferFunction::Gamma {
+            amplitude: *amplitude as f64,
+            exponent: *exponent as f64,
+            offset: *offset as f64,
+        },
+    }
+}
+
+/// Converts usvg's filters of a group whose user space `t` maps to device pixels; `Err`
+/// names a primitive diffsvg does not render.
+pub(crate) fn from_usvg(
+    filters: &[std::sync::Arc<usvg::filter::Filter>],
+    t: &super::Affine,
+    blend: impl Fn(usvg::BlendMode) -> BlendMode,
+) -> Result<Vec<Filter>, String> {
+    use usvg::filter::Kind as K;
+    let (sx, sy) = axis_scales(t);
+    let mut out = Vec::with_capacity(filters.len());
+    for f in filters {
+        let mut prims: Vec<FilterPrimitive> = Vec::new();
+        for p in f.primitives() {
+            // A reference to an unknown name is the source graphic (resvg's fallback);
+            // the latest result of that name wins.
+            let input = |i: &usvg::filter::Input| match i {
+                usvg::filter::Input::SourceGraphic => FilterInput::SourceGraphic,
+                usvg::filter::Input::SourceAlpha => FilterInput::SourceAlpha,
+                usvg::filter::Input::Reference(name) => prims
+                    .iter()
+                    .rposition(|q| q.result == *name)
+                    .map_or(FilterInput::SourceGraphic, FilterInput::Result),
+            };
+            let std_dev = |x: usvg::PositiveF32, y: usvg::PositiveF32| {
+                [x.get() as f64 * sx, y.get() as f64 * sy]
+            };
+            let kind = match p.kind() {
+                K::Flood(fe) => FilterKind::Flood {
+                    color: color(fe.color()),
+                    opacity: fe.opacity().get() as f64,
+                },
+                K::Offset(fe) => FilterKind::Offset {
+                    input: input(fe.input()),
+                    dx: fe.dx() as f64 * sx,
+                    dy: fe.dy() as f64 * sy,
+                },
+                K::GaussianBlur(fe) => FilterKind::Blur {
+                    input: input(fe.input()),
+                    std_dev: std_dev(fe.std_dev_x(), fe.std_dev_y()),
+                },
+                K::DropShadow(fe) => FilterKind::DropShadow {
+                    input: input(fe.input()),
+                    dx: fe.dx() as f64 * sx,
+                    dy: fe.dy() as f64 * sy,
+                    std_dev: std_dev(fe.std_dev_x(), fe.std_dev_y()),
+                    color: color(fe.color()),
+                    opacity: fe.opacity().get() as f64,
+                },
+                K::Merge(fe) => FilterKind::Merge {
+                    inputs: fe.inputs().iter().map(input).collect(),
+                },
+                K::Blend(fe) => FilterKind::Blend {
+                    input1: input(fe.input1()),
+                    input2: input(fe.input2()),
+                    mode: blend(fe.mode()),
+                },
+                K::Composite(fe) => {
+                    use usvg::filter::CompositeOperator as O;
+                    FilterKind::Composite {
+                        input1: input(fe.input1()),
+                        input2: input(fe.input2()),
+                        op: match fe.operator() {
+                            O::Over => CompositeOp::Over,
+                            O::In => CompositeOp::In,
+                            O::Out => CompositeOp::Out,
+                            O::Atop => CompositeOp::Atop,
+                            O::Xor => CompositeOp::Xor,
+                            O::Lighter => CompositeOp::Lighter,
+                            O::Arithmetic { k1, k2, k3, k4 } => {
+                                CompositeOp::Arithmetic([k1, k2, k3, k4].map(|k| k as f64))
+                            }
+                        },
+                    }
+                }
+                K::ColorMatrix(fe) => {
+                    use usvg::filter::ColorMatrixKind as M;
+                    FilterKind::ColorMatrix {
+                        input: input(fe.input()),
+                        matrix: match fe.kind() {
+                            M::Matrix(v) => {
+                                std::array::from_fn(|i| v.get(i).copied().unwrap_or(0.0) as f64)
+                            }
+                            M::Saturate(v) => saturate_matrix(v.get() as f64),
+                            M::HueRotate(a) => hue_rotate_matrix(*a as f64),
+                            M::LuminanceToAlpha => luminance_to_alpha_matrix(),
+                        },
+                    }
+                }
+                K::ComponentTransfer(fe) => FilterKind::ComponentTransfer {
+                    input: input(fe.input()),
+                    funcs: Box::new([
+                        transfer(fe.func_r()),
+                        transfer(fe.func_g()),
+                        transfer(fe.func_b()),
+                        transfer(fe.func_a()),
+                    ]),
+                },
+                other => {
+                    let name = match other {
+                        K::ConvolveMatrix(_) => "feConvolveMatrix",
+                        K::DiffuseLighting(_) => "feDiffuseLighting",
+                        K::DisplacementMap(_) => "feDisplacementMap",
+                        K::Image(_) => "feImage",
+                        K::Morphology(_) => "feMorphology",
+                        K::SpecularLighting(_) => "feSpecularLighting",
+                        K::Tile(_) => "feTile",
+                        _ => "feTurbulence",
+                    };
+                    return Err(name.to_string());
+                }
+            };
+            prims.push(FilterPrimitive {
+                subregion: device_rect(p.rect(), t),
+                linear_rgb: p.color_interpolation() == usvg::filter::ColorInterpolation::LinearRGB,
+                result: p.result().to_string(),
+                kind,
+            });
+        }
+        out.push(Filter {
+            id: f.id().to_string(),
+            region: device_rect(f.rect(), t),
+            primitives: prims,
+        });
+    }
+    Ok(out)
+}
