@@ -97,13 +97,13 @@ fn bad_inputs_fail_cleanly() {
         &dir,
         "filter.svg",
         r#"<svg xmlns="http://www.w3.org/2000/svg" width="10" height="10">
-        <filter id="f"><feGaussianBlur stdDeviation="1"/></filter>
+        <filter id="f"><feTurbulence baseFrequency="0.1"/></filter>
         <rect id="r" width="10" height="10" filter="url(#f)"/></svg>"#,
     );
     assert_fails(
         &diffsvg(&["render", s(&p), "-o", &o]),
         "filter.svg",
-        "filter",
+        "feturbulence",
         &out,
     );
 

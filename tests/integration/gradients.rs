@@ -383,3 +383,35 @@ fn crisp_edges_color_gradient_and_no_point_gradient() {
             .contains(r#"shape-rendering="crispEdges""#)
     );
 }
+
+/// The scene's gradient reaches the points, colors and opacities under a filtered
+/// group, and the group's own opacity.
+#[test]
+fn gradients_reach_the_content_under_a_filter() {
+    let svg = r#"<svg xmlns="http://www.w3.org/2000/svg" width="32" height="28">
+        <filter id="f" x="-20%" y="-20%" width="140%" height="140%">
+          <feGaussianBlur stdDeviation="1.5" result="b"/>
+          <feOffset dx="2" dy="1" in="b" result="o"/>
+          <feColorMatrix type="saturate" values="0.4" in="SourceGraphic" result="s"/>
+          <feComposite operator="arithmetic" k1="0.2" k2="0.6" k3="0.5" k4="0" in="s" in2="o"/>
+        </filter>
+        <g filter="url(#f)" opacity="0.9">
+          <path d="M 6 5 C 14 2 24 6 25 20 L 8 22 Z" fill="rgb(200,60,40)" fill-opacity="0.8"/>
+          <rect x="12.3" y="9.6" width="9.2" height="7.5" fill="rgb(30,120,210)"/>
+        </g></svg>"#;
+    let scene = Scene::from_svg_str(svg, "filter.svg", Sizing::Natural).unwrap();
+    let mut moved = scene.clone();
+    let mut p = moved.params();
+    for (k, v) in p.iter_mut().enumerate() {
+        *v += 0.3 * (k as f64 * 1.3).sin();
+    }
+    moved.set_params(&p);
+    let opts = RenderOptions::default();
+    let target = render(&moved, &opts);
+    let (grad, _, groups) = check(&scene, &target, Loss::Mse, &opts, None, None);
+    assert!(grad.iter().any(|g| *g != 0.0));
+    assert!(groups.len() >= 3, "{groups:?}");
+    for g in groups {
+        assert!(g.passes(2e-2), "{g}");
+    }
+}
