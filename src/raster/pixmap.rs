@@ -52,7 +52,7 @@ impl Alpha {
 }
 
 /// Columns per chunk.
-const CHUNK: usize = 16;
+const CHUNK: usize = 8;
 
 /// Renders an already prepared scene straight to 8-bit RGBA, row-major, 4 bytes a pixel,
 /// top row first: the bytes of converting
