@@ -1,5 +1,5 @@
 //! COLMAP sparse models (`cameras`, `images`, `points3D`, binary `.bin` or text `.txt`):
-//! reading them into a [`Dataset`](super::dataset::Dataset), and writing them (the
+//! reading them into a [`Dataset`], and writing them (the
 //! converter [`convert`], which turns a NeRF-synthetic or instant-ngp folder into one).
 //!
 //! **Layout**: the model is in `DIR/sparse/0/` or `DIR/sparse/`; the binary form is used
@@ -42,10 +42,10 @@
 //! images, each image's 2D points, points, each point's track) times their smallest
 //! record size must fit in what is left of the file; at most
 //! [`MAX_FRAMES`](super::dataset::MAX_FRAMES) cameras and images and
-//! [`MAX_GAUSSIANS`](crate::limits::MAX_GAUSSIANS) points; names at most
+//! [`MAX_GAUSSIANS`] points; names at most
 //! [`MAX_NAME_BYTES`]; text lines are kept up to [`MAX_LINE_BYTES`] (the rest of a longer
 //! line, such as a long list of 2D points, is skipped unread). Image sizes 1 to
-//! [`MAX_SIDE`](crate::limits::MAX_SIDE). Files are streamed, never read whole. Each
+//! [`MAX_SIDE`]. Files are streamed, never read whole. Each
 //! problem is one error naming the file and the entry (`images.bin: image 3 (id 7,
 //! "a.jpg"): camera 9 does not exist in cameras.bin`).
 //!
