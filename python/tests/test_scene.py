@@ -41,10 +41,14 @@ def test_render_matches_the_cli(tmp_path):
     run_cli("render", svg, "-o", tmp_path / "cli.png")
     ours = diffsvg.render(diffsvg.Scene.load(svg))
     diffsvg.save_png(ours, tmp_path / "py.png")
-    # Both PNGs from the same float image: identical bytes after decoding.
+    # The CLI writes through the 8-bit renderer, which takes a run's coverage within four
+    # float steps of 0 or 1 as exact: the same bytes but where a value sits on a rounding
+    # boundary, there one level apart.
     a = diffsvg.load_image(tmp_path / "cli.png")
     b = diffsvg.load_image(tmp_path / "py.png")
-    assert np.array_equal(a, b)
+    diff = np.abs(a - b)
+    assert diff.max() <= 1.5 / 255
+    assert np.count_nonzero(diff) <= 0.01 * diff.size
 
 
 def test_params_round_trip_and_arrays_structure(tmp_path):
