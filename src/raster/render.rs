@@ -328,17 +328,24 @@ impl<'a> BandRenderer<'a> {
         }
         let (ylo, yhi) = (top as f64, bottom as f64);
         let acc = &mut self.acc;
-        let accumulate = if item.crisp {
-            accumulate_centers
+        // Two loops rather than a function pointer: the area accumulation stays inlined
+        // in the hot one.
+        let near = |a: [f64; 2], c: [f64; 2]| a[1].max(c[1]) > ylo && a[1].min(c[1]) < yhi;
+        if item.crisp {
+            item.for_each_edge_near(ylo, yhi, |ia, ic| {
+                let (a, c) = (item.pts[ia], item.pts[ic]);
+                if near(a, c) {
+                    accumulate_centers(acc, a, c, w);
+                }
+            });
         } else {
-            accumulate_line
-        };
-        item.for_each_edge_near(ylo, yhi, |ia, ic| {
-            let (a, c) = (item.pts[ia], item.pts[ic]);
-            if a[1].max(c[1]) > ylo && a[1].min(c[1]) < yhi {
-                accumulate(acc, a, c, w);
-            }
-        });
+            item.for_each_edge_near(ylo, yhi, |ia, ic| {
+                let (a, c) = (item.pts[ia], item.pts[ic]);
+                if near(a, c) {
+                    accumulate_line(acc, a, c, w);
+                }
+            });
+        }
         // A crisp item's winding numbers at pixel centers are exact already.
         if exact && item.can_overlap && !item.crisp && self.p.exact_overlaps {
             let cols = acc.w.min(self.p.width as usize - acc.x0 as usize);
