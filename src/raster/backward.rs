@@ -285,6 +285,16 @@ pub fn backward_with_stats(
         (p.width, p.height),
         "gradient image size must match the canvas"
     );
+    let (mut grad, stats) = device_backward(scene, p, d_image);
+    crate::scene::transform::chain_gradient(scene, &mut grad);
+    (grad, stats)
+}
+
+/// [`backward_with_stats`] before the gradient is carried into the frames of transformed
+/// groups ([`chain_gradient`](crate::scene::transform::chain_gradient)): every slot's
+/// gradient is that of its device value. A filtered layer's content is differentiated so,
+/// its slots being part of the whole scene's, which is chained once.
+fn device_backward(scene: &Scene, p: &Prepared, d_image: &Image) -> (Vec<f64>, BackwardStats) {
     let w = p.width as usize;
     let out = backward_bands(scene, p, None, &|y0, rows, _| {
         (d_image.data[y0 * w..(y0 + rows) * w].to_vec(), [0.0; 2])
@@ -329,10 +339,12 @@ pub fn render_and_backward_fused(scene: &Scene, p: &Prepared, loss: &dyn BandLos
         let sums = loss.band(y0, rendered, &mut d);
         (d, sums)
     });
+    let mut grad = out.grad;
+    crate::scene::transform::chain_gradient(scene, &mut grad);
     Fused {
         image,
         sums: out.sums,
-        grad: out.grad,
+        grad,
         stats: out.stats,
     }
 }
@@ -525,7 +537,7 @@ fn filter_backward(
     for (row, y) in (fl.rect[1]..fl.rect[3]).enumerate() {
         d.data[y * w + fl.rect[0]..y * w + fl.rect[2]].copy_from_slice(&g_src[row * rw..][..rw]);
     }
-    let sub = render_backward(&fl.content, &opts, &d);
+    let sub = device_backward(&fl.content, &Prepared::new(&fl.content, &opts), &d).0;
     let base = layout.groups[fl.param_group] + 1;
     for (k, v) in sub.iter().enumerate() {
         grad[base + k] += v;

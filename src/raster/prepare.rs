@@ -513,6 +513,9 @@ impl Builder<'_> {
         for n in nodes {
             match n {
                 Node::Path(_) => self.path(),
+                // A group that is only a transform is no layer: its children are drawn
+                // as its parent's (it has no opacity parameter either).
+                Node::Group(g) if !g.layer => self.nodes(&g.children, role),
                 Node::Group(g) => {
                     // The walk order of the parameters: a group's opacity first.
                     let group = (role == Role::Paint).then(|| {

@@ -48,6 +48,7 @@ mod project;
 pub mod random;
 pub mod shape;
 pub mod structure;
+pub mod transform;
 pub(crate) mod svg_in;
 pub(crate) mod svg_out;
 
@@ -149,6 +150,14 @@ pub struct Group {
     /// Filters applied to the layer in order, before the clip path and the mask
     /// ([`filter`]); the layer then covers the filter region.
     pub filters: Vec<filter::Filter>,
+    /// The group's own transform as parameters ([`transform`]), or `None` when it is
+    /// baked into the children's points.
+    pub transform: Option<transform::GroupTransform>,
+    /// Whether the group is drawn as a layer, with an opacity parameter. `false` for a
+    /// group that is only a transform (opacity 1, no clip, mask, blend mode, isolation or
+    /// filter): its children are drawn as if they were its parent's, and it has no
+    /// opacity slot.
+    pub layer: bool,
 }
 
 impl Group {
@@ -163,6 +172,8 @@ impl Group {
             blend: BlendMode::Normal,
             isolate: false,
             filters: Vec::new(),
+            transform: None,
+            layer: true,
         }
     }
 
@@ -837,6 +848,7 @@ impl Scene {
                 st_.normalize_frame();
             }
         });
+        transform::scale_outermost(&mut self.nodes, s);
     }
 }
 

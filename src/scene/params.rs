@@ -142,8 +142,11 @@ pub struct ParamLayout {
     pub owners: Vec<Owner>,
     /// Offsets per path, in paint order (the order of [`Scene::for_each_path`]).
     pub paths: Vec<PathOffsets>,
-    /// Offset of each group's opacity, in walk order.
+    /// Offset of each group's opacity, in walk order (groups drawn as layers only).
     pub groups: Vec<usize>,
+    /// Offset of each group transform's first slot (`tx, ty, angle, scale` follow), in
+    /// walk order ([`transform`](super::transform)).
+    pub transforms: Vec<usize>,
 }
 
 /// What a slot visited by [`walk`] is.
@@ -151,6 +154,8 @@ pub struct ParamLayout {
 pub(crate) enum Part {
     /// Opacity of group number `.0` (walk order).
     GroupOpacity(usize),
+    /// First slot (`tx`) of transform number `.0` (walk order).
+    GroupTransform(usize),
     /// First coordinate of path `.0`'s control points.
     PathPoints(usize),
     /// Any other coordinate of a path's control points.
@@ -179,6 +184,7 @@ pub(crate) fn walk(scene: &mut Scene, f: &mut dyn FnMut(usize, ParamGroup, Part,
         owner: 0,
         path_ix: 0,
         group_ix: 0,
+        transform_ix: 0,
     };
     w.nodes(&mut scene.nodes, Role::Paint);
 }
@@ -189,6 +195,7 @@ struct Walk<'a> {
     owner: usize,
     path_ix: usize,
     group_ix: usize,
+    transform_ix: usize,
 }
 
 impl Walk<'_> {
@@ -196,9 +203,9 @@ impl Walk<'_> {
         for n in nodes {
             match n {
                 Node::Group(g) => {
-                    // A group inside a clip path is drawn opaque: its opacity is no
-                    // parameter.
-                    if role == Role::Paint {
+                    // A group inside a clip path is drawn opaque, and a group that is
+                    // only a transform is no layer: no opacity parameter.
+                    if role == Role::Paint && g.layer {
                         (self.f)(
                             self.owner,
                             ParamGroup::Opacity,
@@ -206,6 +213,17 @@ impl Walk<'_> {
                             &mut g.opacity,
                         );
                         self.group_ix += 1;
+                    }
+                    if let Some(t) = &mut g.transform {
+                        for (i, v) in t.slots_mut().into_iter().enumerate() {
+                            let part = if i == 0 {
+                                Part::GroupTransform(self.transform_ix)
+                            } else {
+                                Part::Point
+                            };
+                            (self.f)(self.owner, ParamGroup::Transform, part, v);
+                        }
+                        self.transform_ix += 1;
                     }
                     self.owner += 1;
                     self.layers(g, role);
@@ -356,6 +374,7 @@ impl ParamLayout {
             owners,
             paths: vec![PathOffsets::default(); scene.path_count()],
             groups: Vec::new(),
+            transforms: Vec::new(),
         };
         // The walk needs `&mut`; a clone keeps this function's signature honest.
         let mut s = scene.clone();
@@ -365,6 +384,7 @@ impl ParamLayout {
             layout.slots.push(ParamSlot { group, owner });
             match part {
                 Part::GroupOpacity(_) => layout.groups.push(at),
+                Part::GroupTransform(_) => layout.transforms.push(at),
                 Part::PathPoints(i) => layout.paths[i].points = at,
                 Part::FillPaint(i) => {
                     layout.paths[i].fill = Some(PaintOffsets {
@@ -454,10 +474,12 @@ fn collect_layer_owners(g: &super::Group, out: &mut Vec<Owner>) {
 }
 
 impl Scene {
-    /// The parameter vector, in the canonical order (module docs).
+    /// The parameter vector, in the canonical order (module docs). A transformed group's
+    /// content is reported in the group's own frame ([`transform`](super::transform)).
     pub fn params(&self) -> Vec<f64> {
         let mut out = Vec::new();
         let mut s = self.clone();
+        super::transform::localize(&mut s.nodes);
         walk(&mut s, &mut |_, _, _, v| out.push(*v));
         out
     }
@@ -475,6 +497,7 @@ impl Scene {
             p.sync_primitive();
             p.join_closing_points();
         });
+        super::transform::globalize(&mut self.nodes);
     }
 }
 

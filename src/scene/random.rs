@@ -96,6 +96,18 @@ pub fn perturb(scene: &Scene, max_px: f64, max_color: f64, seed: u64) -> Scene {
             _ => {}
         }
     }
+    // A group transform moves its content's edge by up to a quarter of `max_px` through
+    // each of its translation, angle and scale.
+    let reaches = super::transform::reaches(&scene.nodes);
+    for (&at, (reach, _)) in layout.transforms.iter().zip(reaches) {
+        let q = 0.25 * max_px;
+        p[at] += rng.range(-q, q);
+        p[at + 1] += rng.range(-q, q);
+        if reach > 0.0 {
+            p[at + 2] += rng.range(-q, q) / reach;
+            p[at + 3] *= 1.0 + rng.range(-q, q).clamp(-0.5 * reach, 0.5 * reach) / reach;
+        }
+    }
     let mut out = scene.clone();
     out.set_params(&p);
     clamp_all_points(&mut out.nodes);

@@ -501,6 +501,27 @@ impl Primitive {
         }
     }
 
+    /// Moves by `d` (every position slot; sizes and angle unchanged).
+    pub(crate) fn translate(&mut self, d: Point) {
+        let mut axis = 0;
+        for (what, v) in self.slots_mut() {
+            if what == Slot::Position {
+                *v += d[axis];
+                axis = 1 - axis;
+            }
+        }
+    }
+
+    /// The values of the [`size_slots`](Self::size_slots), in order.
+    pub(crate) fn size_values(&self) -> Vec<f64> {
+        let mut me = self.clone();
+        me.slots_mut()
+            .into_iter()
+            .filter(|(what, _)| *what == Slot::Size)
+            .map(|(_, v)| *v)
+            .collect()
+    }
+
     /// Scales about the origin by `s > 0` (every position and size; not the angle).
     pub(crate) fn scale(&mut self, s: f64) {
         for (what, v) in self.slots_mut() {

@@ -80,8 +80,11 @@ pub struct GroupSlots {
 pub struct Structure {
     /// Per path.
     pub shapes: Vec<ShapeSlots>,
-    /// Per group.
+    /// Per group drawn as a layer: its opacity.
     pub groups: Vec<GroupSlots>,
+    /// Per group with a transform parameter: its first slot (`tx, ty, angle, scale`
+    /// follow; [`transform`](super::transform)).
+    pub transforms: Vec<GroupSlots>,
 }
 
 fn paint_slots(paint: &Paint, po: Option<PaintOffsets>, opacity: usize) -> Option<PaintSlots> {
@@ -105,11 +108,14 @@ fn paint_slots(paint: &Paint, po: Option<PaintOffsets>, opacity: usize) -> Optio
     })
 }
 
-fn group_ids(nodes: &[Node], out: &mut Vec<String>) {
+/// The ids of the groups that `keep` selects, in document order.
+fn group_ids(nodes: &[Node], keep: fn(&super::Group) -> bool, out: &mut Vec<String>) {
     for n in nodes {
         if let Node::Group(g) = n {
-            out.push(g.id.clone());
-            group_ids(&g.children, out);
+            if keep(g) {
+                out.push(g.id.clone());
+            }
+            group_ids(&g.children, keep, out);
         }
     }
 }
@@ -163,14 +169,19 @@ impl Structure {
                 stroke_width: p.stroke.as_ref().map(|_| off.stroke_width),
             });
         });
-        let mut ids = Vec::new();
-        group_ids(&scene.nodes, &mut ids);
-        let groups = ids
-            .into_iter()
-            .zip(&layout.groups)
-            .map(|(id, &offset)| GroupSlots { id, offset })
-            .collect();
-        Structure { shapes, groups }
+        let slots = |keep: fn(&super::Group) -> bool, offsets: &[usize]| {
+            let mut ids = Vec::new();
+            group_ids(&scene.nodes, keep, &mut ids);
+            ids.into_iter()
+                .zip(offsets)
+                .map(|(id, &offset)| GroupSlots { id, offset })
+                .collect()
+        };
+        Structure {
+            shapes,
+            groups: slots(|g| g.layer, &layout.groups),
+            transforms: slots(|g| g.transform.is_some(), &layout.transforms),
+        }
     }
 
     /// A gradient (in [`Scene::params`] order) per shape, as `diffsvg grad --json` prints
@@ -237,7 +248,15 @@ impl Structure {
             .iter()
             .map(|g| json!({"id": g.id, "opacity": grad[g.offset]}))
             .collect();
-        json!({"loss": loss, "shapes": shapes, "groups": groups})
+        let transforms: Vec<Value> = self
+            .transforms
+            .iter()
+            .map(|g| {
+                let v = &grad[g.offset..g.offset + 4];
+                json!({"id": g.id, "translate": [v[0], v[1]], "angle": v[2], "scale": v[3]})
+            })
+            .collect();
+        json!({"loss": loss, "shapes": shapes, "groups": groups, "transforms": transforms})
     }
 }
 

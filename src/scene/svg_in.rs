@@ -5,8 +5,9 @@ use std::path::Path as FsPath;
 use super::{
     Affine, BlendMode, Clip, FRAME_IDENTITY, Fill, FillRule, Fonts, Gradient, GradientKind, Group,
     ImagePaint, ImageQuality, LineCap, LineJoin, Mask, MaskKind, Node, Paint, Path, Role, Scene,
-    Spread, Stop, Stroke, apply, concat,
+    IDENTITY, Point, Spread, Stop, Stroke, apply, concat, invert,
 };
+use super::transform::GroupTransform;
 use crate::error::{Error, Result};
 
 use crate::image_io::{gunzip_bounded, is_gzip, read_bounded};
@@ -764,6 +765,10 @@ struct Ctx<'a> {
     pattern_tiles: std::cell::Cell<usize>,
     /// Shapes copied into pattern tiles so far ([`MAX_PATTERN_SHAPES`]).
     pattern_shapes: std::cell::Cell<usize>,
+    /// The map from the frame of the innermost group with a transform parameter to device
+    /// pixels (the identity outside any): a group's parameter is its transform relative
+    /// to it ([`GroupTransform`]).
+    frame: std::cell::Cell<Affine>,
 }
 
 impl Ctx<'_> {
@@ -848,10 +853,26 @@ pub fn from_tree(tree: &usvg::Tree, name: &FsPath, sizing: Sizing) -> Result<Sce
         image_pixels: std::cell::Cell::new(0),
         pattern_tiles: std::cell::Cell::new(0),
         pattern_shapes: std::cell::Cell::new(0),
+        frame: std::cell::Cell::new(IDENTITY),
     };
     let mut scene = Scene::new(w, h);
-    let t = concat(&ctx.root, &to_affine(tree.root().transform()));
-    scene.nodes = convert_group_children(tree.root(), &ctx, &t, Role::Paint)?;
+    let mut t = concat(&ctx.root, &to_affine(tree.root().transform()));
+    // usvg wraps the drawing in a group of its own for the viewBox (and the root's
+    // `transform`): that is the canvas's frame, not a group transform to fit. (A drawing
+    // whose one element is a plain `<g>` without an id looks the same, and is baked too.)
+    let mut top = tree.root();
+    if let [usvg::Node::Group(w)] = top.children()
+        && w.id().is_empty()
+        && w.opacity().get() >= 1.0
+        && w.clip_path().is_none()
+        && w.mask().is_none()
+        && w.filters().is_empty()
+        && w.blend_mode() == usvg::BlendMode::Normal
+    {
+        t = concat(&t, &to_affine(w.transform()));
+        top = w;
+    }
+    scene.nodes = convert_group_children(top, &ctx, &t, Role::Paint)?;
 
     super::svg_out::check_numbers_with(&scene, super::svg_out::READ_SLACK)
         .map_err(|what| ctx.invalid(what))?;
@@ -875,7 +896,42 @@ fn convert_group_children(g: &usvg::Group, ctx: &Ctx, t: &Affine, role: Role) ->
                         .map_err(|fe| ctx.unsupported(what(&format!("element with {fe}"))))?,
                     Role::Clip => Vec::new(),
                 };
-                let children = convert_group_children(g, ctx, &gt, role)?;
+                // A transform that can be a parameter: the group's frame is the one its
+                // children's parameters are in.
+                // One shape carries its own parameters (and usvg puts a shape's own
+                // `transform` on a group of its own): two or more make a parameter worth it.
+                let movable = role == Role::Paint
+                    && !g.transform().is_identity()
+                    && shapes_in(g) >= 2
+                    && movable_group(g)
+                    && is_uniform(&gt);
+                let relative = invert(&ctx.frame.get()).map(|f| concat(&f, &gt));
+                let own = relative
+                    .filter(|_| movable)
+                    .and_then(|r| GroupTransform::from_affine(&r, [0.0; 2]).map(|_| r));
+                let outer = ctx.frame.get();
+                if own.is_some() {
+                    ctx.frame.set(gt);
+                }
+                let converted = convert_group_children(g, ctx, &gt, role);
+                ctx.frame.set(outer);
+                let mut children = converted?;
+                let transform = match own {
+                    Some(r) if super::transform::movable(&children) => {
+                        // Rotate and scale about the content's center in the local frame
+                        // (which a change of the transform leaves where it is, so a file
+                        // written and read back gets the same parameters).
+                        let pivot = invert(&gt)
+                            .and_then(|i| local_center(&children, &i))
+                            .unwrap_or([0.0; 2]);
+                        GroupTransform::from_affine(&r, pivot)
+                    }
+                    Some(_) => {
+                        bake(&mut children);
+                        None
+                    }
+                    None => None,
+                };
                 let clip = match g.clip_path() {
                     Some(c) => Some(Box::new(convert_clip(c, ctx, &gt)?)),
                     None => None,
@@ -903,11 +959,19 @@ fn convert_group_children(g: &usvg::Group, ctx: &Ctx, t: &Affine, role: Role) ->
                     // Isolation matters only to children that blend.
                     isolate: g.isolate() && role == Role::Paint,
                     filters,
+                    transform,
+                    layer: true,
                 };
                 // A layer composited source-over at full opacity, unclipped and
-                // unmasked, changes nothing (`isolation: isolate` alone).
+                // unmasked, changes nothing (`isolation: isolate` alone): no layer, and
+                // without a transform parameter no group at all.
                 if opacity < 1.0 || !group.is_plain() {
                     out.push(Node::Group(group));
+                } else if group.transform.is_some() {
+                    out.push(Node::Group(Group {
+                        layer: false,
+                        ..group
+                    }));
                 } else {
                     out.extend(group.children);
                 }
@@ -942,6 +1006,95 @@ fn convert_group_children(g: &usvg::Group, ctx: &Ctx, t: &Affine, role: Role) ->
         }
     }
     Ok(out)
+}
+
+/// Whether a usvg group's content can live in a frame of its own
+/// ([`transform`](super::transform)): plain groups whose transforms keep strokes round,
+/// paths with solid paints and undashed strokes; no text, image, clip path, mask or filter.
+fn movable_group(g: &usvg::Group) -> bool {
+    g.clip_path().is_none()
+        && g.mask().is_none()
+        && g.filters().is_empty()
+        && g.children().iter().all(|n| match n {
+            usvg::Node::Group(c) => is_uniform(&to_affine(c.transform())) && movable_group(c),
+            usvg::Node::Path(p) => {
+                let solid = |paint: &usvg::Paint| matches!(paint, usvg::Paint::Color(_));
+                p.fill().is_none_or(|f| solid(f.paint()))
+                    && p
+                        .stroke()
+                        .is_none_or(|s| solid(s.paint()) && s.dasharray().is_none())
+            }
+            usvg::Node::Image(_) | usvg::Node::Text(_) => false,
+        })
+}
+
+/// The paths under a usvg group.
+fn shapes_in(g: &usvg::Group) -> usize {
+    g.children()
+        .iter()
+        .map(|n| match n {
+            usvg::Node::Group(c) => shapes_in(c),
+            _ => 1,
+        })
+        .sum()
+}
+
+/// Whether `t` scales uniformly (a similarity, possibly mirrored): a stroke under it stays
+/// round, so it is drawn in device space.
+fn is_uniform(t: &Affine) -> bool {
+    let [a, b, c, d, _, _] = *t;
+    let (sx, sy) = (a.hypot(b), c.hypot(d));
+    sx > 0.0 && (sx - sy).abs() <= 1e-9 * sx && (a * c + b * d).abs() <= 1e-9 * sx * sy
+}
+
+/// The center of the bounds of every control point under `nodes` (device pixels) mapped
+/// by `to_local`.
+fn local_center(nodes: &[Node], to_local: &Affine) -> Option<Point> {
+    let mut scene = Scene::new(0, 0);
+    scene.nodes = nodes.to_vec();
+    let mut b: Option<[f64; 4]> = None;
+    let mut add = |[x0, y0, x1, y1]: [f64; 4]| {
+        let o = b.get_or_insert([x0, y0, x1, y1]);
+        *o = [o[0].min(x0), o[1].min(y0), o[2].max(x1), o[3].max(y1)];
+    };
+    let k = (to_local[0] * to_local[3] - to_local[1] * to_local[2]).abs().sqrt();
+    scene.for_each_path(|p| match &p.primitive {
+        // A circle's outline starts where its angle says, which turning the group does
+        // not change: its bounds from its center and radius instead.
+        Some(c) if matches!(c.shape, super::Shape::Circle { .. }) => {
+            let [x, y] = apply(to_local, c.center());
+            let r = k * c.radius();
+            add([x - r, y - r, x + r, y + r]);
+        }
+        _ => {
+            for q in &p.points {
+                let [x, y] = apply(to_local, *q);
+                add([x, y, x, y]);
+            }
+        }
+    });
+    b.map(|r| [0.5 * (r[0] + r[2]), 0.5 * (r[1] + r[3])])
+}
+
+/// Drops every transform parameter under `nodes` (their geometry is in device space
+/// already): a group that was only a transform gives way to its children.
+fn bake(nodes: &mut Vec<Node>) {
+    let mut out = Vec::with_capacity(nodes.len());
+    for n in nodes.drain(..) {
+        match n {
+            Node::Group(mut g) => {
+                g.transform = None;
+                bake(&mut g.children);
+                if g.layer {
+                    out.push(Node::Group(g));
+                } else {
+                    out.extend(g.children);
+                }
+            }
+            p => out.push(p),
+        }
+    }
+    *nodes = out;
 }
 
 /// A clip path applied to a group whose user space `t` maps to device pixels.

@@ -196,7 +196,12 @@ impl Writer {
                     if !g.id.is_empty() {
                         let _ = write!(attrs, " id=\"{}\"", escape(&g.id));
                     }
-                    if !self.in_clip {
+                    if let Some(t) = &g.transform {
+                        // `f32`, the precision it is read with, in full.
+                        let m = t.affine().map(|v| format!("{}", v as f32));
+                        let _ = write!(attrs, " transform=\"matrix({})\"", m.join(" "));
+                    }
+                    if !self.in_clip && g.layer {
                         let _ = write!(attrs, " opacity=\"{}\"", num(g.opacity.clamp(0.0, 1.0)));
                     }
                     attrs.push_str(&self.layer_attrs(g));
@@ -664,7 +669,10 @@ impl Scene {
             }
         }
         reserve(&self.nodes, &mut w.ids);
-        w.nodes(&self.nodes, 1);
+        // A transformed group's content is written in its own frame, under its transform.
+        let mut nodes = self.nodes.clone();
+        super::transform::localize(&mut nodes);
+        w.nodes(&nodes, 1);
         let mut out = String::new();
         let _ = writeln!(
             out,

@@ -120,6 +120,40 @@ fn primitive_parameters_match_differences() {
     assert_agrees("primitives", &scene, &target, Loss::Mse, None);
 }
 
+/// Nested groups whose transforms are parameters (a path, strokes, a rounded rectangle, an
+/// ellipse and a circle in them), beside a skewed group that stays baked.
+const NESTED: &str = r##"<svg xmlns="http://www.w3.org/2000/svg" width="80" height="60">
+  <rect width="80" height="60" fill="#f0ece0"/>
+  <g id="outer" transform="translate(6 4) rotate(12 40 30)">
+    <path id="blob" d="M10 10 C30 0 40 20 30 30 Q20 40 10 30 Z" fill="#3366aa"
+          stroke="#112244" stroke-width="2"/>
+    <g id="inner" transform="translate(40 20) scale(0.8) rotate(-20)">
+      <rect id="r" x="0" y="0" width="20" height="12" rx="3" fill="#cc4422"/>
+      <ellipse id="e" cx="10" cy="24" rx="8" ry="4" fill="#22aa66"/>
+      <circle id="c" cx="26" cy="20" r="5" fill="#eeaa00" stroke="#553300" stroke-width="1.5"/>
+    </g>
+  </g>
+  <g id="kept" transform="skewX(20)"><path d="M5 50 L20 50 L15 58 Z" fill="#777"/>
+    <path d="M20 40 L30 40 L25 48 Z" fill="#555"/></g>
+</svg>"##;
+
+/// Group transforms as parameters: each group's translation, angle and scale, and the
+/// local values of what it holds, against central differences; and the file draws as
+/// resvg draws it.
+#[test]
+fn group_transforms_match_differences() {
+    let scene = Scene::from_svg_str(NESTED, "nested.svg", Sizing::Natural).unwrap();
+    let layout = ParamLayout::new(&scene);
+    assert_eq!(layout.transforms.len(), 2, "outer and inner, not the skew");
+    let target = nudged_target(&scene, 1.0, None);
+    assert_agrees("group transforms", &scene, &target, Loss::Mse, None);
+    let dir = scratch("group-transforms");
+    let file = write(&dir, "nested.svg", NESTED);
+    let parity = diffsvg::reference::parity(&file, Sizing::Natural, &RenderOptions::default())
+        .unwrap();
+    assert!(parity.passes(), "{:?}", parity.comparison);
+}
+
 /// A drawing of rectangles, circles and ellipses (rotated and scaled by their groups),
 /// perturbed in those parameters and fitted back: ≥ 45 dB, written back with the same
 /// elements.
@@ -177,6 +211,9 @@ fn primitives_drawing_is_fitted_back_as_itself() {
         (3, 2, 1, 0),
         "{text}"
     );
+    // The turned group of two shapes keeps its transform (a parameter); the scaled group
+    // of one circle is baked into it.
+    assert_eq!(text.matches("transform=\"matrix(").count(), 1, "{text}");
 }
 
 /// `fit --free-shapes`: the same drawing fitted with its shapes' outlines as free paths,
