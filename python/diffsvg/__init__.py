@@ -366,6 +366,11 @@ class Scene:
                 out.append((sh["stroke_width"], 1, ("shapes", i, "stroke_width"), ()))
         for j, g in enumerate(st["groups"]):
             out.append((g["offset"], 1, ("groups", j, "opacity"), ()))
+        for j, t in enumerate(st["transforms"]):
+            at = t["offset"]
+            out.append((at, 2, ("transforms", j, "translate"), (2,)))
+            out.append((at + 2, 1, ("transforms", j, "angle"), ()))
+            out.append((at + 3, 1, ("transforms", j, "scale"), ()))
         out.sort(key=lambda p: p[0])
         return out
 
@@ -379,7 +384,10 @@ class Scene:
                 if e is not None and e["kind"] != "solid":
                     d[key] = {}
             shapes.append(d)
-        return {"shapes": shapes, "groups": [{} for _ in st["groups"]]}
+        tree = {"shapes": shapes, "groups": [{} for _ in st["groups"]]}
+        if st["transforms"]:
+            tree["transforms"] = [{} for _ in st["transforms"]]
+        return tree
 
     def unflatten(self, flat, dtype=np.float32) -> Arrays:
         """A vector in :meth:`params` layout as the per-shape structure of
@@ -408,8 +416,12 @@ class Scene:
                               | {"opacity": ()},     # image: its pixels are fixed
                          "stroke": ...,              # as fill
                          "stroke_width": ()}, ...],
-             "groups": [{"opacity": ()}, ...]}
+             "groups": [{"opacity": ()}, ...],
+             "transforms": [{"translate": (2,), "angle": (), "scale": ()}, ...]}
 
+        ``transforms`` is present when groups' transforms are parameters (a similarity
+        over two or more shapes: translation in pixels, angle in radians, scale, about
+        the content's center; the shapes in such a group are in its own frame).
         A key is absent when the shape has no such paint. A circle, ellipse or
         rectangle has its own parameters in place of ``points`` (device pixels; ``angle``
         in radians, its rotation about its center). In a path every segment is a cubic:
@@ -507,7 +519,13 @@ class Scene:
                 d["stroke_width"] = float(g[sh["stroke_width"]])
             shapes.append(d)
         groups = [{"id": gr["id"], "opacity": float(g[gr["offset"]])} for gr in st["groups"]]
-        return {"shapes": shapes, "groups": groups}
+        out = {"shapes": shapes, "groups": groups}
+        if st["transforms"]:
+            out["transforms"] = [
+                {"id": t["id"], "translate": g[t["offset"]:t["offset"] + 2].tolist(),
+                 "angle": float(g[t["offset"] + 2]), "scale": float(g[t["offset"] + 3])}
+                for t in st["transforms"]]
+        return out
 
 
 _VALUES_NOT_STRUCTURE = "arrays carry values; the scene's structure is fixed"

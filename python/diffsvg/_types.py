@@ -83,9 +83,11 @@ class GroupEntry(TypedDict):
 
 
 class Structure(TypedDict):
-    """``Scene.structure()``."""
+    """``Scene.structure()``: ``transforms`` holds each group transform's first slot
+    (``tx, ty, angle, scale`` follow)."""
     shapes: List[ShapeEntry]
     groups: List[GroupEntry]
+    transforms: List[GroupEntry]
 
 
 class FitInfo(TypedDict):
@@ -193,13 +195,23 @@ class GroupArrays(TypedDict):
     opacity: Array
 
 
+class TransformArrays(TypedDict):
+    """One group transform of ``Scene.arrays()``: pixels, radians, a factor."""
+    translate: Array
+    angle: Array
+    scale: Array
+
+
 class Arrays(TypedDict):
-    """``Scene.arrays()``: the parameters per shape and group, as DiffVG names them."""
+    """``Scene.arrays()``: the parameters per shape and group, as DiffVG names them
+    (``transforms`` only where groups' transforms are parameters)."""
     shapes: List[ShapeArrays]
     groups: List[GroupArrays]
+    transforms: NotRequired[List[TransformArrays]]
 
 
 class GradJson(TypedDict):
     """``Scene.grad_json()``: the layout of ``diffsvg grad --json``."""
     shapes: List[dict]
     groups: List[dict]
+    transforms: NotRequired[List[dict]]

@@ -63,7 +63,7 @@ class _Layout:
     data of a :class:`Params` (equal layouts compare equal, so ``jit`` reuses a compiled
     step for every vector of a scene's structure)."""
 
-    __slots__ = ("pieces", "size", "shapes", "groups", "_hash", "_by_owner")
+    __slots__ = ("pieces", "size", "shapes", "groups", "transforms", "_hash", "_by_owner")
 
     def __init__(self, scene: Scene):
         st = scene.structure()
@@ -71,6 +71,7 @@ class _Layout:
         self.size = sum(p[1] for p in self.pieces)
         self.shapes = len(st["shapes"])
         self.groups = len(st["groups"])
+        self.transforms = len(st["transforms"])
         self._hash = hash(self.pieces)
         self._by_owner: dict = {}
         for off, size, key, shape in self.pieces:
@@ -159,15 +160,19 @@ class Params:
             return _Owners(self, "shapes", self._layout.shapes)
         if key == "groups":
             return _Owners(self, "groups", self._layout.groups)
+        if key == "transforms" and self._layout.transforms:
+            return _Owners(self, "transforms", self._layout.transforms)
         raise KeyError(key)
 
-    def keys(self) -> Tuple[str, str]:
+    def keys(self) -> Tuple[str, ...]:
+        if self._layout.transforms:
+            return ("shapes", "groups", "transforms")
         return ("shapes", "groups")
 
     def arrays(self) -> Arrays:
         """Every shape's and group's arrays as a dict (the structure of
         :meth:`diffsvg.Scene.arrays`), slices of ``flat``."""
-        return {"shapes": list(self["shapes"]), "groups": list(self["groups"])}
+        return {k: list(self[k]) for k in self.keys()}
 
     def set(self, key: Tuple, value) -> "Params":
         """A copy with the array at ``key`` (e.g. ``("shapes", 0, "fill")``) replaced."""

@@ -313,7 +313,9 @@ impl PyScene {
     /// path: `id`, `points` = (offset, count), `primitive` (a circle's, ellipse's or
     /// rectangle's `kind`, `offset` and `fields`, [(name, length)], or None), `segments`
     /// per subpath, `closed` per subpath, `kinds` of the written segments ("L", "Q", "C"), `fill` and `stroke` paint
-    /// entries or None, `stroke_width` offset or None) and `groups` (`id`, `offset`).
+    /// entries or None, `stroke_width` offset or None), `groups` (`id`, `offset` of the
+    /// opacity) and `transforms` (`id`, `offset` of a group transform's `tx, ty, angle,
+    /// scale`).
     fn structure<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let st = Structure::of(&self.inner);
         let shapes = PyList::empty(py);
@@ -339,16 +341,20 @@ impl PyScene {
             d.set_item("stroke_width", sh.stroke_width)?;
             shapes.append(d)?;
         }
-        let groups = PyList::empty(py);
-        for g in &st.groups {
-            let e = PyDict::new(py);
-            e.set_item("id", &g.id)?;
-            e.set_item("offset", g.offset)?;
-            groups.append(e)?;
-        }
+        let entries = |slots: &[diffsvg::scene::structure::GroupSlots]| -> PyResult<_> {
+            let list = PyList::empty(py);
+            for g in slots {
+                let e = PyDict::new(py);
+                e.set_item("id", &g.id)?;
+                e.set_item("offset", g.offset)?;
+                list.append(e)?;
+            }
+            Ok(list)
+        };
         let d = PyDict::new(py);
         d.set_item("shapes", shapes)?;
-        d.set_item("groups", groups)?;
+        d.set_item("groups", entries(&st.groups)?)?;
+        d.set_item("transforms", entries(&st.transforms)?)?;
         Ok(d)
     }
 

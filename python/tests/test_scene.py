@@ -240,3 +240,48 @@ def test_psnr_channels_rgba_and_rgb():
                                                    r"\(6, 5, 3\) \(pass channels='rgb'\)"):
         diffsvg.psnr(a[..., :3], b[..., :3])
     assert diffsvg.psnr(a, a) == float("inf")
+
+
+TURNED = """<svg xmlns="http://www.w3.org/2000/svg" width="64" height="48">
+  <g id="turned" transform="translate(6 4) rotate(12 30 20)">
+    <rect x="10" y="10" width="20" height="12" fill="#cc4422"/>
+    <path d="M34 8 L50 12 L40 30 Z" fill="#2255aa"/>
+  </g>
+</svg>"""
+
+
+def test_group_transforms_are_arrays(tmp_path):
+    s = diffsvg.Scene.from_svg(TURNED)
+    st = s.structure()
+    assert [t["id"] for t in st["transforms"]] == ["turned"] and st["groups"] == []
+    a = s.arrays(np.float64)
+    t = a["transforms"][0]
+    assert t["translate"].shape == (2,)
+    assert abs(float(t["angle"]) - np.radians(12)) < 1e-6 and abs(float(t["scale"]) - 1) < 1e-6
+    assert np.array_equal(s.flatten(a), s.params())
+    # The rectangle's own parameters are in the group's frame: as written.
+    assert np.allclose(a["shapes"][0]["corner"], [10, 10], atol=1e-6)
+    # Turning the group is one number; it survives a save and a load.
+    t["angle"] = t["angle"] + 0.2
+    s.set_arrays(a)
+    s.save(tmp_path / "turned.svg")
+    back = diffsvg.Scene.load(tmp_path / "turned.svg").arrays(np.float64)
+    assert abs(float(back["transforms"][0]["angle"]) - (np.radians(12) + 0.2)) < 1e-5
+    assert np.allclose(back["shapes"][0]["corner"], [10, 10], atol=1e-3)
+    # Gradients come per transform too.
+    target = diffsvg.render(diffsvg.Scene.from_svg(TURNED))
+    _, d = diffsvg.loss(diffsvg.render(s), target, grad=True)
+    g = diffsvg.render_backward(s, d)
+    assert float(g["transforms"][0]["angle"]) > 0  # turning back lowers the loss
+
+
+def test_colors_survive_to_svg_exactly():
+    s = diffsvg.Scene.load(SAMPLES / "10-logo.svg")
+    p = s.params()
+    lay = s.layout()
+    colors = np.flatnonzero(lay["group"] == lay["group_names"].index("colors"))
+    assert colors.size > 0
+    p[colors] = np.linspace(0.013, 0.987, colors.size)
+    s.set_params(p)
+    back = diffsvg.Scene.from_svg(s.to_svg())
+    assert np.array_equal(back.params()[colors], s.params()[colors])

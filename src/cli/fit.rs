@@ -40,8 +40,9 @@ pub struct OptimArgs {
     /// Learning rate of gradient stop offsets.
     #[arg(long, default_value_t = LearningRates::default().stops)]
     pub lr_stops: f64,
-    /// Learning rate of rotations (of circles, ellipses and rectangles), pixels of motion
-    /// at the shape's edge per step.
+    /// Learning rate of transforms (rotations of circles, ellipses and rectangles; group
+    /// transforms' translation, angle and scale), pixels of motion at the shape's or
+    /// group's edge per step.
     #[arg(long, default_value_t = LearningRates::default().transform)]
     pub lr_transform: f64,
     /// Learning-rate schedule.

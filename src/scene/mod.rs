@@ -7,7 +7,8 @@
 //!   of the top-left pixel. Pixel `(i, j)` covers `[i, i+1] × [j, j+1]`; its center is
 //!   `(i + 0.5, j + 0.5)`. SVG transforms and the viewBox are baked in when the scene is
 //!   loaded; only stroke frames and paint transforms keep a matrix (see [`Stroke::frame`],
-//!   [`Gradient::transform`], [`ImagePaint::transform`]).
+//!   [`Gradient::transform`], [`ImagePaint::transform`]), and a group whose transform is
+//!   a parameter ([`transform`]) keeps it too, its content still stored in device pixels.
 //! * **Geometry.** A path is a list of subpaths; each subpath is a start point followed by
 //!   cubic Bézier segments (three points each). Lines and quadratics are elevated to cubics
 //!   exactly and remember their original kind only to be written back compactly.
@@ -40,6 +41,7 @@
 //! ```
 
 mod check;
+mod exact_color;
 pub mod filter;
 pub mod fonts;
 pub(crate) mod geom;

@@ -3,7 +3,10 @@
 //! Every number the optimizer may move is one `f64` slot. The order is fixed by a single
 //! walk over the scene (`walk`) so that parameters, gradients and learning rates line up:
 //!
-//! * nodes in paint order, depth first; a [`Group`](super::Group) contributes its opacity;
+//! * nodes in paint order, depth first; a [`Group`](super::Group) drawn as a layer
+//!   contributes its opacity, then a group with a transform parameter its `tx, ty, angle,
+//!   scale` ([`transform`](super::transform)), whose content's slots are then in the
+//!   group's own frame;
 //! * per path: all control points (`x, y` per point, in [`Path::points`] order), or for
 //!   a circle, ellipse or rectangle its own parameters instead ([`shape`](super::shape)),
 //!   then the fill (paint, then opacity), then the stroke (paint, opacity, width);

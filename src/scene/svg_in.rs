@@ -114,7 +114,18 @@ impl Scene {
         sizing: Sizing,
         fonts: &Fonts,
     ) -> Result<Scene> {
-        from_tree(&parse_tree_with(data, name, fonts)?, name, sizing)
+        let unzipped;
+        let data = if is_gzip(data) {
+            unzipped = gunzip_bounded(data, MAX_DECOMPRESSED_BYTES, name)?;
+            &unzipped[..]
+        } else {
+            data
+        };
+        let mut scene = from_tree(&parse_tree_with(data, name, fonts)?, name, sizing)?;
+        if let Ok(text) = std::str::from_utf8(data) {
+            super::exact_color::restore(&mut scene, text);
+        }
+        Ok(scene)
     }
 }
 

@@ -36,8 +36,9 @@ pub(crate) fn num(v: f64) -> String {
     if s == "-0" { "0".to_string() } else { s }
 }
 
+/// A color in 8 bits; [`exact_color`](super::exact_color) writes what they miss beside it.
 fn hex(c: &[f64; 3]) -> String {
-    let q = |v: f64| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
+    let q = super::exact_color::byte;
     format!("#{:02x}{:02x}{:02x}", q(c[0]), q(c[1]), q(c[2]))
 }
 
@@ -148,6 +149,10 @@ impl Writer {
                         num(s.offset.clamp(0.0, 1.0)),
                         hex(&s.color)
                     );
+                    d.push_str(&super::exact_color::attribute(
+                        super::exact_color::STOP,
+                        &s.color,
+                    ));
                     if s.opacity < 1.0 {
                         let _ = write!(d, " stop-opacity=\"{}\"", num(s.opacity.clamp(0.0, 1.0)));
                     }
@@ -423,9 +428,24 @@ impl Writer {
             }
             None => (super::IDENTITY, String::new()),
         };
+        // Exact colors beside the 8-bit ones are found by the shape's id.
+        use super::exact_color::{FILL, STROKE, attribute};
+        let solid = |paint: Option<&Paint>| match paint {
+            Some(Paint::Solid(c)) => Some(*c),
+            _ => None,
+        };
+        let exact = [
+            (FILL, solid(p.fill.as_ref().map(|f| &f.paint))),
+            (STROKE, solid(p.stroke.as_ref().map(|s| &s.paint))),
+        ]
+        .map(|(name, c)| c.map_or(String::new(), |c| attribute(name, &c)));
+        let id = match p.id.is_empty() {
+            true if exact.iter().any(|a| !a.is_empty()) => self.unique_id("shape"),
+            _ => p.id.clone(),
+        };
         let mut attrs = String::new();
-        if !p.id.is_empty() {
-            let _ = write!(attrs, " id=\"{}\"", escape(&p.id));
+        if !id.is_empty() {
+            let _ = write!(attrs, " id=\"{}\"", escape(&id));
         }
         attrs.push_str(&transform_attr);
         match primitive {
@@ -437,7 +457,7 @@ impl Writer {
         match &p.fill {
             Some(f) => {
                 let v = self.paint(&f.paint, &to_local);
-                let _ = write!(attrs, " fill=\"{v}\"");
+                let _ = write!(attrs, " fill=\"{v}\"{}", exact[0]);
                 if f.opacity < 1.0 {
                     let _ = write!(
                         attrs,
@@ -463,7 +483,8 @@ impl Writer {
             let v = self.paint(&s.paint, &to_local);
             let _ = write!(
                 attrs,
-                " stroke=\"{v}\" stroke-width=\"{}\"",
+                " stroke=\"{v}\"{} stroke-width=\"{}\"",
+                exact[1],
                 num(s.width.max(0.0))
             );
             if s.opacity < 1.0 {

@@ -309,8 +309,7 @@ fn reach_nodes(nodes: &[Node], out: &mut Vec<(f64, f64)>) {
 
 fn reach_group(g: &Group, out: &mut Vec<(f64, f64)>) {
     if let Some(t) = &g.transform {
-        // The pivot in device space: its image under this map is not enough when the group
-        // is nested, so measure from the content's own center instead.
+        // Half the diagonal of the content's device bounds.
         let mut b: Option<[f64; 4]> = None;
         for_each_path(&g.children, &mut |p| {
             if let Some(r) = p.control_bounds() {
