@@ -40,7 +40,9 @@ pub(crate) fn attribute(name: &str, c: &[f64; 3]) -> String {
 }
 
 fn parse(value: &str) -> Option<[f64; 3]> {
-    let mut it = value.split_ascii_whitespace().map(|v| v.parse::<f64>().ok());
+    let mut it = value
+        .split_ascii_whitespace()
+        .map(|v| v.parse::<f64>().ok());
     let c = [it.next()??, it.next()??, it.next()??];
     (it.next().is_none() && c.iter().all(|v| (0.0..=1.0).contains(v))).then_some(c)
 }

@@ -50,9 +50,9 @@ mod project;
 pub mod random;
 pub mod shape;
 pub mod structure;
-pub mod transform;
 pub(crate) mod svg_in;
 pub(crate) mod svg_out;
+pub mod transform;
 
 pub use fonts::Fonts;
 pub use params::{ParamGroup, ParamLayout, ParamSlot};

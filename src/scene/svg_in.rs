@@ -2,12 +2,12 @@
 
 use std::path::Path as FsPath;
 
+use super::transform::GroupTransform;
 use super::{
     Affine, BlendMode, Clip, FRAME_IDENTITY, Fill, FillRule, Fonts, Gradient, GradientKind, Group,
-    ImagePaint, ImageQuality, LineCap, LineJoin, Mask, MaskKind, Node, Paint, Path, Role, Scene,
-    IDENTITY, Point, Spread, Stop, Stroke, apply, concat, invert,
+    IDENTITY, ImagePaint, ImageQuality, LineCap, LineJoin, Mask, MaskKind, Node, Paint, Path,
+    Point, Role, Scene, Spread, Stop, Stroke, apply, concat, invert,
 };
-use super::transform::GroupTransform;
 use crate::error::{Error, Result};
 
 use crate::image_io::{gunzip_bounded, is_gzip, read_bounded};
@@ -1031,8 +1031,7 @@ fn movable_group(g: &usvg::Group) -> bool {
             usvg::Node::Path(p) => {
                 let solid = |paint: &usvg::Paint| matches!(paint, usvg::Paint::Color(_));
                 p.fill().is_none_or(|f| solid(f.paint()))
-                    && p
-                        .stroke()
+                    && p.stroke()
                         .is_none_or(|s| solid(s.paint()) && s.dasharray().is_none())
             }
             usvg::Node::Image(_) | usvg::Node::Text(_) => false,
@@ -1068,7 +1067,9 @@ fn local_center(nodes: &[Node], to_local: &Affine) -> Option<Point> {
         let o = b.get_or_insert([x0, y0, x1, y1]);
         *o = [o[0].min(x0), o[1].min(y0), o[2].max(x1), o[3].max(y1)];
     };
-    let k = (to_local[0] * to_local[3] - to_local[1] * to_local[2]).abs().sqrt();
+    let k = (to_local[0] * to_local[3] - to_local[1] * to_local[2])
+        .abs()
+        .sqrt();
     scene.for_each_path(|p| match &p.primitive {
         // A circle's outline starts where its angle says, which turning the group does
         // not change: its bounds from its center and radius instead.

@@ -314,7 +314,12 @@ fn reach_group(g: &Group, out: &mut Vec<(f64, f64)>) {
         for_each_path(&g.children, &mut |p| {
             if let Some(r) = p.control_bounds() {
                 b = Some(b.map_or(r, |o| {
-                    [o[0].min(r[0]), o[1].min(r[1]), o[2].max(r[2]), o[3].max(r[3])]
+                    [
+                        o[0].min(r[0]),
+                        o[1].min(r[1]),
+                        o[2].max(r[2]),
+                        o[3].max(r[3]),
+                    ]
                 }));
             }
         });
@@ -606,7 +611,10 @@ mod tests {
         assert_eq!(ParamLayout::new(&back).transforms.len(), 2);
         assert!(close(&device_points(&back), &after, 2e-3));
         let (a, b) = (moved.params(), back.params());
-        assert!(a.iter().zip(&b).all(|(x, y)| (x - y).abs() < 2e-3), "{a:?}\n{b:?}");
+        assert!(
+            a.iter().zip(&b).all(|(x, y)| (x - y).abs() < 2e-3),
+            "{a:?}\n{b:?}"
+        );
     }
 
     #[test]

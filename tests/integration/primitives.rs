@@ -149,8 +149,8 @@ fn group_transforms_match_differences() {
     assert_agrees("group transforms", &scene, &target, Loss::Mse, None);
     let dir = scratch("group-transforms");
     let file = write(&dir, "nested.svg", NESTED);
-    let parity = diffsvg::reference::parity(&file, Sizing::Natural, &RenderOptions::default())
-        .unwrap();
+    let parity =
+        diffsvg::reference::parity(&file, Sizing::Natural, &RenderOptions::default()).unwrap();
     assert!(parity.passes(), "{:?}", parity.comparison);
 }
 
