@@ -13,7 +13,7 @@
 //! into its frame, and [`Scene::set_params`](super::Scene::set_params) writes local values
 //! and maps them forward, innermost group first. So the scene is a function of the
 //! parameter vector alone. The backward pass computes gradients of the device values,
-//! then [`chain_gradient`] carries them into the local frames and onto the transforms,
+//! then `chain_gradient` carries them into the local frames and onto the transforms,
 //! outermost group first.
 //!
 //! **Which groups.** The content must be paths with solid paints, undashed strokes drawn
