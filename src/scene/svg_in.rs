@@ -917,9 +917,15 @@ fn convert_group_children(g: &usvg::Group, ctx: &Ctx, t: &Affine, role: Role) ->
                     && movable_group(g)
                     && is_uniform(&gt);
                 let relative = invert(&ctx.frame.get()).map(|f| concat(&f, &gt));
-                let own = relative
-                    .filter(|_| movable)
-                    .and_then(|r| GroupTransform::from_affine(&r, [0.0; 2]).map(|_| r));
+                // Within the range a fit keeps it in, so that the first step does not
+                // jump (a scale of 1e-6 stays baked).
+                let own = relative.filter(|_| movable).filter(|r| {
+                    GroupTransform::from_affine(r, [0.0; 2]).is_some_and(|t| {
+                        let mut kept = t;
+                        kept.project();
+                        kept == t
+                    })
+                });
                 let outer = ctx.frame.get();
                 if own.is_some() {
                     ctx.frame.set(gt);

@@ -618,6 +618,19 @@ mod tests {
     }
 
     #[test]
+    fn transforms_outside_the_fitted_range_stay_baked() {
+        for t in ["scale(1e-5)", "scale(5000)", "translate(5e29 0)"] {
+            let svg = format!(
+                r#"<svg xmlns="http://www.w3.org/2000/svg" width="20" height="20">
+                <g transform="{t}"><rect width="4" height="4"/><rect x="5" width="4" height="4"/>
+                </g></svg>"#
+            );
+            let s = Scene::from_svg_str(&svg, "t.svg", Sizing::Natural).unwrap();
+            assert!(ParamLayout::new(&s).transforms.is_empty(), "{t}");
+        }
+    }
+
+    #[test]
     fn scaling_the_scene_scales_the_outermost_transform() {
         let s = Scene::from_svg_str(NESTED, "n.svg", Sizing::Natural).unwrap();
         let mut big = s.clone();
