@@ -52,6 +52,7 @@ pub mod shape;
 pub mod structure;
 pub(crate) mod svg_in;
 pub(crate) mod svg_out;
+mod svg_out_filter;
 pub mod transform;
 
 pub use fonts::Fonts;

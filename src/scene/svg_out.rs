@@ -37,7 +37,7 @@ pub(crate) fn num(v: f64) -> String {
 }
 
 /// A color in 8 bits; [`exact_color`](super::exact_color) writes what they miss beside it.
-fn hex(c: &[f64; 3]) -> String {
+pub(crate) fn hex(c: &[f64; 3]) -> String {
     let q = super::exact_color::byte;
     format!("#{:02x}{:02x}{:02x}", q(c[0]), q(c[1]), q(c[2]))
 }
@@ -247,6 +247,19 @@ impl Writer {
         }
         if !style.is_empty() {
             let _ = write!(attrs, " style=\"{}\"", style.join(";"));
+        }
+        if !g.filters.is_empty() {
+            let refs: Vec<String> = g
+                .filters
+                .iter()
+                .map(|f| {
+                    let id = self.unique_id(if f.id.is_empty() { "filter" } else { &f.id });
+                    self.defs
+                        .push_str(&super::svg_out_filter::filter_element(f, &id));
+                    format!("url(#{id})")
+                })
+                .collect();
+            let _ = write!(attrs, " filter=\"{}\"", refs.join(" "));
         }
         attrs
     }

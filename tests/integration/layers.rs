@@ -277,6 +277,49 @@ fn layers_survive_a_round_trip_on_resvgs_suite() {
     assert!(checked > 150, "only {checked} files checked");
 }
 
+/// Every supported file of resvg's filters folder reads back from diffsvg's SVG out with
+/// the same pixels: the filters are written, not dropped.
+#[test]
+fn filters_survive_a_round_trip_on_resvgs_suite() {
+    let Some(data) = shared_data("filters_survive_a_round_trip_on_resvgs_suite") else {
+        return;
+    };
+    let root = data.join("resvg-tests/tests/filters");
+    let mut files = Vec::new();
+    for dir in std::fs::read_dir(&root).unwrap() {
+        let dir = dir.unwrap().path();
+        for e in std::fs::read_dir(&dir).unwrap() {
+            let p = e.unwrap().path();
+            if p.extension().is_some_and(|e| e == "svg") {
+                files.push(p);
+            }
+        }
+    }
+    files.sort();
+    let opts = RenderOptions::default();
+    let (mut checked, mut filtered) = (0, 0);
+    for path in files {
+        let Ok(a) = Scene::load(&path, Sizing::Natural) else {
+            continue;
+        };
+        let text = a.to_svg_string();
+        filtered += usize::from(text.contains("<filter "));
+        let b = Scene::from_svg_str(&text, "roundtrip.svg", Sizing::Natural)
+            .unwrap_or_else(|e| panic!("{}: {e}\n{text}", path.display()));
+        let c = compare(&render(&a, &opts), &render(&b, &opts));
+        assert!(
+            c.max < 3.0 && c.mae < 0.02,
+            "{}: round trip changed pixels by {c:?}\n{text}",
+            path.display()
+        );
+        checked += 1;
+    }
+    assert!(
+        checked > 200 && filtered > 150,
+        "{checked} files, {filtered} with filters"
+    );
+}
+
 #[test]
 fn pattern_gradients_reach_the_tiles() {
     let s = scene(
