@@ -639,18 +639,10 @@ pub(crate) fn from_usvg(
                     light: light(fe.light_source(), t),
                 })),
                 K::Image(fe) => {
-                    // resvg draws the element at its subregion's device corner, counted
-                    // from the filter region's corner (cut to the canvas) as its origin.
+                    // resvg draws the content scaled by the axis scales, its origin at
+                    // the subregion's device corner.
                     let sub = device_rect(p.rect(), t);
-                    let reg = device_rect(f.rect(), t);
-                    let at = [
-                        sx,
-                        0.0,
-                        0.0,
-                        sy,
-                        (sub[0] + reg[0].max(0)) as f64,
-                        (sub[1] + reg[1].max(0)) as f64,
-                    ];
+                    let at = [sx, 0.0, 0.0, sy, sub[0] as f64, sub[1] as f64];
                     FilterKind::Image {
                         nodes: image(fe.root(), &at)
                             .map_err(|e| format!("feImage whose content is refused: {e}"))?,

@@ -1,8 +1,9 @@
 //! feMorphology: each premultiplied channel's minimum (erode) or maximum (dilate) over a
 //! window, and its subgradient.
 //!
-//! resvg's window: `c = min(2·⌈r⌉, size)` pixels per axis, starting `⌊c/2⌋` before the
-//! pixel; pixels outside the image are skipped (not read as transparent). A rectangle's
+//! resvg 0.49's window: the pixels within `t = min(round(r), size − 1)` of the pixel along
+//! each axis (`2t + 1` per axis); pixels outside the image are skipped (not read as
+//! transparent). A rectangle's
 //! extremum is separable (rows, then columns), and each 1-D pass is a sliding window with
 //! a monotonic queue, so the cost is independent of the radius. The backward pass sends
 //! each output's gradient to the one pixel that attains the extremum (the first one in
@@ -11,10 +12,11 @@
 use std::collections::VecDeque;
 
 /// The window length and its start before the pixel, for a radius `r` (device pixels) on
-/// an axis of `n` pixels.
+/// an axis of `n` pixels (`n ≥ 1`).
 fn window(r: f64, n: usize) -> (usize, usize) {
-    let c = ((r.ceil().min(n as f64)) as usize).saturating_mul(2).min(n).max(1);
-    (c, c / 2)
+    // Rounded in f32, half away from zero, as resvg rounds it.
+    let t = ((r as f32).round().max(0.0) as f64).min(n.saturating_sub(1) as f64) as usize;
+    (2 * t + 1, t)
 }
 
 /// For each `i < n`, the index in `[i − t, i − t + c)` ∩ `[0, n)` whose value is the
