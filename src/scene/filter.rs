@@ -564,7 +564,10 @@ pub(crate) fn from_usvg(
                 K::Morphology(fe) => FilterKind::Morphology {
                     input: input(fe.input()),
                     dilate: fe.operator() == usvg::filter::MorphologyOperator::Dilate,
-                    radius: [fe.radius_x().get() as f64 * sx, fe.radius_y().get() as f64 * sy],
+                    radius: [
+                        fe.radius_x().get() as f64 * sx,
+                        fe.radius_y().get() as f64 * sy,
+                    ],
                 },
                 K::ConvolveMatrix(fe) => {
                     let m = fe.matrix();

@@ -233,7 +233,10 @@ mod tests {
             };
             let fd = (at(e) - at(-e)) / (2.0 * e as f64);
             let an = dot(&back, &v);
-            assert!((fd - an).abs() < 1e-2 * fd.abs().max(0.1), "{edge} {preserve}: {fd} {an}");
+            assert!(
+                (fd - an).abs() < 1e-2 * fd.abs().max(0.1),
+                "{edge} {preserve}: {fd} {an}"
+            );
         }
     }
 }

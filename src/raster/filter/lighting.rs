@@ -23,7 +23,7 @@
 //! the input get none (they are not read).
 
 use crate::raster::jet::{Jet, Scalar};
-use crate::scene::filter::{Lighting, LightSource};
+use crate::scene::filter::{LightSource, Lighting};
 
 /// The light source relative to the region's top-left pixel.
 #[derive(Clone, Copy)]
@@ -303,19 +303,24 @@ mod tests {
         let ramp: Vec<[f32; 4]> = (0..15)
             .map(|i| [0.0, 0.0, 0.0, 0.1 * (i % 5) as f32])
             .collect();
-        let mut d = fe(None, LightSource::Distant {
-            azimuth: 180.0,
-            elevation: 0.0,
-        });
+        let mut d = fe(
+            None,
+            LightSource::Distant {
+                azimuth: 180.0,
+                elevation: 0.0,
+            },
+        );
         d.constant = 1.0;
         d.color = [1.0; 3];
         let out = apply(&d, &Local::new(&d.light, [0, 0]), &ramp, 5, 3);
         let want = 0.6 / 1.36f64.sqrt();
         assert!((out[7][0] as f64 - want).abs() < 1e-5, "{:?}", out[7]);
         // Too small a region: transparent.
-        assert!(apply(&d, &Local::new(&d.light, [0, 0]), &flat(2, 5, 1.0), 2, 5)
-            .iter()
-            .all(|p| *p == [0.0; 4]));
+        assert!(
+            apply(&d, &Local::new(&d.light, [0, 0]), &flat(2, 5, 1.0), 2, 5)
+                .iter()
+                .all(|p| *p == [0.0; 4])
+        );
     }
 
     #[test]

@@ -797,9 +797,8 @@ impl<'a> Back<'a> {
             }
             FilterKind::ConvolveMatrix(m) => {
                 let x = run.input_in(&m.input, cs);
-                let gx = run.region_adjoint(&x, &g, |xs, gs, w, h| {
-                    convolve::adjoint(m, xs, w, h, gs)
-                });
+                let gx =
+                    run.region_adjoint(&x, &g, |xs, gs, w, h| convolve::adjoint(m, xs, w, h, gs));
                 self.add_input(&m.input.clone(), Some(cs), gx);
             }
             FilterKind::Tile { input } => {
@@ -820,9 +819,8 @@ impl<'a> Back<'a> {
                 // The map's gradient is zero: it picks pixels by rounding.
                 let src = run.displacement_sources(input2, cs, *scale, *channels);
                 let x = run.input_in(input1, cs);
-                let gx = run.region_adjoint(&x, &g, |xs, gs, _, _| {
-                    tile::scatter(gs, &src, xs.len())
-                });
+                let gx =
+                    run.region_adjoint(&x, &g, |xs, gs, _, _| tile::scatter(gs, &src, xs.len()));
                 self.add_input(&input1.clone(), Some(cs), gx);
             }
             // Depend on no input (feImage's nodes are not parameters).

@@ -140,7 +140,11 @@ mod tests {
                         }
                         let q = img[(sy * w as i64 + sx) as usize];
                         for c in 0..4 {
-                            p[c] = if dilate { p[c].max(q[c]) } else { p[c].min(q[c]) };
+                            p[c] = if dilate {
+                                p[c].max(q[c])
+                            } else {
+                                p[c].min(q[c])
+                            };
                         }
                     }
                 }
@@ -163,7 +167,11 @@ mod tests {
                 assert_eq!(got, naive(&img, w, h, dilate, rad), "{dilate} {rad:?}");
             }
         }
-        assert!(apply(&img, w, h, true, [0.0, 1.0]).iter().all(|p| *p == [0.0; 4]));
+        assert!(
+            apply(&img, w, h, true, [0.0, 1.0])
+                .iter()
+                .all(|p| *p == [0.0; 4])
+        );
     }
 
     #[test]
@@ -194,7 +202,11 @@ mod tests {
                     p[k][c] -= 2.0 * e;
                     let down = dot(&g, &apply(&p, w, h, dilate, rad));
                     let fd = (up - down) / (2.0 * e as f64);
-                    assert!((fd - back[k][c] as f64).abs() < 1e-2, "{k} {c}: {fd} {}", back[k][c]);
+                    assert!(
+                        (fd - back[k][c] as f64).abs() < 1e-2,
+                        "{k} {c}: {fd} {}",
+                        back[k][c]
+                    );
                 }
             }
         }

@@ -109,8 +109,16 @@ fn noise2(l: &Lattice, ch: usize, x: f64, y: f64, st: Option<Stitch>) -> f64 {
     let g = &l.grad[ch];
     let dot = |k: usize, rx: f64, ry: f64| rx * g[k][0] + ry * g[k][1];
     let sx = s_curve(rx0);
-    let a = lerp(sx, dot(l.perm[i + by0], rx0, ry0), dot(l.perm[j + by0], rx1, ry0));
-    let b = lerp(sx, dot(l.perm[i + by1], rx0, ry1), dot(l.perm[j + by1], rx1, ry1));
+    let a = lerp(
+        sx,
+        dot(l.perm[i + by0], rx0, ry0),
+        dot(l.perm[j + by0], rx1, ry0),
+    );
+    let b = lerp(
+        sx,
+        dot(l.perm[i + by1], rx0, ry1),
+        dot(l.perm[j + by1], rx1, ry1),
+    );
     lerp(s_curve(ry0), a, b)
 }
 
@@ -126,11 +134,21 @@ fn stitch_frequency(f: f64, size: f64) -> f64 {
 
 /// The noise sum of one channel at lattice point `(x, y)`; `(px, py)` is the pixel in the
 /// `size` tile (for stitching).
-fn turbulence(l: &Lattice, t: &Turbulence, ch: usize, p: [f64; 2], px: [f64; 2], size: [f64; 2]) -> f64 {
+fn turbulence(
+    l: &Lattice,
+    t: &Turbulence,
+    ch: usize,
+    p: [f64; 2],
+    px: [f64; 2],
+    size: [f64; 2],
+) -> f64 {
     let mut f = t.base_frequency;
     let mut st = None;
     if t.stitch {
-        f = [stitch_frequency(f[0], size[0]), stitch_frequency(f[1], size[1])];
+        f = [
+            stitch_frequency(f[0], size[0]),
+            stitch_frequency(f[1], size[1]),
+        ];
         let width = (size[0] * f[0] + 0.5) as i32 as i64;
         let height = (size[1] * f[1] + 0.5) as i32 as i64;
         st = Some(Stitch {
@@ -211,11 +229,17 @@ mod tests {
                 let t = turb(fractal, stitch);
                 let a = render(&t, 16, 12, [3, 4]);
                 assert_eq!(a, render(&t, 16, 12, [3, 4]));
-                assert!(a.iter().all(|p| p.iter().all(|v| (0.0..=1.0).contains(v))
-                    && p[0] <= p[3] + 1e-6));
+                assert!(
+                    a.iter()
+                        .all(|p| p.iter().all(|v| (0.0..=1.0).contains(v)) && p[0] <= p[3] + 1e-6)
+                );
                 let distinct: std::collections::BTreeSet<u32> =
                     a.iter().map(|p| p[3].to_bits()).collect();
-                assert!(distinct.len() > 20, "{fractal} {stitch}: {}", distinct.len());
+                assert!(
+                    distinct.len() > 20,
+                    "{fractal} {stitch}: {}",
+                    distinct.len()
+                );
                 // Another seed, another pattern.
                 let mut t2 = t.clone();
                 t2.seed = 8;
