@@ -80,6 +80,16 @@ pub const MAX_DECOMPRESSED_BYTES: u64 = 256 << 20;
 /// stroke), in the forward and backward passes alike; `raster::warnings` reports it.
 pub const MAX_DASHES_PER_PATH: usize = 100_000;
 
+/// Most values in one feConvolveMatrix kernel (`order` columns × rows): a convolution
+/// costs that many multiply-adds per pixel of the filter region; a larger kernel is
+/// refused when the SVG is read, naming the file.
+pub const MAX_CONVOLVE_TAPS: usize = 4096;
+
+/// Most octaves of feTurbulence computed; `numOctaves` above it is cut to it. Octave `k`
+/// adds at most `2⁻ᵏ` of the noise's range, so the octaves cut change a channel by less
+/// than `2⁻²³` (below `f32` resolution).
+pub const MAX_TURBULENCE_OCTAVES: u32 = 24;
+
 /// Most flattened chords in one scene (fills and stroke centerlines together, plus the
 /// vertices of round joins and caps), counted at load by `Scene::check_limits` from the
 /// control points with the flattener's own formula at the default tolerance, before any

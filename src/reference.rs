@@ -245,7 +245,7 @@ pub const EXACT_FACTOR: u32 = 16;
 pub fn closer_to_exact(path: &Path, sizing: Sizing, fonts: &Fonts) -> Result<Option<[f64; 2]>> {
     let data = crate::image_io::read_bounded(path, crate::limits::MAX_FILE_BYTES)?;
     let tree = crate::scene::svg_in::parse_tree_with(&data, path, fonts)?;
-    if turns_off_antialiasing(tree.root()) {
+    if turns_off_antialiasing(tree.root()) || uses_morphology(tree.root()) {
         return Ok(None);
     }
     let (ours, theirs) = supersampled_mae(
@@ -276,6 +276,23 @@ fn turns_off_antialiasing(g: &usvg::Group) -> bool {
         let mut sub = false;
         node.subroots(|r| sub |= turns_off_antialiasing(r));
         own || sub
+    })
+}
+
+/// Whether a filter under `g` has an feMorphology: resvg computes it by brute force over
+/// the whole window, `(2r)²` reads a pixel, so at [`EXACT_FACTOR`] times the size (the
+/// radius and the pixel count both scaled) one file can take hours; such a file is not
+/// measured against the exact rendering.
+fn uses_morphology(g: &usvg::Group) -> bool {
+    let own = g.filters().iter().any(|f| {
+        f.primitives()
+            .iter()
+            .any(|p| matches!(p.kind(), usvg::filter::Kind::Morphology(_)))
+    });
+    own || g.children().iter().any(|node| {
+        let mut sub = matches!(node, usvg::Node::Group(c) if uses_morphology(c));
+        node.subroots(|r| sub |= uses_morphology(r));
+        sub
     })
 }
 

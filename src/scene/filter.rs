@@ -175,6 +175,134 @@ pub enum FilterKind {
         /// Functions of R, G, B and A.
         funcs: Box<[TransferFunction; 4]>,
     },
+    /// feMorphology: each channel's minimum (erode) or maximum (dilate) over a window of
+    /// `2·⌈radius⌉` pixels per axis (resvg's window), premultiplied.
+    Morphology {
+        /// Input.
+        input: FilterInput,
+        /// Dilate (maximum) rather than erode (minimum).
+        dilate: bool,
+        /// Radii along x and y, device pixels (a radius that is not positive makes the
+        /// result transparent, as in resvg).
+        radius: [f64; 2],
+    },
+    /// feConvolveMatrix over the filter region's pixels.
+    ConvolveMatrix(Box<Convolve>),
+    /// feTile: the input's subregion repeated over the region.
+    Tile {
+        /// Input.
+        input: FilterInput,
+    },
+    /// feDisplacementMap: `input1` resampled (nearest pixel, as resvg) at offsets read from
+    /// `input2`'s premultiplied channels.
+    DisplacementMap {
+        /// `in`: the image moved.
+        input1: FilterInput,
+        /// `in2`: the map.
+        input2: FilterInput,
+        /// Pixels moved per unit of channel value along x and y (resvg's: the `scale`
+        /// attribute squared times the axis scale).
+        scale: [f64; 2],
+        /// The channels (0 R, 1 G, 2 B, 3 A) read for x and y.
+        channels: [usize; 2],
+    },
+    /// feTurbulence: Perlin noise of the reference implementation in the SVG spec.
+    Turbulence(Box<Turbulence>),
+    /// feDiffuseLighting or feSpecularLighting on the input's alpha as a height map.
+    Lighting(Box<Lighting>),
+    /// feImage: an element or picture rendered into the subregion, in device pixels of
+    /// the canvas (placed as resvg places it). Its nodes are not part of the scene's
+    /// parameters: nothing in them gets a gradient.
+    Image {
+        /// What is drawn, already in device pixels.
+        nodes: Vec<super::Node>,
+    },
+}
+
+/// feConvolveMatrix's parameters (kernel in SVG's order, row-major, not flipped).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Convolve {
+    /// Input.
+    pub input: FilterInput,
+    /// Columns and rows (`order`).
+    pub order: [usize; 2],
+    /// `kernelMatrix`, row-major, `order[0] · order[1]` values.
+    pub kernel: Vec<f64>,
+    /// `targetX`, `targetY`.
+    pub target: [usize; 2],
+    /// Divisor (never zero).
+    pub divisor: f64,
+    /// Bias.
+    pub bias: f64,
+    /// `edgeMode`: 0 none, 1 duplicate, 2 wrap.
+    pub edge: u8,
+    /// `preserveAlpha`: convolve the straight colors and keep alpha.
+    pub preserve_alpha: bool,
+}
+
+/// feTurbulence's parameters and where its lattice lies on the canvas.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Turbulence {
+    /// `baseFrequency` along x and y, per user unit.
+    pub base_frequency: [f64; 2],
+    /// `numOctaves`, bounded by [`MAX_TURBULENCE_OCTAVES`](crate::limits::MAX_TURBULENCE_OCTAVES).
+    pub octaves: u32,
+    /// `seed`, truncated as usvg reads it.
+    pub seed: i32,
+    /// `stitchTiles="stitch"`.
+    pub stitch: bool,
+    /// `type="fractalNoise"` rather than `turbulence`.
+    pub fractal: bool,
+    /// The group transform's translation, device pixels: noise is sampled at
+    /// `(device − origin) / scale` (resvg's mapping).
+    pub origin: [f64; 2],
+    /// The transform's axis scales.
+    pub scale: [f64; 2],
+}
+
+/// A light source, in device pixels (z scaled as resvg scales it).
+#[derive(Clone, Debug, PartialEq)]
+pub enum LightSource {
+    /// feDistantLight: degrees.
+    Distant {
+        /// Azimuth.
+        azimuth: f64,
+        /// Elevation.
+        elevation: f64,
+    },
+    /// fePointLight at a position.
+    Point {
+        /// Position.
+        pos: [f64; 3],
+    },
+    /// feSpotLight.
+    Spot {
+        /// Position.
+        pos: [f64; 3],
+        /// Where it points.
+        points_at: [f64; 3],
+        /// `specularExponent` of the cone's falloff.
+        exponent: f64,
+        /// `limitingConeAngle` in degrees.
+        cone: Option<f64>,
+    },
+}
+
+/// feDiffuseLighting or feSpecularLighting.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Lighting {
+    /// Input (only its alpha is read).
+    pub input: FilterInput,
+    /// `Some(specularExponent)` for feSpecularLighting.
+    pub specular: Option<f64>,
+    /// `surfaceScale`.
+    pub surface_scale: f64,
+    /// `diffuseConstant` or `specularConstant`.
+    pub constant: f64,
+    /// `lighting-color`, sRGB in `[0, 1]` (used as it is in either color space, as resvg).
+    pub color: [f64; 3],
+    /// The light.
+    pub light: LightSource,
 }
 
 impl FilterKind {
@@ -186,10 +314,16 @@ impl FilterKind {
             | FilterKind::Blur { input, .. }
             | FilterKind::DropShadow { input, .. }
             | FilterKind::ColorMatrix { input, .. }
-            | FilterKind::ComponentTransfer { input, .. } => vec![input],
+            | FilterKind::ComponentTransfer { input, .. }
+            | FilterKind::Morphology { input, .. }
+            | FilterKind::Tile { input } => vec![input],
+            FilterKind::ConvolveMatrix(c) => vec![&c.input],
+            FilterKind::Lighting(l) => vec![&l.input],
+            FilterKind::Turbulence(_) | FilterKind::Image { .. } => Vec::new(),
             FilterKind::Merge { inputs } => inputs.iter().collect(),
             FilterKind::Blend { input1, input2, .. }
-            | FilterKind::Composite { input1, input2, .. } => vec![input1, input2],
+            | FilterKind::Composite { input1, input2, .. }
+            | FilterKind::DisplacementMap { input1, input2, .. } => vec![input1, input2],
         }
     }
 }
@@ -273,6 +407,32 @@ fn device_rect(r: usvg::NonZeroRect, t: &super::Affine) -> [i64; 4] {
     [c(x), c(y), c(x + w), c(y + h)]
 }
 
+/// A light source in device pixels: positions mapped by `t`, heights scaled by
+/// `√(a² + d²) / √2` of its diagonal (resvg's scaling).
+fn light(l: usvg::filter::LightSource, t: &super::Affine) -> LightSource {
+    use usvg::filter::LightSource as L;
+    let sz = t[0].hypot(t[3]) / std::f64::consts::SQRT_2;
+    let at = |x: f32, y: f32, z: f32| {
+        let [px, py] = super::apply(t, [x as f64, y as f64]);
+        [px, py, z as f64 * sz]
+    };
+    match l {
+        L::DistantLight(d) => LightSource::Distant {
+            azimuth: d.azimuth as f64,
+            elevation: d.elevation as f64,
+        },
+        L::PointLight(p) => LightSource::Point {
+            pos: at(p.x, p.y, p.z),
+        },
+        L::SpotLight(s) => LightSource::Spot {
+            pos: at(s.x, s.y, s.z),
+            points_at: at(s.points_at_x, s.points_at_y, s.points_at_z),
+            exponent: s.specular_exponent.get() as f64,
+            cone: s.limiting_cone_angle.map(|a| a as f64),
+        },
+    }
+}
+
 fn color(c: usvg::Color) -> [f64; 3] {
     [c.red, c.green, c.blue].map(|v| v as f64 / 255.0)
 }
@@ -309,6 +469,7 @@ pub(crate) fn from_usvg(
     filters: &[std::sync::Arc<usvg::filter::Filter>],
     t: &super::Affine,
     blend: impl Fn(usvg::BlendMode) -> BlendMode,
+    image: &dyn Fn(&usvg::Group, &super::Affine) -> Result<Vec<super::Node>, String>,
 ) -> Result<Vec<Filter>, String> {
     use usvg::filter::Kind as K;
     let (sx, sy) = axis_scales(t);
@@ -400,18 +561,95 @@ pub(crate) fn from_usvg(
                         transfer(fe.func_a()),
                     ]),
                 },
-                other => {
-                    let name = match other {
-                        K::ConvolveMatrix(_) => "feConvolveMatrix",
-                        K::DiffuseLighting(_) => "feDiffuseLighting",
-                        K::DisplacementMap(_) => "feDisplacementMap",
-                        K::Image(_) => "feImage",
-                        K::Morphology(_) => "feMorphology",
-                        K::SpecularLighting(_) => "feSpecularLighting",
-                        K::Tile(_) => "feTile",
-                        _ => "feTurbulence",
+                K::Morphology(fe) => FilterKind::Morphology {
+                    input: input(fe.input()),
+                    dilate: fe.operator() == usvg::filter::MorphologyOperator::Dilate,
+                    radius: [
+                        fe.radius_x().get() as f64 * sx,
+                        fe.radius_y().get() as f64 * sy,
+                    ],
+                },
+                K::ConvolveMatrix(fe) => {
+                    let m = fe.matrix();
+                    let taps = m.data().len();
+                    if taps > crate::limits::MAX_CONVOLVE_TAPS {
+                        return Err(format!(
+                            "feConvolveMatrix of {taps} values (limit {})",
+                            crate::limits::MAX_CONVOLVE_TAPS
+                        ));
+                    }
+                    use usvg::filter::EdgeMode as E;
+                    FilterKind::ConvolveMatrix(Box::new(Convolve {
+                        input: input(fe.input()),
+                        order: [m.columns() as usize, m.rows() as usize],
+                        kernel: m.data().iter().map(|&v| v as f64).collect(),
+                        target: [m.target_x() as usize, m.target_y() as usize],
+                        divisor: fe.divisor().get() as f64,
+                        bias: fe.bias() as f64,
+                        edge: match fe.edge_mode() {
+                            E::None => 0,
+                            E::Duplicate => 1,
+                            E::Wrap => 2,
+                        },
+                        preserve_alpha: fe.preserve_alpha(),
+                    }))
+                }
+                K::Tile(fe) => FilterKind::Tile {
+                    input: input(fe.input()),
+                },
+                K::DisplacementMap(fe) => {
+                    use usvg::filter::ColorChannel as C;
+                    let ch = |c: C| match c {
+                        C::R => 0,
+                        C::G => 1,
+                        C::B => 2,
+                        C::A => 3,
                     };
-                    return Err(name.to_string());
+                    let s = fe.scale() as f64;
+                    FilterKind::DisplacementMap {
+                        input1: input(fe.input1()),
+                        input2: input(fe.input2()),
+                        scale: [s * s * sx, s * s * sy],
+                        channels: [ch(fe.x_channel_selector()), ch(fe.y_channel_selector())],
+                    }
+                }
+                K::Turbulence(fe) => FilterKind::Turbulence(Box::new(Turbulence {
+                    base_frequency: [
+                        fe.base_frequency_x().get() as f64,
+                        fe.base_frequency_y().get() as f64,
+                    ],
+                    octaves: fe.num_octaves().min(crate::limits::MAX_TURBULENCE_OCTAVES),
+                    seed: fe.seed(),
+                    stitch: fe.stitch_tiles(),
+                    fractal: fe.kind() == usvg::filter::TurbulenceKind::FractalNoise,
+                    origin: [t[4], t[5]],
+                    scale: [sx, sy],
+                })),
+                K::DiffuseLighting(fe) => FilterKind::Lighting(Box::new(Lighting {
+                    input: input(fe.input()),
+                    specular: None,
+                    surface_scale: fe.surface_scale() as f64,
+                    constant: fe.diffuse_constant() as f64,
+                    color: color(fe.lighting_color()),
+                    light: light(fe.light_source(), t),
+                })),
+                K::SpecularLighting(fe) => FilterKind::Lighting(Box::new(Lighting {
+                    input: input(fe.input()),
+                    specular: Some(fe.specular_exponent() as f64),
+                    surface_scale: fe.surface_scale() as f64,
+                    constant: fe.specular_constant() as f64,
+                    color: color(fe.lighting_color()),
+                    light: light(fe.light_source(), t),
+                })),
+                K::Image(fe) => {
+                    // resvg draws the content scaled by the axis scales, its origin at
+                    // the subregion's device corner.
+                    let sub = device_rect(p.rect(), t);
+                    let at = [sx, 0.0, 0.0, sy, sub[0] as f64, sub[1] as f64];
+                    FilterKind::Image {
+                        nodes: image(fe.root(), &at)
+                            .map_err(|e| format!("feImage whose content is refused: {e}"))?,
+                    }
                 }
             };
             prims.push(FilterPrimitive {

@@ -903,8 +903,14 @@ fn convert_group_children(g: &usvg::Group, ctx: &Ctx, t: &Affine, role: Role) ->
                 let gt = concat(t, &to_affine(g.transform()));
                 // Inside a clip path resvg draws shapes only: filters play no part.
                 let filters = match role {
-                    Role::Paint => super::filter::from_usvg(g.filters(), &gt, convert_blend)
-                        .map_err(|fe| ctx.unsupported(what(&format!("element with {fe}"))))?,
+                    Role::Paint => {
+                        let image = |root: &usvg::Group, at: &Affine| {
+                            convert_group_children(root, ctx, at, Role::Paint)
+                                .map_err(|e| e.to_string())
+                        };
+                        super::filter::from_usvg(g.filters(), &gt, convert_blend, &image)
+                            .map_err(|fe| ctx.unsupported(what(&format!("element with {fe}"))))?
+                    }
                     Role::Clip => Vec::new(),
                 };
                 // A transform that can be a parameter: the group's frame is the one its

@@ -415,3 +415,46 @@ fn gradients_reach_the_content_under_a_filter() {
         assert!(g.passes(2e-2), "{g}");
     }
 }
+
+/// Finite differences through the primitives added in issue 34's second part: the
+/// gradient reaches the content under feConvolveMatrix, feMorphology, feTile,
+/// feDisplacementMap (the moved input) and the two lightings (the alpha surface, through
+/// its normals and, for point and spot lights, its height).
+#[test]
+fn gradients_reach_the_content_under_the_resampling_and_lighting_filters() {
+    let filters = [
+        r#"<feConvolveMatrix order="3 2" kernelMatrix="0.1 0.3 -0.1 0.2 0.4 0.1" bias="0.05" edgeMode="duplicate"/>"#,
+        r#"<feConvolveMatrix order="3" kernelMatrix="1 2 1 0 1 0 1 0 1" divisor="6" preserveAlpha="true" edgeMode="wrap"/>"#,
+        r#"<feMorphology operator="dilate" radius="1.5 1"/>"#,
+        r#"<feMorphology operator="erode" radius="1"/>"#,
+        r#"<feOffset dx="1" dy="2" result="o"/><feTile in="o"/>"#,
+        r#"<feTurbulence baseFrequency="0.2" result="t"/><feDisplacementMap in="SourceGraphic" in2="t" scale="3" xChannelSelector="R" yChannelSelector="A"/>"#,
+        r#"<feDiffuseLighting surfaceScale="2" diffuseConstant="1.2" lighting-color="rgb(250,200,120)"><fePointLight x="20" y="4" z="10"/></feDiffuseLighting>"#,
+        r#"<feSpecularLighting surfaceScale="3" specularConstant="0.9" specularExponent="3"><feSpotLight x="4" y="2" z="14" pointsAtX="16" pointsAtY="16" specularExponent="1.5"/></feSpecularLighting>"#,
+        r#"<feDiffuseLighting surfaceScale="1.5"><feDistantLight azimuth="30" elevation="40"/></feDiffuseLighting>"#,
+    ];
+    for (i, fe) in filters.iter().enumerate() {
+        let svg = format!(
+            r#"<svg xmlns="http://www.w3.org/2000/svg" width="30" height="26">
+            <filter id="f" x="0" y="0" width="30" height="26" filterUnits="userSpaceOnUse">{fe}</filter>
+            <g filter="url(#f)">
+              <path d="M 6 5 C 14 2 24 6 25 20 L 8 22 Z" fill="rgb(200,60,40)" fill-opacity="0.8"/>
+              <circle cx="15.3" cy="13.6" r="5.2" fill="rgb(30,120,210)" fill-opacity="0.7"/>
+            </g></svg>"#
+        );
+        let scene = Scene::from_svg_str(&svg, "filter.svg", Sizing::Natural).unwrap();
+        let mut moved = scene.clone();
+        let mut p = moved.params();
+        for (k, v) in p.iter_mut().enumerate() {
+            *v += 0.3 * (k as f64 * 1.3).sin();
+        }
+        moved.set_params(&p);
+        let opts = RenderOptions::default();
+        let target = render(&moved, &opts);
+        let (grad, _, groups) = check(&scene, &target, Loss::Mse, &opts, None, None);
+        assert!(grad.iter().any(|g| *g != 0.0), "{i}: {fe}");
+        for g in groups {
+            assert!(g.passes(2e-2), "{i}: {fe}: {g}");
+        }
+    }
+}

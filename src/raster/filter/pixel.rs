@@ -27,7 +27,7 @@ pub(crate) fn clamp<S: Scalar>(x: S, lo: f64, hi: f64) -> S {
 /// The straight color of a premultiplied pixel (0 where it is transparent, as resvg's
 /// byte division gives).
 #[inline]
-fn straight<S: Scalar>(px: [S; 4]) -> [S; 4] {
+pub(crate) fn straight<S: Scalar>(px: [S; 4]) -> [S; 4] {
     let a = px[3];
     if a.v() <= 0.0 {
         return [S::c(0.0); 4];
