@@ -904,9 +904,12 @@ fn convert_group_children(g: &usvg::Group, ctx: &Ctx, t: &Affine, role: Role) ->
                 // Inside a clip path resvg draws shapes only: filters play no part.
                 let filters = match role {
                     Role::Paint => {
+                        // An feImage's content is no parameter: its transforms stay baked.
                         let image = |root: &usvg::Group, at: &Affine| {
-                            convert_group_children(root, ctx, at, Role::Paint)
-                                .map_err(|e| e.to_string())
+                            let mut nodes = convert_group_children(root, ctx, at, Role::Paint)
+                                .map_err(|e| e.to_string())?;
+                            bake(&mut nodes);
+                            Ok(nodes)
                         };
                         super::filter::from_usvg(g.filters(), &gt, convert_blend, &image)
                             .map_err(|fe| ctx.unsupported(what(&format!("element with {fe}"))))?

@@ -249,16 +249,25 @@ impl Writer {
             let _ = write!(attrs, " style=\"{}\"", style.join(";"));
         }
         if !g.filters.is_empty() {
-            let refs: Vec<String> = g
-                .filters
-                .iter()
-                .map(|f| {
-                    let id = self.unique_id(if f.id.is_empty() { "filter" } else { &f.id });
-                    self.defs
-                        .push_str(&super::svg_out_filter::filter_element(f, &id));
-                    format!("url(#{id})")
-                })
-                .collect();
+            let mut refs = Vec::new();
+            for f in &g.filters {
+                let id = self.unique_id(if f.id.is_empty() { "filter" } else { &f.id });
+                // An feImage's content: a group in the defs, moved so that its origin
+                // is the corner resvg draws it from.
+                let mut image = |nodes: &[Node], [x, y]: [i64; 2]| {
+                    let id = self.unique_id("fe-image");
+                    let body = self.detached(nodes, 3, false);
+                    let _ = write!(
+                        self.defs,
+                        "    <g id=\"{id}\" transform=\"translate({} {})\">\n{body}    </g>\n",
+                        -x, -y
+                    );
+                    id
+                };
+                let element = super::svg_out_filter::filter_element(f, &id, &mut image);
+                self.defs.push_str(&element);
+                refs.push(format!("url(#{id})"));
+            }
             let _ = write!(attrs, " filter=\"{}\"", refs.join(" "));
         }
         attrs

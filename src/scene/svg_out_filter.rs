@@ -5,11 +5,22 @@
 
 use std::fmt::Write as _;
 
-use super::filter::{CompositeOp, Filter, FilterInput, FilterKind, TransferFunction};
+use super::filter::{CompositeOp, Filter, FilterInput, FilterKind, LightSource, TransferFunction};
 use super::svg_out::num;
 
-/// The `<filter>` element of `f` with the id `id`, indented for the defs.
-pub(crate) fn filter_element(f: &Filter, id: &str) -> String {
+/// The `<filter>` element of `f` with the id `id`, indented for the defs. `image` writes
+/// an feImage's content (device pixels) into the defs, drawn from the given device corner
+/// (where resvg puts the referenced element's origin), and returns its id.
+///
+/// Two things do not survive exactly: feTurbulence's lattice is anchored at the device
+/// origin (a filtered group's translation is baked into the content, so the noise's offset
+/// is lost; its frequency is kept per device pixel), and feDisplacementMap's scale keeps
+/// its magnitude (resvg squares it).
+pub(crate) fn filter_element(
+    f: &Filter,
+    id: &str,
+    image: &mut dyn FnMut(&[super::Node], [i64; 2]) -> String,
+) -> String {
     let mut d = String::new();
     let [x0, y0, x1, y1] = f.region;
     let _ = writeln!(
@@ -173,6 +184,126 @@ pub(crate) fn filter_element(f: &Filter, id: &str) -> String {
                     "<feComponentTransfer{common} in=\"{}\">{body}</feComponentTransfer>",
                     input(i)
                 )
+            }
+            FilterKind::Morphology {
+                input: i,
+                dilate,
+                radius,
+            } => format!(
+                "<feMorphology{common} in=\"{}\" operator=\"{}\" radius=\"{} {}\"/>",
+                input(i),
+                if *dilate { "dilate" } else { "erode" },
+                full(radius[0]),
+                full(radius[1])
+            ),
+            FilterKind::ConvolveMatrix(c) => {
+                let k: Vec<String> = c.kernel.iter().map(|v| full(*v)).collect();
+                format!(
+                    "<feConvolveMatrix{common} in=\"{}\" order=\"{} {}\" kernelMatrix=\"{}\" targetX=\"{}\" targetY=\"{}\" divisor=\"{}\" bias=\"{}\" edgeMode=\"{}\" preserveAlpha=\"{}\"/>",
+                    input(&c.input),
+                    c.order[0],
+                    c.order[1],
+                    k.join(" "),
+                    c.target[0],
+                    c.target[1],
+                    full(c.divisor),
+                    full(c.bias),
+                    ["none", "duplicate", "wrap"][usize::from(c.edge.min(2))],
+                    c.preserve_alpha
+                )
+            }
+            FilterKind::Tile { input: i } => format!("<feTile{common} in=\"{}\"/>", input(i)),
+            FilterKind::DisplacementMap {
+                input1,
+                input2,
+                scale,
+                channels,
+            } => {
+                let ch = |c: usize| ["R", "G", "B", "A"][c.min(3)];
+                format!(
+                    "<feDisplacementMap{common} in=\"{}\" in2=\"{}\" scale=\"{}\" xChannelSelector=\"{}\" yChannelSelector=\"{}\"/>",
+                    input(input1),
+                    input(input2),
+                    full(scale[0].abs().sqrt()),
+                    ch(channels[0]),
+                    ch(channels[1])
+                )
+            }
+            FilterKind::Turbulence(t) => {
+                let per_px = |k: usize| t.base_frequency[k] / t.scale[k].max(f64::MIN_POSITIVE);
+                format!(
+                    "<feTurbulence{common} baseFrequency=\"{} {}\" numOctaves=\"{}\" seed=\"{}\" stitchTiles=\"{}\" type=\"{}\"/>",
+                    full(per_px(0)),
+                    full(per_px(1)),
+                    t.octaves,
+                    t.seed,
+                    if t.stitch { "stitch" } else { "noStitch" },
+                    if t.fractal {
+                        "fractalNoise"
+                    } else {
+                        "turbulence"
+                    }
+                )
+            }
+            FilterKind::Lighting(l) => {
+                let source = match &l.light {
+                    LightSource::Distant { azimuth, elevation } => format!(
+                        "<feDistantLight azimuth=\"{}\" elevation=\"{}\"/>",
+                        full(*azimuth),
+                        full(*elevation)
+                    ),
+                    LightSource::Point { pos } => format!(
+                        "<fePointLight x=\"{}\" y=\"{}\" z=\"{}\"/>",
+                        full(pos[0]),
+                        full(pos[1]),
+                        full(pos[2])
+                    ),
+                    LightSource::Spot {
+                        pos,
+                        points_at,
+                        exponent,
+                        cone,
+                    } => {
+                        let cone = cone.map_or(String::new(), |c| {
+                            format!(" limitingConeAngle=\"{}\"", full(c))
+                        });
+                        format!(
+                            "<feSpotLight x=\"{}\" y=\"{}\" z=\"{}\" pointsAtX=\"{}\" pointsAtY=\"{}\" pointsAtZ=\"{}\" specularExponent=\"{}\"{cone}/>",
+                            full(pos[0]),
+                            full(pos[1]),
+                            full(pos[2]),
+                            full(points_at[0]),
+                            full(points_at[1]),
+                            full(points_at[2]),
+                            full(*exponent)
+                        )
+                    }
+                };
+                let (tag, own) = match l.specular {
+                    Some(e) => (
+                        "feSpecularLighting",
+                        format!(
+                            "specularConstant=\"{}\" specularExponent=\"{}\"",
+                            full(l.constant),
+                            full(e)
+                        ),
+                    ),
+                    None => (
+                        "feDiffuseLighting",
+                        format!("diffuseConstant=\"{}\"", full(l.constant)),
+                    ),
+                };
+                format!(
+                    "<{tag}{common} in=\"{}\" surfaceScale=\"{}\" {own} lighting-color=\"{}\">{source}</{tag}>",
+                    input(&l.input),
+                    full(l.surface_scale),
+                    super::svg_out::hex(&l.color)
+                )
+            }
+            FilterKind::Image { nodes } => {
+                let at = [p.subregion[0], p.subregion[1]];
+                let id = image(nodes, at);
+                format!("<feImage{common} href=\"#{id}\"/>")
             }
         };
         let _ = writeln!(d, "      {line}");
