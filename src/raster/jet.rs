@@ -33,6 +33,9 @@ pub(crate) trait Scalar:
     fn atan2(self, x: Self) -> Self;
     /// `self^e` for a constant exponent (derivative 0 at 0 where it is not finite).
     fn powf(self, e: f64) -> Self;
+    /// `f(self)` given its value `v` and derivative `dv` at `self` (a function evaluated
+    /// elsewhere, e.g. from a table).
+    fn then(self, v: f64, dv: f64) -> Self;
 }
 
 impl Scalar for f64 {
@@ -63,6 +66,10 @@ impl Scalar for f64 {
     #[inline]
     fn powf(self, e: f64) -> Self {
         f64::powf(self, e)
+    }
+    #[inline]
+    fn then(self, v: f64, _dv: f64) -> Self {
+        v
     }
 }
 
@@ -181,6 +188,9 @@ impl<const K: usize> Scalar for Jet<K> {
         let v = self.v.powf(e);
         let dv = e * self.v.powf(e - 1.0);
         self.chain(v, if dv.is_finite() { dv } else { 0.0 })
+    }
+    fn then(self, v: f64, dv: f64) -> Self {
+        self.chain(v, dv)
     }
 }
 

@@ -101,18 +101,75 @@ pub(crate) fn apply(img: &mut [[f32; 4]], w: usize, h: usize, passes: &[Pass]) {
         let horizontal = match p {
             Pass::Box { horizontal, .. } | Pass::Kernel { horizontal, .. } => *horizontal,
         };
-        let (lines, len, step, stride) = if horizontal {
-            (h, w, 1, w)
-        } else {
-            (w, h, w, 1)
-        };
-        for l in 0..lines {
-            let at = |i: usize| l * stride + i * step;
+        if !horizontal {
+            // Down the columns, a row at a time (a column's pixels are a row apart, a
+            // cache miss each): the same sums in the same order, so the same bits.
             line.clear();
-            line.extend((0..len).map(|i| img[at(i)]));
+            line.extend_from_slice(img);
             match p {
-                Pass::Box { radius, .. } => box_line(&line, *radius, |i, v| img[at(i)] = v),
-                Pass::Kernel { taps, .. } => kernel_line(&line, taps, |i, v| img[at(i)] = v),
+                Pass::Box { radius, .. } => box_columns(&line, img, w, h, *radius),
+                Pass::Kernel { taps, .. } => kernel_columns(&line, img, w, h, taps),
+            }
+            continue;
+        }
+        for l in 0..h {
+            let row = &mut img[l * w..(l + 1) * w];
+            line.clear();
+            line.extend_from_slice(row);
+            match p {
+                Pass::Box { radius, .. } => box_line(&line, *radius, |i, v| row[i] = v),
+                Pass::Kernel { taps, .. } => kernel_line(&line, taps, |i, v| row[i] = v),
+            }
+        }
+    }
+}
+
+/// [`box_line`] down every column of `src` at once, into `out` (both `w × h`).
+fn box_columns(src: &[[f32; 4]], out: &mut [[f32; 4]], w: usize, h: usize, r: usize) {
+    let inv = 1.0 / (2 * r + 1) as f64;
+    let mut sum = vec![[0.0f64; 4]; w];
+    let add = |sum: &mut [[f64; 4]], row: &[[f32; 4]], sign: f64| {
+        for (s, v) in sum.iter_mut().zip(row) {
+            for c in 0..4 {
+                s[c] += sign * v[c] as f64;
+            }
+        }
+    };
+    for y in 0..r.min(h) {
+        add(&mut sum, &src[y * w..(y + 1) * w], 1.0);
+    }
+    for i in 0..h {
+        if i + r < h {
+            add(&mut sum, &src[(i + r) * w..(i + r + 1) * w], 1.0);
+        }
+        if i > r {
+            add(&mut sum, &src[(i - r - 1) * w..(i - r) * w], -1.0);
+        }
+        for (o, s) in out[i * w..(i + 1) * w].iter_mut().zip(&sum) {
+            *o = s.map(|s| (s * inv) as f32);
+        }
+    }
+}
+
+/// [`kernel_line`] down every column of `src` at once, into `out` (both `w × h`).
+fn kernel_columns(src: &[[f32; 4]], out: &mut [[f32; 4]], w: usize, h: usize, taps: &[f32]) {
+    let r = taps.len() as isize - 1;
+    for i in 0..h as isize {
+        let acc = &mut out[i as usize * w..(i as usize + 1) * w];
+        acc.fill([0.0; 4]);
+        for k in -r..=r {
+            let j = i + k;
+            if j < 0 || j >= h as isize {
+                continue;
+            }
+            let t = taps[k.unsigned_abs()];
+            for (a, v) in acc
+                .iter_mut()
+                .zip(&src[j as usize * w..(j as usize + 1) * w])
+            {
+                for c in 0..4 {
+                    a[c] += t * v[c];
+                }
             }
         }
     }
