@@ -56,6 +56,21 @@ pub struct SplatArgs {
     /// every 8th). NeRF-synthetic folders use transforms_test.json.
     #[arg(long, value_name = "N")]
     test_every: Option<usize>,
+    /// Anti-aliased splats (Mip-Splatting's 2D filter, gsplat's antialiased mode): each
+    /// splat's opacity is scaled by √(det Σ / det(Σ + 0.3·I)) so that the model renders
+    /// cleanly at other resolutions. Saved in the model; `view` renders it the same way.
+    #[arg(long)]
+    antialias: bool,
+    /// Learn a per-image affine color transform (3×3 and a bias, from the identity) of
+    /// each training photo, for photos of differing exposure or white balance; test views
+    /// are rendered without.
+    #[arg(long)]
+    exposure: bool,
+    /// A fixed budget of --max-gaussians Gaussians (3DGS-MCMC): transparent Gaussians
+    /// are relocated onto opaque ones, and the count grows 5% at a time up to the budget,
+    /// instead of cloning and splitting.
+    #[arg(long)]
+    mcmc: bool,
     #[command(flatten)]
     report: Reporting,
 }
@@ -73,6 +88,9 @@ pub fn run(a: SplatArgs) -> Result<()> {
         seed: a.seed,
         eval_every: a.report.eval_every,
         test_every: a.test_every,
+        antialias: a.antialias,
+        exposure: a.exposure,
+        mcmc: a.mcmc,
     };
     job.validate().map_err(flag_error)?;
     install_interrupt_handler();
@@ -109,7 +127,7 @@ pub fn run(a: SplatArgs) -> Result<()> {
         undistortion_note(&a.scene, outside);
     }
     super::util::print_warnings(&out.warnings);
-    let (model, outcome) = (&out.model, out.outcome);
+    let (model, outcome) = (&out.model, &out.outcome);
     splat::save(model, &a.output)?;
     write_log(
         &a.output,

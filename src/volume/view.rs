@@ -120,6 +120,27 @@ impl Model {
         }
     }
 
+    /// The depth images of the view of `camera` ([`splat::Depth`]: expected and median
+    /// depth along the viewing axis, world units).
+    ///
+    /// # Errors
+    /// For a voxel model (depth images are drawn for Gaussians only), or the renderer's
+    /// refusal of the camera.
+    pub fn render_depth(&self, camera: &Camera) -> Result<splat::Depth> {
+        match self {
+            Model::Voxel(..) => Err(Error::Setting {
+                name: "depth".into(),
+                message: "depth images are drawn for Gaussian (.ply) models only".into(),
+            }),
+            Model::Splat(g, s) => splat::render(g, camera, s)
+                .map(|r| r.depth())
+                .map_err(|what| Error::InvalidValue {
+                    path: "camera".into(),
+                    what,
+                }),
+        }
+    }
+
     /// The center and half-size of the model's box, world units.
     pub fn bounds(&self) -> (Vec3, f32) {
         match self {
