@@ -22,7 +22,8 @@ pub struct SplatArgs {
     /// photos with lens distortion are undistorted once, in memory.
     #[arg(long)]
     scene: PathBuf,
-    /// Model file to write (.ply, the layout Gaussian-splatting viewers read).
+    /// Model file to write: .ply, the layout Gaussian-splatting viewers read, or .spz,
+    /// Niantic's compressed format (about a tenth of the size; quantized).
     #[arg(short, long)]
     output: PathBuf,
     /// Optimizer iterations (one training view each).
@@ -77,7 +78,11 @@ pub struct SplatArgs {
 
 /// Runs `diffsvg recon splat`.
 pub fn run(a: SplatArgs) -> Result<()> {
-    super::util::check_output(&a.output, "ply")?;
+    let spz = a
+        .output
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("spz"));
+    super::util::check_output(&a.output, if spz { "spz" } else { "ply" })?;
     let job = SplatJob {
         iters: a.iters,
         downscale: a.downscale,
@@ -128,7 +133,11 @@ pub fn run(a: SplatArgs) -> Result<()> {
     }
     super::util::print_warnings(&out.warnings);
     let (model, outcome) = (&out.model, &out.outcome);
-    splat::save(model, &a.output)?;
+    if spz {
+        splat::save_spz(model, &a.output)?;
+    } else {
+        splat::save(model, &a.output)?;
+    }
     write_log(
         &a.output,
         &out.log,

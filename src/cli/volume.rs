@@ -98,7 +98,7 @@ pub struct VoxelArgs {
 #[derive(clap::Args, Debug)]
 pub struct ViewArgs {
     /// Model file written by `diffsvg recon voxel` (.vox) or `diffsvg recon splat` (a
-    /// Gaussian-splatting PLY); the kind is read from the file's header.
+    /// Gaussian-splatting PLY or SPZ); the kind is read from the file's header.
     model: PathBuf,
     /// Dataset folder whose cameras to render from.
     #[arg(long)]

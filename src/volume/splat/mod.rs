@@ -31,12 +31,14 @@ pub(crate) mod loss;
 pub mod ply;
 pub(crate) mod points;
 pub mod render;
+pub mod spz;
 pub mod train;
 
 pub use backward::{Gradients, backward, backward_into};
 pub use ply::{load, save};
 pub use points::PointCloud;
 pub use render::{Depth, RenderSettings, Rendered, render};
+pub use spz::{load_spz, save_spz};
 pub use train::{
     Densify, Mcmc, TrainOptions, TrainOutcome, TrainStep, find_point_cloud, from_point_cloud,
     from_points, random_init, train,
