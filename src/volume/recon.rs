@@ -431,6 +431,9 @@ pub fn recon_splat(
         ),
     };
     model.antialiased = job.antialias;
+    if job.mcmc {
+        splat::mcmc_start(&mut model);
+    }
     let iters = job.iters;
     let scaled = |x: usize| ((x as f64 * iters as f64 / 30_000.0).round() as usize).max(1);
     let opts = splat::TrainOptions {

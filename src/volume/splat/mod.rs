@@ -41,7 +41,7 @@ pub use render::{Depth, RenderSettings, Rendered, render};
 pub use spz::{load_spz, save_spz};
 pub use train::{
     Densify, Mcmc, TrainOptions, TrainOutcome, TrainStep, find_point_cloud, from_point_cloud,
-    from_points, random_init, train,
+    from_points, mcmc_start, random_init, train,
 };
 
 use glam::{Quat, Vec3};

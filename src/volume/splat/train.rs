@@ -36,7 +36,7 @@
 //! the Gaussian's covariance, so that nearly transparent Gaussians explore.
 //!
 //! **Per-image exposure** ([`TrainOptions::exposure`]): each training view's rendering
-//! passes through its own learned affine color transform ([`exposure`](super::exposure)
+//! passes through its own learned affine color transform ([`exposure`]
 //! module) before the loss; the transforms start at the identity, have their own Adam
 //! rate, and are returned in [`TrainOutcome::exposures`]. Held-out views are rendered
 //! without them.
@@ -170,7 +170,7 @@ pub struct TrainOptions {
     pub lr_sh_rest: f32,
     /// Adaptive density control.
     pub densify: Densify,
-    /// Learn a per-image affine color transform ([`exposure`](super::exposure)) of
+    /// Learn a per-image affine color transform ([`exposure`]) of
     /// each training view.
     pub exposure: bool,
     /// Learning rate of the exposure transforms, at the first and the last iteration
@@ -234,7 +234,7 @@ pub struct TrainOutcome {
     /// optimizer update, density control.
     pub parts: [f32; 5],
     /// With [`TrainOptions::exposure`], the learned transform of each training view, in
-    /// the order of the views ([`exposure`](super::exposure) module); else empty.
+    /// the order of the views ([`exposure`] module); else empty.
     pub exposures: Vec<[f32; 12]>,
 }
 
@@ -877,6 +877,23 @@ fn densify(
     g.logit_opacities.extend_from_slice(&added.logit_opacities);
     g.sh.extend_from_slice(&added.sh);
     state.compact(&keep, n_added, k3);
+}
+
+/// The start 3DGS-MCMC trains from (gsplat's `init_opa = 0.5`, `init_scale = 0.1`):
+/// every opacity set to 0.5 and every scale divided by 10. Its position noise is scaled
+/// by the covariance and gated to nearly transparent Gaussians, so it assumes small,
+/// fairly opaque ones at the start: from a dense cloud of large, faint Gaussians (what
+/// [`random_init`] makes for the adaptive scheme) the noise moves them by about their
+/// own size every step and the fit falls apart.
+pub fn mcmc_start(g: &mut Gaussians) {
+    for l in &mut g.logit_opacities {
+        *l = 0.0;
+    }
+    for ls in &mut g.log_scales {
+        for v in ls {
+            *v += 0.1f32.ln();
+        }
+    }
 }
 
 /// Keeps at most `cap` Gaussians: a seeded random subset, in model order.
