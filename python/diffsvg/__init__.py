@@ -890,6 +890,8 @@ def recon_voxel(scene, output, *, res: int = 128, iters: int = 3000, batch: int 
 def recon_splat(scene, output, *, iters: int = 5000, downscale: int = 1,
                 max_gaussians: int = 300_000, initial: int = 50_000, degree: int = 3,
                 bound: Optional[float] = None, seed: int = 0, eval_every: int = 0,
+                test_every: Optional[int] = None, antialias: bool = False,
+                exposure: bool = False, mcmc: bool = False,
                 progress: Progress = None) -> ReconInfo:
     """Fits 3D Gaussians (splatting) to the posed photos in ``scene`` and writes them to
     ``output`` (``.ply``, the layout Gaussian-splatting viewers read), as ``diffsvg recon
@@ -903,12 +905,19 @@ def recon_splat(scene, output, *, iters: int = 5000, downscale: int = 1,
     fraction of pixels that fell outside the photos when they were undistorted, else
     ``None``) and ``log``: rows of iteration, seconds, gaussians, SH degree, view PSNR,
     test PSNR (NaN where not evaluated).
+
+    ``test_every``: hold out every N-th view of instant-ngp and COLMAP folders (0: none;
+    default every 8th). ``antialias``: anti-aliased splats, saved with the model.
+    ``exposure``: learn a per-image color transform of each training photo. ``mcmc``: a
+    fixed budget of ``max_gaussians`` by relocation. As the CLI's flags of the same names.
     """
     return _native.recon_splat(
         os.fspath(scene), os.fspath(output), _whole(iters, "iters", _U64),
         _whole(downscale, "downscale"), _whole(max_gaussians, "max_gaussians", _U64),
         _whole(initial, "initial", _U64), _whole(degree, "degree"), bound,
-        _whole(seed, "seed", _U64), _whole(eval_every, "eval_every", _U64), progress)
+        _whole(seed, "seed", _U64), _whole(eval_every, "eval_every", _U64),
+        _whole_or_none(test_every, "test_every", _U64),
+        bool(antialias), bool(exposure), bool(mcmc), progress)
 
 
 def view(model, scene=None, *, split: str = "test", orbit: int = 0, elevation: float = 30.0,

@@ -98,7 +98,9 @@ def recon_voxel(scene: str | PathLike[str], output: str | PathLike[str], res: in
 def recon_splat(scene: str | PathLike[str], output: str | PathLike[str], iters: int = 5000,
                 downscale: int = 1, max_gaussians: int = 300000, initial: int = 50000,
                 degree: int = 3, bound: Optional[float] = None, seed: int = 0,
-                eval_every: int = 0, progress: Progress = None) -> ReconInfo: ...
+                eval_every: int = 0, test_every: Optional[int] = None,
+                antialias: bool = False, exposure: bool = False, mcmc: bool = False,
+                progress: Progress = None) -> ReconInfo: ...
 def view(model: str | PathLike[str], scene: Optional[str | PathLike[str]] = None,
          split: str = "test", orbit: int = 0, elevation: float = 30.0, downscale: int = 1,
          step: float = 0.5) -> Views: ...

@@ -146,7 +146,8 @@ pub(crate) fn recon_voxel<'py>(
 /// Returns a dict.
 #[pyfunction]
 #[pyo3(signature = (scene, output, iters=5000, downscale=1, max_gaussians=300_000,
-    initial=50_000, degree=3, bound=None, seed=0, eval_every=0, progress=None))]
+    initial=50_000, degree=3, bound=None, seed=0, eval_every=0, test_every=None,
+    antialias=false, exposure=false, mcmc=false, progress=None))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn recon_splat<'py>(
     py: Python<'py>,
@@ -160,6 +161,10 @@ pub(crate) fn recon_splat<'py>(
     bound: Option<f32>,
     seed: u64,
     eval_every: usize,
+    test_every: Option<usize>,
+    antialias: bool,
+    exposure: bool,
+    mcmc: bool,
     progress: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     check_output(&output, "ply")?;
@@ -172,7 +177,10 @@ pub(crate) fn recon_splat<'py>(
         bound,
         seed,
         eval_every,
-        test_every: None,
+        test_every,
+        antialias,
+        exposure,
+        mcmc,
     };
     job.validate().map_err(to_py)?;
     let mut prog = Progress::new(progress);

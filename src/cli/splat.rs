@@ -22,7 +22,8 @@ pub struct SplatArgs {
     /// photos with lens distortion are undistorted once, in memory.
     #[arg(long)]
     scene: PathBuf,
-    /// Model file to write (.ply, the layout Gaussian-splatting viewers read).
+    /// Model file to write: .ply, the layout Gaussian-splatting viewers read, or .spz,
+    /// Niantic's compressed format (about a tenth of the size; quantized).
     #[arg(short, long)]
     output: PathBuf,
     /// Optimizer iterations (one training view each).
@@ -56,13 +57,32 @@ pub struct SplatArgs {
     /// every 8th). NeRF-synthetic folders use transforms_test.json.
     #[arg(long, value_name = "N")]
     test_every: Option<usize>,
+    /// Anti-aliased splats (Mip-Splatting's 2D filter, gsplat's antialiased mode): each
+    /// splat's opacity is scaled by √(det Σ / det(Σ + 0.3·I)) so that the model renders
+    /// cleanly at other resolutions. Saved in the model; `view` renders it the same way.
+    #[arg(long)]
+    antialias: bool,
+    /// Learn a per-image affine color transform (3×3 and a bias, from the identity) of
+    /// each training photo, for photos of differing exposure or white balance; test views
+    /// are rendered without.
+    #[arg(long)]
+    exposure: bool,
+    /// A fixed budget of --max-gaussians Gaussians (3DGS-MCMC): transparent Gaussians
+    /// are relocated onto opaque ones, and the count grows 5% at a time up to the budget,
+    /// instead of cloning and splitting.
+    #[arg(long)]
+    mcmc: bool,
     #[command(flatten)]
     report: Reporting,
 }
 
 /// Runs `diffsvg recon splat`.
 pub fn run(a: SplatArgs) -> Result<()> {
-    super::util::check_output(&a.output, "ply")?;
+    let spz = a
+        .output
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("spz"));
+    super::util::check_output(&a.output, if spz { "spz" } else { "ply" })?;
     let job = SplatJob {
         iters: a.iters,
         downscale: a.downscale,
@@ -73,6 +93,9 @@ pub fn run(a: SplatArgs) -> Result<()> {
         seed: a.seed,
         eval_every: a.report.eval_every,
         test_every: a.test_every,
+        antialias: a.antialias,
+        exposure: a.exposure,
+        mcmc: a.mcmc,
     };
     job.validate().map_err(flag_error)?;
     install_interrupt_handler();
@@ -109,8 +132,12 @@ pub fn run(a: SplatArgs) -> Result<()> {
         undistortion_note(&a.scene, outside);
     }
     super::util::print_warnings(&out.warnings);
-    let (model, outcome) = (&out.model, out.outcome);
-    splat::save(model, &a.output)?;
+    let (model, outcome) = (&out.model, &out.outcome);
+    if spz {
+        splat::save_spz(model, &a.output)?;
+    } else {
+        splat::save(model, &a.output)?;
+    }
     write_log(
         &a.output,
         &out.log,

@@ -16,6 +16,7 @@ use super::recon_report::{
 use super::util::flag_error;
 use diffsvg::choice::Choice as _;
 use diffsvg::image_io::{Image, contact_sheet, write_atomic};
+use diffsvg::volume::depth::save_depth;
 use diffsvg::volume::metrics::{psnr, ssim};
 use diffsvg::volume::recon::{VoxelJob, recon_voxel};
 use diffsvg::volume::view::{Model, Split, check_downscale, orbit_cameras};
@@ -97,7 +98,7 @@ pub struct VoxelArgs {
 #[derive(clap::Args, Debug)]
 pub struct ViewArgs {
     /// Model file written by `diffsvg recon voxel` (.vox) or `diffsvg recon splat` (a
-    /// Gaussian-splatting PLY); the kind is read from the file's header.
+    /// Gaussian-splatting PLY or SPZ); the kind is read from the file's header.
     model: PathBuf,
     /// Dataset folder whose cameras to render from.
     #[arg(long)]
@@ -127,6 +128,12 @@ pub struct ViewArgs {
     /// Sample spacing along rays, in voxels (voxel models).
     #[arg(long, default_value_t = 0.5)]
     step: f32,
+    /// Also write depth images of every view (Gaussian models): NAME.depth-expected and
+    /// NAME.depth-median, each as a 16-bit PNG (level × units_per_level = depth, the
+    /// scale in depth.csv) and a float32 .npy; depths along the viewing axis, world
+    /// units, 0 where none.
+    #[arg(long)]
+    depth: bool,
     /// Print a JSON summary instead of a table.
     #[arg(long)]
     json: bool,
@@ -284,6 +291,9 @@ pub fn run_view(a: ViewArgs) -> Result<()> {
     if a.scene.is_none() && a.orbit == 0 {
         bail!("nothing to render: give --scene DIR and/or --orbit N");
     }
+    if a.depth && matches!(model, Model::Voxel(..)) {
+        bail!("--depth: depth images are drawn for Gaussian (.ply) models only");
+    }
     check_downscale(a.downscale).map_err(flag_error)?;
     let data = match &a.scene {
         Some(d) => {
@@ -308,6 +318,19 @@ pub fn run_view(a: ViewArgs) -> Result<()> {
     };
     std::fs::create_dir_all(&a.output)
         .with_context(|| format!("{}: cannot create the output folder", a.output.display()))?;
+    let mut depth_csv = String::from("file,units_per_level,max_depth\n");
+    let mut write_depth = |cam: &diffsvg::volume::camera::Camera, stem: &str| -> Result<()> {
+        if !a.depth {
+            return Ok(());
+        }
+        let d = model.render_depth(cam)?;
+        for (kind, values) in [("expected", &d.expected), ("median", &d.median)] {
+            let name = format!("{stem}.depth-{kind}");
+            let unit = save_depth(values, d.width, d.height, &a.output.join(&name))?;
+            let _ = writeln!(depth_csv, "{name}.png,{unit:e},{:e}", unit * 65535.0);
+        }
+        Ok(())
+    };
     let mut summary = serde_json::Map::new();
     if let Some(data) = &data {
         let views = a.split.views(data);
@@ -334,6 +357,7 @@ pub fn run_view(a: ViewArgs) -> Result<()> {
                 &to_image(&v.rgb, v.width, v.height),
             ]);
             pair.save_png(a.output.join(format!("{}.png", file_stem(&v.name))))?;
+            write_depth(&v.camera, &file_stem(&v.name))?;
         }
         let n = views.len() as f64;
         let _ = writeln!(csv, "mean,{:.3},{:.4},", sp / n, ss / n);
@@ -358,6 +382,7 @@ pub fn run_view(a: ViewArgs) -> Result<()> {
             let out = model.render(cam)?;
             let img = to_image(&out, cam.width, cam.height);
             img.save_png(a.output.join(format!("orbit-{i:03}.png")))?;
+            write_depth(cam, &format!("orbit-{i:03}"))?;
             frames.push(img);
         }
         write_gif(&frames, &a.output.join("orbit.gif"))?;
@@ -375,6 +400,17 @@ pub fn run_view(a: ViewArgs) -> Result<()> {
                 "view: {} orbit frames, orbit.gif and orbit.png in {}",
                 frames.len(),
                 a.output.display()
+            );
+        }
+    }
+    if a.depth {
+        let path = a.output.join("depth.csv");
+        write_atomic(&path, depth_csv.as_bytes())?;
+        summary.insert("depth".into(), json!(path));
+        if !a.json {
+            println!(
+                "view: depth images (16-bit PNG and float32 .npy), their scales in {}",
+                path.display()
             );
         }
     }

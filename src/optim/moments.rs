@@ -123,6 +123,18 @@ impl<T: Float> Moments<T> {
         self.v.fill(T::zero());
     }
 
+    /// Sets the moments of entries `range` to zero (a parameter moved or replaced
+    /// starts afresh); the step count carries on.
+    ///
+    /// # Panics
+    /// If `range` reaches past [`len`](Self::len).
+    pub fn clear_range(&mut self, range: std::ops::Range<usize>) {
+        if !self.m.is_empty() {
+            self.m[range.clone()].fill(T::zero());
+        }
+        self.v[range].fill(T::zero());
+    }
+
     /// Appends `n` slots with zero moments (new or cloned parameters start afresh); the
     /// step count carries on.
     pub fn extend(&mut self, n: usize) {

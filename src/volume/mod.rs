@@ -22,6 +22,7 @@
 pub mod camera;
 pub mod colmap;
 pub mod dataset;
+pub mod depth;
 pub mod metrics;
 
 use glam::Vec3;

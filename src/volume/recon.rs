@@ -116,6 +116,14 @@ pub struct SplatJob {
     pub eval_every: usize,
     /// Which views are held out ([`Loading::test_every`]); `None`: the format's default.
     pub test_every: Option<usize>,
+    /// Train [anti-aliased](splat::Gaussians::antialiased) splats (saved with the model).
+    pub antialias: bool,
+    /// Learn a per-image affine color transform of each training view
+    /// ([`splat::TrainOptions::exposure`]); test views are rendered without.
+    pub exposure: bool,
+    /// A fixed budget of [`max_gaussians`](Self::max_gaussians) by relocation
+    /// (3DGS-MCMC, [`splat::Densify::mcmc`]) instead of cloning and splitting.
+    pub mcmc: bool,
 }
 
 impl Default for SplatJob {
@@ -130,6 +138,9 @@ impl Default for SplatJob {
             seed: 0,
             eval_every: 0,
             test_every: None,
+            antialias: false,
+            exposure: false,
+            mcmc: false,
         }
     }
 }
@@ -419,6 +430,10 @@ pub fn recon_splat(
             job.seed,
         ),
     };
+    model.antialiased = job.antialias;
+    if job.mcmc {
+        splat::mcmc_start(&mut model);
+    }
     let iters = job.iters;
     let scaled = |x: usize| ((x as f64 * iters as f64 / 30_000.0).round() as usize).max(1);
     let opts = splat::TrainOptions {
@@ -430,12 +445,15 @@ pub fn recon_splat(
         extent: camera_extent(&data.train),
         densify: splat::Densify {
             from: scaled(500),
-            until: iters / 2,
+            // 3DGS-MCMC relocates until 25 000 of 30 000 iterations.
+            until: if job.mcmc { scaled(25_000) } else { iters / 2 },
             every: scaled(100).clamp(25, 100),
             reset_every: scaled(3000).max(200),
             max_gaussians: job.max_gaussians,
+            mcmc: job.mcmc.then(splat::Mcmc::default),
             ..splat::Densify::default()
         },
+        exposure: job.exposure,
         ..splat::TrainOptions::default()
     };
     let load_seconds = t_load.elapsed().as_secs_f64();

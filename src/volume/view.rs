@@ -61,7 +61,8 @@ pub enum Model {
 
 impl Model {
     /// Reads a model file, choosing the kind by its first bytes (a `ply` line, ending in
-    /// `\n` or `\r\n` as the PLY reader accepts, for Gaussians; a voxel model otherwise).
+    /// `\n` or `\r\n` as the PLY reader accepts, or a gzip stream, an
+    /// [SPZ file](splat::spz), for Gaussians; a voxel model otherwise).
     /// `step` is the voxel ray-marching step in cells (ignored for Gaussians).
     pub fn load(path: &Path, step: f32) -> Result<Model> {
         use std::io::Read as _;
@@ -72,6 +73,11 @@ impl Model {
         if head.starts_with(b"ply\n") || head.starts_with(b"ply\r\n") {
             Ok(Model::Splat(
                 splat::load(path)?,
+                splat::RenderSettings::default(),
+            ))
+        } else if crate::image_io::is_gzip(&head) {
+            Ok(Model::Splat(
+                splat::load_spz(path)?,
                 splat::RenderSettings::default(),
             ))
         } else {
@@ -117,6 +123,27 @@ impl Model {
                         what,
                     })
             }
+        }
+    }
+
+    /// The depth images of the view of `camera` ([`splat::Depth`]: expected and median
+    /// depth along the viewing axis, world units).
+    ///
+    /// # Errors
+    /// For a voxel model (depth images are drawn for Gaussians only), or the renderer's
+    /// refusal of the camera.
+    pub fn render_depth(&self, camera: &Camera) -> Result<splat::Depth> {
+        match self {
+            Model::Voxel(..) => Err(Error::Setting {
+                name: "depth".into(),
+                message: "depth images are drawn for Gaussian (.ply) models only".into(),
+            }),
+            Model::Splat(g, s) => splat::render(g, camera, s)
+                .map(|r| r.depth())
+                .map_err(|what| Error::InvalidValue {
+                    path: "camera".into(),
+                    what,
+                }),
         }
     }
 

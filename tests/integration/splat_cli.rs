@@ -582,3 +582,86 @@ fn view_rejects_bad_splat_models_cleanly() {
         assert!(!out.exists(), "{name}: the output folder was created");
     }
 }
+
+// ---------------------------------------------------------------------------------------
+// The features of issue 31 end to end
+
+/// `recon splat --antialias --exposure --mcmc` writing an SPZ: the file is gzip, loads
+/// as an antialiased model within the budget, and `view --depth` reads it and writes the
+/// depth images with their scales; a cut SPZ fails with one line naming it.
+#[test]
+fn recon_splat_features_write_spz_and_view_depth() {
+    let dir = scratch("splat_cli_features");
+    let scene = dir.join("scene");
+    write_scene(&scene, 12, 3, 32);
+    let model = dir.join("out/model.spz");
+    let r = diffsvg(&[
+        "recon",
+        "splat",
+        "--scene",
+        s(&scene),
+        "-o",
+        s(&model),
+        "--iters",
+        "60",
+        "--initial",
+        "200",
+        "--max-gaussians",
+        "300",
+        "--antialias",
+        "--exposure",
+        "--mcmc",
+        "--json",
+        "--quiet",
+    ]);
+    assert!(r.status.success(), "{}", stderr(&r));
+    let sum = summary(&r);
+    let n = sum["gaussians"].as_u64().unwrap() as usize;
+    assert!((1..=300).contains(&n), "{sum}");
+    let bytes = std::fs::read(&model).unwrap();
+    assert!(bytes.starts_with(&[0x1f, 0x8b]), "an SPZ is a gzip stream");
+    let g = splat::load_spz(&model).unwrap();
+    assert!(g.antialiased);
+    assert_eq!(g.len(), n);
+
+    let views = dir.join("views");
+    let r = diffsvg(&[
+        "view",
+        s(&model),
+        "--scene",
+        s(&scene),
+        "-o",
+        s(&views),
+        "--depth",
+        "--json",
+    ]);
+    assert!(r.status.success(), "{}", stderr(&r));
+    let test_psnr = sum["test_psnr"].as_f64().unwrap();
+    let view_psnr = summary(&r)["psnr"].as_f64().unwrap();
+    // The SPZ's quantization moves the PSNR a little, not much.
+    assert!(
+        (view_psnr - test_psnr).abs() < 1.0,
+        "{view_psnr} vs {test_psnr}"
+    );
+    let csv = std::fs::read_to_string(views.join("depth.csv")).unwrap();
+    let rows: Vec<&str> = csv.lines().collect();
+    assert_eq!(rows[0], "file,units_per_level,max_depth");
+    assert_eq!(rows.len(), 1 + 3 * 2, "{csv}");
+    for kind in ["expected", "median"] {
+        let png = image::open(views.join(format!("r_0.depth-{kind}.png"))).unwrap();
+        assert_eq!((png.width(), png.height()), (32, 32));
+        assert!(matches!(png, image::DynamicImage::ImageLuma16(_)));
+        let npy = std::fs::read(views.join(format!("r_0.depth-{kind}.npy"))).unwrap();
+        assert!(npy.starts_with(b"\x93NUMPY"));
+    }
+    let row: Vec<&str> = rows[1].split(',').collect();
+    let max: f32 = row[2].parse().unwrap();
+    assert!(max > 0.5 && max < 20.0, "{csv}");
+
+    // A cut SPZ is one line naming it, and nothing is written.
+    let cut = dir.join("cut.spz");
+    std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
+    let out = dir.join("cut-views");
+    let r = diffsvg(&["view", s(&cut), "--scene", s(&scene), "-o", s(&out)]);
+    assert_clean_failure(&r, &["cut.spz"], &out);
+}

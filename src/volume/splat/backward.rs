@@ -311,9 +311,10 @@ fn projection_backward(gaussians: &Gaussians, cam: &Pinhole, p: &Projected, g: &
     // dir = v/|v|: ∂dir/∂v = (I − dir·dirᵀ)/|v|.
     d_mean += (d_dir - dir * dir.dot(d_dir)) / len;
 
-    // Opacity through the sigmoid.
-    let o = p.opacity;
-    let logit = g[5] * o * (1.0 - o);
+    // Opacity through the sigmoid (and the anti-aliasing factor, 1 when off).
+    let o = gaussians.opacity(i);
+    let comp = p.compensation;
+    let logit = g[5] * comp * o * (1.0 - o);
 
     // Conic Q = Σ'⁻¹ → Σ' (matrix gradients with independent entries; the stored b is
     // both off-diagonal entries).
@@ -321,7 +322,19 @@ fn projection_backward(gaussians: &Gaussians, cam: &Pinhole, p: &Projected, g: &
     let q = Mat2::from_cols_array(&[qa, qb, qb, qc]);
     let gq = Mat2::from_cols_array(&[g[2], 0.5 * g[3], 0.5 * g[3], g[4]]);
     let gs = -(q * gq * q);
-    let (da, db, dc) = (gs.x_axis.x, gs.y_axis.x + gs.x_axis.y, gs.y_axis.y);
+    let (mut da, mut db, mut dc) = (gs.x_axis.x, gs.y_axis.x + gs.x_axis.y, gs.y_axis.y);
+    // The anti-aliasing factor k = √(det₀/det), det₀ of the covariance before the
+    // dilation s and det after it: ∂ln k/∂a = ½(c₀/det₀ − c/det), ∂ln k/∂c =
+    // ½(a₀/det₀ − a/det), ∂ln k/∂b = b·(1/det − 1/det₀) (a₀ = a − s, c₀ = c − s).
+    if gaussians.antialiased && comp > 0.0 {
+        let [a, b, c] = geo.abc;
+        let (a0, c0) = (a - cam.dilation, c - cam.dilation);
+        let (det, det0) = (a * c - b * b, a0 * c0 - b * b);
+        let d_log = g[5] * o * comp;
+        da += 0.5 * d_log * (c0 / det0 - c / det);
+        dc += 0.5 * d_log * (a0 / det0 - a / det);
+        db += d_log * b * (1.0 / det - 1.0 / det0);
+    }
     // a = j0ᵀCj0, b = j0ᵀCj1, c = j1ᵀCj1 (C symmetric).
     let (j0, j1, cov) = (geo.j0, geo.j1, geo.cov);
     let g_cov = outer(j0, j0) * da + outer(j0, j1) * db + outer(j1, j1) * dc;
@@ -508,10 +521,36 @@ mod tests {
         check_central_differences(g);
     }
 
+    /// The same with anti-aliased splats: the gradient through the opacity factor
+    /// `√(det Σ / det(Σ + s·I))` to the shape, the mean and the opacity. A large dilation
+    /// (60 px² on splats of about 60 to 170 px² of variance) keeps the scene smooth for
+    /// finite differences while the factor is far from 1.
+    #[test]
+    fn antialiased_splats_match_central_differences() {
+        let mut g = smooth_scene();
+        g.antialiased = true;
+        let s = RenderSettings {
+            dilation: 60.0,
+            ..Default::default()
+        };
+        let out = render(&g, &camera(), &s).unwrap();
+        let comps: Vec<f32> = out.projected.iter().map(|p| p.compensation).collect();
+        assert!(
+            comps.iter().all(|&k| k > 0.2 && k < 0.9),
+            "factors {comps:?}"
+        );
+        check_central_differences_with(g, 60.0);
+    }
+
     fn check_central_differences(g0: Gaussians) {
+        check_central_differences_with(g0, RenderSettings::default().dilation);
+    }
+
+    fn check_central_differences_with(g0: Gaussians, dilation: f32) {
         let cam = camera();
         let s = RenderSettings {
             background: [0.2, 0.5, 0.9],
+            dilation,
             ..Default::default()
         };
         let out = render(&g0, &cam, &s).unwrap();

@@ -69,6 +69,14 @@ fn alpha8(p: &Projected, dx: f32x8, dy: f32) -> (f32x8, f32x8, f32x8, f32x8) {
     (alpha, raw, g, counts)
 }
 
+/// Splat `p`'s opacity at one pixel `(dx, dy)` from its center, the same bits as lane
+/// by lane in [`alpha8`], and whether the pixel counts.
+#[inline]
+pub(crate) fn alpha1(p: &Projected, dx: f32, dy: f32) -> (f32, bool) {
+    let (alpha, _, _, counts) = alpha8(p, f32x8::splat(dx), dy);
+    (alpha.to_array()[0], counts.to_bitmask() & 1 != 0)
+}
+
 /// The halves `[h0, h1)` of a tile row that splat `p` can reach: those with a pixel
 /// center within a pixel of the row's chord of the contour where the opacity falls to
 /// 1/255 (`a·dx² + 2b·dx·dy + c·dy² ≤ reach`). Pixels outside count for nothing, so
@@ -293,6 +301,7 @@ mod tests {
                 reach: 2.0,
                 color: glam::Vec3::ONE,
                 opacity: next(),
+                compensation: 1.0,
             };
             let (left, dy) = (next() * 20.0 - 2.0, next() * 20.0 - 10.0);
             let mut p = p;

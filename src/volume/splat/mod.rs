@@ -25,20 +25,23 @@
 //! ```
 
 pub mod backward;
+pub mod exposure;
 mod kernel;
 pub(crate) mod loss;
 pub mod ply;
 pub(crate) mod points;
 pub mod render;
+pub mod spz;
 pub mod train;
 
 pub use backward::{Gradients, backward, backward_into};
 pub use ply::{load, save};
 pub use points::PointCloud;
-pub use render::{RenderSettings, Rendered, render};
+pub use render::{Depth, RenderSettings, Rendered, render};
+pub use spz::{load_spz, save_spz};
 pub use train::{
-    Densify, TrainOptions, TrainOutcome, TrainStep, find_point_cloud, from_point_cloud,
-    from_points, random_init, train,
+    Densify, Mcmc, TrainOptions, TrainOutcome, TrainStep, find_point_cloud, from_point_cloud,
+    from_points, mcmc_start, random_init, train,
 };
 
 use glam::{Quat, Vec3};
@@ -84,6 +87,14 @@ pub struct Gaussians {
     pub sh: Vec<f32>,
     /// SH degree, 0 to 3.
     pub sh_degree: u32,
+    /// Anti-aliased splats (Mip-Splatting's 2D filter, gsplat's `antialiased` mode):
+    /// every splat's opacity is multiplied by `√(det Σ / det(Σ + s·I))`, with `Σ` its
+    /// projected 2D covariance and `s` the [dilation](render::RenderSettings::dilation)
+    /// (0.3 px²), so that a splat dilated to about a pixel keeps its total weight and a
+    /// model renders alike at other resolutions. A property of the model, not of the
+    /// view: a model trained with it must be rendered with it, so it is saved in the
+    /// PLY file (a `comment diffsvg antialiased` header line, which other readers skip).
+    pub antialiased: bool,
 }
 
 impl Gaussians {

@@ -29,6 +29,10 @@
 //! end_header
 //! ```
 //!
+//! An [antialiased](Gaussians::antialiased) model has the line `comment diffsvg
+//! antialiased` after the format line (other readers skip comments; a model read without
+//! it is not antialiased).
+//!
 //! The file is exactly the header plus `N × 4 × (properties)` bytes.
 //!
 //! **Reading** is strict: the file must fit [`MAX_SPLAT_BYTES`] (checked before reading)
@@ -54,10 +58,18 @@ use crate::volume::sh;
 
 const END_HEADER: &[u8] = b"end_header";
 
+/// The header line that marks an [antialiased](Gaussians::antialiased) model.
+const ANTIALIASED: &str = "comment diffsvg antialiased";
+
 /// The header written for `n` Gaussians of SH degree `degree`.
-fn header(n: usize, degree: u32) -> String {
+fn header(n: usize, degree: u32, antialiased: bool) -> String {
     let rest = 3 * (sh::coeff_count(degree) - 1);
-    let mut h = format!("ply\nformat binary_little_endian 1.0\nelement vertex {n}\n");
+    let mut h = String::from("ply\nformat binary_little_endian 1.0\n");
+    if antialiased {
+        h.push_str(ANTIALIASED);
+        h.push('\n');
+    }
+    h.push_str(&format!("element vertex {n}\n"));
     let mut names: Vec<String> = [
         "x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2",
     ]
@@ -80,7 +92,7 @@ fn header(n: usize, degree: u32) -> String {
 pub(crate) fn to_bytes(g: &Gaussians) -> Vec<u8> {
     let k = g.coeffs_per_channel();
     let n = g.len();
-    let h = header(n, g.sh_degree);
+    let h = header(n, g.sh_degree, g.antialiased);
     let floats = 3 + 3 + 3 * k + 1 + 3 + 4;
     let mut b = Vec::with_capacity(h.len() + 4 * floats * n);
     b.extend_from_slice(h.as_bytes());
@@ -163,6 +175,7 @@ pub(crate) fn from_bytes(b: &[u8], path: &Path) -> Result<Gaussians> {
     };
     let k = sh::coeff_count(degree);
     let mut g = Gaussians::new(degree);
+    g.antialiased = text.lines().any(|l| l.trim_end() == ANTIALIASED);
     g.means.reserve_exact(n);
     g.log_scales.reserve_exact(n);
     g.rotations.reserve_exact(n);
@@ -574,6 +587,25 @@ mod tests {
             assert_eq!(bits(&h), bits(&g));
             assert_eq!(h, g);
         }
+    }
+
+    #[test]
+    fn the_antialiased_flag_round_trips_in_a_comment() {
+        let mut g = sample(1, 4);
+        g.antialiased = true;
+        let path = temp("aa.ply");
+        save(&g, &path).unwrap();
+        let text = std::fs::read(&path).unwrap();
+        let h = load(&path).unwrap();
+        std::fs::remove_file(&path).ok();
+        assert!(h.antialiased);
+        assert_eq!(h, g);
+        let head = String::from_utf8_lossy(&text[..200]).into_owned();
+        assert!(head.contains("\ncomment diffsvg antialiased\n"), "{head}");
+        // Without the line, the same records read as a plain model.
+        g.antialiased = false;
+        let plain = from_bytes(&to_bytes(&g), Path::new("x.ply")).unwrap();
+        assert!(!plain.antialiased);
     }
 
     /// A header of float properties in the given order.

@@ -131,8 +131,12 @@ pub(crate) struct Projected {
     pub reach: f32,
     /// Linear RGB seen along the direction from the camera center to the mean.
     pub color: Vec3,
-    /// Peak opacity, `sigmoid(logit)`.
+    /// Peak opacity as blended: `sigmoid(logit)`, times [`compensation`](Self::compensation).
     pub opacity: f32,
+    /// The anti-aliasing factor `√(det Σ / det(Σ + s·I))` of an
+    /// [antialiased](Gaussians::antialiased) model (`Σ` the 2D covariance before the
+    /// dilation `s`), 1 otherwise.
+    pub compensation: f32,
 }
 
 /// The result of [`render`].
@@ -162,6 +166,80 @@ impl Rendered {
     pub fn visible(&self) -> usize {
         self.projected.len()
     }
+
+    /// The depth images of this rendering ([`Depth`]): the same splats, opacities and
+    /// blending order as the colors, with each splat's depth (its center's distance along
+    /// the viewing axis) in place of its color.
+    pub fn depth(&self) -> Depth {
+        let (w, h) = (self.width as usize, self.height as usize);
+        let mut expected = vec![0.0f32; w * h];
+        let mut median = vec![0.0f32; w * h];
+        let n_tiles = self.bins.tiles_x as usize * self.bins.tiles_y as usize;
+        let tiles: Vec<Vec<(usize, f32, f32)>> = (0..n_tiles)
+            .into_par_iter()
+            .map(|t| {
+                let list = &self.bins.ids[self.bins.offsets[t]..self.bins.offsets[t + 1]];
+                let (x0, x1, y0, y1) = tile_pixels(t, &self.bins, w, h);
+                let mut out = Vec::with_capacity((x1 - x0) * (y1 - y0));
+                for y in y0..y1 {
+                    for x in x0..x1 {
+                        let i = y * w + x;
+                        let end = self.ends[i] as usize;
+                        let (mut t, mut sum, mut med) = (1.0f32, 0.0f32, 0.0f32);
+                        for &id in &list[..end] {
+                            let p = &self.projected[id as usize];
+                            let dx = x as f32 + 0.5 - p.mean2d.x;
+                            let dy = y as f32 + 0.5 - p.mean2d.y;
+                            let (alpha, counts) = super::kernel::alpha1(p, dx, dy);
+                            if !counts {
+                                continue;
+                            }
+                            sum += alpha * t * p.depth;
+                            t *= 1.0 - alpha;
+                            if med == 0.0 && t <= 0.5 {
+                                med = p.depth;
+                            }
+                        }
+                        let covered = 1.0 - t;
+                        let ed = if covered > 0.0 { sum / covered } else { 0.0 };
+                        out.push((i, ed, med));
+                    }
+                }
+                out
+            })
+            .collect();
+        for (i, ed, med) in tiles.into_iter().flatten() {
+            expected[i] = ed;
+            median[i] = med;
+        }
+        Depth {
+            width: self.width,
+            height: self.height,
+            expected,
+            median,
+            opacity: self.transmittance.iter().map(|t| 1.0 - t).collect(),
+        }
+    }
+}
+
+/// Depth images of a splat rendering ([`Rendered::depth`]). Depths are distances along
+/// the camera's viewing axis (`−z` in camera coordinates, not along the ray), world
+/// units; 0 where a pixel has none. Row-major with y down, like [`Rendered::rgb`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct Depth {
+    /// Image width, pixels.
+    pub width: u32,
+    /// Image height, pixels.
+    pub height: u32,
+    /// Expected depth: `Σ wᵢ·zᵢ / Σ wᵢ` over the splats blended at the pixel, with
+    /// `wᵢ = αᵢ·Tᵢ` their blending weights and `zᵢ` their centers' depths (normalized by
+    /// the accumulated opacity, gsplat's "ED"); 0 where nothing was blended.
+    pub expected: Vec<f32>,
+    /// Median depth: the depth of the splat with which the accumulated opacity
+    /// `1 − T` reaches 0.5 (front to back); 0 where it never does.
+    pub median: Vec<f32>,
+    /// Accumulated opacity `1 − T`, in `[0, 1]`.
+    pub opacity: Vec<f32>,
 }
 
 /// Renders `gaussians` seen by `camera` (see the module documentation).
@@ -231,7 +309,8 @@ pub(crate) struct Pinhole {
     lx: (f32, f32),
     ly: (f32, f32),
     near: f32,
-    dilation: f32,
+    /// [`RenderSettings::dilation`], pixels².
+    pub dilation: f32,
 }
 
 /// What projecting one Gaussian computes (before culling by screen bounds), kept for the
@@ -345,9 +424,14 @@ pub(crate) fn project(
             }
             let mid = 0.5 * (a + c);
             let lambda = mid + (mid * mid - det).max(0.1).sqrt();
+            let compensation = if gaussians.antialiased {
+                compensation(geo.abc, cam.dilation)
+            } else {
+                1.0
+            };
             // Opacity-aware bound: beyond √(2·ln(255·o)·λ) pixels from the center the
             // opacity is below 1/255 in every direction, so nothing there is blended.
-            let opacity = gaussians.opacity(i);
+            let opacity = gaussians.opacity(i) * compensation;
             if !(opacity >= MIN_ALPHA) {
                 return None;
             }
@@ -382,9 +466,23 @@ pub(crate) fn project(
                 reach,
                 color: gaussians.color(i, (mean - cam.origin).normalize()),
                 opacity,
+                compensation,
             })
         })
         .collect()
+}
+
+/// The anti-aliasing factor of Mip-Splatting's 2D filter (gsplat's `antialiased`
+/// mode): `√(det Σ / det(Σ + s·I))`, with `[a, b, c]` the entries of the dilated
+/// covariance `Σ + s·I` and `s` the dilation, pixels². A splat much larger than a pixel
+/// keeps its opacity (the factor tends to 1); one much smaller than a pixel is spread
+/// over about a pixel by the dilation and dimmed by this factor, so that its total
+/// weight `opacity × area` stays what it was, at any resolution. 0 for a degenerate
+/// (non-positive) `Σ`.
+pub(crate) fn compensation([a, b, c]: [f32; 3], dilation: f32) -> f32 {
+    let det = a * c - b * b;
+    let det0 = (a - dilation) * (c - dilation) - b * b;
+    (det0 / det).max(0.0).sqrt()
 }
 
 /// Per-tile lists of projected Gaussians (indices into the projected array), each
@@ -877,6 +975,92 @@ mod tests {
             one.transmittance.iter().any(|&t| t < 0.5),
             "the scene covers pixels"
         );
+    }
+
+    /// With anti-aliasing, a splat smaller than a pixel keeps its total weight (the sum of
+    /// its opacity over the image, in units of the coarse image's pixels) when the image
+    /// is rendered at twice the resolution; without it, the dilation makes the small
+    /// splat heavier at the coarse resolution.
+    #[test]
+    fn antialiased_weight_is_the_same_at_two_resolutions() {
+        let weight = |antialiased: bool, w: u32| {
+            let cam = Camera::from_fov_x(w, w, 1.0, Affine3A::IDENTITY).unwrap();
+            let fx32 = 16.0 / 0.5f32.tan();
+            let mut g = Gaussians::new(0);
+            g.antialiased = antialiased;
+            // A standard deviation of 0.5 px at 32 px across, 4 units away.
+            let sigma = 0.5 * 4.0 / fx32;
+            g.push(
+                [0.0, 0.0, -4.0],
+                [sigma.ln(); 3],
+                [1.0, 0.0, 0.0, 0.0],
+                logit(0.3),
+                &[0.0; 3],
+            );
+            let out = render(&g, &cam, &settings([0.0; 3])).unwrap();
+            let covered: f64 = out.transmittance.iter().map(|&t| 1.0 - t as f64).sum();
+            let k = out.projected[0].compensation;
+            (covered * (32.0 / w as f64).powi(2), k)
+        };
+        let (aa32, k32) = weight(true, 32);
+        let (aa64, k64) = weight(true, 64);
+        // Isotropic: k = √(det Σ / det(Σ + 0.3·I)) = σ²/(σ² + 0.3), σ² = 0.25 and 1 px².
+        assert!((k32 - 0.25 / 0.55).abs() < 1e-3, "{k32}");
+        assert!((k64 - 1.0 / 1.3).abs() < 1e-3, "{k64}");
+        assert!((aa64 / aa32 - 1.0).abs() < 0.06, "{aa32} vs {aa64}");
+        let (plain32, _) = weight(false, 32);
+        let (plain64, _) = weight(false, 64);
+        assert!(plain64 / plain32 < 0.7, "{plain32} vs {plain64}");
+        assert_eq!(weight(false, 32).1, 1.0);
+    }
+
+    /// Two walls facing the camera, each one Gaussian flattened along the view: a
+    /// third-transparent one at depth 2 before an opaque one at depth 4. At the center
+    /// the weights are 0.3 and 0.7·0.99, so the expected depth is their mean of 2 and 4,
+    /// and the accumulated opacity crosses 0.5 at the second wall (the median depth).
+    #[test]
+    fn depth_of_two_walls() {
+        let cam = camera();
+        let mut g = Gaussians::new(0);
+        let wall = |g: &mut Gaussians, z: f32, o: f32| {
+            g.push(
+                [0.0, 0.0, -z],
+                [2f32.ln(), 2f32.ln(), 1e-3f32.ln()],
+                [1.0, 0.0, 0.0, 0.0],
+                logit(o),
+                &[0.0; 3],
+            )
+        };
+        wall(&mut g, 4.0, 0.999);
+        wall(&mut g, 2.0, 0.3);
+        let out = render(&g, &cam, &settings([0.0; 3])).unwrap();
+        let d = out.depth();
+        let c = 24 * 64 + 32;
+        let (w1, w2) = (0.3f32, 0.7 * 0.99);
+        let want = (w1 * 2.0 + w2 * 4.0) / (w1 + w2);
+        assert!(
+            (d.expected[c] - want).abs() < 2e-3,
+            "{} vs {want}",
+            d.expected[c]
+        );
+        assert_eq!(d.median[c], 4.0);
+        assert!((d.opacity[c] - (w1 + w2)).abs() < 1e-3);
+        // Only the near wall: its depth, and no median (opacity 0.3 < 0.5).
+        let mut near = Gaussians::new(0);
+        wall(&mut near, 2.0, 0.3);
+        let d = render(&near, &cam, &settings([0.0; 3])).unwrap().depth();
+        assert!((d.expected[c] - 2.0).abs() < 1e-5);
+        assert_eq!(d.median[c], 0.0);
+        // Nothing: zeros.
+        let d = render(&Gaussians::new(0), &cam, &settings([0.0; 3]))
+            .unwrap()
+            .depth();
+        assert!(d.expected.iter().chain(&d.median).all(|&v| v == 0.0));
+        assert_eq!((d.width, d.height, d.expected.len()), (64, 48, 64 * 48));
+    }
+
+    fn logit(p: f32) -> f32 {
+        (p / (1.0 - p)).ln()
     }
 
     #[test]

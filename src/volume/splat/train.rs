@@ -20,8 +20,29 @@
 //!   gradients win);
 //!
 //! and every [`Densify::reset_every`] iterations, opacities are lowered to at most 0.01 so
-//! that pruning can find what no view needs. Results are deterministic for a fixed seed,
-//! on any number of threads (the renderer, the backward pass and the loss are).
+//! that pruning can find what no view needs.
+//!
+//! **A fixed budget** ([`Densify::mcmc`], 3DGS-MCMC, Kheradmand et al. 2024) replaces
+//! cloning, splitting, pruning and opacity resets: every [`Densify::every`] iterations
+//! inside `[from, until)`, the Gaussians whose opacity is at most
+//! [`Densify::min_opacity`] ("dead") are moved onto live ones drawn with probability
+//! proportional to their opacity, and the count grows by [`Mcmc::grow`] (drawn the same
+//! way) up to [`Densify::max_gaussians`], never above it. A Gaussian drawn `N − 1` times
+//! becomes `N` identical copies whose opacity is `1 − (1 − o)^(1/N)` and whose scales are
+//! multiplied by `o / Σᵢ₌₁ᴺ Σₖ₌₀ⁱ⁻¹ C(i−1, k)·(−1)ᵏ·o_newᵏ⁺¹/√(k+1)`, the paper's rule
+//! that keeps the rendering of the copies close to that of the original. The loss gains
+//! `opacity_reg·mean(opacity) + scale_reg·mean(scale)`, and after each step every mean
+//! moves by noise `lr_means·noise_lr·σ(100·(0.005 − o))·Σ·z`, `z` standard normal and `Σ`
+//! the Gaussian's covariance, so that nearly transparent Gaussians explore.
+//!
+//! **Per-image exposure** ([`TrainOptions::exposure`]): each training view's rendering
+//! passes through its own learned affine color transform ([`exposure`]
+//! module) before the loss; the transforms start at the identity, have their own Adam
+//! rate, and are returned in [`TrainOutcome::exposures`]. Held-out views are rendered
+//! without them.
+//!
+//! Results are deterministic for a fixed seed, on any number of threads (the renderer,
+//! the backward pass and the loss are).
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -31,6 +52,7 @@ use rayon::prelude::*;
 
 use super::Gaussians;
 use super::backward::{Gradients, backward_into};
+use super::exposure;
 use super::loss::photometric_loss;
 use super::render::{RenderSettings, render};
 use crate::error::{Error, Result};
@@ -65,6 +87,35 @@ pub struct Densify {
     pub max_screen_radius: f32,
     /// Most Gaussians the model may hold (at least 1).
     pub max_gaussians: usize,
+    /// `Some`: a fixed budget by relocation (3DGS-MCMC, see the module documentation)
+    /// instead of cloning and splitting; `grad_threshold`, `percent_dense`,
+    /// `reset_every` and `max_screen_radius` are then unused.
+    pub mcmc: Option<Mcmc>,
+}
+
+/// The settings of the fixed-budget scheme (3DGS-MCMC's defaults).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Mcmc {
+    /// Scale of the position noise, times the means' learning rate (5·10⁵).
+    pub noise_lr: f32,
+    /// Weight of the mean opacity in the loss (0.01).
+    pub opacity_reg: f32,
+    /// Weight of the mean scale (world units) in the loss (0.01).
+    pub scale_reg: f32,
+    /// Growth of the count at each relocation, as a fraction of it (0.05), up to
+    /// [`Densify::max_gaussians`].
+    pub grow: f32,
+}
+
+impl Default for Mcmc {
+    fn default() -> Self {
+        Mcmc {
+            noise_lr: 5e5,
+            opacity_reg: 0.01,
+            scale_reg: 0.01,
+            grow: 0.05,
+        }
+    }
 }
 
 impl Default for Densify {
@@ -79,6 +130,7 @@ impl Default for Densify {
             min_opacity: 0.005,
             max_screen_radius: 20.0,
             max_gaussians: 1_000_000,
+            mcmc: None,
         }
     }
 }
@@ -118,6 +170,12 @@ pub struct TrainOptions {
     pub lr_sh_rest: f32,
     /// Adaptive density control.
     pub densify: Densify,
+    /// Learn a per-image affine color transform ([`exposure`]) of
+    /// each training view.
+    pub exposure: bool,
+    /// Learning rate of the exposure transforms, at the first and the last iteration
+    /// (exponential decay between).
+    pub lr_exposure: [f32; 2],
 }
 
 impl Default for TrainOptions {
@@ -138,6 +196,8 @@ impl Default for TrainOptions {
             lr_sh_dc: 2.5e-3,
             lr_sh_rest: 2.5e-3 / 20.0,
             densify: Densify::default(),
+            exposure: false,
+            lr_exposure: [1e-2, 1e-3],
         }
     }
 }
@@ -160,7 +220,7 @@ pub struct TrainStep {
 }
 
 /// How [`train`] ended.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct TrainOutcome {
     /// Iterations done.
     pub iterations: usize,
@@ -173,6 +233,9 @@ pub struct TrainOutcome {
     /// Seconds spent per part of a step, summed over the run: render, loss, backward,
     /// optimizer update, density control.
     pub parts: [f32; 5],
+    /// With [`TrainOptions::exposure`], the learned transform of each training view, in
+    /// the order of the views ([`exposure`] module); else empty.
+    pub exposures: Vec<[f32; 12]>,
 }
 
 /// `count` Gaussians at uniformly random places in the cube `center ± half`, with random
@@ -389,7 +452,18 @@ pub fn train(
         loss: f32::NAN,
         seconds: 0.0,
         parts: [0.0; 5],
+        exposures: Vec::new(),
     };
+    let mut exposures = vec![exposure::IDENTITY; if opts.exposure { views.len() } else { 0 }];
+    let mut exposure_moments: Vec<Moments<f32>> = (0..exposures.len())
+        .map(|_| Moments::new(ADAM, 12))
+        .collect();
+    let mut exposed: Vec<[f32; 3]> = Vec::new();
+    let mut d_raw: Vec<[f32; 3]> = Vec::new();
+    if opts.densify.mcmc.is_some() {
+        cap_count(gaussians, opts.densify.max_gaussians, &mut rng);
+        state = State::new(gaussians);
+    }
     let d = &opts.densify;
     let mut active_degree = 0u32;
     for it in 0..opts.iterations {
@@ -402,7 +476,8 @@ pub fn train(
                 order.swap(i, rng.below(i + 1));
             }
         }
-        let view = &views[order.pop().expect("refilled above")];
+        let vi = order.pop().expect("refilled above");
+        let view = &views[vi];
         let mut clock = Instant::now();
         let mut lap = |part: usize, outcome: &mut TrainOutcome| {
             outcome.parts[part] += clock.elapsed().as_secs_f32();
@@ -412,8 +487,22 @@ pub fn train(
         lap(0, &mut outcome);
         d_img.resize(out.rgb.len(), [0.0; 3]);
         let (w, h) = (view.width as usize, view.height as usize);
-        let loss = photometric_loss(&out.rgb, &view.rgb, w, h, opts.ssim_weight, &mut d_img);
-        let mse = crate::volume::metrics::mse(&out.rgb, &view.rgb);
+        let shown = if opts.exposure {
+            exposure::apply(&exposures[vi], &out.rgb, &mut exposed);
+            &exposed
+        } else {
+            &out.rgb
+        };
+        let loss = photometric_loss(shown, &view.rgb, w, h, opts.ssim_weight, &mut d_img);
+        let mse = crate::volume::metrics::mse(shown, &view.rgb);
+        let frac: f32 = progress(it, opts.iterations);
+        if opts.exposure {
+            d_raw.resize(d_img.len(), [0.0; 3]);
+            let dm = exposure::backward(&exposures[vi], &out.rgb, &d_img, &mut d_raw);
+            std::mem::swap(&mut d_img, &mut d_raw);
+            let lr = exponential(opts.lr_exposure, frac);
+            adam(&mut exposure_moments[vi], &mut exposures[vi], &dm, |_| lr);
+        }
         lap(1, &mut outcome);
         backward_into(
             gaussians,
@@ -434,11 +523,21 @@ pub fn train(
             state.max_radius[i] = state.max_radius[i].max(p.radius);
         }
         lap(2, &mut outcome);
-        let frac: f32 = progress(it, opts.iterations);
+        if let Some(m) = &d.mcmc {
+            mcmc_regularize(gaussians, &mut grads, m);
+        }
         state.step(gaussians, &grads, opts, frac, active_degree);
+        if let Some(m) = &d.mcmc {
+            let lr_mean = exponential(opts.lr_means, frac) * opts.extent;
+            mcmc_noise(gaussians, lr_mean * m.noise_lr, &mut rng);
+        }
         lap(3, &mut outcome);
         let iter = it + 1;
-        if iter >= d.from && iter < d.until && iter % d.every == 0 {
+        let window = iter >= d.from && iter < d.until && iter % d.every == 0;
+        if let (true, Some(m)) = (window, &d.mcmc) {
+            relocate(gaussians, &mut state, d.min_opacity, &mut rng);
+            grow(gaussians, &mut state, m.grow, d, &mut rng);
+        } else if window {
             let after_reset = d.reset_every > 0 && iter > d.reset_every;
             densify(gaussians, &mut state, opts, after_reset, &mut rng);
             if gaussians.is_empty() {
@@ -468,7 +567,7 @@ pub fn train(
         }
         // The opacity reset comes after the observer has seen this iteration's model, so
         // that an evaluation (or a stop) never meets the model just after a reset.
-        if d.reset_every > 0 && iter % d.reset_every == 0 && iter < d.until {
+        if d.mcmc.is_none() && d.reset_every > 0 && iter % d.reset_every == 0 && iter < d.until {
             let t_reset = Instant::now();
             let cap = logit(0.01);
             for l in &mut gaussians.logit_opacities {
@@ -479,6 +578,7 @@ pub fn train(
         }
     }
     outcome.seconds = (start.elapsed() - observing).as_secs_f32();
+    outcome.exposures = exposures;
     Ok(outcome)
 }
 
@@ -517,7 +617,20 @@ fn validate(
     if d.every == 0 {
         return Err("densify every 0 iterations".into());
     }
+    if let Some(m) = &d.mcmc {
+        let ok = |v: f32| v.is_finite() && v >= 0.0;
+        if !(ok(m.noise_lr) && ok(m.opacity_reg) && ok(m.scale_reg) && ok(m.grow) && m.grow <= 1.0)
+        {
+            return Err(
+                "MCMC settings: noise_lr, opacity_reg and scale_reg must be finite and ≥ 0, \
+                 grow in [0, 1]"
+                    .into(),
+            );
+        }
+    }
     let rates = [
+        opts.lr_exposure[0],
+        opts.lr_exposure[1],
         opts.lr_means[0],
         opts.lr_means[1],
         opts.lr_log_scales,
@@ -623,6 +736,15 @@ impl State {
                 *q = [1.0, 0.0, 0.0, 0.0];
             }
         }
+    }
+
+    /// Fresh optimizer moments for Gaussian `i` (`k3` SH coefficients each).
+    fn clear_at(&mut self, i: usize, k3: usize) {
+        self.means.clear_range(3 * i..3 * i + 3);
+        self.log_scales.clear_range(3 * i..3 * i + 3);
+        self.rotations.clear_range(4 * i..4 * i + 4);
+        self.opacities.clear_range(i..i + 1);
+        self.sh.clear_range(k3 * i..k3 * (i + 1));
     }
 
     /// Keeps the flagged Gaussians' state, in order, then appends fresh state for `added`.
@@ -755,6 +877,210 @@ fn densify(
     g.logit_opacities.extend_from_slice(&added.logit_opacities);
     g.sh.extend_from_slice(&added.sh);
     state.compact(&keep, n_added, k3);
+}
+
+/// The start 3DGS-MCMC trains from (gsplat's `init_opa = 0.5`, `init_scale = 0.1`):
+/// every opacity set to 0.5 and every scale divided by 10. Its position noise is scaled
+/// by the covariance and gated to nearly transparent Gaussians, so it assumes small,
+/// fairly opaque ones at the start: from a dense cloud of large, faint Gaussians (what
+/// [`random_init`] makes for the adaptive scheme) the noise moves them by about their
+/// own size every step and the fit falls apart.
+pub fn mcmc_start(g: &mut Gaussians) {
+    for l in &mut g.logit_opacities {
+        *l = 0.0;
+    }
+    for ls in &mut g.log_scales {
+        for v in ls {
+            *v += 0.1f32.ln();
+        }
+    }
+}
+
+/// Keeps at most `cap` Gaussians: a seeded random subset, in model order.
+fn cap_count(g: &mut Gaussians, cap: usize, rng: &mut Rng) {
+    let n = g.len();
+    if n <= cap {
+        return;
+    }
+    let mut idx: Vec<usize> = (0..n).collect();
+    for i in 0..cap {
+        let j = i + rng.below(n - i);
+        idx.swap(i, j);
+    }
+    let mut keep = vec![false; n];
+    for &i in &idx[..cap] {
+        keep[i] = true;
+    }
+    retain(g, &keep);
+}
+
+/// Adds the gradients of `opacity_reg·mean(opacity) + scale_reg·mean(scale)` (means
+/// over the Gaussians and, for scales, their three axes).
+fn mcmc_regularize(g: &Gaussians, grads: &mut Gradients, m: &Mcmc) {
+    let n = g.len().max(1) as f32;
+    let (ko, ks) = (m.opacity_reg / n, m.scale_reg / (3.0 * n));
+    grads
+        .logit_opacities
+        .par_iter_mut()
+        .enumerate()
+        .for_each(|(i, d)| {
+            let o = g.opacity(i);
+            *d += ko * o * (1.0 - o);
+        });
+    grads
+        .log_scales
+        .par_iter_mut()
+        .zip(&g.log_scales)
+        .for_each(|(d, ls)| {
+            for k in 0..3 {
+                d[k] += ks * ls[k].exp();
+            }
+        });
+}
+
+/// Moves each mean by `scale·σ(100·(0.005 − o))·Σ·z` (module documentation). Gaussians
+/// whose gate is below 10⁻⁷ (opacity above about 0.17) are left alone and draw no noise:
+/// their step would be negligible.
+fn mcmc_noise(g: &mut Gaussians, scale: f32, rng: &mut Rng) {
+    for i in 0..g.len() {
+        let o = g.opacity(i);
+        let gate = 1.0 / (1.0 + (100.0 * (o - 0.005)).exp());
+        if !(gate >= 1e-7) {
+            continue;
+        }
+        let z = Vec3::new(rng.normal(), rng.normal(), rng.normal());
+        let r = Mat3::from_quat(g.rotation(i));
+        let s = g.scale(i);
+        let cov = r * Mat3::from_diagonal(s * s) * r.transpose();
+        let step = cov * z * (scale * gate);
+        if step.is_finite() {
+            let m = &mut g.means[i];
+            *m = (Vec3::from_array(*m) + step).to_array();
+        }
+    }
+}
+
+/// 3DGS-MCMC's relocation rule: the opacity and the scale factor of each of `copies`
+/// identical Gaussians replacing one of opacity `o` (module documentation).
+pub(crate) fn relocation(o: f32, copies: u32) -> (f32, f32) {
+    let n = copies.clamp(1, 51) as i32;
+    let o = o as f64;
+    let o_new = 1.0 - (1.0 - o).powf(1.0 / n as f64);
+    let mut denom = 0.0f64;
+    for i in 1..=n {
+        let mut binom = 1.0f64; // C(i − 1, k)
+        for k in 0..i {
+            let sign = if k % 2 == 0 { 1.0 } else { -1.0 };
+            denom += binom * sign * o_new.powi(k + 1) / ((k + 1) as f64).sqrt();
+            binom = binom * (i - 1 - k) as f64 / (k + 1) as f64;
+        }
+    }
+    let coeff = if denom > 0.0 { o / denom } else { 1.0 };
+    (o_new as f32, coeff as f32)
+}
+
+/// `count` indices drawn with replacement, index `i` with probability proportional to
+/// `weights[i]` (≥ 0, not all 0).
+fn sample_weighted(weights: &[f32], count: usize, rng: &mut Rng) -> Vec<usize> {
+    let mut cum = Vec::with_capacity(weights.len());
+    let mut total = 0.0f64;
+    for &w in weights {
+        total += w.max(0.0) as f64;
+        cum.push(total);
+    }
+    (0..count)
+        .map(|_| {
+            let u = rng.uniform() as f64 * total;
+            cum.partition_point(|&c| c <= u).min(weights.len() - 1)
+        })
+        .collect()
+}
+
+/// Moves the dead Gaussians (opacity at most `min_opacity`) onto live ones drawn by
+/// opacity.
+fn relocate(g: &mut Gaussians, state: &mut State, min_opacity: f32, rng: &mut Rng) {
+    let n = g.len();
+    let weights: Vec<f32> = (0..n)
+        .map(|i| {
+            let o = g.opacity(i);
+            if o > min_opacity { o } else { 0.0 }
+        })
+        .collect();
+    let dead: Vec<usize> = (0..n).filter(|&i| weights[i] == 0.0).collect();
+    if dead.is_empty() || dead.len() == n {
+        return;
+    }
+    let sources = sample_weighted(&weights, dead.len(), rng);
+    replicate(g, state, &sources, Some(&dead), min_opacity);
+}
+
+/// Adds `rate` of the count (at least one while under the budget), drawn by opacity, up
+/// to `d.max_gaussians`.
+fn grow(g: &mut Gaussians, state: &mut State, rate: f32, d: &Densify, rng: &mut Rng) {
+    let n = g.len();
+    let target = ((n as f64 * (1.0 + rate as f64)) as usize).min(d.max_gaussians);
+    let add = target.saturating_sub(n);
+    if add == 0 {
+        return;
+    }
+    let weights: Vec<f32> = (0..n).map(|i| g.opacity(i)).collect();
+    if !weights.iter().any(|&w| w > 0.0) {
+        return;
+    }
+    let sources = sample_weighted(&weights, add, rng);
+    replicate(g, state, &sources, None, d.min_opacity);
+}
+
+/// Gives each Gaussian drawn `c` times in `sources` `c` copies (by [`relocation`] with
+/// `c + 1` copies, the original updated too), written over `targets` (one per source) or
+/// appended; every Gaussian touched starts with fresh optimizer moments.
+fn replicate(
+    g: &mut Gaussians,
+    state: &mut State,
+    sources: &[usize],
+    targets: Option<&[usize]>,
+    min_opacity: f32,
+) {
+    let n = g.len();
+    let k3 = 3 * g.coeffs_per_channel();
+    let mut count = vec![0u32; n];
+    for &s in sources {
+        count[s] += 1;
+    }
+    for i in 0..n {
+        if count[i] == 0 {
+            continue;
+        }
+        let (o_new, coeff) = relocation(g.opacity(i), count[i] + 1);
+        g.logit_opacities[i] = logit(o_new.clamp(min_opacity, 1.0 - 1e-6));
+        let shift = coeff.max(1e-6).ln();
+        for v in &mut g.log_scales[i] {
+            *v += shift;
+        }
+        state.clear_at(i, k3);
+    }
+    match targets {
+        Some(targets) => {
+            for (&dst, &src) in targets.iter().zip(sources) {
+                g.means[dst] = g.means[src];
+                g.log_scales[dst] = g.log_scales[src];
+                g.rotations[dst] = g.rotations[src];
+                g.logit_opacities[dst] = g.logit_opacities[src];
+                g.sh.copy_within(src * k3..(src + 1) * k3, dst * k3);
+                state.clear_at(dst, k3);
+            }
+        }
+        None => {
+            for &src in sources {
+                g.means.push(g.means[src]);
+                g.log_scales.push(g.log_scales[src]);
+                g.rotations.push(g.rotations[src]);
+                g.logit_opacities.push(g.logit_opacities[src]);
+                g.sh.extend_from_within(src * k3..(src + 1) * k3);
+            }
+            state.compact(&vec![true; n], sources.len(), k3);
+        }
+    }
 }
 
 /// Keeps the flagged Gaussians, in order.
@@ -898,6 +1224,163 @@ mod tests {
         assert!(last > first + 5.0, "PSNR {first} → {last}");
         let (g2, ..) = run();
         assert_eq!(g, g2, "deterministic");
+    }
+
+    /// Renders of three colored Gaussians from 6 cameras around them, 48 × 40, white
+    /// background; view `i`'s colors multiplied by `gain(i)`.
+    fn ring_views(gain: impl Fn(usize) -> f32) -> (Vec<View>, RenderSettings) {
+        let mut truth = Gaussians::new(0);
+        let colors = [[0.9, 0.1, 0.1], [0.1, 0.8, 0.2], [0.2, 0.3, 0.9]];
+        for (k, c) in colors.iter().enumerate() {
+            let dc = c.map(|v| (v - 0.5) / SH_C0);
+            let x = k as f32 * 0.4 - 0.4;
+            truth.push(
+                [x, 0.0, 0.0],
+                [-1.6, -2.0, -1.8],
+                [1.0, 0.2, 0.0, 0.1],
+                3.0,
+                &dc,
+            );
+        }
+        let settings = RenderSettings {
+            background: [1.0; 3],
+            ..Default::default()
+        };
+        let views = (0..6)
+            .map(|i| {
+                let a = i as f32 * std::f32::consts::TAU / 6.0;
+                let eye = Vec3::new(3.0 * a.cos(), 0.5, 3.0 * a.sin());
+                let cam =
+                    crate::volume::camera::Camera::look_at(eye, Vec3::ZERO, Vec3::Y, 0.7, 48, 40)
+                        .unwrap();
+                let rgb = render(&truth, &cam, &settings)
+                    .unwrap()
+                    .rgb
+                    .iter()
+                    .map(|c| c.map(|v| v * gain(i)))
+                    .collect();
+                View {
+                    name: format!("v{i}"),
+                    camera: cam,
+                    width: 48,
+                    height: 40,
+                    rgb,
+                }
+            })
+            .collect();
+        (views, settings)
+    }
+
+    #[test]
+    fn relocation_rule_keeps_the_opacity_of_the_copies() {
+        assert_eq!(relocation(0.37, 1), (0.37, 1.0));
+        let (o, k) = relocation(0.5, 2);
+        assert!((o - (1.0 - 0.5f32.sqrt())).abs() < 1e-6);
+        // 0.5 / (2·o − o²/√2)
+        let want = 0.5 / (2.0 * o - o * o / 2f32.sqrt());
+        assert!((k - want).abs() < 1e-5, "{k} vs {want}");
+        for (o0, n) in [(0.9f32, 3u32), (0.2, 5), (0.99, 10), (0.05, 51)] {
+            let (o, k) = relocation(o0, n);
+            // N copies at one place let through what the original did.
+            let through = (1.0 - o as f64).powi(n as i32);
+            assert!(
+                (1.0 - through - o0 as f64).abs() < 1e-5,
+                "o {o0}, {n} copies"
+            );
+            assert!(k.is_finite() && k > 0.0, "scale factor {k}");
+        }
+    }
+
+    /// 3DGS-MCMC's budget: the count starts capped at the budget, never exceeds it, and
+    /// grows to it; the fit still improves; runs are deterministic.
+    #[test]
+    fn mcmc_never_exceeds_the_budget() {
+        let (views, settings) = ring_views(|_| 1.0);
+        let opts = |budget| TrainOptions {
+            iterations: 300,
+            render: settings,
+            sh_degree: 1,
+            sh_interval: 100,
+            extent: 3.3,
+            densify: Densify {
+                from: 50,
+                until: 250,
+                every: 25,
+                max_gaussians: budget,
+                mcmc: Some(Mcmc::default()),
+                ..Densify::default()
+            },
+            ..TrainOptions::default()
+        };
+        let run = |initial, budget| {
+            let mut g = random_init(Vec3::ZERO, 0.8, initial, 1, 3);
+            let (mut first, mut last, mut counts) = (None, 0.0, Vec::new());
+            train(&mut g, &views, &opts(budget), &mut |s, _| {
+                first.get_or_insert(s.psnr);
+                last = s.psnr;
+                counts.push(s.gaussians);
+                true
+            })
+            .unwrap();
+            (g, first.unwrap(), last, counts)
+        };
+        let (g, first, last, counts) = run(60, 80);
+        assert!(counts.iter().all(|&c| c <= 80), "above the budget");
+        assert_eq!(counts[0], 60);
+        assert_eq!(g.len(), 80, "grew to the budget");
+        assert!(last > first + 5.0, "PSNR {first} → {last}");
+        assert_eq!(g, run(60, 80).0, "deterministic");
+        // A start above the budget is cut to it before the first step.
+        let (g, _, _, counts) = run(150, 70);
+        assert!(counts.iter().all(|&c| c <= 70), "{:?}", &counts[..3]);
+        assert_eq!(g.len(), 70);
+    }
+
+    /// Photos of differing brightness: the exposure transforms learn the gains (the
+    /// brightest view's transform is brighter than the darkest's), and the fit to the
+    /// photos is better than without them.
+    #[test]
+    fn exposure_learns_per_view_gains() {
+        let (views, settings) = ring_views(|i| 0.6 + 0.15 * i as f32);
+        let opts = |exposure| TrainOptions {
+            iterations: 300,
+            render: settings,
+            sh_degree: 0,
+            extent: 3.3,
+            densify: Densify {
+                from: 50,
+                until: 250,
+                every: 25,
+                reset_every: 0,
+                max_gaussians: 120,
+                ..Densify::default()
+            },
+            exposure,
+            ..TrainOptions::default()
+        };
+        let run = |exposure| {
+            let mut g = random_init(Vec3::ZERO, 0.8, 60, 0, 3);
+            let mut tail = Vec::new();
+            let out = train(&mut g, &views, &opts(exposure), &mut |s, _| {
+                if s.iteration > 240 {
+                    tail.push(s.psnr);
+                }
+                true
+            })
+            .unwrap();
+            (out, tail.iter().sum::<f32>() / tail.len() as f32)
+        };
+        let (with, psnr_with) = run(true);
+        let (without, psnr_without) = run(false);
+        assert!(without.exposures.is_empty());
+        assert_eq!(with.exposures.len(), 6);
+        let gain = |m: &[f32; 12]| (m[0] + m[5] + m[10]) / 3.0 + (m[3] + m[7] + m[11]) / 3.0;
+        let (dark, bright) = (gain(&with.exposures[0]), gain(&with.exposures[5]));
+        assert!(bright > dark + 0.05, "gains {dark} → {bright}");
+        assert!(
+            psnr_with > psnr_without + 1.0,
+            "PSNR {psnr_without} without, {psnr_with} with"
+        );
     }
 
     /// One 8 × 8 grey view from 4 units away on +Z, looking at the origin.
