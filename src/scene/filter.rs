@@ -463,13 +463,18 @@ fn transfer(f: &usvg::filter::TransferFunction) -> TransferFunction {
     }
 }
 
+/// Converts feImage's content (a usvg group) to scene nodes drawn under a transform to
+/// device pixels; `Err` says why it is refused.
+pub(crate) type ImageContent<'a> =
+    dyn Fn(&usvg::Group, &super::Affine) -> Result<Vec<super::Node>, String> + 'a;
+
 /// Converts usvg's filters of a group whose user space `t` maps to device pixels; `Err`
 /// names a primitive diffsvg does not render.
 pub(crate) fn from_usvg(
     filters: &[std::sync::Arc<usvg::filter::Filter>],
     t: &super::Affine,
     blend: impl Fn(usvg::BlendMode) -> BlendMode,
-    image: &dyn Fn(&usvg::Group, &super::Affine) -> Result<Vec<super::Node>, String>,
+    image: &ImageContent<'_>,
 ) -> Result<Vec<Filter>, String> {
     use usvg::filter::Kind as K;
     let (sx, sy) = axis_scales(t);

@@ -419,12 +419,17 @@ fn gradients_reach_the_content_under_a_filter() {
 /// Finite differences through the primitives added in issue 34's second part: the
 /// gradient reaches the content under feConvolveMatrix, feMorphology, feTile,
 /// feDisplacementMap (the moved input) and the two lightings (the alpha surface, through
-/// its normals and, for point and spot lights, its height).
+/// its normals and, for point and spot lights, its height). feImage and feTurbulence read
+/// no content.
 #[test]
 fn gradients_reach_the_content_under_the_resampling_and_lighting_filters() {
     let filters = [
         r#"<feConvolveMatrix order="3 2" kernelMatrix="0.1 0.3 -0.1 0.2 0.4 0.1" bias="0.05" edgeMode="duplicate"/>"#,
-        r#"<feConvolveMatrix order="3" kernelMatrix="1 2 1 0 1 0 1 0 1" divisor="6" preserveAlpha="true" edgeMode="wrap"/>"#,
+        // (preserveAlpha divides by alpha: a pixel turning from transparent to barely
+        // covered jumps to its full straight color, a discontinuity in the points that
+        // finite differences cannot cross; its adjoint is checked on pixels away from
+        // alpha 0 in `raster::filter::convolve`.)
+        r#"<feConvolveMatrix order="3" kernelMatrix="1 2 1 0 1 0 1 0 1" divisor="6" edgeMode="wrap"/>"#,
         r#"<feMorphology operator="dilate" radius="1.5 1"/>"#,
         r#"<feMorphology operator="erode" radius="1"/>"#,
         r#"<feOffset dx="1" dy="2" result="o"/><feTile in="o"/>"#,

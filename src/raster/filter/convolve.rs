@@ -14,6 +14,9 @@
 //!
 //! The backward pass runs the per-pixel part on jets and scatters the sums' gradients back
 //! along the taps (the transpose of the linear part); a clamp's derivative is one side's.
+//! With `preserveAlpha` the straight colors are read, so the result jumps where a pixel
+//! turns from transparent (straight color 0, as resvg divides) to barely covered: the
+//! gradient is that of each side, not of the jump.
 
 use super::pixel;
 use crate::raster::jet::{Jet, Scalar};
@@ -195,8 +198,8 @@ mod tests {
         let (w, h) = (5, 4);
         let img: Vec<[f32; 4]> = (0..w * h)
             .map(|_| {
-                let a = 0.4 + 0.5 * r.uniform() as f32;
-                [0.2, 0.5, 0.8, 1.0].map(|c| c * a * (0.5 + 0.5 * r.uniform() as f32))
+                let a = 0.4 + 0.5 * r.uniform();
+                [0.2, 0.5, 0.8, 1.0].map(|c| c * a * (0.5 + 0.5 * r.uniform()))
             })
             .map(|mut p: [f32; 4]| {
                 p[3] = p[3].max(p[0]).max(p[1]).max(p[2]) + 0.05;
@@ -204,7 +207,7 @@ mod tests {
             })
             .collect();
         let g: Vec<[f32; 4]> = (0..w * h)
-            .map(|_| std::array::from_fn(|_| r.uniform() as f32 - 0.5))
+            .map(|_| std::array::from_fn(|_| r.uniform() - 0.5))
             .collect();
         let dot = |a: &[[f32; 4]], b: &[[f32; 4]]| -> f64 {
             a.iter()
@@ -220,7 +223,7 @@ mod tests {
             m.bias = 0.02;
             let back = adjoint(&m, &img, w, h, &g);
             let v: Vec<[f32; 4]> = (0..w * h)
-                .map(|_| std::array::from_fn(|_| r.uniform() as f32 - 0.5))
+                .map(|_| std::array::from_fn(|_| r.uniform() - 0.5))
                 .collect();
             let e = 1e-3f32;
             let at = |t: f32| {

@@ -336,10 +336,10 @@ mod tests {
             .collect();
         let mut r = crate::rng::Rng::new(11);
         let g: Vec<[f32; 4]> = (0..w * h)
-            .map(|_| std::array::from_fn(|_| r.uniform() as f32 - 0.5))
+            .map(|_| std::array::from_fn(|_| r.uniform() - 0.5))
             .collect();
         let v: Vec<[f32; 4]> = (0..w * h)
-            .map(|_| [0.0, 0.0, 0.0, r.uniform() as f32 - 0.5])
+            .map(|_| [0.0, 0.0, 0.0, r.uniform() - 0.5])
             .collect();
         let dot = |a: &[[f32; 4]], b: &[[f32; 4]]| -> f64 {
             a.iter()

@@ -159,7 +159,7 @@ mod tests {
         let mut r = crate::rng::Rng::new(5);
         let (w, h) = (9, 7);
         let img: Vec<[f32; 4]> = (0..w * h)
-            .map(|_| std::array::from_fn(|_| r.uniform() as f32))
+            .map(|_| std::array::from_fn(|_| r.uniform()))
             .collect();
         for dilate in [false, true] {
             for rad in [[0.5, 0.5], [1.0, 2.0], [2.3, 0.7], [40.0, 3.0]] {

@@ -93,7 +93,7 @@ mod tests {
         let (w, h) = (6, 5);
         let rnd = |r: &mut crate::rng::Rng| -> Vec<[f32; 4]> {
             (0..w * h)
-                .map(|_| std::array::from_fn(|_| r.uniform() as f32))
+                .map(|_| std::array::from_fn(|_| r.uniform()))
                 .collect()
         };
         let (x, g, map) = (rnd(&mut r), rnd(&mut r), rnd(&mut r));
