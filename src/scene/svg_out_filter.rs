@@ -320,7 +320,6 @@ fn full(v: f64) -> String {
 
 #[cfg(test)]
 mod tests {
-    use crate::raster::{RenderOptions, render};
     use crate::scene::{Node, Scene, Sizing};
 
     /// Every primitive the model holds, chained by names, with sRGB and linearRGB.
@@ -382,8 +381,6 @@ mod tests {
                 assert!((x - y).abs() <= 1e-4 * x.abs().max(1.0), "{dp}\n{dq}");
             }
         }
-        let opts = RenderOptions::default();
-        let c = crate::metrics::compare(&render(&a, &opts), &render(&b, &opts));
-        assert!(c.max < 1.0 && c.mae < 0.01, "{c:?}\n{text}");
+        // The pixels: `layers::filters_survive_a_round_trip_on_resvgs_suite`.
     }
 }

@@ -93,17 +93,21 @@ fn bad_inputs_fail_cleanly() {
         &out,
     );
 
+    // Every filter primitive renders; a convolution kernel past the limit is refused.
+    let kernel = vec!["1"; 65 * 65].join(" ");
     let p = write(
         &dir,
         "filter.svg",
-        r#"<svg xmlns="http://www.w3.org/2000/svg" width="10" height="10">
-        <filter id="f"><feTurbulence baseFrequency="0.1"/></filter>
-        <rect id="r" width="10" height="10" filter="url(#f)"/></svg>"#,
+        &format!(
+            r#"<svg xmlns="http://www.w3.org/2000/svg" width="10" height="10">
+        <filter id="f"><feConvolveMatrix order="65" kernelMatrix="{kernel}"/></filter>
+        <rect id="r" width="10" height="10" filter="url(#f)"/></svg>"#
+        ),
     );
     assert_fails(
         &diffsvg(&["render", s(&p), "-o", &o]),
         "filter.svg",
-        "feturbulence",
+        "feconvolvematrix",
         &out,
     );
 
