@@ -16,9 +16,11 @@
 //! then `chain_gradient` carries them into the local frames and onto the transforms,
 //! outermost group first.
 //!
-//! **Which groups.** The content must be paths with solid paints, undashed strokes drawn
-//! in device space, and plain groups (opacity, blend mode, isolation): no clip path,
-//! mask, filter, image or gradient paint inside. Those hold device quantities that are not
+//! **Which groups.** The reader makes one of a group of two or more shapes (one shape has
+//! parameters of its own, and usvg puts a shape's own `transform` on a group of its own)
+//! whose transform lies in the range a fit keeps it in. The content must be paths with
+//! solid paints, undashed strokes drawn in device space, and plain groups (opacity, blend
+//! mode, isolation): no clip path, mask, filter, image or gradient paint inside. Those hold device quantities that are not
 //! parameters (a gradient's transform, a clip region, a dash pattern) and would need a
 //! frame of their own; such a group keeps its transform baked into the points, as every
 //! group did before.
