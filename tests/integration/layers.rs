@@ -232,6 +232,33 @@ fn markers_are_bounded() {
     assert!(msg.contains("bomb.svg") && msg.contains("marker"), "{msg}");
 }
 
+/// The `.svg` files directly in `dir`, sorted.
+fn svg_files(dir: &std::path::Path) -> Vec<std::path::PathBuf> {
+    let mut files: Vec<_> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "svg"))
+        .collect();
+    files.sort();
+    files
+}
+
+/// Writes `a` (read from `path`) as SVG, reads it back and asserts the same pixels;
+/// returns the text written.
+fn assert_round_trip(a: &Scene, path: &std::path::Path) -> String {
+    let opts = RenderOptions::default();
+    let text = a.to_svg_string();
+    let b = Scene::from_svg_str(&text, "roundtrip.svg", Sizing::Natural)
+        .unwrap_or_else(|e| panic!("{}: {e}\n{text}", path.display()));
+    let c = compare(&render(a, &opts), &render(&b, &opts));
+    assert!(
+        c.max < 3.0 && c.mae < 0.02,
+        "{}: round trip changed pixels by {c:?}\n{text}",
+        path.display()
+    );
+    text
+}
+
 /// Every supported file of resvg's masking, blend, isolation, marker and paint-order
 /// folders reads back from diffsvg's SVG out with the same pixels.
 #[test]
@@ -249,28 +276,13 @@ fn layers_survive_a_round_trip_on_resvgs_suite() {
         "painting/marker",
         "painting/paint-order",
     ];
-    let opts = RenderOptions::default();
     let mut checked = 0;
     for f in folders {
-        let mut files: Vec<_> = std::fs::read_dir(tests.join(f))
-            .unwrap()
-            .map(|e| e.unwrap().path())
-            .filter(|p| p.extension().is_some_and(|e| e == "svg"))
-            .collect();
-        files.sort();
-        for path in files {
+        for path in svg_files(&tests.join(f)) {
             let Ok(a) = Scene::load(&path, Sizing::Natural) else {
                 continue;
             };
-            let text = a.to_svg_string();
-            let b = Scene::from_svg_str(&text, "roundtrip.svg", Sizing::Natural)
-                .unwrap_or_else(|e| panic!("{}: {e}\n{text}", path.display()));
-            let c = compare(&render(&a, &opts), &render(&b, &opts));
-            assert!(
-                c.max < 3.0 && c.mae < 0.02,
-                "{}: round trip changed pixels by {c:?}\n{text}",
-                path.display()
-            );
+            assert_round_trip(&a, &path);
             checked += 1;
         }
     }
@@ -287,20 +299,14 @@ fn filters_survive_a_round_trip_on_resvgs_suite() {
         return;
     };
     let root = data.join("resvg-tests/tests/filters");
-    let mut files = Vec::new();
-    for dir in std::fs::read_dir(&root).unwrap() {
-        let dir = dir.unwrap().path();
-        for e in std::fs::read_dir(&dir).unwrap() {
-            let p = e.unwrap().path();
-            if p.extension().is_some_and(|e| e == "svg") {
-                files.push(p);
-            }
-        }
-    }
-    files.sort();
+    let mut dirs: Vec<_> = std::fs::read_dir(&root)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    dirs.sort();
     let opts = RenderOptions::default();
     let (mut checked, mut filtered) = (0, 0);
-    for path in files {
+    for path in dirs.iter().flat_map(|d| svg_files(d)) {
         let Ok(a) = Scene::load(&path, Sizing::Natural) else {
             continue;
         };
@@ -308,16 +314,8 @@ fn filters_survive_a_round_trip_on_resvgs_suite() {
         if !same.is_ok_and(|p| p.passes()) {
             continue;
         }
-        let text = a.to_svg_string();
+        let text = assert_round_trip(&a, &path);
         filtered += usize::from(text.contains("<filter "));
-        let b = Scene::from_svg_str(&text, "roundtrip.svg", Sizing::Natural)
-            .unwrap_or_else(|e| panic!("{}: {e}\n{text}", path.display()));
-        let c = compare(&render(&a, &opts), &render(&b, &opts));
-        assert!(
-            c.max < 3.0 && c.mae < 0.02,
-            "{}: round trip changed pixels by {c:?}\n{text}",
-            path.display()
-        );
         checked += 1;
     }
     assert!(
