@@ -750,6 +750,27 @@ impl Path {
     }
 }
 
+/// Calls `f` on every path under `nodes` in paint order (depth first: a group's children,
+/// then its clip path's shapes, then its mask's content), with its role; `role` is that
+/// of `nodes`.
+pub(crate) fn paths_of<'a>(nodes: &'a [Node], role: Role, f: &mut impl FnMut(&'a Path, Role)) {
+    fn group<'a>(g: &'a Group, role: Role, f: &mut impl FnMut(&'a Path, Role)) {
+        paths_of(&g.children, role, f);
+        if let Some(c) = &g.clip {
+            group(&c.content, Role::Clip, f);
+        }
+        if let Some(m) = &g.mask {
+            group(&m.content, role, f);
+        }
+    }
+    for n in nodes {
+        match n {
+            Node::Path(p) => f(p, role),
+            Node::Group(g) => group(g, role, f),
+        }
+    }
+}
+
 impl Scene {
     /// An empty scene of the given size.
     pub fn new(width: u32, height: u32) -> Self {
@@ -768,24 +789,7 @@ impl Scene {
 
     /// Like [`for_each_path`](Self::for_each_path), telling which paths are clip shapes.
     pub fn for_each_path_role<'a>(&'a self, mut f: impl FnMut(&'a Path, Role)) {
-        fn walk<'a>(nodes: &'a [Node], role: Role, f: &mut impl FnMut(&'a Path, Role)) {
-            for n in nodes {
-                match n {
-                    Node::Path(p) => f(p, role),
-                    Node::Group(g) => group(g, role, f),
-                }
-            }
-        }
-        fn group<'a>(g: &'a Group, role: Role, f: &mut impl FnMut(&'a Path, Role)) {
-            walk(&g.children, role, f);
-            if let Some(c) = &g.clip {
-                group(&c.content, Role::Clip, f);
-            }
-            if let Some(m) = &g.mask {
-                group(&m.content, role, f);
-            }
-        }
-        walk(&self.nodes, Role::Paint, &mut f);
+        paths_of(&self.nodes, Role::Paint, &mut f);
     }
 
     /// Calls `f` on every path in paint order (depth first), mutably.

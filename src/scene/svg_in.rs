@@ -922,7 +922,7 @@ fn convert_group_children(g: &usvg::Group, ctx: &Ctx, t: &Affine, role: Role) ->
                 // `transform` on a group of its own): two or more make a parameter worth it.
                 let movable = role == Role::Paint
                     && !g.transform().is_identity()
-                    && shapes_in(g) >= 2
+                    && shapes_in(g, 2) >= 2
                     && movable_group(g)
                     && is_uniform(&gt);
                 let relative = invert(&ctx.frame.get()).map(|f| concat(&f, &gt));
@@ -1053,15 +1053,20 @@ fn movable_group(g: &usvg::Group) -> bool {
         })
 }
 
-/// The paths under a usvg group.
-fn shapes_in(g: &usvg::Group) -> usize {
-    g.children()
-        .iter()
-        .map(|n| match n {
-            usvg::Node::Group(c) => shapes_in(c),
+/// The paths under a usvg group, counted up to `at_most` (so a big group is not walked
+/// whole for every transformed group above it).
+fn shapes_in(g: &usvg::Group, at_most: usize) -> usize {
+    let mut n = 0;
+    for c in g.children() {
+        n += match c {
+            usvg::Node::Group(c) => shapes_in(c, at_most - n),
             _ => 1,
-        })
-        .sum()
+        };
+        if n >= at_most {
+            break;
+        }
+    }
+    n
 }
 
 /// Whether `t` scales uniformly (a similarity, possibly mirrored): a stroke under it stays
@@ -1075,8 +1080,6 @@ fn is_uniform(t: &Affine) -> bool {
 /// The center of the bounds of every control point under `nodes` (device pixels) mapped
 /// by `to_local`.
 fn local_center(nodes: &[Node], to_local: &Affine) -> Option<Point> {
-    let mut scene = Scene::new(0, 0);
-    scene.nodes = nodes.to_vec();
     let mut b: Option<[f64; 4]> = None;
     let mut add = |[x0, y0, x1, y1]: [f64; 4]| {
         let o = b.get_or_insert([x0, y0, x1, y1]);
@@ -1085,7 +1088,7 @@ fn local_center(nodes: &[Node], to_local: &Affine) -> Option<Point> {
     let k = (to_local[0] * to_local[3] - to_local[1] * to_local[2])
         .abs()
         .sqrt();
-    scene.for_each_path(|p| match &p.primitive {
+    super::paths_of(nodes, Role::Paint, &mut |p, _| match &p.primitive {
         // A circle's outline starts where its angle says, which turning the group does
         // not change: its bounds from its center and radius instead.
         Some(c) if matches!(c.shape, super::Shape::Circle { .. }) => {

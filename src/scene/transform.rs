@@ -35,7 +35,7 @@
 use super::geom::{add_scaled, scale};
 use super::params::ParamLayout;
 use super::shape::Shape;
-use super::{Affine, Group, Node, Paint, Path, Point, apply, invert};
+use super::{Affine, Group, Node, Paint, Path, Point, Role, apply, invert};
 
 /// The least and greatest scale a projected transform keeps.
 pub const SCALE_RANGE: [f64; 2] = [1e-3, 1e3];
@@ -313,7 +313,7 @@ fn reach_group(g: &Group, out: &mut Vec<(f64, f64)>) {
     if let Some(t) = &g.transform {
         // Half the diagonal of the content's device bounds.
         let mut b: Option<[f64; 4]> = None;
-        for_each_path(&g.children, &mut |p| {
+        super::paths_of(&g.children, Role::Paint, &mut |p, _| {
             if let Some(r) = p.control_bounds() {
                 b = Some(b.map_or(r, |o| {
                     [
@@ -397,7 +397,7 @@ impl Chain<'_> {
             map_nodes(&mut g.children, &t.inverse());
             let mut acc = [0.0; 4];
             let mut k = self.path_ix;
-            for_each_path(&g.children, &mut |p| {
+            super::paths_of(&g.children, Role::Paint, &mut |p, _| {
                 chain_path(p, &self.layout.paths[k], &t, self.grad, &mut acc);
                 k += 1;
             });
@@ -411,23 +411,6 @@ impl Chain<'_> {
         }
         if let Some(m) = &mut g.mask {
             self.group(&mut m.content);
-        }
-    }
-}
-
-fn for_each_path(nodes: &[Node], f: &mut dyn FnMut(&Path)) {
-    for n in nodes {
-        match n {
-            Node::Path(p) => f(p),
-            Node::Group(g) => {
-                for_each_path(&g.children, f);
-                if let Some(c) = &g.clip {
-                    for_each_path(&c.content.children, f);
-                }
-                if let Some(m) = &g.mask {
-                    for_each_path(&m.content.children, f);
-                }
-            }
         }
     }
 }
