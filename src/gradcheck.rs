@@ -120,9 +120,11 @@ fn bounds(group: ParamGroup) -> (f64, f64) {
     match group {
         ParamGroup::Color | ParamGroup::Opacity | ParamGroup::StopOffset => (0.0, 1.0),
         ParamGroup::StrokeWidth => (0.0, f64::INFINITY),
-        ParamGroup::Points | ParamGroup::PaintGeometry | ParamGroup::Transform => {
-            (f64::NEG_INFINITY, f64::INFINITY)
-        }
+        // Deviations are clamped at 0 too, but matrix values and offsets are free.
+        ParamGroup::Points
+        | ParamGroup::PaintGeometry
+        | ParamGroup::Transform
+        | ParamGroup::Filter => (f64::NEG_INFINITY, f64::INFINITY),
     }
 }
 

@@ -734,7 +734,7 @@ def _target_for(target, width: int, height: int) -> np.ndarray:
 def fit(scene: Scene, target, iters: int = 500, *, lr_points: float = 1.0,
         lr_color: float = 0.01, lr_opacity: float = 0.01, lr_width: float = 0.1,
         lr_paint: float = 0.5, lr_stops: float = 0.005, lr_transform: float = 0.5,
-        schedule: str = "constant", loss: str = "mse", background: Color = None,
+        lr_filter: float = 0.1, exact_filters: bool = False, schedule: str = "constant", loss: str = "mse", background: Color = None,
         pyramid: int = 1, until_psnr: Optional[float] = None, tolerance: float = 0.02,
         fit_background: bool = False, progress: Progress = None) -> Tuple["Scene", FitInfo]:
     """Refines every parameter of ``scene`` toward ``target`` with exact gradients and
@@ -744,7 +744,11 @@ def fit(scene: Scene, target, iters: int = 500, *, lr_points: float = 1.0,
     JPEG or SVG), resampled to the scene's size. Learning rates are per step in each
     group's units (pixels for points and gradient geometry; ``lr_transform``, the
     rotation of circles, ellipses and rectangles, in pixels of motion at the shape's
-    edge). ``background`` (straight RGB[A]) is composited under render and target before
+    edge; ``lr_filter``, filter offsets and blur deviations in pixels, color-matrix values
+    and feComposite's k a tenth of it). ``exact_filters`` evaluates filters as the SVG
+    specification defines them (true Gaussian blurs, fractional offsets), so that blur
+    deviations and offsets get a gradient (as ``diffsvg fit --exact-filters``).
+    ``background`` (straight RGB[A]) is composited under render and target before
     comparing (opaque: over RGB only); with ``fit_background`` an opaque background's
     color is fitted too (as ``diffsvg fit --fit-background``) and returned as
     ``info["background"]`` (straight RGBA; ``None`` otherwise). ``progress(step)`` is called after every evaluation with ``iter``, ``loss``,
@@ -757,7 +761,8 @@ def fit(scene: Scene, target, iters: int = 500, *, lr_points: float = 1.0,
     t = _target_for(target, scene.width, scene.height)
     options = dict(lr_points=lr_points, lr_color=lr_color, lr_opacity=lr_opacity,
                    lr_width=lr_width, lr_paint=lr_paint, lr_stops=lr_stops,
-                   lr_transform=lr_transform, schedule=schedule, loss=loss,
+                   lr_transform=lr_transform, lr_filter=lr_filter,
+                   exact_filters=bool(exact_filters), schedule=schedule, loss=loss,
                    background=_color(background, "background"),
                    pyramid=_whole(pyramid, "pyramid", _U64), tolerance=tolerance,
                    fit_background=bool(fit_background))

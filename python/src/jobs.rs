@@ -9,6 +9,7 @@ use diffsvg::fit::{LearningRates, Objective};
 use diffsvg::limits::MAX_PATHS;
 use diffsvg::loss::Loss;
 use diffsvg::optim::Schedule;
+use diffsvg::raster::RenderOptions;
 use numpy::{PyArray2, PyReadonlyArrayDyn, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -88,7 +89,7 @@ fn step_dict(d: &Bound<'_, PyDict>, s: &Step) -> PyResult<()> {
 
 /// The options shared by `fit` and `vectorize`, from a dict (unknown keys refused):
 /// `lr_points`, `lr_color`, `lr_opacity`, `lr_width`, `lr_paint`, `lr_stops`,
-/// `lr_transform` (finite, ≥ 0), `schedule`, `loss`, `background` (straight RGBA), `pyramid`, `tolerance`,
+/// `lr_transform`, `lr_filter` (finite, ≥ 0), `exact_filters` (bool), `schedule`, `loss`, `background` (straight RGBA), `pyramid`, `tolerance`,
 /// `fit_background` (bool; `fit` only).
 fn fit_setup(
     target: &PyReadonlyArrayDyn<'_, f32>,
@@ -96,7 +97,7 @@ fn fit_setup(
     until_psnr: Option<f64>,
     options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<(Objective, FitOptions)> {
-    const KEYS: [&str; 13] = [
+    const KEYS: [&str; 15] = [
         "lr_points",
         "lr_color",
         "lr_opacity",
@@ -104,6 +105,8 @@ fn fit_setup(
         "lr_paint",
         "lr_stops",
         "lr_transform",
+        "lr_filter",
+        "exact_filters",
         "schedule",
         "loss",
         "background",
@@ -136,6 +139,7 @@ fn fit_setup(
         &mut rates.paint,
         &mut rates.stops,
         &mut rates.transform,
+        &mut rates.filter,
     ]) {
         if let Some(v) = get(k)? {
             *r = v.extract()?;
@@ -147,6 +151,7 @@ fn fit_setup(
     let pyramid: usize = get("pyramid")?.map_or(Ok(1), |v| v.extract())?;
     let tolerance: f64 = get("tolerance")?.map_or(Ok(0.02), |v| v.extract())?;
     let fit_background: bool = get("fit_background")?.map_or(Ok(false), |v| v.extract())?;
+    let exact_filters: bool = get("exact_filters")?.map_or(Ok(false), |v| v.extract())?;
     let target = image_in(target, "target")?;
     if target.width == 0 || target.height == 0 {
         return Err(bad("target: the image is empty"));
@@ -157,7 +162,10 @@ fn fit_setup(
         rates,
         schedule: schedule.parse::<Schedule>().map_err(bad)?,
         until_psnr,
-        render: options_for(tolerance)?,
+        render: RenderOptions {
+            exact_filters,
+            ..options_for(tolerance)?
+        },
         fit_background,
         ..FitOptions::default()
     };

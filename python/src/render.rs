@@ -25,7 +25,7 @@ pub(crate) fn options(tolerance: f64) -> PyResult<RenderOptions> {
     }
     Ok(RenderOptions {
         tolerance,
-        exact_overlaps: false,
+        ..RenderOptions::default()
     })
 }
 

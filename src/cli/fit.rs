@@ -45,6 +45,10 @@ pub struct OptimArgs {
     /// group's edge per step.
     #[arg(long, default_value_t = LearningRates::default().transform)]
     pub lr_transform: f64,
+    /// Learning rate of filter offsets and blur deviations, pixels per step (matrix
+    /// values and feComposite's k move by a tenth of it).
+    #[arg(long, default_value_t = LearningRates::default().filter)]
+    pub lr_filter: f64,
     /// Learning-rate schedule.
     #[arg(long, ignore_case = true, value_parser = choice::<Schedule>(), default_value = Schedule::default().name())]
     pub schedule: Schedule,
@@ -103,6 +107,7 @@ impl OptimArgs {
                 paint: self.lr_paint,
                 stops: self.lr_stops,
                 transform: self.lr_transform,
+                filter: self.lr_filter,
             },
             schedule: self.schedule,
             until_psnr: self.until_psnr,
@@ -140,6 +145,11 @@ pub struct Args {
     /// canvas-sized `<rect>` under the drawing.
     #[arg(long)]
     fit_background: bool,
+    /// Evaluate filters exactly (true Gaussian blurs, offsets by fractions of a pixel), so
+    /// that blur deviations and offsets get a gradient; without it they stay where they
+    /// are (resvg's box blurs and whole-pixel offsets are piecewise constant in them).
+    #[arg(long)]
+    exact_filters: bool,
     #[command(flatten)]
     optim: OptimArgs,
     #[command(flatten)]
@@ -157,6 +167,7 @@ pub fn run(a: Args) -> Result<()> {
     }
     let mut opts = a.optim.fit_options(a.iters)?;
     opts.fit_background = a.fit_background;
+    opts.render.exact_filters = a.exact_filters;
     let fonts = a.fonts.fonts();
     let target = load_target_with(&a.target, None, &fonts)?;
     let objective = a.optim.objective(&target)?;
@@ -171,7 +182,7 @@ pub fn run(a: Args) -> Result<()> {
     if a.free_shapes {
         scene.outline_primitives();
     }
-    super::util::warn_about(&scene, &a.init, &diffsvg::raster::RenderOptions::default());
+    super::util::warn_about(&scene, &a.init, &opts.render);
     diffsvg::raster::check_backward_memory(&scene, &opts.render, &a.init)?;
     let layout = ParamLayout::new(&scene);
     if scene.path_count() == 0 || layout.is_empty() {
@@ -185,6 +196,14 @@ pub fn run(a: Args) -> Result<()> {
         .iter()
         .filter(|s| opts.rates.get(s.group) > 0.0)
         .count();
+    let filter_slots = layout.slots.iter().any(|s| s.group == ParamGroup::Filter);
+    if filter_slots && !a.exact_filters && opts.rates.filter > 0.0 {
+        eprintln!(
+            "note: {} has filters; their offsets and blur deviations move only with \
+             --exact-filters",
+            a.init.display()
+        );
+    }
     if movable == 0 {
         bail!(
             "{}: nothing to optimize: every parameter group present is frozen",
@@ -208,7 +227,7 @@ pub fn run(a: Args) -> Result<()> {
         None => (out.best.clone(), objective),
     };
     let compare = a.compare.then(|| {
-        let opts = RenderOptions::default();
+        let opts = opts.render;
         let before = objective.composite(&render(&initial, &opts));
         let after = objective.composite(&render(&fitted, &opts));
         side_by_side(&[objective.target(), &before, &after])

@@ -38,6 +38,11 @@ pub struct Args {
     /// default keeps the clamped winding integral there (see docs/parity.md).
     #[arg(long)]
     exact_overlaps: bool,
+    /// Evaluate filters as the SVG specification defines them: true Gaussian blurs and
+    /// offsets by fractions of a pixel, as `fit --exact-filters` optimizes them (the
+    /// default is resvg's box blurs and whole-pixel offsets).
+    #[arg(long)]
+    exact_filters: bool,
 }
 
 /// Runs `diffsvg render`.
@@ -53,6 +58,7 @@ pub fn run(a: Args) -> Result<()> {
     let scene = from_tree(&tree, &a.input, sizing)?;
     let opts = RenderOptions {
         exact_overlaps: a.exact_overlaps,
+        exact_filters: a.exact_filters,
         tolerance: a.tolerance,
     };
     super::util::warn_about(&scene, &a.input, &opts);

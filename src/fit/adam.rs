@@ -2,6 +2,7 @@
 //! parameter slot from per-group rates.
 
 use crate::optim::{Moments, Rule};
+use crate::scene::params::Part;
 use crate::scene::{Paint, ParamGroup, ParamLayout, Scene};
 
 /// Adam's constants.
@@ -60,12 +61,16 @@ pub struct LearningRates {
     /// edge: per slot the rate is divided by the shape's radius (half its diagonal for a
     /// rectangle), so that a rotation moves the outline as fast as the points' rate does.
     pub transform: f64,
+    /// Filter primitives' numbers, in device pixels for offsets and blur deviations; a
+    /// color-matrix value or feComposite's `k` moves by a tenth of it (unitless, like a
+    /// color).
+    pub filter: f64,
 }
 
 impl Default for LearningRates {
     /// Rates that work for drawings of a few hundred pixels: 1 px for points (as DiffVG),
     /// 0.01 for colors and opacities, 0.1 for widths, 0.5 px for gradient geometry, 0.005
-    /// for stops, 0.5 px (at the edge) for rotations.
+    /// for stops, 0.5 px (at the edge) for rotations, 0.1 px for filter offsets and blurs.
     fn default() -> Self {
         LearningRates {
             points: 1.0,
@@ -75,6 +80,7 @@ impl Default for LearningRates {
             paint: 0.5,
             stops: 0.005,
             transform: 0.5,
+            filter: 0.1,
         }
     }
 }
@@ -90,6 +96,7 @@ impl LearningRates {
             ParamGroup::PaintGeometry => self.paint,
             ParamGroup::StopOffset => self.stops,
             ParamGroup::Transform => self.transform,
+            ParamGroup::Filter => self.filter,
         }
     }
 
@@ -103,6 +110,7 @@ impl LearningRates {
             ParamGroup::PaintGeometry => &mut self.paint,
             ParamGroup::StopOffset => &mut self.stops,
             ParamGroup::Transform => &mut self.transform,
+            ParamGroup::Filter => &mut self.filter,
         }
     }
 
@@ -118,6 +126,15 @@ impl LearningRates {
     pub fn per_slot(&self, scene: &Scene) -> Vec<f64> {
         let layout = ParamLayout::new(scene);
         let mut rates: Vec<f64> = layout.slots.iter().map(|s| self.get(s.group)).collect();
+        // A unitless filter number (a color-matrix value, feComposite's k) moves by a
+        // tenth of the rate of pixel quantities.
+        let mut slot = 0;
+        crate::scene::params::walk(&mut scene.clone(), &mut |_, _, part, _| {
+            if part == (Part::Filter { unitless: true }) {
+                rates[slot] *= 0.1;
+            }
+            slot += 1;
+        });
         let mut i = 0;
         scene.for_each_path(|p| {
             let offsets = &layout.paths[i];

@@ -891,6 +891,7 @@ pub fn fit_glyph(target: &Image, opts: &GlyphOptions) -> GlyphOutcome {
             paint: 0.0,
             stops: 0.0,
             transform: 0.0,
+            filter: 0.0,
         },
         schedule: Schedule::Cosine,
         render: opts.render,

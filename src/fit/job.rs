@@ -61,6 +61,7 @@ pub fn rate_name(g: ParamGroup) -> &'static str {
         ParamGroup::PaintGeometry => "lr_paint",
         ParamGroup::StopOffset => "lr_stops",
         ParamGroup::Transform => "lr_transform",
+        ParamGroup::Filter => "lr_filter",
     }
 }
 

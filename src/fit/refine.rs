@@ -163,7 +163,8 @@ pub fn refine(
                 .and_then(|_| objective.background_gradient(&img));
             (loss, mse, Some((g, g_bg)))
         } else {
-            let mut forward = prepare_forward(&scene, opts.render.tolerance);
+            let mut forward =
+                prepare_forward(&scene, opts.render.tolerance, opts.render.exact_filters);
             forward.set_exact_overlaps(opts.render.exact_overlaps);
             let img = render_prepared(&forward);
             let (loss, mse, _) = objective.eval_with_mse(&img);

@@ -515,9 +515,10 @@ fn backward_bands(
     BandsOut { grad, stats, sums }
 }
 
-/// Adds to `grad` the gradient of a filtered layer's children, given `∂L/∂layer` over
-/// its rect: back through the filters, then through the children's own backward pass
-/// (whose parameters are the slots after the group's opacity).
+/// Adds to `grad` the gradient of a filtered layer's filters and children, given
+/// `∂L/∂layer` over its rect: back through the filters (whose parameters are the slots
+/// after the group's opacity), then through the children's own backward pass (whose
+/// parameters follow the filters').
 fn filter_backward(
     p: &Prepared,
     fl: &FilterLayer,
@@ -529,16 +530,23 @@ fn filter_backward(
     let opts = RenderOptions {
         tolerance: p.tolerance,
         exact_overlaps: p.exact_overlaps,
+        exact_filters: p.exact_filters,
     };
     let src = super::render::render(&fl.content, &opts);
-    let g_src = filter::adjoint(&fl.filters, fl.rect, filter::crop(&src.data, w, fl.rect), g);
+    let crop = filter::crop(&src.data, w, fl.rect);
+    let (g_src, g_params) = filter::adjoint(&fl.filters, fl.rect, crop, g, p.exact_filters);
     let mut d = Image::new(w as u32, h as u32);
     let rw = fl.rect[2] - fl.rect[0];
     for (row, y) in (fl.rect[1]..fl.rect[3]).enumerate() {
         d.data[y * w + fl.rect[0]..y * w + fl.rect[2]].copy_from_slice(&g_src[row * rw..][..rw]);
     }
     let sub = device_backward(&fl.content, &Prepared::new(&fl.content, &opts), &d).0;
-    let base = layout.groups[fl.param_group] + 1;
+    // The filters' slots follow the group's opacity, and the children's follow them.
+    let filters = layout.groups[fl.param_group] + 1;
+    for (k, v) in g_params.iter().enumerate() {
+        grad[filters + k] += v;
+    }
+    let base = filters + g_params.len();
     for (k, v) in sub.iter().enumerate() {
         grad[base + k] += v;
     }

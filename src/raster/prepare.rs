@@ -230,6 +230,8 @@ pub struct Prepared {
     pub(crate) tolerance: f64,
     /// [`RenderOptions::exact_overlaps`](super::RenderOptions::exact_overlaps).
     pub(crate) exact_overlaps: bool,
+    /// [`RenderOptions::exact_filters`](super::RenderOptions::exact_filters).
+    pub(crate) exact_filters: bool,
     /// The groups with filters, in the order of their [`Op::Push`]es.
     pub(crate) filters: Vec<FilterLayer>,
 }
@@ -239,7 +241,7 @@ impl Prepared {
     /// and [`backward_with_stats`](super::backward_with_stats) calls, flattened at
     /// `opts.tolerance` with chord counts chosen from the scene as it is now.
     pub fn new(scene: &Scene, opts: &super::RenderOptions) -> Prepared {
-        let mut p = prepare(scene, opts.tolerance, None);
+        let mut p = prepare_with(scene, opts.tolerance, None, true, opts.exact_filters);
         p.set_exact_overlaps(opts.exact_overlaps);
         p
     }
@@ -303,14 +305,16 @@ impl Prepared {
 /// per path, as in [`PathGeom::counts`]) the chord counts are fixed instead of computed.
 /// Keeps everything the backward pass needs.
 pub(crate) fn prepare(scene: &Scene, tolerance: f64, counts: Option<&[ChordCounts]>) -> Prepared {
-    prepare_with(scene, tolerance, counts, true)
+    prepare_with(scene, tolerance, counts, true, false)
 }
 
 /// Like [`prepare`] for a forward render only: the per-path geometry the backward pass
 /// reads (flattened points and their provenance, dashes, outline recipes) is not kept,
 /// which makes memory a fraction of [`prepare`]'s on scenes with many stroked curves.
-pub(crate) fn prepare_forward(scene: &Scene, tolerance: f64) -> Prepared {
-    prepare_with(scene, tolerance, None, false)
+/// Filters are evaluated exactly with `exact_filters`
+/// ([`RenderOptions::exact_filters`](super::RenderOptions::exact_filters)).
+pub(crate) fn prepare_forward(scene: &Scene, tolerance: f64, exact_filters: bool) -> Prepared {
+    prepare_with(scene, tolerance, None, false, exact_filters)
 }
 
 fn prepare_with(
@@ -318,6 +322,7 @@ fn prepare_with(
     tolerance: f64,
     counts: Option<&[ChordCounts]>,
     for_backward: bool,
+    exact_filters: bool,
 ) -> Prepared {
     let mut p = Prepared {
         width: scene.width,
@@ -330,6 +335,7 @@ fn prepare_with(
         for_backward,
         tolerance,
         exact_overlaps: false,
+        exact_filters,
         filters: Vec::new(),
     };
     // Each path's geometry and items depend on that path alone: built in parallel (in
@@ -564,9 +570,15 @@ impl Builder<'_> {
                 let opts = super::RenderOptions {
                     tolerance: self.out.tolerance,
                     exact_overlaps: false,
+                    exact_filters: self.out.exact_filters,
                 };
                 let src = super::render(&content, &opts);
-                filter::apply(&g.filters, r, crop(&src.data, w as usize, r))
+                filter::apply(
+                    &g.filters,
+                    r,
+                    crop(&src.data, w as usize, r),
+                    opts.exact_filters,
+                )
             }
             _ => Vec::new(),
         };
@@ -1067,7 +1079,7 @@ mod tests {
     fn forward_prepare_draws_the_same_items() {
         let s = load(&rect(r#"stroke-dasharray="4 2" stroke-linejoin="round""#));
         let full = prepare(&s, 0.02, None);
-        let fwd = prepare_forward(&s, 0.02);
+        let fwd = prepare_forward(&s, 0.02, false);
         assert!(!fwd.for_backward && fwd.geoms[0].flat.pts.is_empty());
         assert_eq!(full.items.len(), fwd.items.len());
         for (a, b) in full.items.iter().zip(&fwd.items) {

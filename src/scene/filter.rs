@@ -7,11 +7,17 @@
 //! transform, its corner floored and its size rounded up); blur deviations and offsets are
 //! scaled by the transform's axis scales. Colors are straight sRGB in `[0, 1]`.
 //!
-//! Filters have no parameters of their own yet: the gradient reaches the content beneath
-//! (its points, colors and opacities) through each operator's adjoint
-//! (`raster/filter/`).
+//! The gradient reaches the content beneath (its points, colors and opacities) through
+//! each operator's adjoint (`raster/filter/`), and these primitives' own numbers are
+//! parameters ([`FilterPrimitive::slots_mut`]): feFlood's color and opacity, feOffset's
+//! `dx, dy`, feGaussianBlur's deviations, feDropShadow's `dx, dy`, deviations, color and
+//! opacity, feColorMatrix's twenty values and feComposite's `k1 … k4`. Deviations and
+//! offsets have a gradient only when filters are evaluated exactly
+//! ([`RenderOptions::exact_filters`](crate::raster::RenderOptions::exact_filters)):
+//! resvg's box blurs and whole-pixel offsets are piecewise constant in them.
 
 use super::BlendMode;
+use super::params::ParamGroup;
 
 /// One `<filter>` (or CSS filter function) applied to a group.
 #[derive(Clone, Debug, PartialEq)]
@@ -305,7 +311,79 @@ pub struct Lighting {
     pub light: LightSource,
 }
 
+impl Filter {
+    /// Number of parameter slots of the filter's primitives.
+    pub fn slot_count(&self) -> usize {
+        self.primitives.iter().map(|p| p.kind.slot_count()).sum()
+    }
+}
+
+impl FilterPrimitive {
+    /// The primitive's parameters in slot order, each with its group (see the module
+    /// docs): pixel quantities (offsets, deviations) and unitless ones (matrix values,
+    /// `k1 … k4`) are [`ParamGroup::Filter`], a flood's or shadow's color
+    /// [`ParamGroup::Color`] and its opacity [`ParamGroup::Opacity`].
+    pub fn slots_mut(&mut self) -> Vec<(ParamGroup, &mut f64)> {
+        use ParamGroup::{Color, Filter, Opacity};
+        match &mut self.kind {
+            FilterKind::Flood { color, opacity } => {
+                let mut v: Vec<_> = color.iter_mut().map(|c| (Color, c)).collect();
+                v.push((Opacity, opacity));
+                v
+            }
+            FilterKind::Offset { dx, dy, .. } => vec![(Filter, dx), (Filter, dy)],
+            FilterKind::Blur { std_dev, .. } => std_dev.iter_mut().map(|s| (Filter, s)).collect(),
+            FilterKind::DropShadow {
+                dx,
+                dy,
+                std_dev,
+                color,
+                opacity,
+                ..
+            } => {
+                let mut v = vec![(Filter, dx), (Filter, dy)];
+                v.extend(std_dev.iter_mut().map(|s| (Filter, s)));
+                v.extend(color.iter_mut().map(|c| (Color, c)));
+                v.push((Opacity, opacity));
+                v
+            }
+            FilterKind::ColorMatrix { matrix, .. } => {
+                matrix.iter_mut().map(|m| (Filter, m)).collect()
+            }
+            FilterKind::Composite {
+                op: CompositeOp::Arithmetic(k),
+                ..
+            } => k.iter_mut().map(|k| (Filter, k)).collect(),
+            _ => Vec::new(),
+        }
+    }
+}
+
 impl FilterKind {
+    /// Number of parameter slots ([`FilterPrimitive::slots_mut`]).
+    pub fn slot_count(&self) -> usize {
+        match self {
+            FilterKind::Flood { .. } => 4,
+            FilterKind::Offset { .. } | FilterKind::Blur { .. } => 2,
+            FilterKind::DropShadow { .. } => 8,
+            FilterKind::ColorMatrix { .. } => 20,
+            FilterKind::Composite {
+                op: CompositeOp::Arithmetic(_),
+                ..
+            } => 4,
+            _ => 0,
+        }
+    }
+
+    /// Whether the primitive's [`ParamGroup::Filter`] slots are unitless (color-matrix
+    /// values, feComposite's `k`) rather than device pixels.
+    pub(crate) fn unitless(&self) -> bool {
+        matches!(
+            self,
+            FilterKind::ColorMatrix { .. } | FilterKind::Composite { .. }
+        )
+    }
+
     /// The inputs the primitive reads.
     pub fn inputs(&self) -> Vec<&FilterInput> {
         match self {

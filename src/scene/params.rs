@@ -6,7 +6,8 @@
 //! * nodes in paint order, depth first; a [`Group`](super::Group) drawn as a layer
 //!   contributes its opacity, then a group with a transform parameter its `tx, ty, angle,
 //!   scale` ([`transform`](super::transform)), whose content's slots are then in the
-//!   group's own frame;
+//!   group's own frame, then a group with filters its primitives' numbers, filter by
+//!   filter ([`FilterPrimitive::slots_mut`](super::filter::FilterPrimitive::slots_mut));
 //! * per path: all control points (`x, y` per point, in [`Path::points`] order), or for
 //!   a circle, ellipse or rectangle its own parameters instead ([`shape`](super::shape)),
 //!   then the fill (paint, then opacity), then the stroke (paint, opacity, width);
@@ -63,11 +64,15 @@ pub enum ParamGroup {
     /// Transform parameters: the rotation of an ellipse or a rectangle
     /// ([`Primitive::angle`](super::Primitive::angle)), radians.
     Transform,
+    /// Filter primitives' numbers ([`FilterPrimitive::slots_mut`](super::filter::FilterPrimitive::slots_mut)):
+    /// offsets and blur deviations in device pixels, color-matrix values and feComposite's
+    /// `k1 … k4` (unitless).
+    Filter,
 }
 
 impl ParamGroup {
     /// All groups, in a fixed order.
-    pub const ALL: [ParamGroup; 7] = [
+    pub const ALL: [ParamGroup; 8] = [
         ParamGroup::Points,
         ParamGroup::Color,
         ParamGroup::Opacity,
@@ -75,6 +80,7 @@ impl ParamGroup {
         ParamGroup::PaintGeometry,
         ParamGroup::StopOffset,
         ParamGroup::Transform,
+        ParamGroup::Filter,
     ];
 
     /// Lower-case name used on the command line and in reports.
@@ -87,6 +93,7 @@ impl ParamGroup {
             ParamGroup::PaintGeometry => "paint",
             ParamGroup::StopOffset => "stops",
             ParamGroup::Transform => "transforms",
+            ParamGroup::Filter => "filters",
         }
     }
 }
@@ -105,7 +112,8 @@ pub struct ParamSlot {
 pub struct Owner {
     /// The SVG id (may be empty).
     pub id: String,
-    /// `true` for a group (its only parameter is its opacity), `false` for a path.
+    /// `true` for a group (its parameters are its opacity, transform and filters' numbers),
+    /// `false` for a path.
     pub is_group: bool,
 }
 
@@ -177,6 +185,12 @@ pub(crate) enum Part {
     StrokeOpacity(usize),
     /// Stroke width of path `.0`.
     StrokeWidth(usize),
+    /// A filter primitive's number; `unitless` for color-matrix values and feComposite's
+    /// `k` (the others are device pixels, colors or opacities).
+    Filter {
+        /// A unitless number.
+        unitless: bool,
+    },
 }
 
 /// Visits every parameter of `scene` in the canonical order. `f` receives the owner index
@@ -227,6 +241,19 @@ impl Walk<'_> {
                             (self.f)(self.owner, ParamGroup::Transform, part, v);
                         }
                         self.transform_ix += 1;
+                    }
+                    // A filtered group's primitives, after its opacity: its children's
+                    // slots follow them.
+                    if role == Role::Paint && g.layer {
+                        for p in g.filters.iter_mut().flat_map(|f| &mut f.primitives) {
+                            let unitless = p.kind.unitless();
+                            for (group, v) in p.slots_mut() {
+                                let part = Part::Filter {
+                                    unitless: unitless && group == ParamGroup::Filter,
+                                };
+                                (self.f)(self.owner, group, part, v);
+                            }
+                        }
                     }
                     self.owner += 1;
                     self.layers(g, role);
@@ -430,7 +457,7 @@ impl ParamLayout {
                     });
                 }
                 Part::StrokeWidth(i) => layout.paths[i].stroke_width = at,
-                Part::Point | Part::PaintSlot => {}
+                Part::Point | Part::PaintSlot | Part::Filter { .. } => {}
             }
         });
         layout
@@ -637,6 +664,7 @@ impl crate::choice::Choice for ParamGroup {
             Self::PaintGeometry => &[],
             Self::StopOffset => &["stop"],
             Self::Transform => &["transform", "angle", "angles"],
+            Self::Filter => &["filter"],
         }
     }
 }

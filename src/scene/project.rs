@@ -1,13 +1,15 @@
 //! Projection onto valid scenes, applied after every optimizer step.
 
 use crate::limits::MAX_COORDINATE;
+use crate::scene::filter::{CompositeOp, FilterKind};
 use crate::scene::params::{clamp_coordinate, clamp_points};
 use crate::scene::{GradientKind, Node, Paint, Scene};
 
 /// Clamps every parameter back into its valid range: colors and opacities to `[0, 1]`,
 /// stroke widths, gradient radii and the sizes of circles, ellipses and rectangles to
 /// `[0, MAX_COORDINATE]` (a rectangle's corner radii to half its sides), gradient stop offsets to
-/// `[0, 1]` and non-decreasing (each offset at least the one before it). Control points
+/// `[0, 1]` and non-decreasing (each offset at least the one before it), and filter
+/// primitives' numbers into theirs (see `project_filter`). Control points
 /// and gradient end points are free within the readable range: ±[`MAX_COORDINATE`] in
 /// device pixels, and for a stroke drawn in a non-uniform frame tighter still, so that the
 /// coordinates the SVG writer puts in that frame stay within it too. NaN values become 0.
@@ -34,6 +36,9 @@ fn non_negative(v: &mut f64) {
 /// are parameters too).
 fn project_group(g: &mut crate::scene::Group) {
     unit(&mut g.opacity);
+    for p in g.filters.iter_mut().flat_map(|f| &mut f.primitives) {
+        project_filter(&mut p.kind);
+    }
     project_nodes(&mut g.children);
     if let Some(c) = &mut g.clip {
         project_group(&mut c.content);
@@ -60,6 +65,43 @@ fn project_nodes(nodes: &mut [Node]) {
                 }
             }
         }
+    }
+}
+
+/// A filter primitive's numbers: colors and opacities to `[0, 1]`, deviations to
+/// `[0, MAX_COORDINATE]`, offsets, matrix values and `k` to ±`MAX_COORDINATE`.
+fn project_filter(kind: &mut FilterKind) {
+    let free = |v: &mut f64| clamp_coordinate(v, MAX_COORDINATE);
+    match kind {
+        FilterKind::Flood { color, opacity } => {
+            color.iter_mut().for_each(unit);
+            unit(opacity);
+        }
+        FilterKind::Offset { dx, dy, .. } => {
+            free(dx);
+            free(dy);
+        }
+        FilterKind::Blur { std_dev, .. } => std_dev.iter_mut().for_each(non_negative),
+        FilterKind::DropShadow {
+            dx,
+            dy,
+            std_dev,
+            color,
+            opacity,
+            ..
+        } => {
+            free(dx);
+            free(dy);
+            std_dev.iter_mut().for_each(non_negative);
+            color.iter_mut().for_each(unit);
+            unit(opacity);
+        }
+        FilterKind::ColorMatrix { matrix, .. } => matrix.iter_mut().for_each(free),
+        FilterKind::Composite {
+            op: CompositeOp::Arithmetic(k),
+            ..
+        } => k.iter_mut().for_each(free),
+        _ => {}
     }
 }
 

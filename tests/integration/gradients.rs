@@ -385,20 +385,26 @@ fn crisp_edges_color_gradient_and_no_point_gradient() {
 }
 
 /// The scene's gradient reaches the points, colors and opacities under a filtered
-/// group, and the group's own opacity.
+/// group, the group's own opacity and the filters' parameters (blur deviation, offsets,
+/// color matrix, arithmetic k), with resvg's filters and with exact ones (where
+/// offsets and the blur of σ ≥ 2 move too). Offsets are fractional: at whole pixels
+/// either kind has a kink.
 #[test]
 fn gradients_reach_the_content_under_a_filter() {
     let svg = r#"<svg xmlns="http://www.w3.org/2000/svg" width="32" height="28">
         <filter id="f" x="-20%" y="-20%" width="140%" height="140%">
           <feGaussianBlur stdDeviation="1.5" result="b"/>
-          <feOffset dx="2" dy="1" in="b" result="o"/>
-          <feColorMatrix type="saturate" values="0.4" in="SourceGraphic" result="s"/>
+          <feOffset dx="2.3" dy="1.4" in="b" result="o"/>
+          <feColorMatrix values="0.6 0.3 0.1 0 0.02  0.2 0.7 0.1 0 0  0.1 0.2 0.7 0 0  0 0 0 1 -0.01" in="SourceGraphic" result="s"/>
           <feComposite operator="arithmetic" k1="0.2" k2="0.6" k3="0.5" k4="0" in="s" in2="o"/>
         </filter>
         <g filter="url(#f)" opacity="0.9">
           <path d="M 6 5 C 14 2 24 6 25 20 L 8 22 Z" fill="rgb(200,60,40)" fill-opacity="0.8"/>
-          <rect x="12.3" y="9.6" width="9.2" height="7.5" fill="rgb(30,120,210)"/>
+          <rect x="12.3" y="9.6" width="9.2" height="7.5" fill="rgb(30,120,210)" fill-opacity="0.9"/>
         </g></svg>"#;
+    // (Nothing is opaque, and the matrix's alpha offset is not 0: an alpha entry of 1
+    // would put an opaque pixel's alpha on the clamp at 1, and an offset of 0 a
+    // transparent pixel's alpha on the clamp at 0, both kinks.)
     let scene = Scene::from_svg_str(svg, "filter.svg", Sizing::Natural).unwrap();
     let mut moved = scene.clone();
     let mut p = moved.params();
@@ -406,13 +412,18 @@ fn gradients_reach_the_content_under_a_filter() {
         *v += 0.3 * (k as f64 * 1.3).sin();
     }
     moved.set_params(&p);
-    let opts = RenderOptions::default();
-    let target = render(&moved, &opts);
-    let (grad, _, groups) = check(&scene, &target, Loss::Mse, &opts, None, None);
-    assert!(grad.iter().any(|g| *g != 0.0));
-    assert!(groups.len() >= 3, "{groups:?}");
-    for g in groups {
-        assert!(g.passes(2e-2), "{g}");
+    for exact_filters in [false, true] {
+        let opts = RenderOptions {
+            exact_filters,
+            ..RenderOptions::default()
+        };
+        let target = render(&moved, &opts);
+        let (grad, _, groups) = check(&scene, &target, Loss::Mse, &opts, None, None);
+        assert!(grad.iter().any(|g| *g != 0.0));
+        assert!(groups.len() >= 4, "{groups:?}");
+        for g in groups {
+            assert!(g.passes(2e-2), "exact filters {exact_filters}: {g}");
+        }
     }
 }
 
@@ -432,7 +443,7 @@ fn gradients_reach_the_content_under_the_resampling_and_lighting_filters() {
         r#"<feConvolveMatrix order="3" kernelMatrix="1 2 1 0 1 0 1 0 1" divisor="6" edgeMode="wrap"/>"#,
         r#"<feMorphology operator="dilate" radius="1.5 1"/>"#,
         r#"<feMorphology operator="erode" radius="1"/>"#,
-        r#"<feOffset dx="1" dy="2" result="o"/><feTile in="o"/>"#,
+        r#"<feOffset dx="1.3" dy="2.4" result="o"/><feTile in="o"/>"#,
         r#"<feTurbulence baseFrequency="0.2" result="t"/><feDisplacementMap in="SourceGraphic" in2="t" scale="3" xChannelSelector="R" yChannelSelector="A"/>"#,
         r#"<feDiffuseLighting surfaceScale="2" diffuseConstant="1.2" lighting-color="rgb(250,200,120)"><fePointLight x="20" y="4" z="10"/></feDiffuseLighting>"#,
         r#"<feSpecularLighting surfaceScale="3" specularConstant="0.9" specularExponent="3"><feSpotLight x="4" y="2" z="14" pointsAtX="16" pointsAtY="16" specularExponent="1.5"/></feSpecularLighting>"#,

@@ -7,6 +7,10 @@
 //! * σ < 2: resvg runs a recursive (IIR) filter; here an exact Gaussian kernel truncated
 //!   at 3σ (at most 13 taps), normalized to sum 1.
 //!
+//! * Exactly ([`RenderOptions::exact_filters`](crate::raster::RenderOptions::exact_filters)):
+//!   a Gaussian kernel on either axis, tapered to 0 between 4σ and 5σ so that it is smooth
+//!   in σ, with its derivative ([`sigma_gradient`]); its cost grows with σ.
+//!
 //! Every pass is a symmetric matrix (a symmetric kernel, zero outside the image), so the
 //! adjoint of the blur is the same passes in reverse order ([`adjoint`]).
 
@@ -28,9 +32,12 @@ const BOX_FROM: f64 = 2.0;
 /// Deviations below this count as 0 (resvg's rule).
 const MIN_SIGMA: f64 = 0.05;
 
-/// The passes of a blur with deviations `std_dev` (device pixels); empty when it changes
-/// nothing.
-pub(crate) fn passes(std_dev: [f64; 2]) -> Vec<Pass> {
+/// The passes of a blur with deviations `std_dev` (device pixels), resvg's or (`exact`)
+/// true Gaussians; empty when it changes nothing.
+pub(crate) fn passes(std_dev: [f64; 2], exact: bool) -> Vec<Pass> {
+    if exact {
+        return exact_passes(std_dev);
+    }
     let [mut sx, mut sy] = std_dev.map(|s| if s.is_finite() { s } else { 0.0 });
     if sx.abs() <= f64::EPSILON && sy.abs() <= f64::EPSILON {
         return Vec::new();
@@ -56,7 +63,7 @@ pub(crate) fn passes(std_dev: [f64; 2]) -> Vec<Pass> {
         for (s, horizontal) in [(sy, false), (sx, true)] {
             if s > 0.0 {
                 out.push(Pass::Kernel {
-                    taps: gaussian_taps(s),
+                    taps: kernel_taps(s, SMALL_REACH, false).0,
                     horizontal,
                 });
             }
@@ -84,14 +91,132 @@ fn box_sizes(sigma: f32) -> [i32; STEPS] {
     std::array::from_fn(|i| if i < m { wl } else { wu })
 }
 
-/// A Gaussian of deviation `s`, truncated at `3s`, normalized.
-fn gaussian_taps(s: f64) -> Vec<f32> {
-    let r = (3.0 * s).ceil().max(1.0) as usize;
-    let w: Vec<f64> = (0..=r)
-        .map(|k| (-((k * k) as f64) / (2.0 * s * s)).exp())
+/// Exact passes: a vertical then a horizontal Gaussian ([`kernel_taps`], tapered from
+/// 4σ to 5σ) for each
+/// deviation that is positive.
+fn exact_passes(std_dev: [f64; 2]) -> Vec<Pass> {
+    let [sx, sy] = std_dev.map(|s| if s.is_finite() { s } else { 0.0 });
+    [(sy, false), (sx, true)]
+        .into_iter()
+        .filter(|&(s, _)| s > 0.0)
+        .map(|(s, horizontal)| Pass::Kernel {
+            taps: kernel_taps(s, EXACT_REACH, true).0,
+            horizontal,
+        })
+        .collect()
+}
+
+/// Where the exact kernel starts to taper, in deviations: from 4σ to 5σ its weights are
+/// multiplied by a smoothstep falling from 1 to 0, so that no tap enters or leaves with
+/// a jump as σ changes (the kernel and its derivative are continuous in σ). The taper
+/// touches weights below `e^-8 ≈ 3e-4` of the center's.
+const EXACT_REACH: f64 = 4.0;
+
+/// Truncation of the kernel of small resvg blurs (σ < 2), in deviations (no taper, as
+/// before: a tap enters with a jump of `e^-4.5` of the center's as `3σ` crosses it).
+const SMALL_REACH: f64 = 3.0;
+
+/// A Gaussian kernel for deviation `s > 0` (`taps[k]` at distance `k`, normalized to sum
+/// 1) and its derivative with respect to `s`: truncated at `reach · s` (`r ≥ 1` taps a
+/// side) or, with `taper`, tapered from `reach · s` to `(reach + 1) · s`
+/// ([`EXACT_REACH`]).
+fn kernel_taps(s: f64, reach: f64, taper: bool) -> (Vec<f32>, Vec<f32>) {
+    let end = if taper { reach + 1.0 } else { reach };
+    let r = (end * s).ceil().max(1.0) as usize;
+    let s3 = s * s * s;
+    // Weights `e_k · φ_k` and their derivatives in `s`.
+    let (e, de): (Vec<f64>, Vec<f64>) = (0..=r)
+        .map(|k| {
+            let kf = k as f64;
+            let g = (-(kf * kf) / (2.0 * s * s)).exp();
+            let dg = g * kf * kf / s3;
+            // u = end − k/s, 0 at the far end, 1 where the taper starts.
+            let u = end - kf / s;
+            if !taper || u >= 1.0 {
+                (g, dg)
+            } else if u <= 0.0 {
+                (0.0, 0.0)
+            } else {
+                let phi = u * u * (3.0 - 2.0 * u);
+                let dphi = 6.0 * u * (1.0 - u) * kf / (s * s);
+                (g * phi, dg * phi + g * dphi)
+            }
+        })
+        .unzip();
+    let z = e[0] + 2.0 * e[1..].iter().sum::<f64>();
+    let dz = de[0] + 2.0 * de[1..].iter().sum::<f64>();
+    let taps = e.iter().map(|v| (v / z) as f32).collect();
+    let d = e
+        .iter()
+        .zip(&de)
+        .map(|(v, dv)| ((dv - v / z * dz) / z) as f32)
         .collect();
-    let total = w[0] + 2.0 * w[1..].iter().sum::<f64>();
-    w.iter().map(|v| (v / total) as f32).collect()
+    (taps, d)
+}
+
+/// `(∂L/∂σx, ∂L/∂σy)` of the blur of `x` (`w × h`) by [`passes`], given
+/// `g = ∂L/∂(blurred x)`. Where the passes are Gaussian kernels (exact, or resvg's below
+/// σ = 2) the blur is `H(V x)`; `∂/∂σx = ⟨g, H'(V x)⟩` and `∂/∂σy = ⟨H g, V' x⟩` (`H`
+/// is symmetric). resvg's box blurs are piecewise constant in σ: zero. So is a deviation
+/// with no pass.
+pub(crate) fn sigma_gradient(
+    x: &[[f32; 4]],
+    w: usize,
+    h: usize,
+    std_dev: [f64; 2],
+    g: &[[f32; 4]],
+    exact: bool,
+) -> [f64; 2] {
+    let [mut sx, mut sy] = std_dev.map(|s| if s.is_finite() { s } else { 0.0 });
+    let reach = if exact {
+        EXACT_REACH
+    } else {
+        if sx >= BOX_FROM || sy >= BOX_FROM {
+            return [0.0; 2];
+        }
+        // resvg's rule: deviations below MIN_SIGMA count as 0 (and so both, when both are).
+        if sx < MIN_SIGMA {
+            sx = 0.0;
+        }
+        if sy < MIN_SIGMA {
+            sy = 0.0;
+        }
+        SMALL_REACH
+    };
+    let kernel = |s: f64, horizontal: bool, derivative: bool| {
+        let (t, d) = kernel_taps(s, reach, exact);
+        Pass::Kernel {
+            taps: if derivative { d } else { t },
+            horizontal,
+        }
+    };
+    let mut out = [0.0; 2];
+    if sx > 0.0 {
+        let mut y = x.to_vec();
+        if sy > 0.0 {
+            apply(&mut y, w, h, &[kernel(sy, false, false)]);
+        }
+        apply(&mut y, w, h, &[kernel(sx, true, true)]);
+        out[0] = dot(g, &y);
+    }
+    if sy > 0.0 {
+        let mut hg = g.to_vec();
+        if sx > 0.0 {
+            apply(&mut hg, w, h, &[kernel(sx, true, false)]);
+        }
+        let mut y = x.to_vec();
+        apply(&mut y, w, h, &[kernel(sy, false, true)]);
+        out[1] = dot(&hg, &y);
+    }
+    out
+}
+
+/// The sum of the products of all channels, in `f64`.
+pub(crate) fn dot(a: &[[f32; 4]], b: &[[f32; 4]]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (0..4).map(|c| x[c] as f64 * y[c] as f64).sum::<f64>())
+        .sum()
 }
 
 /// Applies the passes in order to a `w × h` image.
@@ -240,20 +365,19 @@ pub(super) mod tests {
             .collect()
     }
 
-    /// The sum of the products of all channels.
-    pub(in crate::raster::filter) fn dot(a: &[[f32; 4]], b: &[[f32; 4]]) -> f64 {
-        a.iter()
-            .zip(b)
-            .map(|(x, y)| (0..4).map(|c| x[c] as f64 * y[c] as f64).sum::<f64>())
-            .sum()
-    }
-
     /// `⟨B x, y⟩ = ⟨x, Bᵀ y⟩` for boxes and kernels, on an image smaller than the boxes.
     #[test]
     fn adjoint_is_the_transpose() {
         let (w, h) = (13, 7);
-        for std in [[0.7, 1.3], [3.0, 0.0], [2.5, 9.0], [40.0, 40.0]] {
-            let p = passes(std);
+        for (std, exact) in [
+            ([0.7, 1.3], false),
+            ([3.0, 0.0], false),
+            ([2.5, 9.0], false),
+            ([40.0, 40.0], false),
+            ([0.7, 2.6], true),
+            ([5.0, 0.0], true),
+        ] {
+            let p = passes(std, exact);
             assert!(!p.is_empty());
             let (x, y) = (random(w * h, 1), random(w * h, 2));
             let mut bx = x.clone();
@@ -265,6 +389,79 @@ pub(super) mod tests {
         }
     }
 
+    /// The deviation gradient of the exact blur and of resvg's small blurs agrees with
+    /// central differences, on both axes and with one axis unblurred.
+    #[test]
+    fn sigma_gradient_agrees_with_differences() {
+        let (w, h) = (17, 11);
+        let (x, g) = (random(w * h, 3), random(w * h, 4));
+        let loss = |s: [f64; 2], exact: bool| {
+            let mut y = x.clone();
+            apply(&mut y, w, h, &passes(s, exact));
+            dot(&g, &y)
+        };
+        for (s, exact) in [
+            ([1.3, 0.9], true),
+            ([2.7, 0.0], true),
+            ([0.0, 3.1], true),
+            ([0.45, 5.2], true),
+            ([1.3, 0.9], false),
+            ([0.0, 1.55], false),
+        ] {
+            let got = sigma_gradient(&x, w, h, s, &g, exact);
+            for axis in 0..2 {
+                if s[axis] == 0.0 {
+                    assert_eq!(got[axis], 0.0);
+                    continue;
+                }
+                let e = 1e-3;
+                let (mut a, mut b) = (s, s);
+                a[axis] += e;
+                b[axis] -= e;
+                let fd = (loss(a, exact) - loss(b, exact)) / (2.0 * e);
+                let tol = 1e-3 * fd.abs().max(1.0);
+                assert!(
+                    (got[axis] - fd).abs() < tol,
+                    "{s:?} axis {axis}: {} vs {fd}",
+                    got[axis]
+                );
+            }
+        }
+    }
+
+    /// The exact kernel is closer to a true Gaussian than resvg's boxes: measured as the
+    /// largest difference of an impulse's response from the sampled Gaussian.
+    #[test]
+    fn exact_blur_is_nearer_a_gaussian_than_boxes() {
+        for sigma in [2.5f64, 6.0] {
+            let n = 121;
+            let response = |exact: bool| {
+                let mut img = vec![[0.0f32; 4]; n];
+                img[n / 2] = [1.0; 4];
+                apply(&mut img, n, 1, &passes([sigma, 0.0], exact));
+                img
+            };
+            let err = |img: &[[f32; 4]]| {
+                let z: f64 = (0..n)
+                    .map(|i| (-((i as f64 - (n / 2) as f64).powi(2)) / (2.0 * sigma * sigma)).exp())
+                    .sum();
+                (0..n)
+                    .map(|i| {
+                        let t = (-((i as f64 - (n / 2) as f64).powi(2)) / (2.0 * sigma * sigma))
+                            .exp()
+                            / z;
+                        (img[i][0] as f64 - t).abs()
+                    })
+                    .fold(0.0, f64::max)
+            };
+            let (e_exact, e_box) = (err(&response(true)), err(&response(false)));
+            assert!(
+                e_exact < 0.01 * e_box,
+                "σ {sigma}: {e_exact} vs boxes {e_box}"
+            );
+        }
+    }
+
     /// Inside a large image the blur keeps the total and has about the asked deviation
     /// (within the box approximation's rounding of widths).
     #[test]
@@ -273,7 +470,7 @@ pub(super) mod tests {
             let n = 201;
             let mut img = vec![[0.0f32; 4]; n];
             img[n / 2] = [1.0; 4];
-            apply(&mut img, n, 1, &passes([sigma, 0.0]));
+            apply(&mut img, n, 1, &passes([sigma, 0.0], false));
             let total: f64 = img.iter().map(|v| v[0] as f64).sum();
             let var: f64 = img
                 .iter()

@@ -29,7 +29,7 @@ mod turbulence;
 
 use crate::raster::jet::{Jet, Scalar};
 use crate::scene::Scene;
-use crate::scene::filter::{Filter, FilterInput, FilterKind};
+use crate::scene::filter::{CompositeOp, Filter, FilterInput, FilterKind};
 
 /// A filtered group of a prepared scene.
 #[derive(Clone, Debug)]
@@ -149,6 +149,60 @@ impl Frame {
         }
         out
     }
+
+    /// The whole shifts and weights of a move by `(dx, dy)` pixels: the four neighbours
+    /// of `(⌊dx⌋, ⌊dy⌋)` with bilinear weights (one with weight 1 at whole offsets), or
+    /// resvg's truncated offset alone (`!exact`).
+    fn shifts(dx: f64, dy: f64, exact: bool) -> Vec<(i64, i64, f32)> {
+        if !exact {
+            return match whole_offset(dx, dy) {
+                Some((x, y)) => vec![(x, y, 1.0)],
+                None => vec![(0, 0, 1.0)],
+            };
+        }
+        let (ix, iy) = (dx.floor(), dy.floor());
+        let (fx, fy) = ((dx - ix) as f32, (dy - iy) as f32);
+        let (ix, iy) = (ix as i64, iy as i64);
+        [
+            (ix, iy, (1.0 - fx) * (1.0 - fy)),
+            (ix + 1, iy, fx * (1.0 - fy)),
+            (ix, iy + 1, (1.0 - fx) * fy),
+            (ix + 1, iy + 1, fx * fy),
+        ]
+        .into_iter()
+        .filter(|s| s.2 != 0.0)
+        .collect()
+    }
+
+    /// `px` moved by `(dx, dy)` ([`shifts`](Self::shifts)); `back` moves the other way
+    /// (the adjoint).
+    fn moved(&self, px: &[[f32; 4]], dx: f64, dy: f64, exact: bool, back: bool) -> Vec<[f32; 4]> {
+        let sign = if back { -1 } else { 1 };
+        let mut out = vec![[0.0f32; 4]; px.len()];
+        for (x, y, wgt) in Frame::shifts(dx, dy, exact) {
+            let s = self.shift(px, sign * x, sign * y);
+            for (o, v) in out.iter_mut().zip(&s) {
+                for c in 0..4 {
+                    o[c] += wgt * v[c];
+                }
+            }
+        }
+        out
+    }
+
+    /// `(∂L/∂dx, ∂L/∂dy)` of the exact move of `px` by `(dx, dy)`, given `g = ∂L/∂moved`:
+    /// the bilinear weights' derivatives (one-sided, from the right, at whole offsets).
+    fn move_gradient(&self, px: &[[f32; 4]], dx: f64, dy: f64, g: &[[f32; 4]]) -> [f64; 2] {
+        let (ix, iy) = (dx.floor(), dy.floor());
+        let (fx, fy) = (dx - ix, dy - iy);
+        let (ix, iy) = (ix as i64, iy as i64);
+        let at = |a: i64, b: i64| blur::dot(g, &self.shift(px, ix + a, iy + b));
+        let (g00, g10, g01, g11) = (at(0, 0), at(1, 0), at(0, 1), at(1, 1));
+        [
+            (1.0 - fy) * (g10 - g00) + fy * (g11 - g01),
+            (1.0 - fx) * (g01 - g00) + fx * (g11 - g10),
+        ]
+    }
 }
 
 /// A primitive's result with its color space.
@@ -179,27 +233,29 @@ fn over_adjoint(s: [f32; 4], d: [f32; 4], g: [f32; 4]) -> ([f32; 4], [f32; 4]) {
 }
 
 /// feFlood's (and feDropShadow's) color at alpha `a`, premultiplied.
-fn flood<S: Scalar>(color: [f64; 3], opacity: f64, a: S) -> [S; 4] {
-    let al = a * S::c(opacity);
-    [
-        S::c(color[0]) * al,
-        S::c(color[1]) * al,
-        S::c(color[2]) * al,
-        al,
-    ]
+fn flood<S: Scalar>(color: [S; 3], opacity: S, a: S) -> [S; 4] {
+    let al = a * opacity;
+    [color[0] * al, color[1] * al, color[2] * al, al]
+}
+
+/// [`flood`] of constant parameters.
+fn flood_of<S: Scalar>(color: [f64; 3], opacity: f64, a: S) -> [S; 4] {
+    flood(color.map(S::c), S::c(opacity), a)
 }
 
 /// One filter's primitives run over `src`, keeping every result.
 struct Run<'a> {
     f: &'a Filter,
     fr: Frame,
+    /// [`RenderOptions::exact_filters`](crate::raster::RenderOptions::exact_filters).
+    exact: bool,
     src: Res,
     alpha: Res,
     results: Vec<Res>,
 }
 
 impl<'a> Run<'a> {
-    fn new(f: &'a Filter, fr: Frame, src: &[[f32; 4]]) -> Self {
+    fn new(f: &'a Filter, fr: Frame, src: &[[f32; 4]], exact: bool) -> Self {
         let src = Res {
             px: src.to_vec(),
             linear: false,
@@ -211,6 +267,7 @@ impl<'a> Run<'a> {
         let mut run = Run {
             f,
             fr,
+            exact,
             src,
             alpha,
             results: Vec::with_capacity(f.primitives.len()),
@@ -249,21 +306,18 @@ impl<'a> Run<'a> {
         let fr = self.fr;
         let mut res = match &p.kind {
             FilterKind::Flood { color, opacity } => Res {
-                px: vec![flood(*color, *opacity, 1.0f64).map(|v| v as f32); fr.w * fr.h],
+                px: vec![flood_of(*color, *opacity, 1.0f64).map(|v| v as f32); fr.w * fr.h],
                 linear: false,
             },
             FilterKind::Offset { input, dx, dy } => {
                 let r = self.input(input);
-                match whole_offset(*dx, *dy) {
-                    Some((x, y)) => Res {
-                        px: fr.shift(&r.px, x, y),
-                        linear: r.linear,
-                    },
-                    None => r.clone(),
+                Res {
+                    px: fr.moved(&r.px, *dx, *dy, self.exact, false),
+                    linear: r.linear,
                 }
             }
             FilterKind::Blur { input, std_dev } => {
-                let passes = blur::passes(*std_dev);
+                let passes = blur::passes(*std_dev, self.exact);
                 if passes.is_empty() {
                     self.input(input).clone()
                 } else {
@@ -273,7 +327,7 @@ impl<'a> Run<'a> {
                 }
             }
             FilterKind::DropShadow { input, .. } => {
-                let (x, _, shifted) = self.drop_shadow(p, input);
+                let (x, _, _, shifted) = self.drop_shadow(p, input);
                 let px = x.iter().zip(&shifted).map(|(&s, &d)| over(s, d)).collect();
                 Res { px, linear: cs }
             }
@@ -506,13 +560,13 @@ impl<'a> Run<'a> {
     }
 
     /// feDropShadow's parts: the input in the primitive's color space, its blurred copy,
-    /// and the shadow (flooded, converted as resvg converts it, moved).
+    /// the shadow (flooded, converted as resvg converts it) and the shadow moved.
     #[allow(clippy::type_complexity)]
     fn drop_shadow(
         &self,
         p: &crate::scene::filter::FilterPrimitive,
         input: &FilterInput,
-    ) -> (Vec<[f32; 4]>, Vec<[f32; 4]>, Vec<[f32; 4]>) {
+    ) -> (Vec<[f32; 4]>, Vec<[f32; 4]>, Vec<[f32; 4]>, Vec<[f32; 4]>) {
         let FilterKind::DropShadow {
             dx,
             dy,
@@ -527,21 +581,23 @@ impl<'a> Run<'a> {
         let cs = p.linear_rgb;
         let x = self.input_in(input, cs);
         let mut blurred = x.clone();
-        blur::apply(&mut blurred, self.fr.w, self.fr.h, &blur::passes(*std_dev));
+        blur::apply(
+            &mut blurred,
+            self.fr.w,
+            self.fr.h,
+            &blur::passes(*std_dev, self.exact),
+        );
         // resvg floods the shadow with the sRGB color, then converts it "into" the
         // primitive's space: to linearRGB, or (its quirk) from linear to sRGB.
         let shadow: Vec<[f32; 4]> = blurred
             .iter()
             .map(|b| {
-                let fl = flood(*color, *opacity, b[3] as f64);
+                let fl = flood_of(*color, *opacity, b[3] as f64);
                 pixel::convert(fl, cs).map(|v| v as f32)
             })
             .collect();
-        let shifted = match whole_offset(*dx, *dy) {
-            Some((ox, oy)) => self.fr.shift(&shadow, ox, oy),
-            None => shadow,
-        };
-        (x, blurred, shifted)
+        let shifted = self.fr.moved(&shadow, *dx, *dy, self.exact, false);
+        (x, blurred, shadow, shifted)
     }
 
     /// The filter's output: the last result in sRGB, cleared outside the region.
@@ -563,32 +619,61 @@ impl<'a> Run<'a> {
 }
 
 /// Runs `filters` in order over `src`, the layer `rect` (canvas pixels) of a group's
-/// rendered children; returns the filtered layer.
-pub(crate) fn apply(filters: &[Filter], rect: [usize; 4], src: Vec<[f32; 4]>) -> Vec<[f32; 4]> {
+/// rendered children; returns the filtered layer. `exact`:
+/// [`RenderOptions::exact_filters`](crate::raster::RenderOptions::exact_filters).
+pub(crate) fn apply(
+    filters: &[Filter],
+    rect: [usize; 4],
+    src: Vec<[f32; 4]>,
+    exact: bool,
+) -> Vec<[f32; 4]> {
     let fr = Frame::of(rect);
     filters
         .iter()
-        .fold(src, |px, f| Run::new(f, fr, &px).output())
+        .fold(src, |px, f| Run::new(f, fr, &px, exact).output())
 }
 
-/// The adjoint of [`apply`] at `src`: `∂L/∂src` from `∂L/∂output`.
+/// The adjoint of [`apply`] at `src`: `∂L/∂src` from `∂L/∂output`, and the gradient of
+/// the filters' parameters in slot order
+/// ([`FilterPrimitive::slots_mut`](crate::scene::filter::FilterPrimitive::slots_mut),
+/// filter by filter).
 pub(crate) fn adjoint(
     filters: &[Filter],
     rect: [usize; 4],
     src: Vec<[f32; 4]>,
     g_out: Vec<[f32; 4]>,
-) -> Vec<[f32; 4]> {
+    exact: bool,
+) -> (Vec<[f32; 4]>, Vec<f64>) {
     let fr = Frame::of(rect);
     let mut sources = vec![src];
     for f in &filters[..filters.len().saturating_sub(1)] {
-        let next = Run::new(f, fr, sources.last().expect("a source")).output();
+        let next = Run::new(f, fr, sources.last().expect("a source"), exact).output();
         sources.push(next);
     }
     let mut g = g_out;
+    let mut params: Vec<Vec<f64>> = Vec::with_capacity(filters.len());
     for (f, src) in filters.iter().zip(&sources).rev() {
-        g = Back::new(Run::new(f, fr, src)).run(g);
+        let (gs, gp) = Back::new(Run::new(f, fr, src, exact)).run(g);
+        g = gs;
+        params.push(gp);
     }
-    g
+    (g, params.into_iter().rev().flatten().collect())
+}
+
+/// `Σ_pixels Σ_channels g · ∂out/∂θ` for a per-pixel operator `out(i)` seeded on `K`
+/// parameters `θ` (pixels where `g` is zero skipped).
+fn param_gradient<const K: usize>(g: &[[f32; 4]], out: impl Fn(usize) -> [Jet<K>; 4]) -> [f64; K] {
+    let mut acc = [0.0f64; K];
+    for (i, gv) in g.iter().enumerate() {
+        if *gv == [0.0; 4] {
+            continue;
+        }
+        let y = out(i);
+        for (j, a) in acc.iter_mut().enumerate() {
+            *a += (0..4).map(|o| gv[o] as f64 * y[o].d[j]).sum::<f64>();
+        }
+    }
+    acc
 }
 
 /// The reverse walk of one filter's [`Run`].
@@ -597,6 +682,10 @@ struct Back<'a> {
     /// `∂L/∂result`, per primitive (`None`: zero).
     g_res: Vec<Option<Vec<[f32; 4]>>>,
     g_src: Vec<[f32; 4]>,
+    /// `∂L/∂` the filter's parameters, in slot order.
+    g_params: Vec<f64>,
+    /// Each primitive's first slot in `g_params`.
+    first_slot: Vec<usize>,
 }
 
 fn add_into(acc: &mut Option<Vec<[f32; 4]>>, g: &[[f32; 4]]) {
@@ -616,17 +705,26 @@ impl<'a> Back<'a> {
     fn new(run: Run<'a>) -> Self {
         let n = run.fr.w * run.fr.h;
         let g_res = vec![None; run.results.len()];
+        let mut first_slot = Vec::with_capacity(run.f.primitives.len());
+        let mut at = 0;
+        for p in &run.f.primitives {
+            first_slot.push(at);
+            at += p.kind.slot_count();
+        }
         Back {
             run,
             g_res,
             g_src: vec![[0.0; 4]; n],
+            g_params: vec![0.0; at],
+            first_slot,
         }
     }
 
-    fn run(mut self, g_out: Vec<[f32; 4]>) -> Vec<[f32; 4]> {
+    /// `(∂L/∂src, ∂L/∂parameters)` from `∂L/∂output`.
+    fn run(mut self, g_out: Vec<[f32; 4]>) -> (Vec<[f32; 4]>, Vec<f64>) {
         let fr = self.run.fr;
         let Some(last) = self.run.results.last() else {
-            return self.g_src;
+            return (self.g_src, self.g_params);
         };
         let mut g = g_out;
         fr.clear_outside(&mut g, fr.local(self.run.f.region));
@@ -642,7 +740,7 @@ impl<'a> Back<'a> {
                 self.primitive(k, g);
             }
         }
-        self.g_src
+        (self.g_src, self.g_params)
     }
 
     /// Adds `g`, the gradient of input `i` read in color space `cs` (`None`: as it is),
@@ -679,21 +777,40 @@ impl<'a> Back<'a> {
         if !matches!(p.kind, FilterKind::Offset { .. }) {
             fr.clear_outside(&mut g, fr.local(p.subregion));
         }
+        let exact = run.exact;
+        let at = self.first_slot[k];
         match &p.kind {
-            // No parameters yet: the flood's color and opacity get no gradient.
-            FilterKind::Flood { .. } => {}
+            FilterKind::Flood { color, opacity } => {
+                // A constant pixel: the gradient of the sum of `g`.
+                let mut sum = [0.0f64; 4];
+                for v in &g {
+                    for c in 0..4 {
+                        sum[c] += v[c] as f64;
+                    }
+                }
+                for c in 0..3 {
+                    self.g_params[at + c] += sum[c] * opacity;
+                }
+                self.g_params[at + 3] += (0..3).map(|c| sum[c] * color[c]).sum::<f64>() + sum[3];
+            }
             FilterKind::Offset { input, dx, dy } => {
-                let g = match whole_offset(*dx, *dy) {
-                    Some((x, y)) => fr.shift(&g, -x, -y),
-                    None => g,
-                };
+                if exact {
+                    let d = fr.move_gradient(&run.input(input).px, *dx, *dy, &g);
+                    self.g_params[at] += d[0];
+                    self.g_params[at + 1] += d[1];
+                }
+                let g = fr.moved(&g, *dx, *dy, exact, true);
                 self.add_input(&input.clone(), None, g);
             }
             FilterKind::Blur { input, std_dev } => {
-                let passes = blur::passes(*std_dev);
+                let passes = blur::passes(*std_dev, exact);
                 if passes.is_empty() {
                     self.add_input(&input.clone(), None, g);
                 } else {
+                    let x = run.input_in(input, cs);
+                    let d = blur::sigma_gradient(&x, fr.w, fr.h, *std_dev, &g, exact);
+                    self.g_params[at] += d[0];
+                    self.g_params[at + 1] += d[1];
                     blur::adjoint(&mut g, fr.w, fr.h, &passes);
                     self.add_input(&input.clone(), Some(cs), g);
                 }
@@ -706,24 +823,50 @@ impl<'a> Back<'a> {
                 color,
                 opacity,
             } => {
-                let (x, blurred, shifted) = run.drop_shadow(p, input);
+                let (x, blurred, shadow, shifted) = run.drop_shadow(p, input);
                 let mut gx = vec![[0.0f32; 4]; g.len()];
                 let mut gsh = vec![[0.0f32; 4]; g.len()];
                 for i in 0..g.len() {
                     (gx[i], gsh[i]) = over_adjoint(x[i], shifted[i], g[i]);
                 }
-                let gsh = match whole_offset(*dx, *dy) {
-                    Some((ox, oy)) => fr.shift(&gsh, -ox, -oy),
-                    None => gsh,
-                };
+                if exact {
+                    let d = fr.move_gradient(&shadow, *dx, *dy, &gsh);
+                    self.g_params[at] += d[0];
+                    self.g_params[at + 1] += d[1];
+                }
+                let gsh = fr.moved(&gsh, *dx, *dy, exact, true);
                 let (color, opacity) = (*color, *opacity);
-                let shade = |v: [Jet<4>; 4]| pixel::convert(flood(color, opacity, v[3]), cs);
+                let shade = |v: [Jet<4>; 4]| pixel::convert(flood_of(color, opacity, v[3]), cs);
+                // The color and opacity, seeded as four inputs, at each blurred alpha.
+                let seeded: [Jet<4>; 4] = [
+                    Jet::var(color[0], 0),
+                    Jet::var(color[1], 1),
+                    Jet::var(color[2], 2),
+                    Jet::var(opacity, 3),
+                ];
+                let mut g_shade = [0.0f64; 4];
+                for (b, gv) in blurred.iter().zip(&gsh) {
+                    if *gv == [0.0; 4] {
+                        continue;
+                    }
+                    let [r, gr, bl, op] = seeded;
+                    let y = pixel::convert(flood([r, gr, bl], op, Jet::c(b[3] as f64)), cs);
+                    for (j, s) in g_shade.iter_mut().enumerate() {
+                        *s += (0..4).map(|o| gv[o] as f64 * y[o].d[j]).sum::<f64>();
+                    }
+                }
+                for (j, s) in g_shade.iter().enumerate() {
+                    self.g_params[at + 4 + j] += s;
+                }
                 let mut gb: Vec<[f32; 4]> = blurred
                     .iter()
                     .zip(&gsh)
                     .map(|(&b, &gv)| pixel::adjoint1(&shade, b, gv))
                     .collect();
-                blur::adjoint(&mut gb, fr.w, fr.h, &blur::passes(*std_dev));
+                let d = blur::sigma_gradient(&x, fr.w, fr.h, *std_dev, &gb, exact);
+                self.g_params[at + 2] += d[0];
+                self.g_params[at + 3] += d[1];
+                blur::adjoint(&mut gb, fr.w, fr.h, &blur::passes(*std_dev, exact));
                 for (a, b) in gx.iter_mut().zip(&gb) {
                     for c in 0..4 {
                         a[c] += b[c];
@@ -765,11 +908,32 @@ impl<'a> Back<'a> {
             FilterKind::Composite { input1, input2, op } => {
                 let op = *op;
                 let (a, b) = (input1.clone(), input2.clone());
+                if let CompositeOp::Arithmetic(k) = op {
+                    let (x1, x2) = (run.input_in(&a, cs), run.input_in(&b, cs));
+                    let seeded: [Jet<4>; 4] = std::array::from_fn(|i| Jet::var(k[i], i));
+                    let d = param_gradient(&g, |i| {
+                        pixel::arithmetic(
+                            seeded,
+                            x1[i].map(|v| Jet::c(v as f64)),
+                            x2[i].map(|v| Jet::c(v as f64)),
+                        )
+                    });
+                    for (j, v) in d.iter().enumerate() {
+                        self.g_params[at + j] += v;
+                    }
+                }
                 self.binary(&a, &b, cs, g, |s, d| pixel::composite(op, s, d));
             }
             FilterKind::ColorMatrix { input, matrix } => {
                 let (i, m) = (input.clone(), *matrix);
                 let x = run.input_in(&i, cs);
+                let seeded: [Jet<20>; 20] = std::array::from_fn(|j| Jet::var(m[j], j));
+                let d = param_gradient(&g, |k| {
+                    pixel::color_matrix_with(x[k].map(|v| Jet::c(v as f64)), &seeded)
+                });
+                for (j, v) in d.iter().enumerate() {
+                    self.g_params[at + j] += v;
+                }
                 for (gv, &p) in g.iter_mut().zip(&x) {
                     *gv = pixel::adjoint1(&|v| pixel::color_matrix(v, &m), p, *gv);
                 }
@@ -857,7 +1021,7 @@ impl<'a> Back<'a> {
 
 #[cfg(test)]
 mod tests {
-    use super::blur::tests::dot;
+    use super::blur::dot;
     use super::*;
     use crate::rng::Rng;
     use crate::scene::BlendMode;
@@ -908,22 +1072,56 @@ mod tests {
             .collect()
     }
 
-    /// `d/dt ⟨g, F(x + t·v)⟩` by central differences against `⟨Fᵀ g, v⟩`.
+    /// `d/dt ⟨g, F(x + t·v)⟩` by central differences against `⟨Fᵀ g, v⟩`, with resvg's
+    /// filters and exact ones; then each of the filters' parameters `θ`:
+    /// `∂⟨g, F(x)⟩/∂θ` by central differences against the adjoint's (exact filters; with
+    /// resvg's, deviations and offsets have none and the others the same).
     fn check(name: &str, filters: &[Filter]) {
         let (x, g, v) = (image(1), image(2), image(3));
-        let h = 1e-3f32;
-        let at = |t: f32| {
-            let y: Vec<[f32; 4]> = x
-                .iter()
-                .zip(&v)
-                .map(|(a, b)| std::array::from_fn(|c| a[c] + t * b[c]))
-                .collect();
-            dot(&g, &apply(filters, RECT, y))
-        };
-        let numeric = (at(h) - at(-h)) / (2.0 * h as f64);
-        let analytic = dot(&adjoint(filters, RECT, x.clone(), g.clone()), &v);
-        let err = (numeric - analytic).abs() / numeric.abs().max(1e-2);
-        assert!(err < 1e-2, "{name}: numeric {numeric}, analytic {analytic}");
+        for exact in [false, true] {
+            let h = 1e-3f32;
+            let at = |t: f32| {
+                let y: Vec<[f32; 4]> = x
+                    .iter()
+                    .zip(&v)
+                    .map(|(a, b)| std::array::from_fn(|c| a[c] + t * b[c]))
+                    .collect();
+                dot(&g, &apply(filters, RECT, y, exact))
+            };
+            let numeric = (at(h) - at(-h)) / (2.0 * h as f64);
+            let (g_src, g_params) = adjoint(filters, RECT, x.clone(), g.clone(), exact);
+            let analytic = dot(&g_src, &v);
+            let err = (numeric - analytic).abs() / numeric.abs().max(1e-2);
+            assert!(
+                err < 1e-2,
+                "{name} (exact {exact}): numeric {numeric}, analytic {analytic}"
+            );
+            let count: usize = filters.iter().map(Filter::slot_count).sum();
+            assert_eq!(g_params.len(), count, "{name}");
+            for slot in 0..count {
+                let with = |d: f64| {
+                    let mut fs = filters.to_vec();
+                    let mut k = 0;
+                    for p in fs.iter_mut().flat_map(|f| &mut f.primitives) {
+                        for (_, val) in p.slots_mut() {
+                            if k == slot {
+                                *val += d;
+                            }
+                            k += 1;
+                        }
+                    }
+                    dot(&g, &apply(&fs, RECT, x.clone(), exact))
+                };
+                let e = 1e-4;
+                let numeric = (with(e) - with(-e)) / (2.0 * e);
+                let analytic = g_params[slot];
+                let err = (numeric - analytic).abs() / numeric.abs().max(1e-1);
+                assert!(
+                    err < 2e-2 || !exact && analytic == 0.0,
+                    "{name} (exact {exact}) slot {slot}: numeric {numeric}, analytic {analytic}"
+                );
+            }
+        }
     }
 
     use FilterInput::{Result as R, SourceAlpha, SourceGraphic as Src};
@@ -951,7 +1149,7 @@ mod tests {
                 vec![prim(
                     FilterKind::Blur {
                         input: Src,
-                        std_dev: [2.5, 3.0],
+                        std_dev: [2.45, 3.1],
                     },
                     true,
                 )],
@@ -971,9 +1169,9 @@ mod tests {
                 vec![prim(
                     FilterKind::DropShadow {
                         input: Src,
-                        dx: 2.0,
-                        dy: 1.0,
-                        std_dev: [1.0, 1.5],
+                        dx: 2.4,
+                        dy: 1.3,
+                        std_dev: [1.1, 1.45],
                         color: [0.3, 0.1, 0.7],
                         opacity: 0.8,
                     },
@@ -1045,11 +1243,13 @@ mod tests {
             CompositeOp::Atop,
             CompositeOp::Xor,
             CompositeOp::Arithmetic([0.5, 0.3, 0.4, 0.05]),
+            CompositeOp::Arithmetic([0.2, 0.6, 0.5, 0.0]),
+            CompositeOp::Arithmetic([0.9, 0.8, 0.7, 0.0]),
         ] {
             let blurred = prim(
                 FilterKind::Blur {
                     input: Src,
-                    std_dev: [1.0, 1.0],
+                    std_dev: [1.05, 0.95],
                 },
                 true,
             );
@@ -1072,8 +1272,8 @@ mod tests {
             let moved = prim(
                 FilterKind::Offset {
                     input: Src,
-                    dx: 1.0,
-                    dy: 1.0,
+                    dx: 1.2,
+                    dy: 1.35,
                 },
                 false,
             );
@@ -1091,16 +1291,17 @@ mod tests {
         let mut cut = prim(
             FilterKind::Blur {
                 input: Src,
-                std_dev: [1.5, 0.5],
+                std_dev: [1.55, 0.45],
             },
             true,
         );
         cut.subregion = [3, 2, 9, 7];
+        // (An alpha offset of exactly 0 would be a kink: transparent pixels' alpha is
+        // the offset, clamped at 0.)
+        let mut matrix = saturate_matrix(1.6);
+        matrix[19] = -0.02;
         let mut second = filter(vec![prim(
-            FilterKind::ColorMatrix {
-                input: Src,
-                matrix: saturate_matrix(1.6),
-            },
+            FilterKind::ColorMatrix { input: Src, matrix },
             true,
         )]);
         second.region = [2, 2, 10, 8];

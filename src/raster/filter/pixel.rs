@@ -131,15 +131,34 @@ pub(crate) fn convert<S: Scalar>(px: [S; 4], linear: bool) -> [S; 4] {
 
 /// feColorMatrix: the 4 × 5 matrix applied to the straight color, each channel clamped.
 pub(crate) fn color_matrix<S: Scalar>(px: [S; 4], m: &[f64; 20]) -> [S; 4] {
+    color_matrix_with(px, &m.map(S::c))
+}
+
+/// [`color_matrix`] with the matrix's values as numbers of the same kind as the pixel's
+/// (so that the matrix can be differentiated).
+pub(crate) fn color_matrix_with<S: Scalar>(px: [S; 4], m: &[S; 20]) -> [S; 4] {
     let s = straight(px);
     premultiplied(std::array::from_fn(|r| {
         let row = &m[r * 5..r * 5 + 5];
-        s[0] * S::c(row[0])
-            + s[1] * S::c(row[1])
-            + s[2] * S::c(row[2])
-            + s[3] * S::c(row[3])
-            + S::c(row[4])
+        s[0] * row[0] + s[1] * row[1] + s[2] * row[2] + s[3] * row[3] + row[4]
     }))
+}
+
+/// feComposite's arithmetic operator `k1·i1·i2 + k2·i1 + k3·i2 + k4` per premultiplied
+/// channel, alpha clamped to `[0, 1]` and colors to `[0, alpha]` (transparent where alpha
+/// is below `f32::EPSILON`, as resvg).
+pub(crate) fn arithmetic<S: Scalar>(k: [S; 4], s: [S; 4], d: [S; 4]) -> [S; 4] {
+    let f = |i1: S, i2: S| k[0] * i1 * i2 + k[1] * i1 + k[2] * i2 + k[3];
+    let a = clamp(f(s[3], d[3]), 0.0, 1.0);
+    if a.v() <= f32::EPSILON as f64 {
+        return [S::c(0.0); 4];
+    }
+    [
+        clamp(f(s[0], d[0]), 0.0, a.v()),
+        clamp(f(s[1], d[1]), 0.0, a.v()),
+        clamp(f(s[2], d[2]), 0.0, a.v()),
+        a,
+    ]
 }
 
 /// One transfer function at a straight channel value `c` in `[0, 1]`.
@@ -187,19 +206,7 @@ pub(crate) fn composite<S: Scalar>(op: CompositeOp, s: [S; 4], d: [S; 4]) -> [S;
         CompositeOp::Atop => std::array::from_fn(|c| s[c] * da + d[c] * (one - sa)),
         CompositeOp::Xor => std::array::from_fn(|c| s[c] * (one - da) + d[c] * (one - sa)),
         CompositeOp::Lighter => std::array::from_fn(|c| clamp(s[c] + d[c], 0.0, 1.0)),
-        CompositeOp::Arithmetic([k1, k2, k3, k4]) => {
-            let f = |i1: S, i2: S| S::c(k1) * i1 * i2 + S::c(k2) * i1 + S::c(k3) * i2 + S::c(k4);
-            let a = clamp(f(sa, da), 0.0, 1.0);
-            if a.v() <= f32::EPSILON as f64 {
-                return [S::c(0.0); 4];
-            }
-            [
-                clamp(f(s[0], d[0]), 0.0, a.v()),
-                clamp(f(s[1], d[1]), 0.0, a.v()),
-                clamp(f(s[2], d[2]), 0.0, a.v()),
-                a,
-            ]
-        }
+        CompositeOp::Arithmetic(k) => arithmetic(k.map(S::c), s, d),
     }
 }
 
