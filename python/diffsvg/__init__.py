@@ -371,6 +371,8 @@ class Scene:
             out.append((at, 2, ("transforms", j, "translate"), (2,)))
             out.append((at + 2, 1, ("transforms", j, "angle"), ()))
             out.append((at + 3, 1, ("transforms", j, "scale"), ()))
+        for j, f in enumerate(st["filters"]):
+            out.append((f["offset"], f["len"], ("filters", j, "values"), (f["len"],)))
         out.sort(key=lambda p: p[0])
         return out
 
@@ -387,6 +389,8 @@ class Scene:
         tree = {"shapes": shapes, "groups": [{} for _ in st["groups"]]}
         if st["transforms"]:
             tree["transforms"] = [{} for _ in st["transforms"]]
+        if st["filters"]:
+            tree["filters"] = [{} for _ in st["filters"]]
         return tree
 
     def unflatten(self, flat, dtype=np.float32) -> Arrays:
@@ -417,11 +421,15 @@ class Scene:
                          "stroke": ...,              # as fill
                          "stroke_width": ()}, ...],
              "groups": [{"opacity": ()}, ...],
-             "transforms": [{"translate": (2,), "angle": (), "scale": ()}, ...]}
+             "transforms": [{"translate": (2,), "angle": (), "scale": ()}, ...],
+             "filters": [{"values": (n,)}, ...]}
 
         ``transforms`` is present when groups' transforms are parameters (a similarity
         over two or more shapes: translation in pixels, angle in radians, scale, about
-        the content's center; the shapes in such a group are in its own frame).
+        the content's center; the shapes in such a group are in its own frame);
+        ``filters`` when filtered groups' filters have parameters (per group, its
+        primitives' numbers in order: offsets, blur deviations, drop shadows, flood
+        colors, color matrices, arithmetic k; docs/filters.md).
         A key is absent when the shape has no such paint. A circle, ellipse or
         rectangle has its own parameters in place of ``points`` (device pixels; ``angle``
         in radians, its rotation about its center). In a path every segment is a cubic:
@@ -525,6 +533,10 @@ class Scene:
                 {"id": t["id"], "translate": g[t["offset"]:t["offset"] + 2].tolist(),
                  "angle": float(g[t["offset"] + 2]), "scale": float(g[t["offset"] + 3])}
                 for t in st["transforms"]]
+        if st["filters"]:
+            out["filters"] = [
+                {"id": f["id"], "values": g[f["offset"]:f["offset"] + f["len"]].tolist()}
+                for f in st["filters"]]
         return out
 
 

@@ -82,12 +82,21 @@ class GroupEntry(TypedDict):
     offset: int
 
 
+class FilterEntry(TypedDict):
+    """One filtered group of ``Scene.structure()``: its filters' slots."""
+    id: str
+    offset: int
+    len: int
+
+
 class Structure(TypedDict):
     """``Scene.structure()``: ``transforms`` holds each group transform's first slot
-    (``tx, ty, angle, scale`` follow)."""
+    (``tx, ty, angle, scale`` follow), ``filters`` each filtered group's filter
+    parameters."""
     shapes: List[ShapeEntry]
     groups: List[GroupEntry]
     transforms: List[GroupEntry]
+    filters: List[FilterEntry]
 
 
 class FitInfo(TypedDict):
@@ -204,10 +213,12 @@ class TransformArrays(TypedDict):
 
 class Arrays(TypedDict):
     """``Scene.arrays()``: the parameters per shape and group, as DiffVG names them
-    (``transforms`` only where groups' transforms are parameters)."""
+    (``transforms`` only where groups' transforms are parameters, ``filters`` where
+    filters have parameters)."""
     shapes: List[ShapeArrays]
     groups: List[GroupArrays]
     transforms: NotRequired[List[TransformArrays]]
+    filters: NotRequired[List[dict]]
 
 
 class GradJson(TypedDict):
@@ -215,3 +226,4 @@ class GradJson(TypedDict):
     shapes: List[dict]
     groups: List[dict]
     transforms: NotRequired[List[dict]]
+    filters: NotRequired[List[dict]]

@@ -63,7 +63,8 @@ class _Layout:
     data of a :class:`Params` (equal layouts compare equal, so ``jit`` reuses a compiled
     step for every vector of a scene's structure)."""
 
-    __slots__ = ("pieces", "size", "shapes", "groups", "transforms", "_hash", "_by_owner")
+    __slots__ = ("pieces", "size", "shapes", "groups", "transforms", "filters", "_hash",
+                 "_by_owner")
 
     def __init__(self, scene: Scene):
         st = scene.structure()
@@ -72,6 +73,7 @@ class _Layout:
         self.shapes = len(st["shapes"])
         self.groups = len(st["groups"])
         self.transforms = len(st["transforms"])
+        self.filters = len(st["filters"])
         self._hash = hash(self.pieces)
         self._by_owner: dict = {}
         for off, size, key, shape in self.pieces:
@@ -162,12 +164,17 @@ class Params:
             return _Owners(self, "groups", self._layout.groups)
         if key == "transforms" and self._layout.transforms:
             return _Owners(self, "transforms", self._layout.transforms)
+        if key == "filters" and self._layout.filters:
+            return _Owners(self, "filters", self._layout.filters)
         raise KeyError(key)
 
     def keys(self) -> Tuple[str, ...]:
+        keys = ("shapes", "groups")
         if self._layout.transforms:
-            return ("shapes", "groups", "transforms")
-        return ("shapes", "groups")
+            keys += ("transforms",)
+        if self._layout.filters:
+            keys += ("filters",)
+        return keys
 
     def arrays(self) -> Arrays:
         """Every shape's and group's arrays as a dict (the structure of

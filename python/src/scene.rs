@@ -314,8 +314,9 @@ impl PyScene {
     /// rectangle's `kind`, `offset` and `fields`, [(name, length)], or None), `segments`
     /// per subpath, `closed` per subpath, `kinds` of the written segments ("L", "Q", "C"), `fill` and `stroke` paint
     /// entries or None, `stroke_width` offset or None), `groups` (`id`, `offset` of the
-    /// opacity) and `transforms` (`id`, `offset` of a group transform's `tx, ty, angle,
-    /// scale`).
+    /// opacity), `transforms` (`id`, `offset` of a group transform's `tx, ty, angle,
+    /// scale`) and `filters` (`id`, `offset` and `len` of a filtered group's filter
+    /// parameters, docs/filters.md).
     fn structure<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let st = Structure::of(&self.inner);
         let shapes = PyList::empty(py);
@@ -355,6 +356,15 @@ impl PyScene {
         d.set_item("shapes", shapes)?;
         d.set_item("groups", entries(&st.groups)?)?;
         d.set_item("transforms", entries(&st.transforms)?)?;
+        let filters = PyList::empty(py);
+        for f in &st.filters {
+            let e = PyDict::new(py);
+            e.set_item("id", &f.id)?;
+            e.set_item("offset", f.offset)?;
+            e.set_item("len", f.len)?;
+            filters.append(e)?;
+        }
+        d.set_item("filters", filters)?;
         Ok(d)
     }
 

@@ -285,3 +285,30 @@ def test_colors_survive_to_svg_exactly():
     s.set_params(p)
     back = diffsvg.Scene.from_svg(s.to_svg())
     assert np.array_equal(back.params()[colors], s.params()[colors])
+
+
+SHADOW = """<svg xmlns="http://www.w3.org/2000/svg" width="48" height="40">
+  <filter id="s" x="-50%" y="-50%" width="200%" height="200%">
+    <feDropShadow dx="{dx}" dy="2" stdDeviation="1.5"/></filter>
+  <g id="g" filter="url(#s)">
+    <rect x="10" y="8" width="20" height="16" fill="rgb(40,110,220)"/>
+    <circle cx="30" cy="24" r="7" fill="rgb(230,80,40)"/></g></svg>"""
+
+
+def test_filter_parameters_are_arrays_and_fit():
+    s = diffsvg.Scene.from_svg(SHADOW.format(dx=1.5))
+    st = s.structure()
+    assert [(f["id"], f["len"]) for f in st["filters"]] == [("g", 8)]
+    a = s.arrays(np.float64)
+    v = a["filters"][0]["values"]  # dx, dy, σx, σy, r, g, b, opacity
+    assert v.shape == (8,) and abs(v[0] - 1.5) < 1e-9 and abs(v[2] - 1.5) < 1e-9
+    assert np.array_equal(s.flatten(a), s.params())
+    # With exact filters the shadow's offset has a gradient: a fit moves it to the
+    # target's (rendered by resvg's rule, whole pixels: dx 4).
+    target = diffsvg.render(diffsvg.Scene.from_svg(SHADOW.format(dx=4)))
+    fitted, _ = diffsvg.fit(s, target, 150, exact_filters=True, lr_points=0.0, lr_color=0.0,
+                            lr_opacity=0.0, lr_filter=0.1)
+    assert abs(fitted.arrays(np.float64)["filters"][0]["values"][0] - 4) < 0.3
+    # Without, it stays where it was.
+    still, _ = diffsvg.fit(s, target, 20, lr_points=0.0, lr_color=0.0, lr_opacity=0.0)
+    assert still.arrays(np.float64)["filters"][0]["values"][0] == 1.5

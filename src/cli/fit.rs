@@ -16,7 +16,7 @@ use diffsvg::fit::{LearningRates, Objective};
 use diffsvg::image_io::{Image, side_by_side};
 use diffsvg::loss::Loss;
 use diffsvg::optim::Schedule;
-use diffsvg::raster::{RenderOptions, render};
+use diffsvg::raster::render;
 use diffsvg::scene::{ParamGroup, ParamLayout, Scene};
 
 /// Optimizer flags shared by `fit` and `vectorize`.

@@ -158,6 +158,9 @@ pub struct ParamLayout {
     /// Offset of each group transform's first slot (`tx, ty, angle, scale` follow), in
     /// walk order ([`transform`](super::transform)).
     pub transforms: Vec<usize>,
+    /// The slots of each filtered group's filter parameters, in walk order (groups whose
+    /// filters have parameters only; [`FilterPrimitive::slots_mut`](super::filter::FilterPrimitive::slots_mut)).
+    pub filters: Vec<std::ops::Range<usize>>,
 }
 
 /// What a slot visited by [`walk`] is.
@@ -405,6 +408,7 @@ impl ParamLayout {
             paths: vec![PathOffsets::default(); scene.path_count()],
             groups: Vec::new(),
             transforms: Vec::new(),
+            filters: Vec::new(),
         };
         // The walk needs `&mut`; a clone keeps this function's signature honest.
         let mut s = scene.clone();
@@ -457,7 +461,12 @@ impl ParamLayout {
                     });
                 }
                 Part::StrokeWidth(i) => layout.paths[i].stroke_width = at,
-                Part::Point | Part::PaintSlot | Part::Filter { .. } => {}
+                // A group's filter slots are one run: the first opens it.
+                Part::Filter { .. } => match layout.filters.last_mut() {
+                    Some(r) if r.end == at => r.end = at + 1,
+                    _ => layout.filters.push(at..at + 1),
+                },
+                Part::Point | Part::PaintSlot => {}
             }
         });
         layout

@@ -85,6 +85,21 @@ pub struct Structure {
     /// Per group with a transform parameter: its first slot (`tx, ty, angle, scale`
     /// follow; [`transform`](super::transform)).
     pub transforms: Vec<GroupSlots>,
+    /// Per filtered group whose filters have parameters: their slots
+    /// ([`FilterPrimitive::slots_mut`](super::filter::FilterPrimitive::slots_mut), filter by
+    /// filter, primitive by primitive).
+    pub filters: Vec<FilterSlots>,
+}
+
+/// A filtered group's filter parameters.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FilterSlots {
+    /// The group's id.
+    pub id: String,
+    /// The first slot.
+    pub offset: usize,
+    /// The number of slots.
+    pub len: usize,
 }
 
 fn paint_slots(paint: &Paint, po: Option<PaintOffsets>, opacity: usize) -> Option<PaintSlots> {
@@ -181,6 +196,15 @@ impl Structure {
             shapes,
             groups: slots(|g| g.layer, &layout.groups),
             transforms: slots(|g| g.transform.is_some(), &layout.transforms),
+            filters: layout
+                .filters
+                .iter()
+                .map(|r| FilterSlots {
+                    id: layout.owners[layout.slots[r.start].owner].id.clone(),
+                    offset: r.start,
+                    len: r.len(),
+                })
+                .collect(),
         }
     }
 
@@ -189,7 +213,9 @@ impl Structure {
     /// per written point, chained from the cubics; none for a primitive, which has
     /// `shape`: its `kind` and one entry per [`PrimitiveSlots::fields`]), `fill`/`stroke` (solid:
     /// `[r, g, b, opacity]`; gradient: `kind`, `geometry`, `stops`, `opacity`) and
-    /// `stroke_width`; each group with `id` and `opacity`.
+    /// `stroke_width`; each group with `id` and `opacity`; each group transform with `id`,
+    /// `translate`, `angle`, `scale`; each filtered group with `id` and its filters'
+    /// `values` ([`Structure::filters`]).
     pub fn gradient_json(&self, scene: &Scene, loss: f64, grad: &[f64]) -> Value {
         let paint = |ps: &Option<PaintSlots>| -> Value {
             let Some(ps) = ps else { return Value::Null };
@@ -256,7 +282,13 @@ impl Structure {
                 json!({"id": g.id, "translate": [v[0], v[1]], "angle": v[2], "scale": v[3]})
             })
             .collect();
-        json!({"loss": loss, "shapes": shapes, "groups": groups, "transforms": transforms})
+        let filters: Vec<Value> = self
+            .filters
+            .iter()
+            .map(|f| json!({"id": f.id, "values": grad[f.offset..f.offset + f.len].to_vec()}))
+            .collect();
+        json!({"loss": loss, "shapes": shapes, "groups": groups, "transforms": transforms,
+            "filters": filters})
     }
 }
 
