@@ -271,3 +271,68 @@ fn fit_background_recovers_the_backdrop() {
         &refused,
     );
 }
+
+/// A drop shadow's offset and blur fitted from the command line: the target is rendered
+/// with `render --exact-filters`, the fit starts from a small, near shadow and moves only
+/// the filter, and the written SVG holds the recovered numbers. Without
+/// `--exact-filters` the fit says that offsets and deviations will not move.
+#[test]
+fn fit_exact_filters_recovers_a_drop_shadow() {
+    let dir = scratch("fit-exact-filters");
+    let svg = |dx: f64, dy: f64, sd: f64| {
+        format!(
+            r#"<svg xmlns="http://www.w3.org/2000/svg" width="64" height="48">
+            <filter id="s" x="-40%" y="-40%" width="180%" height="180%">
+              <feDropShadow dx="{dx}" dy="{dy}" stdDeviation="{sd}" flood-opacity="0.7"/></filter>
+            <g filter="url(#s)">
+              <rect x="12" y="10" width="24" height="18" fill="rgb(40,110,220)"/>
+              <circle cx="36" cy="28" r="9" fill="rgb(230,80,40)"/></g></svg>"#
+        )
+    };
+    let truth = write(&dir, "truth.svg", &svg(4.0, 5.0, 2.5));
+    let init = write(&dir, "init.svg", &svg(1.5, 1.5, 1.2));
+    let target = dir.join("target.png");
+    let o = diffsvg(&["render", s(&truth), "-o", s(&target), "--exact-filters"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let out = dir.join("fitted.svg");
+    let fit = |exact: bool| {
+        let mut args = vec![
+            "fit",
+            s(&init),
+            s(&target),
+            "-o",
+            s(&out),
+            "--iters",
+            "200",
+            "--freeze",
+            "points,colors,opacities",
+            "--lr-filter",
+            "0.2",
+        ];
+        if exact {
+            args.push("--exact-filters");
+        }
+        let o = diffsvg(&args);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        (
+            std::fs::read_to_string(&out).unwrap(),
+            String::from_utf8_lossy(&o.stderr).into_owned(),
+        )
+    };
+    let number = |text: &str, attr: &str| -> f64 {
+        let at = text.find(&format!(" {attr}=\"")).expect(attr) + attr.len() + 3;
+        let end = text[at..].find(['"', ' ']).unwrap();
+        text[at..at + end].parse().unwrap()
+    };
+    let (fitted, _) = fit(true);
+    for (attr, want) in [("dx", 4.0), ("dy", 5.0), ("stdDeviation", 2.5)] {
+        let got = number(&fitted, attr);
+        assert!(
+            (got - want).abs() < 0.15,
+            "{attr}: {got}, want {want}\n{fitted}"
+        );
+    }
+    let (unmoved, note) = fit(false);
+    assert!(note.contains("--exact-filters"), "{note}");
+    assert_eq!(number(&unmoved, "dx"), 1.5, "{unmoved}");
+}
