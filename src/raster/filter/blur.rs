@@ -116,9 +116,9 @@ const EXACT_REACH: f64 = 4.0;
 /// before: a tap enters with a jump of `e^-4.5` of the center's as `3σ` crosses it).
 const SMALL_REACH: f64 = 3.0;
 
-/// A Gaussian kernel for deviation `s > 0` (`taps[k]` at distance `k`, normalized to sum
-/// 1) and its derivative with respect to `s`: truncated at `reach · s` (`r ≥ 1` taps a
-/// side) or, with `taper`, tapered from `reach · s` to `(reach + 1) · s`
+/// A Gaussian kernel for deviation `s > 0`, normalized to sum to one (`taps[k]` at
+/// distance `k`), and its derivative with respect to `s`: truncated at `reach · s`
+/// (`r ≥ 1` taps a side) or, with `taper`, tapered from `reach · s` to `(reach + 1) · s`
 /// ([`EXACT_REACH`]).
 fn kernel_taps(s: f64, reach: f64, taper: bool) -> (Vec<f32>, Vec<f32>) {
     let end = if taper { reach + 1.0 } else { reach };
