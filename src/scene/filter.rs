@@ -11,7 +11,8 @@
 //! each operator's adjoint (`raster/filter/`), and these primitives' own numbers are
 //! parameters ([`FilterPrimitive::slots_mut`]): feFlood's color and opacity, feOffset's
 //! `dx, dy`, feGaussianBlur's deviations, feDropShadow's `dx, dy`, deviations, color and
-//! opacity, feColorMatrix's twenty values and feComposite's `k1 … k4`. Deviations and
+//! opacity, feColorMatrix's twenty values, feComponentTransfer's functions' numbers and
+//! feComposite's `k1 … k4`. Deviations and
 //! offsets have a gradient only when filters are evaluated exactly
 //! ([`RenderOptions::exact_filters`](crate::raster::RenderOptions::exact_filters)):
 //! resvg's box blurs and whole-pixel offsets are piecewise constant in them.
@@ -311,6 +312,33 @@ pub struct Lighting {
     pub light: LightSource,
 }
 
+impl TransferFunction {
+    /// The function's numbers, as parameters: a table's or discrete function's values,
+    /// `slope, intercept`, or `amplitude, exponent, offset`.
+    pub fn values_mut(&mut self) -> Vec<&mut f64> {
+        match self {
+            TransferFunction::Identity => Vec::new(),
+            TransferFunction::Table(v) | TransferFunction::Discrete(v) => v.iter_mut().collect(),
+            TransferFunction::Linear { slope, intercept } => vec![slope, intercept],
+            TransferFunction::Gamma {
+                amplitude,
+                exponent,
+                offset,
+            } => vec![amplitude, exponent, offset],
+        }
+    }
+
+    /// The number of [`values_mut`](Self::values_mut).
+    pub fn value_count(&self) -> usize {
+        match self {
+            TransferFunction::Identity => 0,
+            TransferFunction::Table(v) | TransferFunction::Discrete(v) => v.len(),
+            TransferFunction::Linear { .. } => 2,
+            TransferFunction::Gamma { .. } => 3,
+        }
+    }
+}
+
 impl Filter {
     /// Number of parameter slots of the filter's primitives.
     pub fn slot_count(&self) -> usize {
@@ -350,6 +378,11 @@ impl FilterPrimitive {
             FilterKind::ColorMatrix { matrix, .. } => {
                 matrix.iter_mut().map(|m| (Filter, m)).collect()
             }
+            FilterKind::ComponentTransfer { funcs, .. } => funcs
+                .iter_mut()
+                .flat_map(TransferFunction::values_mut)
+                .map(|v| (Filter, v))
+                .collect(),
             FilterKind::Composite {
                 op: CompositeOp::Arithmetic(k),
                 ..
@@ -367,6 +400,9 @@ impl FilterKind {
             FilterKind::Offset { .. } | FilterKind::Blur { .. } => 2,
             FilterKind::DropShadow { .. } => 8,
             FilterKind::ColorMatrix { .. } => 20,
+            FilterKind::ComponentTransfer { funcs, .. } => {
+                funcs.iter().map(TransferFunction::value_count).sum()
+            }
             FilterKind::Composite {
                 op: CompositeOp::Arithmetic(_),
                 ..
@@ -380,7 +416,9 @@ impl FilterKind {
     pub(crate) fn unitless(&self) -> bool {
         matches!(
             self,
-            FilterKind::ColorMatrix { .. } | FilterKind::Composite { .. }
+            FilterKind::ColorMatrix { .. }
+                | FilterKind::Composite { .. }
+                | FilterKind::ComponentTransfer { .. }
         )
     }
 

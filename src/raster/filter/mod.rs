@@ -942,6 +942,15 @@ impl<'a> Back<'a> {
             FilterKind::ComponentTransfer { input, funcs } => {
                 let (i, funcs) = (input.clone(), funcs.clone());
                 let x = run.input_in(&i, cs);
+                let n = p.kind.slot_count();
+                for (gv, &px) in g.iter().zip(&x) {
+                    pixel::component_transfer_value_gradient(
+                        px,
+                        &funcs,
+                        *gv,
+                        &mut self.g_params[at..at + n],
+                    );
+                }
                 for (gv, &p) in g.iter_mut().zip(&x) {
                     *gv = pixel::adjoint1(&|v| pixel::component_transfer(v, &funcs), p, *gv);
                 }
@@ -1230,6 +1239,30 @@ mod tests {
                         ]),
                     },
                     true,
+                )],
+            ),
+            (
+                // (feComponentTransfer's discrete functions are piecewise constant in the
+                // input: finite differences on the content would cross their steps.)
+                "component transfer of alpha",
+                vec![prim(
+                    FilterKind::ComponentTransfer {
+                        input: Src,
+                        funcs: Box::new([
+                            TransferFunction::Gamma {
+                                amplitude: 1.1,
+                                exponent: 0.8,
+                                offset: -0.05,
+                            },
+                            TransferFunction::Identity,
+                            TransferFunction::Linear {
+                                slope: 0.6,
+                                intercept: 0.2,
+                            },
+                            TransferFunction::Table(vec![0.05, 0.9]),
+                        ]),
+                    },
+                    false,
                 )],
             ),
         ];

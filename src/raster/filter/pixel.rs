@@ -189,6 +189,85 @@ fn transfer<S: Scalar>(f: &TransferFunction, c: S) -> S {
     }
 }
 
+/// `∂T/∂θ` of one transfer function at a straight channel value `c`, for its values
+/// `θ` ([`TransferFunction::values_mut`](crate::scene::filter::TransferFunction::values_mut)),
+/// into `out`.
+fn transfer_value_gradient(f: &TransferFunction, c: f64, out: &mut [f64]) {
+    match f {
+        TransferFunction::Identity => {}
+        TransferFunction::Table(v) => {
+            let n = v.len() - 1;
+            let k = ((c * n as f64).floor().max(0.0) as usize).min(n);
+            if k == n {
+                out[k] = 1.0;
+            } else {
+                let t = c * n as f64 - k as f64;
+                out[k] = 1.0 - t;
+                out[k + 1] = t;
+            }
+        }
+        TransferFunction::Discrete(v) => {
+            let n = v.len();
+            out[((c * n as f64).floor().max(0.0) as usize).min(n - 1)] = 1.0;
+        }
+        TransferFunction::Linear { .. } => {
+            out[0] = c;
+            out[1] = 1.0;
+        }
+        TransferFunction::Gamma {
+            amplitude,
+            exponent,
+            ..
+        } => {
+            let p = c.powf(*exponent);
+            out[0] = p;
+            out[1] = if c > 0.0 { amplitude * p * c.ln() } else { 0.0 };
+            out[2] = 1.0;
+        }
+    }
+}
+
+/// The derivative of [`clamp`]`(x, 0, 1)`: 1 inside (ends included), 0 outside.
+fn unit_slope(x: f64) -> f64 {
+    if (0.0..=1.0).contains(&x) { 1.0 } else { 0.0 }
+}
+
+/// Adds `Σ g · ∂out/∂θ` of [`component_transfer`] at `px` to `grad`, the functions'
+/// values `θ` in slot order (R's, G's, B's, then A's).
+pub(crate) fn component_transfer_value_gradient(
+    px: [f32; 4],
+    funcs: &[TransferFunction; 4],
+    g: [f32; 4],
+    grad: &mut [f64],
+) {
+    if g == [0.0; 4] {
+        return;
+    }
+    let s = straight(px.map(|v| v as f64));
+    let t: [f64; 4] = std::array::from_fn(|c| transfer(&funcs[c], s[c]));
+    let a = t[3].clamp(0.0, 1.0);
+    let mut at = 0;
+    for c in 0..4 {
+        let n = funcs[c].value_count();
+        let mut d = vec![0.0; n];
+        transfer_value_gradient(&funcs[c], s[c], &mut d);
+        // out_c = clamp(T_c) · A for a color; A's own values reach every channel.
+        let w = if c < 3 {
+            g[c] as f64 * unit_slope(t[c]) * a
+        } else {
+            ((0..3)
+                .map(|k| g[k] as f64 * t[k].clamp(0.0, 1.0))
+                .sum::<f64>()
+                + g[3] as f64)
+                * unit_slope(t[3])
+        };
+        for (o, dv) in grad[at..at + n].iter_mut().zip(&d) {
+            *o += w * dv;
+        }
+        at += n;
+    }
+}
+
 /// feComponentTransfer on one pixel.
 pub(crate) fn component_transfer<S: Scalar>(px: [S; 4], funcs: &[TransferFunction; 4]) -> [S; 4] {
     let s = straight(px);
