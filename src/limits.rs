@@ -85,6 +85,12 @@ pub const MAX_DASHES_PER_PATH: usize = 100_000;
 /// refused when the SVG is read, naming the file.
 pub const MAX_CONVOLVE_TAPS: usize = 4096;
 
+/// Largest blur deviation evaluated exactly, device pixels
+/// ([`RenderOptions::exact_filters`](crate::raster::RenderOptions::exact_filters)): the
+/// exact kernel has `⌈5σ⌉` taps a side, each pixel reads at most the layer's side of
+/// them. A larger deviation blurs as this one (and has no gradient).
+pub const MAX_EXACT_BLUR_SIGMA: f64 = 1000.0;
+
 /// Most octaves of feTurbulence computed; `numOctaves` above it is cut to it. Octave `k`
 /// adds at most `2⁻ᵏ` of the noise's range, so the octaves cut change a channel by less
 /// than `2⁻²³` (below `f32` resolution).

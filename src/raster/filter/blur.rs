@@ -14,6 +14,8 @@
 //! Every pass is a symmetric matrix (a symmetric kernel, zero outside the image), so the
 //! adjoint of the blur is the same passes in reverse order ([`adjoint`]).
 
+use crate::limits::MAX_EXACT_BLUR_SIGMA;
+
 /// One pass over the image's rows (`horizontal`) or columns.
 #[derive(Clone, Debug, PartialEq)]
 pub(crate) enum Pass {
@@ -95,7 +97,13 @@ fn box_sizes(sigma: f32) -> [i32; STEPS] {
 /// 4σ to 5σ) for each
 /// deviation that is positive.
 fn exact_passes(std_dev: [f64; 2]) -> Vec<Pass> {
-    let [sx, sy] = std_dev.map(|s| if s.is_finite() { s } else { 0.0 });
+    let [sx, sy] = std_dev.map(|s| {
+        if s.is_finite() {
+            s.min(MAX_EXACT_BLUR_SIGMA)
+        } else {
+            0.0
+        }
+    });
     [(sy, false), (sx, true)]
         .into_iter()
         .filter(|&(s, _)| s > 0.0)
@@ -168,7 +176,16 @@ pub(crate) fn sigma_gradient(
     exact: bool,
 ) -> [f64; 2] {
     let [mut sx, mut sy] = std_dev.map(|s| if s.is_finite() { s } else { 0.0 });
+    // Whether each deviation moves the blur (past the exact limit it is that of the
+    // limit: constant).
+    let mut moves = [true; 2];
     let reach = if exact {
+        for (s, m) in [&mut sx, &mut sy].into_iter().zip(&mut moves) {
+            if *s > MAX_EXACT_BLUR_SIGMA {
+                *s = MAX_EXACT_BLUR_SIGMA;
+                *m = false;
+            }
+        }
         EXACT_REACH
     } else {
         if sx >= BOX_FROM || sy >= BOX_FROM {
@@ -191,7 +208,7 @@ pub(crate) fn sigma_gradient(
         }
     };
     let mut out = [0.0; 2];
-    if sx > 0.0 {
+    if sx > 0.0 && moves[0] {
         let mut y = x.to_vec();
         if sy > 0.0 {
             apply(&mut y, w, h, &[kernel(sy, false, false)]);
@@ -199,7 +216,7 @@ pub(crate) fn sigma_gradient(
         apply(&mut y, w, h, &[kernel(sx, true, true)]);
         out[0] = dot(g, &y);
     }
-    if sy > 0.0 {
+    if sy > 0.0 && moves[1] {
         let mut hg = g.to_vec();
         if sx > 0.0 {
             apply(&mut hg, w, h, &[kernel(sx, true, false)]);
@@ -282,11 +299,9 @@ fn kernel_columns(src: &[[f32; 4]], out: &mut [[f32; 4]], w: usize, h: usize, ta
     for i in 0..h as isize {
         let acc = &mut out[i as usize * w..(i as usize + 1) * w];
         acc.fill([0.0; 4]);
-        for k in -r..=r {
+        // Only the taps that land in the image (a kernel may reach far past it).
+        for k in (-r).max(-i)..=r.min(h as isize - 1 - i) {
             let j = i + k;
-            if j < 0 || j >= h as isize {
-                continue;
-            }
             let t = taps[k.unsigned_abs()];
             for (a, v) in acc
                 .iter_mut()
@@ -339,11 +354,8 @@ fn kernel_line(src: &[[f32; 4]], taps: &[f32], mut put: impl FnMut(usize, [f32; 
     let r = taps.len() as isize - 1;
     for i in 0..n {
         let mut acc = [0.0f32; 4];
-        for k in -r..=r {
+        for k in (-r).max(-i)..=r.min(n - 1 - i) {
             let j = i + k;
-            if j < 0 || j >= n {
-                continue;
-            }
             let t = taps[k.unsigned_abs()];
             for c in 0..4 {
                 acc[c] += t * src[j as usize][c];
@@ -387,6 +399,24 @@ pub(super) mod tests {
             let (l, r) = (dot(&bx, &y), dot(&x, &bty));
             assert!((l - r).abs() < 1e-4 * l.abs(), "{std:?}: {l} vs {r}");
         }
+    }
+
+    /// A deviation past the exact limit blurs as the limit does (the kernel is bounded;
+    /// each pixel reads only the taps that land in the image) and has no gradient.
+    #[test]
+    fn a_huge_exact_deviation_is_bounded() {
+        let p = passes([1e300, 3.0e3], true);
+        let Pass::Kernel { taps, .. } = &p[0] else {
+            panic!("a kernel")
+        };
+        assert!(taps.len() <= 5 * MAX_EXACT_BLUR_SIGMA as usize + 1);
+        assert_eq!(p, passes([MAX_EXACT_BLUR_SIGMA; 2], true));
+        let (w, h) = (9, 7);
+        let (x, g) = (random(w * h, 5), random(w * h, 6));
+        let mut y = x.clone();
+        apply(&mut y, w, h, &p);
+        assert!(y.iter().flatten().all(|v| v.is_finite()));
+        assert_eq!(sigma_gradient(&x, w, h, [1e300, 3.0e3], &g, true), [0.0; 2]);
     }
 
     /// The deviation gradient of the exact blur and of resvg's small blurs agrees with
