@@ -11,8 +11,9 @@
 //! each operator's adjoint (`raster/filter/`), and these primitives' own numbers are
 //! parameters ([`FilterPrimitive::slots_mut`]): feFlood's color and opacity, feOffset's
 //! `dx, dy`, feGaussianBlur's deviations, feDropShadow's `dx, dy`, deviations, color and
-//! opacity, feColorMatrix's twenty values, feComponentTransfer's functions' numbers and
-//! feComposite's `k1 … k4`. Deviations and
+//! opacity, feColorMatrix's twenty values, feComponentTransfer's functions' numbers,
+//! feComposite's `k1 … k4` and the lightings' constants, color and light
+//! ([`Lighting::values_mut`]). Deviations and
 //! offsets have a gradient only when filters are evaluated exactly
 //! ([`RenderOptions::exact_filters`](crate::raster::RenderOptions::exact_filters)):
 //! resvg's box blurs and whole-pixel offsets are piecewise constant in them.
@@ -339,6 +340,63 @@ impl TransferFunction {
     }
 }
 
+impl Lighting {
+    /// The primitive's numbers as parameters, in slot order, each with its group:
+    /// `surfaceScale` and the diffuse or specular constant ([`ParamGroup::Filter`]),
+    /// `lighting-color` ([`ParamGroup::Color`]), feSpecularLighting's exponent, then the
+    /// light's: a distant light's azimuth and elevation (degrees), a point light's
+    /// position, a spot light's position, where it points and its exponent (device pixels;
+    /// the cone's angle is not a parameter: its edge is a jump).
+    pub fn values_mut(&mut self) -> Vec<(ParamGroup, &mut f64)> {
+        use ParamGroup::{Color, Filter};
+        let mut v = vec![
+            (Filter, &mut self.surface_scale),
+            (Filter, &mut self.constant),
+        ];
+        v.extend(self.color.iter_mut().map(|c| (Color, c)));
+        if let Some(e) = &mut self.specular {
+            v.push((Filter, e));
+        }
+        match &mut self.light {
+            LightSource::Distant { azimuth, elevation } => {
+                v.push((Filter, azimuth));
+                v.push((Filter, elevation));
+            }
+            LightSource::Point { pos } => v.extend(pos.iter_mut().map(|c| (Filter, c))),
+            LightSource::Spot {
+                pos,
+                points_at,
+                exponent,
+                ..
+            } => {
+                v.extend(pos.iter_mut().map(|c| (Filter, c)));
+                v.extend(points_at.iter_mut().map(|c| (Filter, c)));
+                v.push((Filter, exponent));
+            }
+        }
+        v
+    }
+
+    /// The values of [`values_mut`](Self::values_mut).
+    pub(crate) fn values(&self) -> Vec<f64> {
+        self.clone()
+            .values_mut()
+            .into_iter()
+            .map(|(_, v)| *v)
+            .collect()
+    }
+
+    /// The number of [`values_mut`](Self::values_mut).
+    pub fn value_count(&self) -> usize {
+        let light = match self.light {
+            LightSource::Distant { .. } => 2,
+            LightSource::Point { .. } => 3,
+            LightSource::Spot { .. } => 7,
+        };
+        5 + self.specular.is_some() as usize + light
+    }
+}
+
 impl Filter {
     /// Number of parameter slots of the filter's primitives.
     pub fn slot_count(&self) -> usize {
@@ -378,6 +436,7 @@ impl FilterPrimitive {
             FilterKind::ColorMatrix { matrix, .. } => {
                 matrix.iter_mut().map(|m| (Filter, m)).collect()
             }
+            FilterKind::Lighting(l) => l.values_mut(),
             FilterKind::ComponentTransfer { funcs, .. } => funcs
                 .iter_mut()
                 .flat_map(TransferFunction::values_mut)
@@ -403,6 +462,7 @@ impl FilterKind {
             FilterKind::ComponentTransfer { funcs, .. } => {
                 funcs.iter().map(TransferFunction::value_count).sum()
             }
+            FilterKind::Lighting(l) => l.value_count(),
             FilterKind::Composite {
                 op: CompositeOp::Arithmetic(_),
                 ..

@@ -69,7 +69,8 @@ fn project_nodes(nodes: &mut [Node]) {
 }
 
 /// A filter primitive's numbers: colors and opacities to `[0, 1]`, deviations to
-/// `[0, MAX_COORDINATE]`, offsets, matrix values and `k` to ±`MAX_COORDINATE`.
+/// `[0, MAX_COORDINATE]`, the others (offsets, matrix values, transfer functions, `k`,
+/// lighting constants and lights) to ±`MAX_COORDINATE`.
 fn project_filter(kind: &mut FilterKind) {
     let free = |v: &mut f64| clamp_coordinate(v, MAX_COORDINATE);
     match kind {
@@ -101,6 +102,18 @@ fn project_filter(kind: &mut FilterKind) {
             op: CompositeOp::Arithmetic(k),
             ..
         } => k.iter_mut().for_each(free),
+        FilterKind::Lighting(l) => {
+            for (group, v) in l.values_mut() {
+                if group == crate::scene::ParamGroup::Color {
+                    unit(v);
+                } else {
+                    free(v);
+                }
+            }
+        }
+        FilterKind::ComponentTransfer { funcs, .. } => {
+            funcs.iter_mut().flat_map(|f| f.values_mut()).for_each(free);
+        }
         _ => {}
     }
 }

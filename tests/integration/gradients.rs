@@ -430,8 +430,10 @@ fn gradients_reach_the_content_under_a_filter() {
 /// Finite differences through the primitives added in issue 34's second part: the
 /// gradient reaches the content under feConvolveMatrix, feMorphology, feTile,
 /// feDisplacementMap (the moved input) and the two lightings (the alpha surface, through
-/// its normals and, for point and spot lights, its height). feImage and feTurbulence read
-/// no content.
+/// its normals and, for point and spot lights, its height), and to the lightings' own
+/// numbers (constants, color, light). feImage and feTurbulence read no content. (Lighting
+/// colors are not gray: a specular result's alpha is its largest channel, a kink where
+/// channels tie, and white sits on the colors' bound.)
 #[test]
 fn gradients_reach_the_content_under_the_resampling_and_lighting_filters() {
     let filters = [
@@ -446,8 +448,8 @@ fn gradients_reach_the_content_under_the_resampling_and_lighting_filters() {
         r#"<feOffset dx="1.3" dy="2.4" result="o"/><feTile in="o"/>"#,
         r#"<feTurbulence baseFrequency="0.2" result="t"/><feDisplacementMap in="SourceGraphic" in2="t" scale="3" xChannelSelector="R" yChannelSelector="A"/>"#,
         r#"<feDiffuseLighting surfaceScale="2" diffuseConstant="1.2" lighting-color="rgb(250,200,120)"><fePointLight x="20" y="4" z="10"/></feDiffuseLighting>"#,
-        r#"<feSpecularLighting surfaceScale="3" specularConstant="0.9" specularExponent="3"><feSpotLight x="4" y="2" z="14" pointsAtX="16" pointsAtY="16" specularExponent="1.5"/></feSpecularLighting>"#,
-        r#"<feDiffuseLighting surfaceScale="1.5"><feDistantLight azimuth="30" elevation="40"/></feDiffuseLighting>"#,
+        r#"<feSpecularLighting surfaceScale="3" specularConstant="0.9" specularExponent="3" lighting-color="rgb(240,210,150)"><feSpotLight x="4" y="2" z="14" pointsAtX="16" pointsAtY="16" specularExponent="1.5"/></feSpecularLighting>"#,
+        r#"<feDiffuseLighting surfaceScale="1.5" lighting-color="rgb(200,230,250)"><feDistantLight azimuth="30" elevation="40"/></feDiffuseLighting>"#,
     ];
     for (i, fe) in filters.iter().enumerate() {
         let svg = format!(

@@ -25,21 +25,17 @@
 use crate::raster::jet::{Jet, Scalar};
 use crate::scene::filter::{LightSource, Lighting};
 
-/// The light source relative to the region's top-left pixel.
+/// The light source relative to the region's top-left pixel, in numbers of kind `S`.
 #[derive(Clone, Copy)]
-pub(crate) enum Local {
-    Distant([f64; 3]),
-    Point([f64; 3]),
+enum Local<S> {
+    Distant([S; 3]),
+    Point([S; 3]),
     Spot {
-        pos: [f64; 3],
-        dir: [f64; 3],
-        exponent: f64,
+        pos: [S; 3],
+        dir: [S; 3],
+        exponent: S,
         cos_cone: Option<f64>,
     },
-}
-
-fn sub3(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
 
 /// A vector divided by its length, or itself when that length is (nearly) zero.
@@ -52,43 +48,92 @@ fn normalized<S: Scalar>(v: [S; 3]) -> [S; 3] {
     }
 }
 
-impl Local {
-    /// `l`'s light with the region's top-left pixel at device pixel `corner`.
-    pub(crate) fn new(l: &LightSource, corner: [i64; 2]) -> Local {
-        let shift = |p: [f64; 3]| [p[0] - corner[0] as f64, p[1] - corner[1] as f64, p[2]];
-        match l {
-            LightSource::Distant { azimuth, elevation } => {
-                let (a, e) = (azimuth.to_radians(), elevation.to_radians());
+/// `m^e` with a derivative in both (in `e` only where `m > 0`, where `ln m` exists).
+fn pow<S: Scalar>(m: S, e: S) -> S {
+    let (mv, ev) = (m.v(), e.v());
+    let p = m.powf(ev);
+    if mv > 0.0 {
+        // The first-order term in `e`: its value is 0, its derivative `m^e ln m · de`.
+        p + (e - S::c(ev)) * S::c(mv.powf(ev) * mv.ln())
+    } else {
+        p
+    }
+}
+
+/// A lighting primitive's numbers, of kind `S` (plain, or seeded to differentiate them):
+/// surface scale, constant, color, specular exponent, and the light with the region's
+/// top-left pixel at `corner`.
+#[derive(Clone, Copy)]
+pub(crate) struct Setup<S> {
+    surface_scale: S,
+    constant: S,
+    color: [S; 3],
+    exponent: Option<S>,
+    light: Local<S>,
+}
+
+impl<S: Scalar> Setup<S> {
+    /// `fe`'s setup from its numbers `v` in slot order
+    /// ([`Lighting::values_mut`](crate::scene::filter::Lighting::values_mut)).
+    fn of(fe: &Lighting, corner: [i64; 2], v: &[S]) -> Self {
+        let mut at = 5;
+        let exponent = fe.specular.map(|_| {
+            at += 1;
+            v[5]
+        });
+        let shift = |p: &[S]| {
+            [
+                p[0] - S::c(corner[0] as f64),
+                p[1] - S::c(corner[1] as f64),
+                p[2],
+            ]
+        };
+        let l = &v[at..];
+        let light = match &fe.light {
+            LightSource::Distant { .. } => {
+                let rad = S::c(std::f64::consts::PI / 180.0);
+                let (a, e) = (l[0] * rad, l[1] * rad);
                 Local::Distant([a.cos() * e.cos(), a.sin() * e.cos(), e.sin()])
             }
-            LightSource::Point { pos } => Local::Point(shift(*pos)),
-            LightSource::Spot {
-                pos,
-                points_at,
-                exponent,
-                cone,
-            } => Local::Spot {
-                pos: shift(*pos),
-                dir: normalized(sub3(*points_at, *pos)),
-                exponent: *exponent,
-                cos_cone: cone.map(|c| c.to_radians().cos()),
-            },
+            LightSource::Point { .. } => Local::Point(shift(&l[..3])),
+            LightSource::Spot { cone, .. } => {
+                let pos = shift(&l[..3]);
+                let to = shift(&l[3..6]);
+                Local::Spot {
+                    pos,
+                    dir: normalized([to[0] - pos[0], to[1] - pos[1], to[2] - pos[2]]),
+                    exponent: l[6],
+                    cos_cone: cone.map(|c| c.to_radians().cos()),
+                }
+            }
+        };
+        Setup {
+            surface_scale: v[0],
+            constant: v[1],
+            color: [v[2], v[3], v[4]],
+            exponent,
+            light,
         }
+    }
+}
+
+impl Setup<f64> {
+    /// `fe`'s setup with the region's top-left pixel at device pixel `corner`.
+    pub(crate) fn new(fe: &Lighting, corner: [i64; 2]) -> Self {
+        Setup::of(fe, corner, &fe.values())
+    }
+
+    /// The same numbers as constants of another kind.
+    fn constants<T: Scalar>(fe: &Lighting, corner: [i64; 2]) -> Setup<T> {
+        let v: Vec<T> = fe.values().into_iter().map(T::c).collect();
+        Setup::of(fe, corner, &v)
     }
 }
 
 /// One pixel's lighting from the alphas `a` of its 3 × 3 neighborhood (row-major,
 /// `a[4]` its own; entries outside the image are not read), premultiplied.
 #[allow(clippy::too_many_arguments)]
-fn pixel<S: Scalar>(
-    fe: &Lighting,
-    light: &Local,
-    a: &[S; 9],
-    x: usize,
-    y: usize,
-    w: usize,
-    h: usize,
-) -> [S; 4] {
+fn pixel<S: Scalar>(p: &Setup<S>, a: &[S; 9], x: usize, y: usize, w: usize, h: usize) -> [S; 4] {
     let at = |dx: i64, dy: i64| a[((dy + 1) * 3 + dx + 1) as usize];
     let (has_l, has_r, has_t, has_b) = (x > 0, x + 1 < w, y > 0, y + 1 < h);
     // The difference across the pixel along x on row dy (or along y on column d).
@@ -121,23 +166,19 @@ fn pixel<S: Scalar>(
     let span_y = if has_t && has_b { 2.0 } else { 1.0 };
     let rows = 2.0 + has_t as u8 as f64 + has_b as u8 as f64;
     let cols = 2.0 + has_l as u8 as f64 + has_r as u8 as f64;
-    let ss = fe.surface_scale;
+    let ss = p.surface_scale;
     let n = [
-        -sx * S::c(ss * 2.0 / (span_x * rows)),
-        -sy * S::c(ss * 2.0 / (span_y * cols)),
+        -sx * ss * S::c(2.0 / (span_x * rows)),
+        -sy * ss * S::c(2.0 / (span_y * cols)),
         S::c(1.0),
     ];
-    let surface = |pos: [f64; 3]| {
-        let z = a[4] * S::c(ss);
-        normalized([
-            S::c(pos[0] - x as f64),
-            S::c(pos[1] - y as f64),
-            S::c(pos[2]) - z,
-        ])
+    let surface = |pos: [S; 3]| {
+        let z = a[4] * ss;
+        normalized([pos[0] - S::c(x as f64), pos[1] - S::c(y as f64), pos[2] - z])
     };
-    let (l, color) = match *light {
-        Local::Distant(v) => (v.map(S::c), fe.color.map(S::c)),
-        Local::Point(pos) => (surface(pos), fe.color.map(S::c)),
+    let (l, color) = match p.light {
+        Local::Distant(v) => (v, p.color),
+        Local::Point(pos) => (surface(pos), p.color),
         Local::Spot {
             pos,
             dir,
@@ -145,13 +186,13 @@ fn pixel<S: Scalar>(
             cos_cone,
         } => {
             let l = surface(pos);
-            let m = -(l[0] * S::c(dir[0]) + l[1] * S::c(dir[1]) + l[2] * S::c(dir[2]));
+            let m = -(l[0] * dir[0] + l[1] * dir[1] + l[2] * dir[2]);
             let dark = m.v() <= 0.0 || cos_cone.is_some_and(|c| m.v() < c);
             let color = if dark {
                 [S::c(0.0); 3]
             } else {
-                let f = m.powf(exponent);
-                fe.color.map(|c| super::pixel::clamp(S::c(c) * f, 0.0, 1.0))
+                let f = pow(m, exponent);
+                p.color.map(|c| super::pixel::clamp(c * f, 0.0, 1.0))
             };
             (l, color)
         }
@@ -159,8 +200,8 @@ fn pixel<S: Scalar>(
     let n_len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
     let dot = |u: [S; 3], v: [S; 3]| u[0] * v[0] + u[1] * v[1] + u[2] * v[2];
     let zero = S::c(0.0);
-    let (k, specular) = match fe.specular {
-        None => (S::c(fe.constant) * dot(n, l) / n_len, false),
+    let (k, specular) = match p.exponent {
+        None => (p.constant * dot(n, l) / n_len, false),
         Some(e) => {
             let hv = [l[0], l[1], l[2] + S::c(1.0)];
             let h_len = dot(hv, hv).sqrt();
@@ -168,9 +209,13 @@ fn pixel<S: Scalar>(
                 return [zero; 4];
             }
             let nh = dot(n, hv) / n_len / h_len;
-            let p = if e == 1.0 { nh } else { nh.powf(e) };
-            let p = if p.v().is_finite() { p } else { zero };
-            (S::c(fe.constant) * p, true)
+            let q = if e.v() == 1.0 && nh.v() <= 0.0 {
+                nh
+            } else {
+                pow(nh, e)
+            };
+            let q = if q.v().is_finite() { q } else { zero };
+            (p.constant * q, true)
         }
     };
     let c = color.map(|c| super::pixel::clamp(c * k, 0.0, 1.0));
@@ -202,13 +247,7 @@ fn neighborhood(img: &[[f32; 4]], w: usize, h: usize, x: usize, y: usize) -> [f6
 }
 
 /// The lit image (`w × h`) of `img`'s alpha.
-pub(crate) fn apply(
-    fe: &Lighting,
-    light: &Local,
-    img: &[[f32; 4]],
-    w: usize,
-    h: usize,
-) -> Vec<[f32; 4]> {
+pub(crate) fn apply(p: &Setup<f64>, img: &[[f32; 4]], w: usize, h: usize) -> Vec<[f32; 4]> {
     let mut out = vec![[0.0f32; 4]; w * h];
     if w < 3 || h < 3 {
         return out;
@@ -216,16 +255,54 @@ pub(crate) fn apply(
     for y in 0..h {
         for x in 0..w {
             let a = neighborhood(img, w, h, x, y);
-            out[y * w + x] = pixel(fe, light, &a, x, y, w, h).map(|v| v as f32);
+            out[y * w + x] = pixel(p, &a, x, y, w, h).map(|v| v as f32);
         }
     }
     out
 }
 
-/// `∂L/∂img` from `∂L/∂out` at `img` (alpha channel only).
+/// The most numbers a lighting primitive has
+/// ([`Lighting::values_mut`](crate::scene::filter::Lighting::values_mut)).
+const MOST_VALUES: usize = 13;
+
+/// `∂L/∂θ` of `fe`'s numbers `θ` (slot order) from `∂L/∂out` at `img`, the region's
+/// top-left pixel at device pixel `corner`; added to `grad`.
+pub(crate) fn value_gradient(
+    fe: &Lighting,
+    corner: [i64; 2],
+    img: &[[f32; 4]],
+    w: usize,
+    h: usize,
+    g: &[[f32; 4]],
+    grad: &mut [f64],
+) {
+    if w < 3 || h < 3 {
+        return;
+    }
+    let v = fe.values();
+    let seeded: Vec<Jet<MOST_VALUES>> =
+        v.iter().enumerate().map(|(i, &x)| Jet::var(x, i)).collect();
+    let p = Setup::of(fe, corner, &seeded);
+    for y in 0..h {
+        for x in 0..w {
+            let gv = g[y * w + x];
+            if gv == [0.0; 4] {
+                continue;
+            }
+            let a = neighborhood(img, w, h, x, y).map(Jet::c);
+            let o = pixel(&p, &a, x, y, w, h);
+            for (k, d) in grad.iter_mut().enumerate().take(v.len()) {
+                *d += (0..4).map(|c| gv[c] as f64 * o[c].d[k]).sum::<f64>();
+            }
+        }
+    }
+}
+
+/// `∂L/∂img` from `∂L/∂out` at `img` (alpha channel only), the region's top-left pixel
+/// at device pixel `corner`.
 pub(crate) fn adjoint(
     fe: &Lighting,
-    light: &Local,
+    corner: [i64; 2],
     img: &[[f32; 4]],
     w: usize,
     h: usize,
@@ -235,6 +312,7 @@ pub(crate) fn adjoint(
     if w < 3 || h < 3 {
         return out;
     }
+    let p = Setup::constants::<Jet<9>>(fe, corner);
     for y in 0..h {
         for x in 0..w {
             let gv = g[y * w + x];
@@ -243,7 +321,7 @@ pub(crate) fn adjoint(
             }
             let a = neighborhood(img, w, h, x, y);
             let aj: [Jet<9>; 9] = std::array::from_fn(|k| Jet::var(a[k], k));
-            let o = pixel(fe, light, &aj, x, y, w, h);
+            let o = pixel(&p, &aj, x, y, w, h);
             for k in 0..9 {
                 let (sx, sy) = (x as i64 + (k % 3) as i64 - 1, y as i64 + (k / 3) as i64 - 1);
                 if sx < 0 || sy < 0 || sx >= w as i64 || sy >= h as i64 {
@@ -285,7 +363,7 @@ mod tests {
             elevation: 90.0,
         };
         let d = fe(None, up.clone());
-        let out = apply(&d, &Local::new(&d.light, [0, 0]), &flat(4, 3, 0.5), 4, 3);
+        let out = apply(&Setup::new(&d, [0, 0]), &flat(4, 3, 0.5), 4, 3);
         for p in &out {
             let want = [1.0, 0.72, 0.36, 1.0];
             for c in 0..4 {
@@ -295,7 +373,7 @@ mod tests {
         // Specular from above: N·H/|H| = 1, alpha the largest channel.
         let mut s = fe(Some(4.0), up);
         s.constant = 0.5;
-        let out = apply(&s, &Local::new(&s.light, [0, 0]), &flat(4, 3, 0.5), 4, 3);
+        let out = apply(&Setup::new(&s, [0, 0]), &flat(4, 3, 0.5), 4, 3);
         assert!((out[5][0] - 0.5).abs() < 1e-6 && (out[5][3] - 0.5).abs() < 1e-6);
         assert!((out[5][1] - 0.3).abs() < 1e-6, "{:?}", out[5]);
         // A ramp α = 0.1·x lit from +x at elevation 0: inside, Sx = 4 · 0.2, fx = 1/4,
@@ -312,12 +390,12 @@ mod tests {
         );
         d.constant = 1.0;
         d.color = [1.0; 3];
-        let out = apply(&d, &Local::new(&d.light, [0, 0]), &ramp, 5, 3);
+        let out = apply(&Setup::new(&d, [0, 0]), &ramp, 5, 3);
         let want = 0.6 / 1.36f64.sqrt();
         assert!((out[7][0] as f64 - want).abs() < 1e-5, "{:?}", out[7]);
         // Too small a region: transparent.
         assert!(
-            apply(&d, &Local::new(&d.light, [0, 0]), &flat(2, 5, 1.0), 2, 5)
+            apply(&Setup::new(&d, [0, 0]), &flat(2, 5, 1.0), 2, 5)
                 .iter()
                 .all(|p| *p == [0.0; 4])
         );
@@ -367,8 +445,8 @@ mod tests {
                 let mut f = fe(specular, light.clone());
                 f.constant = 0.4;
                 f.surface_scale = 2.0;
-                let loc = Local::new(&f.light, [10, 3]);
-                let back = adjoint(&f, &loc, &img, w, h, &g);
+                let loc = Setup::new(&f, [10, 3]);
+                let back = adjoint(&f, [10, 3], &img, w, h, &g);
                 let e = 1e-3f32;
                 let at = |t: f32| {
                     let p: Vec<[f32; 4]> = img
@@ -376,7 +454,7 @@ mod tests {
                         .zip(&v)
                         .map(|(a, b)| std::array::from_fn(|c| a[c] + t * b[c]))
                         .collect();
-                    dot(&g, &apply(&f, &loc, &p, w, h))
+                    dot(&g, &apply(&loc, &p, w, h))
                 };
                 let fd = (at(e) - at(-e)) / (2.0 * e as f64);
                 let an = dot(&back, &v);
@@ -384,6 +462,22 @@ mod tests {
                     (fd - an).abs() < 2e-2 * fd.abs().max(0.1),
                     "{light:?} {specular:?}: {fd} {an}"
                 );
+                // The primitive's own numbers.
+                let mut grad = vec![0.0; f.value_count()];
+                value_gradient(&f, [10, 3], &img, w, h, &g, &mut grad);
+                for (k, an) in grad.iter().enumerate() {
+                    let with = |d: f64| {
+                        let mut q = f.clone();
+                        *q.values_mut()[k].1 += d;
+                        dot(&g, &apply(&Setup::new(&q, [10, 3]), &img, w, h))
+                    };
+                    let e = 1e-4;
+                    let fd = (with(e) - with(-e)) / (2.0 * e);
+                    assert!(
+                        (fd - an).abs() < 2e-2 * fd.abs().max(0.1),
+                        "{light:?} {specular:?} value {k}: {fd} {an}"
+                    );
+                }
             }
         }
     }

@@ -395,9 +395,9 @@ impl<'a> Run<'a> {
                 Res { px, linear: cs }
             }
             FilterKind::Lighting(l) => {
-                let light = lighting::Local::new(&l.light, self.corner());
+                let setup = lighting::Setup::new(l, self.corner());
                 let x = &self.input(&l.input).px;
-                let px = self.in_region(x, |img, w, h| lighting::apply(l, &light, img, w, h));
+                let px = self.in_region(x, |img, w, h| lighting::apply(&setup, img, w, h));
                 Res { px, linear: cs }
             }
             FilterKind::Image { nodes } => Res {
@@ -999,10 +999,13 @@ impl<'a> Back<'a> {
             // Depend on no input (feImage's nodes are not parameters).
             FilterKind::Turbulence(_) | FilterKind::Image { .. } => {}
             FilterKind::Lighting(l) => {
-                let light = lighting::Local::new(&l.light, run.corner());
+                let corner = run.corner();
                 let x = &run.input(&l.input).px;
+                let n = p.kind.slot_count();
+                let values = &mut self.g_params[at..at + n];
                 let gx = run.region_adjoint(x, &g, |xs, gs, w, h| {
-                    lighting::adjoint(l, &light, xs, w, h, gs)
+                    lighting::value_gradient(l, corner, xs, w, h, gs, values);
+                    lighting::adjoint(l, corner, xs, w, h, gs)
                 });
                 self.add_input(&l.input.clone(), None, gx);
             }
