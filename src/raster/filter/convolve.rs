@@ -209,12 +209,7 @@ mod tests {
         let g: Vec<[f32; 4]> = (0..w * h)
             .map(|_| std::array::from_fn(|_| r.uniform() - 0.5))
             .collect();
-        let dot = |a: &[[f32; 4]], b: &[[f32; 4]]| -> f64 {
-            a.iter()
-                .zip(b)
-                .map(|(x, y)| (0..4).map(|c| x[c] as f64 * y[c] as f64).sum::<f64>())
-                .sum()
-        };
+        let dot = super::super::blur::dot;
         let kernel = vec![0.1, -0.05, 0.2, 0.15, 0.3, 0.05];
         for (edge, preserve) in [(0, false), (1, true), (2, false), (2, true)] {
             let mut m = conv(kernel.clone(), [3, 2], [1, 1], edge);

@@ -419,12 +419,7 @@ mod tests {
         let v: Vec<[f32; 4]> = (0..w * h)
             .map(|_| [0.0, 0.0, 0.0, r.uniform() - 0.5])
             .collect();
-        let dot = |a: &[[f32; 4]], b: &[[f32; 4]]| -> f64 {
-            a.iter()
-                .zip(b)
-                .map(|(x, y)| (0..4).map(|c| x[c] as f64 * y[c] as f64).sum::<f64>())
-                .sum()
-        };
+        let dot = super::super::blur::dot;
         let lights = [
             LightSource::Distant {
                 azimuth: 40.0,

@@ -184,12 +184,7 @@ mod tests {
         let g: Vec<[f32; 4]> = (0..w * h)
             .map(|i| std::array::from_fn(|c| ((i * 5 + c * 3) % 11) as f32 - 5.0))
             .collect();
-        let dot = |a: &[[f32; 4]], b: &[[f32; 4]]| -> f64 {
-            a.iter()
-                .zip(b)
-                .map(|(x, y)| (0..4).map(|c| x[c] as f64 * y[c] as f64).sum::<f64>())
-                .sum()
-        };
+        let dot = super::super::blur::dot;
         for dilate in [false, true] {
             let rad = [1.5, 1.0];
             let back = adjoint(&img, w, h, dilate, rad, &g);
