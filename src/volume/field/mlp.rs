@@ -84,15 +84,11 @@ impl Mlp {
             let y = &mut tail[..n_out];
             let p = &self.params[self.offsets[k]..self.offsets[k] + n_in * n_out + n_out];
             let (wt, b) = p.split_at(n_in * n_out);
-            y.copy_from_slice(b);
-            for (i, &xi) in x.iter().enumerate() {
-                if xi == 0.0 {
-                    continue;
-                }
-                let row = &wt[i * n_out..(i + 1) * n_out];
-                for (yj, wj) in y.iter_mut().zip(row) {
-                    *yj += xi * wj;
-                }
+            match n_out {
+                64 => fwd_fixed::<64>(x, wt, b, y),
+                32 => fwd_fixed::<32>(x, wt, b, y),
+                16 => fwd_fixed::<16>(x, wt, b, y),
+                _ => fwd_any(x, wt, b, y),
             }
             if k < last {
                 for v in y.iter_mut() {
@@ -141,22 +137,83 @@ impl Mlp {
             }
             let wt = &self.params[off..off + n_in * n_out];
             let dx = &mut dx_buf[..n_in];
-            for i in 0..n_in {
-                let xi = x[i];
-                let row = &wt[i * n_out..(i + 1) * n_out];
-                dx[i] = dot(row, dy);
-                if xi != 0.0 {
-                    let grow = &mut gw[i * n_out..(i + 1) * n_out];
-                    for (gj, dj) in grow.iter_mut().zip(dy.iter()) {
-                        *gj += xi * dj;
-                    }
-                }
+            match n_out {
+                64 => bwd_fixed::<64>(x, wt, dy, gw, dx),
+                32 => bwd_fixed::<32>(x, wt, dy, gw, dx),
+                16 => bwd_fixed::<16>(x, wt, dy, gw, dx),
+                _ => bwd_any(x, wt, dy, gw, dx),
             }
             end -= n_out;
             if k == 0 {
                 d_in[..n_in].copy_from_slice(dx);
             } else {
                 dy_buf[..n_in].copy_from_slice(dx);
+            }
+        }
+    }
+}
+
+/// `y = b + Σ_i x[i]·w[i, ·]` for `N` outputs, the accumulator in registers.
+#[inline(always)]
+fn fwd_fixed<const N: usize>(x: &[f32], wt: &[f32], b: &[f32], y: &mut [f32]) {
+    let mut acc: [f32; N] = b.try_into().expect("N biases");
+    for (i, &xi) in x.iter().enumerate() {
+        if xi == 0.0 {
+            continue;
+        }
+        let row: &[f32; N] = wt[i * N..(i + 1) * N].try_into().expect("a row");
+        for j in 0..N {
+            acc[j] += xi * row[j];
+        }
+    }
+    y.copy_from_slice(&acc);
+}
+
+/// [`fwd_fixed`] for any output count.
+#[inline(always)]
+fn fwd_any(x: &[f32], wt: &[f32], b: &[f32], y: &mut [f32]) {
+    let n_out = y.len();
+    y.copy_from_slice(b);
+    for (i, &xi) in x.iter().enumerate() {
+        if xi == 0.0 {
+            continue;
+        }
+        let row = &wt[i * n_out..(i + 1) * n_out];
+        for (yj, wj) in y.iter_mut().zip(row) {
+            *yj += xi * wj;
+        }
+    }
+}
+
+/// One layer's backward for `N` outputs: `gw[i, ·] += x[i]·dy`, `dx[i] = w[i, ·]·dy`.
+#[inline(always)]
+fn bwd_fixed<const N: usize>(x: &[f32], wt: &[f32], dy: &[f32], gw: &mut [f32], dx: &mut [f32]) {
+    let d: &[f32; N] = dy.try_into().expect("N gradients");
+    for i in 0..x.len() {
+        let row: &[f32; N] = wt[i * N..(i + 1) * N].try_into().expect("a row");
+        dx[i] = dot(row, d);
+        let xi = x[i];
+        if xi != 0.0 {
+            let grow: &mut [f32; N] = (&mut gw[i * N..(i + 1) * N]).try_into().expect("a row");
+            for j in 0..N {
+                grow[j] += xi * d[j];
+            }
+        }
+    }
+}
+
+/// [`bwd_fixed`] for any output count.
+#[inline(always)]
+fn bwd_any(x: &[f32], wt: &[f32], dy: &[f32], gw: &mut [f32], dx: &mut [f32]) {
+    let n_out = dy.len();
+    for i in 0..x.len() {
+        let row = &wt[i * n_out..(i + 1) * n_out];
+        dx[i] = dot(row, dy);
+        let xi = x[i];
+        if xi != 0.0 {
+            let grow = &mut gw[i * n_out..(i + 1) * n_out];
+            for (gj, dj) in grow.iter_mut().zip(dy) {
+                *gj += xi * dj;
             }
         }
     }

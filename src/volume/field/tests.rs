@@ -227,8 +227,8 @@ fn same_bits_on_one_two_and_three_threads() {
     }
 }
 
-/// A short fit learns the ball: the batch error falls well below an empty model's, and
-/// the occupancy grid frees space.
+/// A short fit learns the ball: the batch error falls tenfold, the views reach 22 dB,
+/// and the occupancy grid skips only space without density.
 #[test]
 fn a_short_fit_learns_a_ball() {
     let (rays, colors) = ball_scene(8, 16);
@@ -254,7 +254,23 @@ fn a_short_fit_learns_a_ball() {
     );
     let psnr = crate::volume::metrics::psnr(&rendered, &colors);
     assert!(psnr > 22.0, "PSNR {psnr}");
-    assert!(m.occupied_fraction() < 0.9, "{}", m.occupied_fraction());
+    // Skipping cells the occupancy grid marks empty changes the picture little: they
+    // hold next to no density.
+    let mut all = m.clone();
+    all.occupancy.bits.fill(true);
+    let unskipped = render_rays(
+        &all,
+        &rays,
+        &RenderSettings {
+            steps: 64,
+            ..RenderSettings::default()
+        },
+    );
+    let agree = crate::volume::metrics::psnr(&rendered, &unskipped);
+    assert!(
+        agree > 35.0,
+        "skipping empty cells: {agree} dB from the full march"
+    );
 }
 
 #[test]
