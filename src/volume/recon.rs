@@ -264,16 +264,17 @@ impl NgpJob {
         }
         let s = self.shape();
         s.hash.validate().map_err(|e| {
-            let name = if e.starts_with("levels") {
-                "levels"
+            let (name, prefix) = if e.starts_with("levels") {
+                ("levels", "levels ")
             } else if e.starts_with("log2") {
-                "log2_table"
+                ("log2_table", "log2 table size ")
             } else {
-                "max_res"
+                ("max_res", "")
             };
-            setting(name, e)
+            setting(name, e.trim_start_matches(prefix).into())
         })?;
-        s.validate().map_err(|e| setting("width", e))?;
+        s.validate()
+            .map_err(|e| setting("width", e.trim_start_matches("width ").into()))?;
         Ok(())
     }
 }
