@@ -37,7 +37,7 @@ pub struct TrainOptions {
     pub batch_size: usize,
     /// Samples (network evaluations) aimed at per iteration, as Instant-NGP does: each
     /// iteration draws `batch_samples / (samples per ray of the last iteration)` rays,
-    /// between [`CHUNK`] and `batch_size` (the first iteration draws [`CHUNK`]). 0: always
+    /// between 64 (the chunk of rays) and `batch_size` (the first iteration draws 64). 0: always
     /// `batch_size` rays.
     pub batch_samples: usize,
     /// Seed of the ray batches, the jitter and the occupancy updates.
