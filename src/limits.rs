@@ -187,6 +187,10 @@ pub const MAX_DIGIT_CURVES: usize = 16;
 /// line had no upper bound; the fit grows segment by segment, each round a refinement).
 pub const MAX_GLYPH_SEGMENTS: usize = 1024;
 
+/// Most rays per iteration of `recon ngp` (each chunk of a batch keeps its samples'
+/// gradients until the reduction: about 140 bytes per sample).
+pub const MAX_NGP_BATCH: usize = 1 << 20;
+
 /// Refuses `value` outside `range` as an [`Error::Setting`](crate::Error::Setting) naming
 /// the option as the library names it (`max_segments`).
 pub(crate) fn check_count(

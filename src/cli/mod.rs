@@ -17,6 +17,7 @@ mod digits;
 mod fit;
 mod glyphs;
 mod grad;
+mod ngp;
 mod parity;
 mod perturb;
 mod plot;

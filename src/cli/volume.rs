@@ -35,6 +35,8 @@ enum ReconModel {
     Voxel(VoxelArgs),
     /// 3D Gaussians rasterized by splatting (Kerbl et al. 2023), written as a PLY.
     Splat(super::splat::SplatArgs),
+    /// An Instant-NGP neural field: a multiresolution hash grid and tiny MLPs (.ngp).
+    Ngp(super::ngp::NgpArgs),
 }
 
 /// Arguments of `diffsvg recon voxel`.
@@ -97,8 +99,9 @@ pub struct VoxelArgs {
 /// Arguments of `diffsvg view`.
 #[derive(clap::Args, Debug)]
 pub struct ViewArgs {
-    /// Model file written by `diffsvg recon voxel` (.vox) or `diffsvg recon splat` (a
-    /// Gaussian-splatting PLY or SPZ); the kind is read from the file's header.
+    /// Model file written by `diffsvg recon voxel` (.vox), `diffsvg recon splat` (a
+    /// Gaussian-splatting PLY or SPZ) or `diffsvg recon ngp` (.ngp); the kind is read
+    /// from the file's header.
     model: PathBuf,
     /// Dataset folder whose cameras to render from.
     #[arg(long)]
@@ -144,6 +147,7 @@ pub fn run_recon(a: ReconArgs) -> Result<()> {
     match a.model {
         ReconModel::Voxel(v) => run_voxel(v),
         ReconModel::Splat(v) => super::splat::run(v),
+        ReconModel::Ngp(v) => super::ngp::run(v),
     }
 }
 
@@ -246,6 +250,22 @@ fn run_voxel(a: VoxelArgs) -> Result<()> {
 /// Writes `<model>.log.csv` (iteration, training seconds, resolution, allocated slots,
 /// batch PSNR, test PSNR where evaluated) and, when the test views were evaluated more
 /// than once, `<model>.psnr.png` and `.psnr.svg`: PSNR against training time.
+pub(super) fn write_log_rows(
+    model: &Path,
+    header: &str,
+    rows: &[String],
+    tests: Vec<(f64, f64)>,
+    batches: Vec<(f64, f64)>,
+) -> Result<()> {
+    let mut csv = String::from(header);
+    for r in rows {
+        csv.push_str(r);
+        csv.push('\n');
+    }
+    write_atomic(&sibling(model, ".log.csv"), csv.as_bytes())?;
+    write_psnr_plot(model, tests, batches, "training batches")
+}
+
 fn write_log(model: &Path, rows: &[(TrainStep, Option<f64>)]) -> Result<()> {
     let mut csv = String::from("iteration,seconds,res,allocated,batch_psnr,test_psnr\n");
     for (s, test) in rows {
@@ -291,7 +311,7 @@ pub fn run_view(a: ViewArgs) -> Result<()> {
     if a.scene.is_none() && a.orbit == 0 {
         bail!("nothing to render: give --scene DIR and/or --orbit N");
     }
-    if a.depth && matches!(model, Model::Voxel(..)) {
+    if a.depth && matches!(model, Model::Voxel(..) | Model::Ngp(..)) {
         bail!("--depth: depth images are drawn for Gaussian (.ply) models only");
     }
     check_downscale(a.downscale).map_err(flag_error)?;

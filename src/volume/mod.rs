@@ -23,6 +23,7 @@ pub mod camera;
 pub mod colmap;
 pub mod dataset;
 pub mod depth;
+pub mod field;
 pub mod metrics;
 
 use glam::Vec3;

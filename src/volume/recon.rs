@@ -30,6 +30,7 @@ use crate::error::{Error, Result};
 use crate::limits::MAX_GAUSSIANS;
 use crate::volume::Ray;
 use crate::volume::dataset::{Dataset, Loading, View};
+use crate::volume::field::{self, HashShape, Ngp, NgpShape};
 use crate::volume::metrics::psnr;
 use crate::volume::splat::{self, Gaussians};
 use crate::volume::voxel::{self, Grid, RenderSettings};
@@ -143,6 +144,240 @@ impl Default for SplatJob {
             mcmc: false,
         }
     }
+}
+
+/// What [`recon_ngp`] fits: an Instant-NGP neural field (hash encoding and tiny MLPs).
+/// The defaults are `diffsvg recon ngp`'s.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NgpJob {
+    /// Optimizer iterations (mini-batches of rays), at least 1.
+    pub iters: usize,
+    /// Training time budget in seconds (0: none): training stops when it is spent and the
+    /// learning rate decays over it instead of over `iters`.
+    pub seconds: f32,
+    /// Most rays per iteration, at least 1.
+    pub batch: usize,
+    /// Samples aimed at per iteration ([`field::TrainOptions::batch_samples`]; 0: always
+    /// `batch` rays).
+    pub samples: usize,
+    /// Divide image sizes by this integer, at least 1.
+    pub downscale: u32,
+    /// Half the box's side, world units; `None` as for [`VoxelJob::bound`].
+    pub bound: Option<f32>,
+    /// Samples along the box's diagonal (16 to 8192).
+    pub steps: u32,
+    /// Hash levels (1 to 32).
+    pub levels: u32,
+    /// `log2` of the entries per level (4 to 24).
+    pub log2_table: u32,
+    /// Cells per axis of the coarsest level (at least 2).
+    pub min_res: u32,
+    /// Cells per axis of the finest level (`min_res` to 65536).
+    pub max_res: u32,
+    /// Neurons per hidden layer (8 to 256).
+    pub width: u32,
+    /// Learning rate at the start and the end (exponential decay in between).
+    pub lr: [f32; 2],
+    /// Random seed of the parameters and the ray batches.
+    pub seed: u64,
+    /// Every this many iterations, evaluate the test views; 0: only at the end.
+    pub eval_every: usize,
+    /// Which views are held out ([`Loading::test_every`]); `None`: the format's default.
+    pub test_every: Option<usize>,
+}
+
+impl Default for NgpJob {
+    fn default() -> Self {
+        let s = NgpShape::default();
+        let o = field::TrainOptions::default();
+        NgpJob {
+            iters: o.iterations,
+            seconds: 0.0,
+            batch: o.batch_size,
+            samples: o.batch_samples,
+            downscale: 1,
+            bound: None,
+            steps: o.render.steps,
+            levels: s.hash.levels,
+            log2_table: s.hash.log2_table,
+            min_res: s.hash.n_min,
+            max_res: s.hash.n_max,
+            width: s.width,
+            lr: o.lr,
+            seed: 0,
+            eval_every: 0,
+            test_every: None,
+        }
+    }
+}
+
+impl NgpJob {
+    /// How the job loads its dataset.
+    pub fn loading(&self) -> Loading {
+        Loading {
+            downscale: self.downscale,
+            test_every: self.test_every,
+        }
+    }
+
+    /// The model's shape.
+    pub fn shape(&self) -> NgpShape {
+        NgpShape {
+            hash: HashShape {
+                levels: self.levels,
+                log2_table: self.log2_table,
+                n_min: self.min_res,
+                n_max: self.max_res,
+            },
+            width: self.width,
+            ..NgpShape::default()
+        }
+    }
+
+    /// Checks every option that does not depend on the photos.
+    pub fn validate(&self) -> Result<()> {
+        at_least_one("downscale", self.downscale as u64)?;
+        at_least_one("iters", self.iters as u64)?;
+        crate::limits::check_count("iters", self.iters, 1..=crate::limits::MAX_ITERS)?;
+        at_least_one("batch", self.batch as u64)?;
+        crate::limits::check_count("batch", self.batch, 1..=crate::limits::MAX_NGP_BATCH)?;
+        if !(self.seconds.is_finite() && self.seconds >= 0.0) {
+            return Err(setting(
+                "seconds",
+                format!("{} must be a number ≥ 0", self.seconds),
+            ));
+        }
+        if let Some(b) = self.bound {
+            check_positive(b)?;
+        }
+        if !(16..=8192).contains(&self.steps) {
+            return Err(setting(
+                "steps",
+                format!("{} must be 16 to 8192", self.steps),
+            ));
+        }
+        if !self.lr.iter().all(|r| r.is_finite() && *r > 0.0) {
+            return Err(setting(
+                "lr",
+                format!("{:?} must be positive numbers", self.lr),
+            ));
+        }
+        let s = self.shape();
+        s.hash.validate().map_err(|e| {
+            let (name, prefix) = if e.starts_with("levels") {
+                ("levels", "levels ")
+            } else if e.starts_with("log2") {
+                ("log2_table", "log2 table size ")
+            } else {
+                ("max_res", "")
+            };
+            setting(name, e.trim_start_matches(prefix).into())
+        })?;
+        s.validate()
+            .map_err(|e| setting("width", e.trim_start_matches("width ").into()))?;
+        Ok(())
+    }
+}
+
+/// A fitted neural field and how the run went.
+#[derive(Clone, Debug)]
+pub struct NgpResult {
+    /// The model after training.
+    pub model: Ngp,
+    /// The dataset's warnings ([`Dataset::warnings`]), for the caller to show.
+    pub warnings: Vec<String>,
+    /// How training ended.
+    pub outcome: field::TrainOutcome,
+    /// One row per 50 iterations and per evaluation, as in [`VoxelResult::log`]; the last
+    /// row is the end of the run with the final test PSNR.
+    pub log: Vec<(field::TrainStep, Option<f64>)>,
+    /// Mean PSNR of the test views at the end; `None` when the dataset has none.
+    pub test_psnr: Option<f64>,
+    /// Seconds spent loading the photos.
+    pub load_seconds: f64,
+    /// The settings the model was trained and is rendered with.
+    pub render: field::RenderSettings,
+}
+
+/// Fits an Instant-NGP field to the photos in `scene` ([`Dataset::load`]): a box as for
+/// [`recon_voxel`], the background of the dataset's kind, [`field::train()`] with the
+/// job's options. `observe` is called as in [`recon_voxel`].
+///
+/// # Errors
+/// As [`recon_voxel`].
+pub fn recon_ngp(
+    scene: &Path,
+    job: &NgpJob,
+    observe: &mut dyn FnMut(&field::TrainStep, Option<f64>) -> bool,
+) -> Result<NgpResult> {
+    job.validate()?;
+    let t_load = Instant::now();
+    let data = Dataset::load_with(scene, &job.loading())?;
+    if data.train.is_empty() {
+        return Err(no_training_views(scene));
+    }
+    let (rays, colors) = pixels(&data.train);
+    let test_rays: Vec<Vec<Ray>> = data.test.iter().map(|v| v.camera.rays()).collect();
+    let defaults = Defaults::for_dataset(&data);
+    let (center, half) = scene_box(scene, &data, job.bound, defaults.box_factor)?;
+    let load_seconds = t_load.elapsed().as_secs_f64();
+    let render = field::RenderSettings {
+        steps: job.steps,
+        background: background(&data),
+        ..field::RenderSettings::default()
+    };
+    let mut model = Ngp::new(
+        center - Vec3::splat(half),
+        center + Vec3::splat(half),
+        job.shape(),
+        job.seed,
+    );
+    let opts = field::TrainOptions {
+        iterations: job.iters,
+        seconds: job.seconds,
+        batch_size: job.batch,
+        batch_samples: job.samples,
+        seed: job.seed,
+        render,
+        lr: job.lr,
+        ..field::TrainOptions::default()
+    };
+    let mut log: Vec<(field::TrainStep, Option<f64>)> = Vec::new();
+    let mut last: Option<field::TrainStep> = None;
+    let outcome = field::train(&mut model, &rays, &colors, &opts, &mut |s, m| {
+        last = Some(*s);
+        let test = evaluate_now(job.eval_every, s.iteration, job.iters, &data)
+            .then(|| ngp_psnr(m, &test_rays, &data.test, &render));
+        if test.is_some() || s.iteration % 50 == 0 {
+            log.push((*s, test));
+        }
+        observe(s, test)
+    })?;
+    let test_psnr =
+        (!data.test.is_empty()).then(|| ngp_psnr(&model, &test_rays, &data.test, &render));
+    if let Some(s) = last {
+        log.retain(|r| r.0.iteration != s.iteration);
+        log.push((s, test_psnr));
+    }
+    Ok(NgpResult {
+        warnings: data.warnings.clone(),
+        model,
+        outcome,
+        log,
+        test_psnr,
+        load_seconds,
+        render,
+    })
+}
+
+/// Mean PSNR (dB, capped at 99 per view) of a field rendered along each view's rays.
+fn ngp_psnr(m: &Ngp, rays: &[Vec<Ray>], views: &[View], render: &field::RenderSettings) -> f64 {
+    let sum: f64 = rays
+        .iter()
+        .zip(views)
+        .map(|(r, v)| psnr(&field::render_rays(m, r, render), &v.rgb).min(99.0))
+        .sum();
+    sum / views.len().max(1) as f64
 }
 
 /// A fitted grid and how the run went.

@@ -13,6 +13,7 @@ use glam::Vec3;
 
 use super::camera::{Camera, orbit};
 use super::dataset::{Dataset, Loading, View};
+use super::field::{self, Ngp};
 use super::recon::{background, load_for_splat};
 use super::splat::{self, Gaussians};
 use super::voxel::{self, Grid};
@@ -57,6 +58,8 @@ pub enum Model {
     Voxel(Grid, voxel::RenderSettings),
     /// 3D Gaussians (`.ply`).
     Splat(Gaussians, splat::RenderSettings),
+    /// An Instant-NGP neural field (`.ngp`).
+    Ngp(Ngp, field::RenderSettings),
 }
 
 impl Model {
@@ -66,14 +69,19 @@ impl Model {
     /// `step` is the voxel ray-marching step in cells (ignored for Gaussians).
     pub fn load(path: &Path, step: f32) -> Result<Model> {
         use std::io::Read as _;
-        let mut head = Vec::with_capacity(5);
+        let mut head = Vec::with_capacity(8);
         std::fs::File::open(path)
-            .and_then(|f| f.take(5).read_to_end(&mut head))
+            .and_then(|f| f.take(8).read_to_end(&mut head))
             .map_err(|e| Error::io(path, e))?;
         if head.starts_with(b"ply\n") || head.starts_with(b"ply\r\n") {
             Ok(Model::Splat(
                 splat::load(path)?,
                 splat::RenderSettings::default(),
+            ))
+        } else if head.starts_with(&field::io::MAGIC) {
+            Ok(Model::Ngp(
+                field::load(path)?,
+                field::RenderSettings::default(),
             ))
         } else if crate::image_io::is_gzip(&head) {
             Ok(Model::Splat(
@@ -103,10 +111,12 @@ impl Model {
         check_downscale(loading.downscale)?;
         let (data, outside) = match self {
             Model::Splat(..) => load_for_splat(dir, loading)?,
-            Model::Voxel(..) => (Dataset::load_with(dir, loading)?, None),
+            Model::Voxel(..) | Model::Ngp(..) => (Dataset::load_with(dir, loading)?, None),
         };
-        if let Model::Splat(_, s) = self {
-            s.background = background(&data);
+        match self {
+            Model::Splat(_, s) => s.background = background(&data),
+            Model::Ngp(_, s) => s.background = background(&data),
+            Model::Voxel(..) => {}
         }
         Ok((data, outside))
     }
@@ -115,6 +125,7 @@ impl Model {
     pub fn render(&self, camera: &Camera) -> Result<Vec<[f32; 3]>> {
         match self {
             Model::Voxel(g, s) => Ok(voxel::render_rays(g, &camera.rays(), s)),
+            Model::Ngp(m, s) => Ok(field::render_rays(m, &camera.rays(), s)),
             Model::Splat(g, s) => {
                 splat::render(g, camera, s)
                     .map(|r| r.rgb)
@@ -134,7 +145,7 @@ impl Model {
     /// refusal of the camera.
     pub fn render_depth(&self, camera: &Camera) -> Result<splat::Depth> {
         match self {
-            Model::Voxel(..) => Err(Error::Setting {
+            Model::Voxel(..) | Model::Ngp(..) => Err(Error::Setting {
                 name: "depth".into(),
                 message: "depth images are drawn for Gaussian (.ply) models only".into(),
             }),
@@ -155,6 +166,10 @@ impl Model {
                 (g.max() - g.min()).max_element() * 0.5,
             ),
             Model::Splat(g, _) => splat_bounds(g),
+            Model::Ngp(m, _) => (
+                (m.min() + m.max()) * 0.5,
+                (m.max() - m.min()).max_element() * 0.5,
+            ),
         }
     }
 }
