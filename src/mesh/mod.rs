@@ -27,6 +27,7 @@
 //! * **Texture**: straight RGB in `[0, 1]`, `(u, v)` with v up (OBJ), repeated outside
 //!   `[0, 1]`, bilinear between texel centers; no mip levels yet.
 
+pub mod fit;
 mod geom;
 mod io;
 pub mod render;

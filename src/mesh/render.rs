@@ -949,8 +949,9 @@ mod tests {
             .unwrap()
             .backward(&wts, true)
             .unwrap();
-        let h = 1e-6;
-        let mut worst = 0.0f64;
+        // Small steps: pieces whose vertices are crossings of nearly parallel lines have
+        // large second derivatives (at 1e-6 a fold's central difference is off by 2e-5).
+        let h = 1e-7;
         let mut nonzero = 0;
         for v in 0..mesh.positions.len() {
             for k in 0..3 {
@@ -960,7 +961,6 @@ mod tests {
                 let fd = (loss(&p, &cam, opts, &wts) - loss(&m, &cam, opts, &wts)) / (2.0 * h);
                 let an = g.positions[v][k];
                 let err = (fd - an).abs() / an.abs().max(1.0);
-                worst = worst.max(err);
                 assert!(
                     err < 1e-5,
                     "{name}: vertex {v} axis {k}: analytic {an} vs fd {fd}"
@@ -1244,6 +1244,7 @@ mod tests {
             }
             // Point sampling errs by at most one sample row per edge crossing: n / n² of
             // the pixel per edge, times the largest color step (< 1).
+            eprintln!("cull {cull}: max error against {n}×{n} samples: {worst:.2e}");
             assert!(worst < 2.0 / n as f64, "cull {cull}: max error {worst}");
             assert!(worst > 0.0);
         }
@@ -1267,18 +1268,21 @@ mod tests {
         };
         let view = View::new(&m, &cam, o).unwrap();
         let img = view.render_f64();
-        let mut both = 0;
+        let (mut red, mut green) = (0, 0);
         for p in &img {
             assert!(p[3] <= 1.0 + 1e-12, "coverage {}", p[3]);
             assert!((p[0] + p[1] - p[3]).abs() < 1e-12);
-            if p[0] > 0.05 && p[1] > 0.05 {
-                both += 1;
+            // A fully covered pixel is all one triangle: the crossing is not resolved
+            // inside a pixel.
+            if p[3] > 1.0 - 1e-9 {
+                assert!(p[0] > 1.0 - 1e-9 || p[1] > 1.0 - 1e-9, "{p:?}");
+                red += (p[0] > 0.5) as usize;
+                green += (p[1] > 0.5) as usize;
             }
         }
-        // Pixels along the crossing line show both colors, and covered interior pixels
-        // are fully covered (no double counting, no hole).
-        assert!(both > 0);
-        let interior = img.iter().filter(|p| p[3] > 1.0 - 1e-9).count();
+        // Each triangle is in front on its own side of the crossing line.
+        assert!(red > 5 && green > 5, "{red} red, {green} green");
+        let interior = red + green;
         assert!(interior > 10);
     }
 }
