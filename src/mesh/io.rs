@@ -30,8 +30,9 @@ fn count_obj(text: &str) -> (usize, usize) {
     (v, t)
 }
 
-/// Reads an OBJ mesh with its MTL material's diffuse color and diffuse texture (the
-/// first material used; one texture per mesh). All objects of the file are merged.
+/// Reads an OBJ mesh with its vertex colors (`v x y z r g b`), or else its MTL
+/// material's diffuse color, and its diffuse texture (the first material used; one
+/// texture per mesh). All objects of the file are merged.
 /// Polygons are fanned into triangles; a vertex used with several UVs is split.
 ///
 /// Sizes are checked before anything is parsed ([`MAX_MESH_FILE_BYTES`] per file,
@@ -95,6 +96,10 @@ pub fn read_obj(path: &Path) -> Result<Mesh> {
         texture: None,
     };
     let all_uv = models.iter().all(|m| !m.mesh.texcoords.is_empty());
+    let all_colors = models
+        .iter()
+        .all(|m| m.mesh.vertex_color.len() == m.mesh.positions.len());
+    let mut colors = Vec::new();
     let mut uvs = Vec::new();
     let mut material = None;
     for m in &models {
@@ -129,6 +134,13 @@ pub fn read_obj(path: &Path) -> Result<Mesh> {
                     .map(|t| [t[0] as f64, t[1] as f64]),
             );
         }
+        if all_colors {
+            colors.extend(
+                mm.vertex_color
+                    .chunks_exact(3)
+                    .map(|c| [c[0] as f64, c[1] as f64, c[2] as f64]),
+            );
+        }
         for t in mm.indices.chunks_exact(3) {
             if t.iter().any(|&i| i as usize >= n) {
                 return Err(invalid(
@@ -146,6 +158,10 @@ pub fn read_obj(path: &Path) -> Result<Mesh> {
     if all_uv {
         mesh.uvs = Some(uvs);
     }
+    // Vertex colors (`v x y z r g b`) win over a material's diffuse color.
+    if all_colors && !colors.is_empty() {
+        mesh.colors = Some(colors);
+    }
     if let Some(mat) = material {
         if let Some(tex) = mat.diffuse_texture.as_ref().filter(|t| !t.is_empty()) {
             if mesh.uvs.is_none() {
@@ -160,7 +176,7 @@ pub fn read_obj(path: &Path) -> Result<Mesh> {
             let tp = resolve(path, tex);
             let img = Image::load(&tp)?;
             mesh.texture = Some(Texture::from_image(&img));
-        } else if let Some(kd) = mat.diffuse {
+        } else if let (Some(kd), None) = (mat.diffuse, &mesh.colors) {
             mesh.colors = Some(vec![
                 [kd[0] as f64, kd[1] as f64, kd[2] as f64];
                 mesh.positions.len()
@@ -284,6 +300,13 @@ mod tests {
         assert_eq!((t.width, t.height), (2, 2));
         assert!((t.data[0][0] - 1.0).abs() < 1e-6 && t.data[1][1] > 0.99);
         assert!(back.uvs.is_some());
+        let (c0, c1) = (
+            m.colors.as_ref().unwrap(),
+            back.colors.as_ref().expect("colors read back"),
+        );
+        assert!(
+            (c0[m.triangles[0][0] as usize][0] - c1[back.triangles[0][0] as usize][0]).abs() < 1e-6
+        );
         std::fs::remove_dir_all(&d).unwrap();
     }
 
@@ -321,7 +344,7 @@ mod tests {
     fn spot_loads_when_the_data_is_there() {
         let Some(dir) = std::env::var_os("DIFFSVG_DATA")
             .map(PathBuf::from)
-            .or_else(|| Some(PathBuf::from("/work/shared/data")))
+            .or_else(|| Some(Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data")))
             .map(|d| d.join("meshes/spot/spot.obj"))
             .filter(|p| p.exists())
         else {
