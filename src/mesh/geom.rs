@@ -114,14 +114,14 @@ pub(crate) fn clip(poly: &[Vertex], line: Line, side: f64, sv: &[[f64; 2]], out:
             } else {
                 out.push(prev);
             }
-        } else if d_cur > 0.0 {
-            if let Some(p) = cross_point(prev.next, line, sv) {
-                out.push(Vertex {
-                    p,
-                    origin: Origin::Cross(prev.next, line),
-                    next: prev.next,
-                });
-            }
+        } else if d_cur > 0.0
+            && let Some(p) = cross_point(prev.next, line, sv)
+        {
+            out.push(Vertex {
+                p,
+                origin: Origin::Cross(prev.next, line),
+                next: prev.next,
+            });
         }
         d_prev = d_cur;
         prev = cur;

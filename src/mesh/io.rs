@@ -65,7 +65,6 @@ pub fn read_obj(path: &Path) -> Result<Mesh> {
         triangulate: true,
         ignore_points: true,
         ignore_lines: true,
-        ..Default::default()
     };
     let (models, materials) = tobj::load_obj_buf(
         &mut std::io::Cursor::new(&bytes[..]),

@@ -859,9 +859,12 @@ fn uv_at(uvs: &[[f64; 2]], tri: [u32; 3], b: [f64; 3]) -> [f64; 2] {
     uv
 }
 
+/// A texture sample: the value, the four taps `(texel, weight)` and `∂value_c/∂(u, v)`.
+type Sample = ([f64; 3], [(u32, f64); 4], [[f64; 2]; 3]);
+
 /// Bilinear sample of `tex` at `uv` (repeat): the value, the four taps `(texel, weight)`
 /// and `∂value_c/∂(u, v)`.
-fn sample(tex: &Texture, uv: [f64; 2]) -> ([f64; 3], [(u32, f64); 4], [[f64; 2]; 3]) {
+fn sample(tex: &Texture, uv: [f64; 2]) -> Sample {
     let (w, h) = (tex.width as f64, tex.height as f64);
     let tx = uv[0] * w - 0.5;
     let ty = (1.0 - uv[1]) * h - 0.5;
