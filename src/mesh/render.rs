@@ -7,7 +7,7 @@
 //! in front of it on their common part (depth compared at the centroid of that overlap),
 //! and what is left is its visible area. Every piece vertex is a projected vertex, a
 //! pixel corner or the crossing of two lines, so the backward pass runs reverse-mode
-//! through the clipping ([`super::geom`]) and then through the projection.
+//! through the clipping (`mesh/geom.rs`) and then through the projection.
 //!
 //! Rows are independent; the backward pass collects each row's contributions in a list
 //! and adds the lists in row order, so results are the same bits on any number of
