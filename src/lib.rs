@@ -80,6 +80,7 @@ mod guard;
 pub mod image_io;
 pub mod limits;
 pub mod loss;
+pub mod mesh;
 pub mod metrics;
 pub mod mnist;
 pub mod optim;

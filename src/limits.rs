@@ -153,6 +153,17 @@ pub const MAX_COORDINATE: f64 = 1e30;
 
 // ---- options of the jobs ------------------------------------------------------------
 //
+/// Largest mesh file (OBJ, MTL) read, in bytes, from its size before it is read: the
+/// parser's memory grows with the file.
+pub const MAX_MESH_FILE_BYTES: u64 = 1 << 30;
+
+/// Most vertices of a mesh, counted in the OBJ (`v` lines) before it is parsed.
+pub const MAX_MESH_VERTICES: usize = 20_000_000;
+
+/// Most triangles of a mesh, counted in the OBJ (each `f` line's polygon fanned) before it
+/// is parsed.
+pub const MAX_MESH_TRIANGLES: usize = 20_000_000;
+
 // One bound per option, shared by the command line, batch files and Python (each front
 // end names the option its own way: `--max-segments`, `max_segments`). Where the front
 // ends once disagreed, the note says which bound was kept and why.

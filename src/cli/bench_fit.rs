@@ -31,6 +31,9 @@ pub enum Which {
     /// gsplat's test fixture (the garden) and on trained models (from a dataset's test
     /// cameras or an orbit).
     Splat(super::bench_splat::SplatBenchArgs),
+    /// Forward and forward + backward time of the exact mesh renderer (spot at 256² by
+    /// default), medians per thread count (see docs/mesh.md).
+    Mesh(super::mesh::MeshBenchArgs),
 }
 
 /// Arguments of `diffsvg bench painterly`.
@@ -185,5 +188,6 @@ pub fn run(w: Which) -> Result<()> {
         Which::Fit(a) => super::bench_suite::run(a),
         Which::Voxel(a) => super::bench_voxel::run(a),
         Which::Splat(a) => super::bench_splat::run(a),
+        Which::Mesh(a) => super::mesh::run_bench(a),
     }
 }

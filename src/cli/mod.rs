@@ -17,6 +17,7 @@ mod digits;
 mod fit;
 mod glyphs;
 mod grad;
+mod mesh;
 mod ngp;
 mod parity;
 mod perturb;
@@ -66,6 +67,8 @@ enum Command {
     Recon(volume::ReconArgs),
     /// Render a reconstructed model from held-out cameras (PSNR, SSIM) or an orbit.
     View(volume::ViewArgs),
+    /// Triangle meshes: render with exact anti-aliasing, fit to renders.
+    Mesh(mesh::MeshArgs),
     /// Plot several `recon` runs' test PSNR against training time in one chart.
     Compare(compare::Args),
 }
@@ -158,6 +161,7 @@ fn dispatch(command: Command) -> ExitCode {
         Command::Recon(a) => volume::run_recon(a),
         Command::View(a) => volume::run_view(a),
         Command::Compare(a) => compare::run(a),
+        Command::Mesh(a) => mesh::run(a),
     };
     match result {
         // A run stopped by Ctrl-C has written its best result; the status says it stopped.

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use super::common::root;
 
 /// The library's top-level modules.
-const MODULES: [&str; 17] = [
+const MODULES: [&str; 18] = [
     "error",
     "limits",
     "guard",
@@ -24,6 +24,7 @@ const MODULES: [&str; 17] = [
     "gradcheck",
     "reference",
     "volume",
+    "mesh",
     "lib",
 ];
 
@@ -32,7 +33,7 @@ const MODULES: [&str; 17] = [
 /// `guard`, `choice` and `rng`.
 fn forbidden(module: &str) -> &'static [&'static str] {
     // Modules that sit above everything else but the command line.
-    const TOP: [&str; 4] = ["fit", "gradcheck", "reference", "volume"];
+    const TOP: [&str; 5] = ["fit", "gradcheck", "reference", "volume", "mesh"];
     match module {
         "error" | "limits" | "guard" | "choice" | "rng" => &[
             "image_io",
@@ -46,6 +47,7 @@ fn forbidden(module: &str) -> &'static [&'static str] {
             "gradcheck",
             "reference",
             "volume",
+            "mesh",
         ],
         "image_io" | "metrics" | "loss" | "mnist" => &[
             "scene",
@@ -55,6 +57,7 @@ fn forbidden(module: &str) -> &'static [&'static str] {
             "gradcheck",
             "reference",
             "volume",
+            "mesh",
         ],
         // The generic optimizer: slices of numbers only.
         "optim" => &[
@@ -65,11 +68,30 @@ fn forbidden(module: &str) -> &'static [&'static str] {
             "loss",
             "gradcheck",
             "reference",
+            "mesh",
         ],
-        "scene" => &["raster", "fit", "optim", "gradcheck", "reference", "volume"],
-        "raster" => &["fit", "optim", "volume", "gradcheck", "reference"],
-        "volume" => &["scene", "raster", "fit", "gradcheck", "reference", "loss"],
-        "fit" => &["volume", "gradcheck", "reference"],
+        "scene" => &[
+            "raster",
+            "fit",
+            "optim",
+            "gradcheck",
+            "reference",
+            "volume",
+            "mesh",
+        ],
+        "raster" => &["fit", "optim", "volume", "gradcheck", "reference", "mesh"],
+        "volume" => &[
+            "scene",
+            "raster",
+            "fit",
+            "gradcheck",
+            "reference",
+            "loss",
+            "mesh",
+        ],
+        "fit" => &["volume", "gradcheck", "reference", "mesh"],
+        // Meshes use raster, volume's cameras and datasets, optim, loss and metrics.
+        "mesh" => &["fit", "gradcheck", "reference", "scene"],
         "gradcheck" | "reference" => &TOP,
         m => panic!("module {m} is not in docs/architecture.md's table: add it there and here"),
     }

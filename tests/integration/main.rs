@@ -14,6 +14,7 @@ mod gradcheck_cli;
 mod gradients;
 mod images;
 mod layers;
+mod mesh_cli;
 mod ngp_cli;
 mod options;
 mod parity;

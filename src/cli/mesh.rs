@@ -1,0 +1,286 @@
+//! `diffsvg mesh render`, `diffsvg mesh fit` and `diffsvg bench mesh`: thin over
+//! [`diffsvg::mesh`].
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{Result, bail};
+
+use super::progress::{install_interrupt_handler, interrupted, terminal_bar};
+use diffsvg::Image;
+use diffsvg::image_io::{check_output, side_by_side};
+use diffsvg::mesh::fit::{FitOptions, fit, mse, orbit_cameras, sphere_around};
+use diffsvg::mesh::{RenderOptions, View, read_obj, write_obj};
+use diffsvg::metrics::{median, psnr_from_mse};
+
+/// Mesh commands.
+#[derive(clap::Subcommand, Debug)]
+pub enum MeshCommand {
+    /// Render an OBJ mesh from orbit cameras around its bounds (exact box-filtered
+    /// anti-aliasing); several views are laid out side by side.
+    Render(RenderArgs),
+    /// Fit an icosphere's vertex positions and vertex colors to renders of a reference
+    /// mesh from orbit views; prints held-out PSNR and writes the fitted OBJ.
+    Fit(FitArgs),
+}
+
+/// Arguments of `diffsvg mesh`.
+#[derive(clap::Args, Debug)]
+pub struct MeshArgs {
+    #[command(subcommand)]
+    command: MeshCommand,
+}
+
+/// Arguments of `diffsvg mesh render`.
+#[derive(clap::Args, Debug)]
+pub struct RenderArgs {
+    /// OBJ file (with its MTL and texture).
+    mesh: PathBuf,
+    /// Number of orbit views.
+    #[arg(long, default_value_t = 1)]
+    orbit: usize,
+    /// Image side, pixels.
+    #[arg(long, default_value_t = 256)]
+    size: u32,
+    /// Output PNG.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Keep back faces (slower; the same image for closed meshes).
+    #[arg(long)]
+    no_cull: bool,
+    /// Transparent background instead of white.
+    #[arg(long)]
+    transparent: bool,
+}
+
+/// Arguments of `diffsvg mesh fit`.
+#[derive(clap::Args, Debug)]
+pub struct FitArgs {
+    /// Reference OBJ file, rendered from the training and held-out views.
+    reference: PathBuf,
+    /// Training views on an orbit.
+    #[arg(long, default_value_t = 20)]
+    views: usize,
+    /// Held-out views, between the training ones.
+    #[arg(long, default_value_t = 5)]
+    test_views: usize,
+    /// Image side, pixels.
+    #[arg(long, default_value_t = 128)]
+    size: u32,
+    /// Optimizer steps (each renders every training view).
+    #[arg(long, default_value_t = 200)]
+    iters: usize,
+    /// Subdivisions of the starting icosphere (20·4ⁿ triangles).
+    #[arg(long, default_value_t = 3)]
+    subdivisions: u32,
+    /// Learning rate of vertex positions, world units per step.
+    #[arg(long, default_value_t = 2e-3)]
+    lr_positions: f64,
+    /// Learning rate of vertex colors.
+    #[arg(long, default_value_t = 1e-2)]
+    lr_colors: f64,
+    /// Weight of the edge-length smoothness term.
+    #[arg(long, default_value_t = 1e-3)]
+    smoothness: f64,
+    /// Output OBJ of the fitted mesh.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// No progress bar.
+    #[arg(long)]
+    quiet: bool,
+}
+
+/// Arguments of `diffsvg bench mesh`.
+#[derive(clap::Args, Debug)]
+pub struct MeshBenchArgs {
+    /// OBJ file (default: ../shared/data/meshes/spot/spot.obj).
+    mesh: Option<PathBuf>,
+    /// Image side, pixels.
+    #[arg(long, default_value_t = 256)]
+    size: u32,
+    /// Timed runs; medians are reported.
+    #[arg(long, default_value_t = 9)]
+    runs: usize,
+    /// Thread counts.
+    #[arg(long, value_delimiter = ',', default_value = "1,2")]
+    threads: Vec<usize>,
+}
+
+/// Runs `diffsvg mesh …`.
+pub fn run(a: MeshArgs) -> Result<()> {
+    match a.command {
+        MeshCommand::Render(r) => run_render(r),
+        MeshCommand::Fit(f) => run_fit(f),
+    }
+}
+
+fn check_size(size: u32, views: usize) -> Result<()> {
+    if size == 0 || size > 4096 {
+        bail!("--size {size} must be between 1 and 4096");
+    }
+    if views == 0 || views > 1000 {
+        bail!("the number of views {views} must be between 1 and 1000");
+    }
+    Ok(())
+}
+
+fn run_render(a: RenderArgs) -> Result<()> {
+    check_size(a.size, a.orbit)?;
+    check_output(&a.output, "png")?;
+    let mesh = read_obj(&a.mesh)?;
+    let opts = RenderOptions {
+        background: (!a.transparent).then_some([1.0; 3]),
+        cull_back_faces: !a.no_cull,
+        ..RenderOptions::default()
+    };
+    let cams = orbit_cameras(&mesh, a.orbit, a.size, 0.0)?;
+    let t = Instant::now();
+    let imgs: Vec<Image> = cams
+        .iter()
+        .map(|c| Ok(View::new(&mesh, c, opts)?.render()))
+        .collect::<diffsvg::Result<_>>()?;
+    let ms = t.elapsed().as_secs_f64() * 1e3 / imgs.len() as f64;
+    let out = if imgs.len() == 1 {
+        imgs.into_iter().next().expect("one image")
+    } else {
+        let refs: Vec<&Image> = imgs.iter().collect();
+        side_by_side(&refs)
+    };
+    out.save_png(&a.output)?;
+    println!(
+        "{}: {} triangles, {} view(s) at {}², {ms:.1} ms per view → {}",
+        a.mesh.display(),
+        mesh.triangles.len(),
+        cams.len(),
+        a.size,
+        a.output.display()
+    );
+    Ok(())
+}
+
+fn run_fit(a: FitArgs) -> Result<()> {
+    check_size(a.size, a.views)?;
+    check_size(a.size, a.test_views)?;
+    if a.subdivisions > 6 {
+        bail!("--subdivisions {} must be at most 6", a.subdivisions);
+    }
+    check_output(&a.output, "obj")?;
+    let reference = read_obj(&a.reference)?;
+    let opts = FitOptions {
+        iters: a.iters,
+        lr_positions: a.lr_positions,
+        lr_colors: a.lr_colors,
+        smoothness: a.smoothness,
+        ..FitOptions::default()
+    };
+    let render_all = |cams: &[diffsvg::volume::camera::Camera]| -> diffsvg::Result<Vec<_>> {
+        cams.iter()
+            .map(|c| Ok((*c, View::new(&reference, c, opts.render)?.render())))
+            .collect()
+    };
+    let train = render_all(&orbit_cameras(&reference, a.views, a.size, 0.0)?)?;
+    let test = render_all(&orbit_cameras(&reference, a.test_views, a.size, 0.5)?)?;
+    let mut model = sphere_around(&reference, a.subdivisions);
+    let held_out = |m: &diffsvg::mesh::Mesh| -> diffsvg::Result<f64> {
+        let mut e = 0.0;
+        for (c, t) in &test {
+            e += mse(&View::new(m, c, opts.render)?.render(), t);
+        }
+        Ok(psnr_from_mse(e / test.len() as f64))
+    };
+    let start_psnr = held_out(&model)?;
+    install_interrupt_handler();
+    let bar = terminal_bar(a.quiet, a.iters, "steps");
+    let t = Instant::now();
+    let train_mse = fit(&mut model, &train, &opts, |s| {
+        if let Some(b) = &bar {
+            b.set_position(s.iter as u64);
+            b.set_message(format!("train PSNR {:.2} dB", psnr_from_mse(s.mse)));
+        } else if !a.quiet && (s.iter % 25 == 0) {
+            println!(
+                "step {:4}  train PSNR {:.2} dB",
+                s.iter,
+                psnr_from_mse(s.mse)
+            );
+        }
+        !interrupted()
+    })?;
+    let secs = t.elapsed().as_secs_f64();
+    if let Some(b) = bar {
+        b.finish_and_clear();
+    }
+    let end_psnr = held_out(&model)?;
+    write_obj(&model, &a.output)?;
+    println!(
+        "fitted {} triangles to {} views at {}² in {secs:.1} s ({} steps): train PSNR {:.2} dB, \
+         held-out PSNR {start_psnr:.2} → {end_psnr:.2} dB over {} views → {}",
+        model.triangles.len(),
+        a.views,
+        a.size,
+        a.iters,
+        psnr_from_mse(train_mse),
+        a.test_views,
+        a.output.display()
+    );
+    Ok(())
+}
+
+/// Runs `diffsvg bench mesh`: forward, and forward + backward, medians per thread count.
+pub fn run_bench(a: MeshBenchArgs) -> Result<()> {
+    check_size(a.size, 1)?;
+    if a.runs == 0 || a.runs > 1000 {
+        bail!("--runs {} must be between 1 and 1000", a.runs);
+    }
+    let path = a
+        .mesh
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("../shared/data/meshes/spot/spot.obj"));
+    let mesh = read_obj(&path)?;
+    let cam = orbit_cameras(&mesh, 8, a.size, 0.0)?[1];
+    let opts = RenderOptions {
+        background: Some([1.0; 3]),
+        ..RenderOptions::default()
+    };
+    println!(
+        "{}: {} triangles, {}² (median of {} runs)",
+        path.display(),
+        mesh.triangles.len(),
+        a.size,
+        a.runs
+    );
+    println!("| threads | forward ms | forward + backward ms |\n|---|---|---|");
+    for &n in &a.threads {
+        if n == 0 || n > 256 {
+            bail!("--threads {n} must be between 1 and 256");
+        }
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(n).build()?;
+        let (mut fwd, mut both) = (Vec::new(), Vec::new());
+        pool.install(|| -> Result<()> {
+            for _ in 0..a.runs + 1 {
+                let t = Instant::now();
+                let img = View::new(&mesh, &cam, opts)?.render();
+                let f = t.elapsed().as_secs_f64() * 1e3;
+                let mut d = img.clone();
+                for p in &mut d.data {
+                    *p = p.map(|v| v - 0.5);
+                }
+                let t = Instant::now();
+                let view = View::new(&mesh, &cam, opts)?;
+                let img2 = view.render();
+                let g = view.backward(&d, true)?;
+                let b = t.elapsed().as_secs_f64() * 1e3;
+                std::hint::black_box((&img2, &g));
+                fwd.push(f);
+                both.push(b);
+            }
+            Ok(())
+        })?;
+        // The first run warms the caches and the pool; it is left out.
+        println!(
+            "| {n} | {:.2} | {:.2} |",
+            median(&mut fwd[1..]),
+            median(&mut both[1..])
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,146 @@
+//! `diffsvg mesh render`, `mesh fit` and `bench mesh` on a tiny generated mesh (no data
+//! needed), and `mesh render` on spot when the shared data is there.
+
+use super::common::{assert_fails, diffsvg, s, scratch, shared_data, write};
+
+/// An octahedron with a red material: 6 vertices, 8 counter-clockwise faces.
+fn octahedron(dir: &std::path::Path) -> std::path::PathBuf {
+    write(dir, "octa.mtl", "newmtl red\nKd 0.9 0.1 0.1\n");
+    write(
+        dir,
+        "octa.obj",
+        "mtllib octa.mtl\nv 1 0 0\nv -1 0 0\nv 0 1 0\nv 0 -1 0\nv 0 0 1\nv 0 0 -1\nusemtl red\n\
+         f 1 3 5\nf 3 2 5\nf 2 4 5\nf 4 1 5\nf 3 1 6\nf 2 3 6\nf 4 2 6\nf 1 4 6\n",
+    )
+}
+
+#[test]
+fn mesh_render_draws_a_generated_mesh_and_refuses_bad_files() {
+    let d = scratch("mesh_render");
+    let obj = octahedron(&d);
+    let out = d.join("octa.png");
+    let r = diffsvg(&[
+        "mesh",
+        "render",
+        s(&obj),
+        "--orbit",
+        "2",
+        "--size",
+        "32",
+        "-o",
+        s(&out),
+    ]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let img = diffsvg::Image::load(&out).unwrap();
+    assert_eq!((img.width, img.height), (64, 32));
+    // Red inside, white around, and anti-aliased pixels between.
+    let red = img
+        .data
+        .iter()
+        .filter(|p| p[0] > 0.85 && p[1] < 0.15)
+        .count();
+    let white = img.data.iter().filter(|p| p[1] > 0.99).count();
+    let edge = img.data.iter().filter(|p| p[1] > 0.2 && p[1] < 0.8).count();
+    assert!(
+        red > 50 && white > 500 && edge > 10,
+        "{red} red, {white} white, {edge} edge"
+    );
+
+    let bad = write(&d, "bad.obj", "v 0 0 0\nv 1 0 0\nf 1 2 7\n");
+    let out2 = d.join("bad.png");
+    let r = diffsvg(&["mesh", "render", s(&bad), "-o", s(&out2)]);
+    assert_fails(&r, "bad.obj", "malformed obj", &out2);
+    let r = diffsvg(&["mesh", "render", s(&d.join("absent.obj")), "-o", s(&out2)]);
+    assert_fails(&r, "absent.obj", "no such file", &out2);
+}
+
+#[test]
+fn mesh_fit_moves_a_sphere_towards_a_generated_mesh_and_writes_an_obj() {
+    let d = scratch("mesh_fit");
+    let obj = octahedron(&d);
+    let out = d.join("fit.obj");
+    let r = diffsvg(&[
+        "mesh",
+        "fit",
+        s(&obj),
+        "--views",
+        "3",
+        "--test-views",
+        "2",
+        "--size",
+        "24",
+        "--iters",
+        "30",
+        "--subdivisions",
+        "1",
+        "--lr-positions",
+        "0.02",
+        "--lr-colors",
+        "0.05",
+        "--quiet",
+        "-o",
+        s(&out),
+    ]);
+    let stdout = String::from_utf8_lossy(&r.stdout);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    // "held-out PSNR A → B dB": the fit improves the held-out views.
+    let tail = stdout
+        .split("held-out PSNR ")
+        .nth(1)
+        .expect("held-out PSNR printed");
+    let nums: Vec<f64> = tail
+        .split(|c: char| !(c.is_ascii_digit() || c == '.'))
+        .filter_map(|t| t.parse().ok())
+        .take(2)
+        .collect();
+    assert!(nums[1] > nums[0] + 1.0, "{stdout}");
+    let fitted = diffsvg::mesh::read_obj(&out).unwrap();
+    assert_eq!(fitted.triangles.len(), 80);
+    assert!(fitted.colors.is_some(), "vertex colors written");
+}
+
+#[test]
+fn bench_mesh_prints_a_table() {
+    let d = scratch("mesh_bench");
+    let obj = octahedron(&d);
+    let r = diffsvg(&[
+        "bench",
+        "mesh",
+        s(&obj),
+        "--size",
+        "32",
+        "--runs",
+        "2",
+        "--threads",
+        "1,2",
+    ]);
+    let stdout = String::from_utf8_lossy(&r.stdout);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    assert_eq!(
+        stdout
+            .lines()
+            .filter(|l| l.starts_with("| 1 |") || l.starts_with("| 2 |"))
+            .count(),
+        2,
+        "{stdout}"
+    );
+}
+
+#[test]
+fn mesh_render_draws_spot() {
+    let Some(data) = shared_data("mesh_render_draws_spot") else {
+        return;
+    };
+    let spot = data.join("meshes/spot/spot.obj");
+    let d = scratch("mesh_spot");
+    let out = d.join("spot.png");
+    let r = diffsvg(&["mesh", "render", s(&spot), "--size", "64", "-o", s(&out)]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let img = diffsvg::Image::load(&out).unwrap();
+    let covered = img
+        .data
+        .iter()
+        .filter(|p| p[0] < 0.95 || p[2] < 0.95)
+        .count();
+    assert!(covered > 300, "{covered} pixels show the cow");
+}
