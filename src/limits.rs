@@ -85,6 +85,11 @@ pub const MAX_DASHES_PER_PATH: usize = 100_000;
 /// refused when the SVG is read, naming the file.
 pub const MAX_CONVOLVE_TAPS: usize = 4096;
 
+/// Most filter primitives on one group (over all its filters): rendering keeps each
+/// primitive's result, a layer-sized image of 16 bytes a pixel, for the backward pass; a
+/// group with more is refused when the SVG is read, naming the file.
+pub const MAX_FILTER_PRIMITIVES: usize = 256;
+
 /// Largest blur deviation evaluated exactly, device pixels
 /// ([`RenderOptions::exact_filters`](crate::raster::RenderOptions::exact_filters)): the
 /// exact kernel has `⌈5σ⌉` taps a side, each pixel reads at most the layer's side of

@@ -654,6 +654,13 @@ pub(crate) fn from_usvg(
 ) -> Result<Vec<Filter>, String> {
     use usvg::filter::Kind as K;
     let (sx, sy) = axis_scales(t);
+    let count: usize = filters.iter().map(|f| f.primitives().len()).sum();
+    if count > crate::limits::MAX_FILTER_PRIMITIVES {
+        return Err(format!(
+            "filters of {count} primitives on one element (limit {})",
+            crate::limits::MAX_FILTER_PRIMITIVES
+        ));
+    }
     let mut out = Vec::with_capacity(filters.len());
     for f in filters {
         let mut prims: Vec<FilterPrimitive> = Vec::new();

@@ -1344,6 +1344,21 @@ mod tests {
         check("chain", &[filter(vec![cut]), second]);
     }
 
+    /// A filter of more than `MAX_FILTER_PRIMITIVES` primitives is refused, naming the
+    /// file and the count, before anything is rendered.
+    #[test]
+    fn too_many_primitives_are_refused_by_name() {
+        let prims = "<feOffset dx=\"1\"/>".repeat(crate::limits::MAX_FILTER_PRIMITIVES + 1);
+        let svg = format!(
+            r#"<svg xmlns="http://www.w3.org/2000/svg" width="10" height="10">
+            <filter id="t">{prims}</filter>
+            <rect width="5" height="5" filter="url(#t)"/></svg>"#
+        );
+        let err = Scene::from_svg_str(&svg, "many.svg", Sizing::Natural).unwrap_err();
+        let msg = err.to_string();
+        assert!(msg.contains("many.svg") && msg.contains("257"), "{msg}");
+    }
+
     /// A convolution kernel past `MAX_CONVOLVE_TAPS` is refused, naming the file and the
     /// primitive, before anything is rendered.
     #[test]
