@@ -44,6 +44,22 @@ pub struct Ray {
     pub dir: Vec3,
 }
 
+/// Refuses training rays and colors of different or zero counts, or a color that is not
+/// finite: the check every ray-batch trainer (voxels, neural fields) starts with.
+pub(crate) fn check_rays_and_colors(rays: &[Ray], colors: &[[f32; 3]]) -> Result<(), String> {
+    if rays.is_empty() || rays.len() != colors.len() {
+        return Err(format!(
+            "{} rays and {} colors (need the same positive number)",
+            rays.len(),
+            colors.len()
+        ));
+    }
+    if let Some(i) = colors.iter().position(|c| !c.iter().all(|v| v.is_finite())) {
+        return Err(format!("color {i} is not finite: {:?}", colors[i]));
+    }
+    Ok(())
+}
+
 impl Ray {
     /// The point at distance `t` along the ray.
     pub fn at(&self, t: f32) -> Vec3 {

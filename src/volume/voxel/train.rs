@@ -264,16 +264,7 @@ pub fn train(
 }
 
 fn validate(rays: &[Ray], colors: &[[f32; 3]], o: &TrainOptions) -> Result<(), String> {
-    if rays.is_empty() || rays.len() != colors.len() {
-        return Err(format!(
-            "{} rays and {} colors (need the same positive number)",
-            rays.len(),
-            colors.len()
-        ));
-    }
-    if let Some(i) = colors.iter().position(|c| !c.iter().all(|v| v.is_finite())) {
-        return Err(format!("color {i} is not finite: {:?}", colors[i]));
-    }
+    super::super::check_rays_and_colors(rays, colors)?;
     if o.batch_size == 0 {
         return Err("batch_size is 0".into());
     }
