@@ -276,8 +276,8 @@ mod tests {
         }
     }
 
-    /// Area of (triangle 0 ∩ pixel) minus triangle 1, as a function of the vertices.
-    fn visible(sv: &[[f64; 2]]) -> f64 {
+    /// The pieces of (triangle 0 ∩ pixel) minus triangle 1.
+    fn visible_pieces(sv: &[[f64; 2]]) -> Vec<Poly> {
         let b = pixel_box(0.0, 0.0);
         let mut t = b.clone();
         let mut tmp = Poly::new();
@@ -293,25 +293,16 @@ mod tests {
             &mut pieces,
             0.0,
         );
-        pieces.iter().map(|p| area(p)).sum()
+        pieces
+    }
+
+    /// Area of (triangle 0 ∩ pixel) minus triangle 1, as a function of the vertices.
+    fn visible(sv: &[[f64; 2]]) -> f64 {
+        visible_pieces(sv).iter().map(|p| area(p)).sum()
     }
 
     fn visible_grad(sv: &[[f64; 2]]) -> Vec<[f64; 2]> {
-        let b = pixel_box(0.0, 0.0);
-        let mut t = b.clone();
-        let mut tmp = Poly::new();
-        for k in 0..3u32 {
-            clip(&t, Line::Edge(k, (k + 1) % 3), 1.0, sv, &mut tmp);
-            std::mem::swap(&mut t, &mut tmp);
-        }
-        let mut pieces = Vec::new();
-        subtract(
-            &t,
-            &[Line::Edge(3, 4), Line::Edge(4, 5), Line::Edge(5, 3)],
-            sv,
-            &mut pieces,
-            0.0,
-        );
+        let pieces = visible_pieces(sv);
         let mut g = Dense(vec![[0.0; 2]; sv.len()]);
         for p in &pieces {
             area_backward(p, 1.0, sv, &mut g);
