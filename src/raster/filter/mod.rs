@@ -178,8 +178,13 @@ impl Frame {
     /// (the adjoint).
     fn moved(&self, px: &[[f32; 4]], dx: f64, dy: f64, exact: bool, back: bool) -> Vec<[f32; 4]> {
         let sign = if back { -1 } else { 1 };
+        let shifts = Frame::shifts(dx, dy, exact);
+        // A whole shift (resvg's always) is a copy: no weighted sum.
+        if let [(x, y, 1.0)] = shifts[..] {
+            return self.shift(px, sign * x, sign * y);
+        }
         let mut out = vec![[0.0f32; 4]; px.len()];
-        for (x, y, wgt) in Frame::shifts(dx, dy, exact) {
+        for (x, y, wgt) in shifts {
             let s = self.shift(px, sign * x, sign * y);
             for (o, v) in out.iter_mut().zip(&s) {
                 for c in 0..4 {
