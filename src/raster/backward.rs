@@ -286,7 +286,7 @@ pub fn backward_with_stats(
         "gradient image size must match the canvas"
     );
     let (mut grad, stats) = device_backward(scene, p, d_image);
-    crate::scene::transform::chain_gradient(scene, &mut grad);
+    crate::scene::params::parameter_gradient(scene, &mut grad);
     (grad, stats)
 }
 
@@ -340,7 +340,7 @@ pub fn render_and_backward_fused(scene: &Scene, p: &Prepared, loss: &dyn BandLos
         (d, sums)
     });
     let mut grad = out.grad;
-    crate::scene::transform::chain_gradient(scene, &mut grad);
+    crate::scene::params::parameter_gradient(scene, &mut grad);
     Fused {
         image,
         sums: out.sums,

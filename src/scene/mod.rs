@@ -50,6 +50,7 @@ mod project;
 pub mod random;
 pub mod shape;
 pub mod structure;
+pub mod tiling;
 pub(crate) mod svg_in;
 pub(crate) mod svg_out;
 mod svg_out_filter;
@@ -60,6 +61,7 @@ pub use params::{ParamGroup, ParamLayout, ParamSlot};
 pub use project::project;
 pub use shape::{Primitive, Shape};
 pub use structure::Structure;
+pub use tiling::Tiling;
 pub use svg_in::{Sizing, from_tree, parse_tree, parse_tree_with};
 pub use svg_out::escape;
 
@@ -161,6 +163,9 @@ pub struct Group {
     /// filter): its children are drawn as if they were its parent's, and it has no
     /// opacity slot.
     pub layer: bool,
+    /// For a shape's pattern paint: how the children, the pattern's tiles, are laid out;
+    /// they are copies of the first tile and share its parameters ([`tiling`]).
+    pub tiling: Option<Box<Tiling>>,
 }
 
 impl Group {
@@ -177,6 +182,7 @@ impl Group {
             filters: Vec::new(),
             transform: None,
             layer: true,
+            tiling: None,
         }
     }
 
@@ -771,6 +777,25 @@ pub(crate) fn paths_of<'a>(nodes: &'a [Node], role: Role, f: &mut impl FnMut(&'a
     }
 }
 
+/// Calls `f` on every path under `nodes` in paint order (as [`paths_of`]), mutably.
+pub(crate) fn paths_of_mut(nodes: &mut [Node], f: &mut impl FnMut(&mut Path)) {
+    fn group(g: &mut Group, f: &mut impl FnMut(&mut Path)) {
+        paths_of_mut(&mut g.children, f);
+        if let Some(c) = &mut g.clip {
+            group(&mut c.content, f);
+        }
+        if let Some(m) = &mut g.mask {
+            group(&mut m.content, f);
+        }
+    }
+    for n in nodes {
+        match n {
+            Node::Path(p) => f(p),
+            Node::Group(g) => group(g, f),
+        }
+    }
+}
+
 impl Scene {
     /// An empty scene of the given size.
     pub fn new(width: u32, height: u32) -> Self {
@@ -794,24 +819,7 @@ impl Scene {
 
     /// Calls `f` on every path in paint order (depth first), mutably.
     pub fn for_each_path_mut(&mut self, mut f: impl FnMut(&mut Path)) {
-        fn walk(nodes: &mut [Node], f: &mut impl FnMut(&mut Path)) {
-            for n in nodes {
-                match n {
-                    Node::Path(p) => f(p),
-                    Node::Group(g) => group(g, f),
-                }
-            }
-        }
-        fn group(g: &mut Group, f: &mut impl FnMut(&mut Path)) {
-            walk(&mut g.children, f);
-            if let Some(c) = &mut g.clip {
-                group(&mut c.content, f);
-            }
-            if let Some(m) = &mut g.mask {
-                group(&mut m.content, f);
-            }
-        }
-        walk(&mut self.nodes, &mut f);
+        paths_of_mut(&mut self.nodes, &mut f);
     }
 
     /// Number of paths in the scene.
@@ -826,36 +834,7 @@ impl Scene {
     pub fn scale_to(&mut self, s: f64, width: u32, height: u32) {
         self.width = width;
         self.height = height;
-        let st: Affine = [s, 0.0, 0.0, s, 0.0, 0.0];
-        fn scale_paint(p: &mut Paint, st: &Affine) {
-            match p {
-                Paint::Gradient(g) => g.transform = concat(st, &g.transform),
-                Paint::Image(i) => i.transform = concat(st, &i.transform),
-                Paint::Solid(_) => {}
-            }
-        }
-        self.for_each_path_mut(|p| {
-            for q in &mut p.points {
-                q[0] *= s;
-                q[1] *= s;
-            }
-            if let Some(prim) = &mut p.primitive {
-                prim.scale(s);
-                p.sync_primitive();
-            }
-            if let Some(f) = &mut p.fill {
-                scale_paint(&mut f.paint, &st);
-            }
-            if let Some(st_) = &mut p.stroke {
-                scale_paint(&mut st_.paint, &st);
-                // The frame maps frame units to device units: scale it, keep the width.
-                for v in &mut st_.frame {
-                    *v *= s;
-                }
-                st_.normalize_frame();
-            }
-        });
-        transform::scale_outermost(&mut self.nodes, s);
+        tiling::map_nodes(&mut self.nodes, s, [0.0; 2]);
     }
 }
 

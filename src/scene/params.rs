@@ -43,6 +43,7 @@
 //! ```
 
 use super::geom::{add_scaled, scale};
+use super::tiling::TileSlots;
 use super::{GradientKind, Node, Paint, Path, Point, Role, Scene, SegmentKind};
 
 /// What kind of quantity a parameter is; the optimizer gives each group its own learning
@@ -197,21 +198,37 @@ pub(crate) enum Part {
 }
 
 /// Visits every parameter of `scene` in the canonical order. `f` receives the owner index
-/// (into [`ParamLayout::owners`]), the group, what the slot is, and the value.
-pub(crate) fn walk(scene: &mut Scene, f: &mut dyn FnMut(usize, ParamGroup, Part, &mut f64)) {
+/// (into [`ParamLayout::owners`]), the group, what the slot is, and the value. Returns
+/// where each tiled group's tiles' slots are ([`tiling`](super::tiling)), in post-order.
+pub(crate) fn walk(
+    scene: &mut Scene,
+    f: &mut dyn FnMut(usize, ParamGroup, Part, &mut f64),
+) -> Vec<TileSlots> {
+    let count = std::cell::Cell::new(0usize);
+    let mut counted = |o: usize, g: ParamGroup, p: Part, v: &mut f64| {
+        count.set(count.get() + 1);
+        f(o, g, p, v)
+    };
     let mut w = Walk {
-        f,
+        f: &mut counted,
+        count: &count,
+        tiles: Vec::new(),
         owner: 0,
         path_ix: 0,
         group_ix: 0,
         transform_ix: 0,
     };
     w.nodes(&mut scene.nodes, Role::Paint);
+    w.tiles
 }
 
 /// The counters of [`walk`].
 struct Walk<'a> {
     f: &'a mut dyn FnMut(usize, ParamGroup, Part, &mut f64),
+    /// Slots visited so far.
+    count: &'a std::cell::Cell<usize>,
+    /// The tiled groups' slots met so far.
+    tiles: Vec<TileSlots>,
     owner: usize,
     path_ix: usize,
     group_ix: usize,
@@ -273,7 +290,27 @@ impl Walk<'_> {
     /// A group's children, then its clip path's shapes, then its mask's content (the
     /// order of [`Scene::for_each_path`]).
     fn layers(&mut self, g: &mut super::Group, role: Role) {
-        self.nodes(&mut g.children, role);
+        match g.tiling.as_ref().map(|t| t.per_tile) {
+            // Tile by tile, noting where each starts; equal tiles have equal lengths.
+            Some(n) if n > 0 => {
+                let mut starts = Vec::new();
+                for tile in g.children.chunks_mut(n) {
+                    starts.push(self.count.get());
+                    self.nodes(tile, role);
+                }
+                let len = starts.get(1).map_or(0, |s| s - starts[0]);
+                let equal = starts.windows(2).all(|w| w[1] - w[0] == len)
+                    && self.count.get() - starts[starts.len() - 1] == len;
+                if starts.len() > 1 && equal {
+                    self.tiles.push(TileSlots {
+                        start: starts[0],
+                        len,
+                        tiles: starts.len(),
+                    });
+                }
+            }
+            _ => self.nodes(&mut g.children, role),
+        }
         if let Some(c) = &mut g.clip {
             self.layers(&mut c.content, Role::Clip);
         }
@@ -537,7 +574,21 @@ impl Scene {
             p.join_closing_points();
         });
         super::transform::globalize(&mut self.nodes);
+        super::tiling::retile(&mut self.nodes);
     }
+}
+
+/// Turns the gradient of every slot's device value (what the backward pass computes) into
+/// the gradient of the parameter vector: each pattern tile's copy is added to its tile 0
+/// ([`tiling`](super::tiling)), then the content of transformed groups is carried into
+/// their frames ([`chain_gradient`](super::transform::chain_gradient)).
+pub(crate) fn parameter_gradient(scene: &Scene, grad: &mut [f64]) {
+    if super::tiling::any(&scene.nodes) {
+        let mut s = scene.clone();
+        let tiles = walk(&mut s, &mut |_, _, _, _| {});
+        super::tiling::tie_gradients(&tiles, grad);
+    }
+    super::transform::chain_gradient(scene, grad);
 }
 
 /// Moves the gradient of each closing point that is its subpath's start

@@ -780,6 +780,9 @@ struct Ctx<'a> {
     /// pixels (the identity outside any): a group's parameter is its transform relative
     /// to it ([`GroupTransform`]).
     frame: std::cell::Cell<Affine>,
+    /// Converting a pattern's content: its groups' transforms stay baked (a tile's copies
+    /// are moved by translation, and a written pattern's content is read back the same).
+    in_pattern: std::cell::Cell<bool>,
 }
 
 impl Ctx<'_> {
@@ -865,6 +868,7 @@ pub fn from_tree(tree: &usvg::Tree, name: &FsPath, sizing: Sizing) -> Result<Sce
         pattern_tiles: std::cell::Cell::new(0),
         pattern_shapes: std::cell::Cell::new(0),
         frame: std::cell::Cell::new(IDENTITY),
+        in_pattern: std::cell::Cell::new(false),
     };
     let mut scene = Scene::new(w, h);
     let mut t = concat(&ctx.root, &to_affine(tree.root().transform()));
@@ -921,6 +925,7 @@ fn convert_group_children(g: &usvg::Group, ctx: &Ctx, t: &Affine, role: Role) ->
                 // One shape carries its own parameters (and usvg puts a shape's own
                 // `transform` on a group of its own): two or more make a parameter worth it.
                 let movable = role == Role::Paint
+                    && !ctx.in_pattern.get()
                     && !g.transform().is_identity()
                     && shapes_in(g, 2) >= 2
                     && movable_group(g)
@@ -987,6 +992,7 @@ fn convert_group_children(g: &usvg::Group, ctx: &Ctx, t: &Affine, role: Role) ->
                     filters,
                     transform,
                     layer: true,
+                    tiling: None,
                 };
                 // A layer composited source-over at full opacity, unclipped and
                 // unmasked, changes nothing (`isolation: isolate` alone): no layer, and
@@ -1578,8 +1584,10 @@ fn patterned_layer(
     ctx: &Ctx,
     t: &Affine,
 ) -> Result<Node> {
-    let mut layer = Group::new(pat.id(), opacity, pattern_tiles(pat, bounds, ctx, t)?);
+    let (tiles, tiling) = pattern_tiles(pat, bounds, ctx, t)?;
+    let mut layer = Group::new(pat.id(), opacity, tiles);
     layer.clip = Some(Box::new(Clip::of_shape(shape)));
+    layer.tiling = tiling.map(Box::new);
     Ok(Node::Group(layer))
 }
 
@@ -1603,16 +1611,18 @@ fn rect_clip(t: &Affine, [x0, y0, x1, y1]: [f64; 4]) -> Box<Clip> {
 /// The tiles of `pat` (drawn in the user space `t` maps to device pixels) that cover the
 /// device box `bounds`, each its content placed at its cell and clipped to it unless the
 /// content stays inside. Like resvg, a tile smaller than half a device pixel draws
-/// nothing; more than [`MAX_PATTERN_TILES`] tiles in the drawing are refused.
+/// nothing; more than [`MAX_PATTERN_TILES`] tiles in the drawing are refused. When the
+/// content translates exactly, the tiles are copies of the first and the layout is
+/// returned ([`Tiling`](super::Tiling)); otherwise each tile is converted on its own.
 fn pattern_tiles(
     pat: &usvg::Pattern,
     bounds: [f64; 4],
     ctx: &Ctx,
     t: &Affine,
-) -> Result<Vec<Node>> {
+) -> Result<(Vec<Node>, Option<super::Tiling>)> {
     let pt = concat(t, &to_affine(pat.transform()));
     let Some(inv) = super::invert(&pt) else {
-        return Ok(Vec::new());
+        return Ok((Vec::new(), None));
     };
     let r = pat.rect();
     let (rx, ry, rw, rh) = (
@@ -1624,7 +1634,7 @@ fn pattern_tiles(
     let (sx, sy) = (pt[0].hypot(pt[1]), pt[2].hypot(pt[3]));
     let (pw, ph) = ((rw * sx).round(), (rh * sy).round());
     if pw < 1.0 || ph < 1.0 {
-        return Ok(Vec::new());
+        return Ok((Vec::new(), None));
     }
     // resvg draws a tile into a pixmap of whole device pixels and repeats that: the
     // period (and the cell the content is clipped to) is the tile's size rounded to
@@ -1683,25 +1693,47 @@ fn pattern_tiles(
         inside &=
             b[0] - reach >= 0.0 && b[1] - reach >= 0.0 && b[2] + reach <= rw && b[3] + reach <= rh;
     });
-    let mut tiles = Vec::new();
-    for j in (j0 as i64)..(j1 as i64) {
-        for i in (i0 as i64)..(i1 as i64) {
-            let cell: Affine = [1.0, 0.0, 0.0, 1.0, rx + i as f64 * rw, ry + j as f64 * rh];
-            let tt = concat(&pt, &cell);
-            let children = convert_group_children(pat.root(), ctx, &tt, Role::Paint)?;
-            if children.is_empty() {
-                continue;
-            }
-            if inside {
-                tiles.extend(children);
-                continue;
-            }
-            let mut tile = Group::new("", 1.0, children);
-            tile.clip = Some(rect_clip(&tt, [0.0, 0.0, rw, rh]));
-            tiles.push(Node::Group(tile));
+    let mut tiling = super::Tiling {
+        transform: pt,
+        cell: [rx, ry, rw, rh],
+        cells: ((j0 as i64)..(j1 as i64))
+            .flat_map(|j| ((i0 as i64)..(i1 as i64)).map(move |i| [i, j]))
+            .collect(),
+        per_tile: 0,
+        clipped: !inside,
+    };
+    // One tile: the content placed at its cell, clipped to it unless it stays inside.
+    let tile = |tiling: &super::Tiling, cell: [i64; 2]| -> Result<Vec<Node>> {
+        let tt = tiling.tile_transform(cell);
+        let outer = ctx.in_pattern.replace(true);
+        let children = convert_group_children(pat.root(), ctx, &tt, Role::Paint);
+        ctx.in_pattern.set(outer);
+        let children = children?;
+        if inside || children.is_empty() {
+            return Ok(children);
         }
+        let mut tile = Group::new("", 1.0, children);
+        tile.clip = Some(rect_clip(&tt, [0.0, 0.0, rw, rh]));
+        Ok(vec![Node::Group(tile)])
+    };
+    let Some(&first) = tiling.cells.first() else {
+        return Ok((Vec::new(), None));
+    };
+    let first = tile(&tiling, first)?;
+    if first.is_empty() {
+        return Ok((Vec::new(), None));
     }
-    Ok(tiles)
+    if super::tiling::translatable(&first) {
+        // Copies of the first tile, moved: `Scene::set_params` keeps them so.
+        tiling.per_tile = first.len();
+        let tiles = super::tiling::copies(&first, &tiling);
+        return Ok((tiles, Some(tiling)));
+    }
+    let mut tiles = first;
+    for &cell in &tiling.cells[1..] {
+        tiles.extend(tile(&tiling, cell)?);
+    }
+    Ok((tiles, None))
 }
 
 #[cfg(test)]

@@ -52,6 +52,9 @@ struct Writer {
     /// While writing a clip path's shapes, the clip path (and its id) of the group they
     /// are in, which each shape carries.
     clip_ref: Option<(String, Box<Clip>)>,
+    /// The pattern the next shape written is painted with (its fill, or its stroke when it
+    /// has no fill): the tiling and tile 0's content, written in device pixels.
+    pattern: Option<(String, super::Tiling, String)>,
 }
 
 /// The device-space rectangle `[x0, y0, x1, y1]` a clip content is, when it is one
@@ -195,6 +198,7 @@ impl Writer {
                     self.nodes(&g.children, indent);
                     self.clip_ref = outer;
                 }
+                Node::Group(g) if self.pattern_layer(g, indent) => {}
                 Node::Group(g) => {
                     let pad = "  ".repeat(indent);
                     let mut attrs = String::new();
@@ -224,6 +228,67 @@ impl Writer {
                 },
             }
         }
+    }
+
+    /// Writes a tiled group ([`Tiling`](super::Tiling)) back as its shape painted with a
+    /// `<pattern>` made of tile 0, and returns `true`; `false` (nothing written) for any
+    /// other group.
+    fn pattern_layer(&mut self, g: &Group, indent: usize) -> bool {
+        let (Some(t), Some(c)) = (&g.tiling, &g.clip) else {
+            return false;
+        };
+        let [Node::Path(shape)] = c.content.children.as_slice() else {
+            return false;
+        };
+        let plain = g.mask.is_none()
+            && g.blend == BlendMode::Normal
+            && g.filters.is_empty()
+            && c.content.clip.is_none()
+            && g.transform.is_none();
+        if !plain || t.per_tile == 0 || g.children.len() != t.per_tile * t.cells.len() {
+            return false;
+        }
+        // Tile 0's content without its cell's clip (the pattern clips each tile).
+        let mut content: Vec<Node> = Vec::new();
+        for n in &g.children[..t.per_tile] {
+            match n {
+                Node::Group(tile) if t.clipped => content.extend(tile.children.iter().cloned()),
+                _ => content.push(n.clone()),
+            }
+        }
+        let body = self.detached(&content, 4, false);
+        let id = self.unique_id(if g.id.is_empty() { "pattern" } else { &g.id });
+        let mut shape = shape.clone();
+        let opacity = g.opacity.clamp(0.0, 1.0);
+        match (&mut shape.fill, &mut shape.stroke) {
+            (Some(f), _) => f.opacity = opacity,
+            (None, Some(s)) => s.opacity = opacity,
+            (None, None) => return false,
+        }
+        self.pattern = Some((id, (**t).clone(), body));
+        self.path(&shape, indent);
+        self.pattern = None;
+        true
+    }
+
+    /// Writes the pending pattern ([`Writer::pattern`]) to the defs for a shape whose
+    /// user space `to_local` maps device pixels to; returns the paint's value.
+    fn pattern_paint(&mut self, to_local: &Affine) -> String {
+        let Some((id, t, body)) = self.pattern.take() else {
+            return "none".to_string();
+        };
+        let matrix = |m: &Affine| format!("matrix({} {} {} {} {} {})", m[0], m[1], m[2], m[3], m[4], m[5]);
+        // The content is in device pixels: the tile at `cells[0]` maps it back into its
+        // cell's frame.
+        let to_tile = invert(&t.tile_transform(t.cells[0])).unwrap_or(super::IDENTITY);
+        let [x, y, w, h] = t.cell;
+        let _ = write!(
+            self.defs,
+            "    <pattern id=\"{id}\" patternUnits=\"userSpaceOnUse\" x=\"{x}\" y=\"{y}\" width=\"{w}\" height=\"{h}\" patternTransform=\"{}\">\n      <g transform=\"{}\">\n{body}      </g>\n    </pattern>\n",
+            matrix(&concat(to_local, &t.transform)),
+            matrix(&to_tile),
+        );
+        format!("url(#{id})")
     }
 
     /// The `clip-path`, `mask` and blend attributes of a layer (its clip path and mask
@@ -452,8 +517,10 @@ impl Writer {
         };
         // Exact colors beside the 8-bit ones are found by the shape's id.
         use super::exact_color::{FILL, STROKE, attribute};
+        // A patterned shape's black stand-in paint is not written.
+        let patterned = self.pattern.is_some();
         let solid = |paint: Option<&Paint>| match paint {
-            Some(Paint::Solid(c)) => Some(*c),
+            Some(Paint::Solid(c)) if !patterned => Some(*c),
             _ => None,
         };
         let exact = [
@@ -478,7 +545,10 @@ impl Writer {
         }
         match &p.fill {
             Some(f) => {
-                let v = self.paint(&f.paint, &to_local);
+                let v = match patterned {
+                    true => self.pattern_paint(&to_local),
+                    false => self.paint(&f.paint, &to_local),
+                };
                 let _ = write!(attrs, " fill=\"{v}\"{}", exact[0]);
                 if f.opacity < 1.0 {
                     let _ = write!(
@@ -502,7 +572,10 @@ impl Writer {
             None => attrs.push_str(" fill=\"none\""),
         }
         if let Some(s) = &p.stroke {
-            let v = self.paint(&s.paint, &to_local);
+            let v = match patterned && p.fill.is_none() {
+                true => self.pattern_paint(&to_local),
+                false => self.paint(&s.paint, &to_local),
+            };
             let _ = write!(
                 attrs,
                 " stroke=\"{v}\"{} stroke-width=\"{}\"",
@@ -685,6 +758,7 @@ impl Scene {
             next_id: 0,
             in_clip: false,
             clip_ref: None,
+            pattern: None,
         };
         // Reserve path and group ids so that gradient ids do not collide with them.
         fn reserve(nodes: &[Node], ids: &mut HashSet<String>) {

@@ -263,27 +263,28 @@ fn globalize_layer(g: &mut Group) {
     }
 }
 
-/// Scales the outermost transforms under `nodes` by `k > 0` about the device origin, when
-/// the caller scales the device values of their content by `k` too
-/// ([`Scene::scale_to`](super::Scene::scale_to)); nested transforms are relative and stay.
-pub(crate) fn scale_outermost(nodes: &mut [Node], k: f64) {
+/// Maps the outermost transforms under `nodes` by `x ↦ k·x + d` (`k > 0`) in device
+/// pixels, when the caller maps the device values of their content the same way
+/// ([`Scene::scale_to`](super::Scene::scale_to), a pattern's tiles); nested transforms are
+/// relative and stay.
+pub(crate) fn map_outermost(nodes: &mut [Node], k: f64, d: Point) {
     for n in nodes {
         if let Node::Group(g) = n {
             match &mut g.transform {
                 Some(t) => {
-                    // `k·(S·R·(x − p) + p + t) = k·S·R·(x − p) + p + (k·(p + t) − p)`.
+                    // `k·(S·R·(x − p) + p + t) + d = k·S·R·(x − p) + p + (k·(p + t) + d − p)`.
                     for i in 0..2 {
-                        t.translate[i] = k * (t.pivot[i] + t.translate[i]) - t.pivot[i];
+                        t.translate[i] = k * (t.pivot[i] + t.translate[i]) + d[i] - t.pivot[i];
                     }
                     t.scale *= k;
                 }
                 None => {
-                    scale_outermost(&mut g.children, k);
+                    map_outermost(&mut g.children, k, d);
                     if let Some(c) = &mut g.clip {
-                        scale_outermost(&mut c.content.children, k);
+                        map_outermost(&mut c.content.children, k, d);
                     }
                     if let Some(m) = &mut g.mask {
-                        scale_outermost(&mut m.content.children, k);
+                        map_outermost(&mut m.content.children, k, d);
                     }
                 }
             }

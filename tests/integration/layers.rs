@@ -334,7 +334,7 @@ fn pattern_gradients_reach_the_tiles() {
         <path id="a" d="M 3 3 C 20 0 38 8 36 32 L 6 33 Z" fill="url(#p)" fill-opacity="0.8"
               stroke="url(#p)" stroke-width="3"/></svg>"#,
     );
-    // Several tiles, each a copy of the content with its own parameters.
+    // Several tiles, copies of the first sharing its parameters (`scene::tiling`).
     assert!(s.path_count() > 8, "{}", s.path_count());
     assert_agrees(
         "pattern",
