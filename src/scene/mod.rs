@@ -50,10 +50,10 @@ mod project;
 pub mod random;
 pub mod shape;
 pub mod structure;
-pub mod tiling;
 pub(crate) mod svg_in;
 pub(crate) mod svg_out;
 mod svg_out_filter;
+pub mod tiling;
 pub mod transform;
 
 pub use fonts::Fonts;
@@ -61,9 +61,9 @@ pub use params::{ParamGroup, ParamLayout, ParamSlot};
 pub use project::project;
 pub use shape::{Primitive, Shape};
 pub use structure::Structure;
-pub use tiling::Tiling;
 pub use svg_in::{Sizing, from_tree, parse_tree, parse_tree_with};
 pub use svg_out::escape;
+pub use tiling::Tiling;
 
 /// A 2D point or vector in device pixels.
 pub type Point = [f64; 2];

@@ -1690,8 +1690,13 @@ fn pattern_tiles(
             .stroke
             .as_ref()
             .map_or(0.0, |s| s.width.abs() * s.miter_limit.max(1.0));
-        inside &=
-            b[0] - reach >= 0.0 && b[1] - reach >= 0.0 && b[2] + reach <= rw && b[3] + reach <= rh;
+        // Within `f32` noise of the cell's sides (usvg's object-bounding-box units give
+        // `0.2 · 160 = 32.000004` for a cell 32 wide): clipping there would only add seams.
+        let eps = 1e-5 * rw.max(rh);
+        inside &= b[0] - reach >= -eps
+            && b[1] - reach >= -eps
+            && b[2] + reach <= rw + eps
+            && b[3] + reach <= rh + eps;
     });
     let mut tiling = super::Tiling {
         transform: pt,

@@ -277,7 +277,12 @@ impl Writer {
         let Some((id, t, body)) = self.pattern.take() else {
             return "none".to_string();
         };
-        let matrix = |m: &Affine| format!("matrix({} {} {} {} {} {})", m[0], m[1], m[2], m[3], m[4], m[5]);
+        let matrix = |m: &Affine| {
+            format!(
+                "matrix({} {} {} {} {} {})",
+                m[0], m[1], m[2], m[3], m[4], m[5]
+            )
+        };
         // The content is in device pixels: the tile at `cells[0]` maps it back into its
         // cell's frame.
         let to_tile = invert(&t.tile_transform(t.cells[0])).unwrap_or(super::IDENTITY);

@@ -67,7 +67,9 @@ pub(crate) fn any(nodes: &[Node]) -> bool {
             || g.clip.as_ref().is_some_and(|c| group(&c.content))
             || g.mask.as_ref().is_some_and(|m| group(&m.content))
     }
-    nodes.iter().any(|n| matches!(n, Node::Group(g) if group(g)))
+    nodes
+        .iter()
+        .any(|n| matches!(n, Node::Group(g) if group(g)))
 }
 
 /// Whether `nodes` can be moved exactly by a device translation ([`map_nodes`]): nothing
@@ -338,7 +340,11 @@ mod tests {
         for i in t.start + t.len..t.start + 2 * t.len {
             assert_eq!((grad[i], num[i]), (0.0, 0.0), "copy slot {i}");
         }
-        assert!(grad[t.start..t.start + t.len].iter().any(|g| g.abs() > 1e-6));
+        assert!(
+            grad[t.start..t.start + t.len]
+                .iter()
+                .any(|g| g.abs() > 1e-6)
+        );
     }
 
     /// Written back, a tiled group is a `<pattern>` holding tile 0, read back as the same

@@ -259,8 +259,8 @@ fn assert_round_trip(a: &Scene, path: &std::path::Path) -> String {
     text
 }
 
-/// Every supported file of resvg's masking, blend, isolation, marker and paint-order
-/// folders reads back from diffsvg's SVG out with the same pixels.
+/// Every supported file of resvg's masking, blend, isolation, marker, paint-order and
+/// pattern folders reads back from diffsvg's SVG out with the same pixels.
 #[test]
 fn layers_survive_a_round_trip_on_resvgs_suite() {
     let Some(data) = shared_data("layers_survive_a_round_trip_on_resvgs_suite") else {
@@ -275,6 +275,7 @@ fn layers_survive_a_round_trip_on_resvgs_suite() {
         "painting/isolation",
         "painting/marker",
         "painting/paint-order",
+        "paint-servers/pattern",
     ];
     let mut checked = 0;
     for f in folders {
