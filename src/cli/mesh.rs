@@ -10,13 +10,13 @@ use super::progress::{install_interrupt_handler, interrupted, terminal_bar};
 use diffsvg::Image;
 use diffsvg::image_io::{check_output, side_by_side};
 use diffsvg::mesh::fit::{FitOptions, fit, mse, orbit_cameras, sphere_around};
-use diffsvg::mesh::{RenderOptions, View, read_obj, write_obj};
+use diffsvg::mesh::{RenderOptions, View, read_mesh, write_obj};
 use diffsvg::metrics::{median, psnr_from_mse};
 
 /// Mesh commands.
 #[derive(clap::Subcommand, Debug)]
 pub enum MeshCommand {
-    /// Render an OBJ mesh from orbit cameras around its bounds (exact box-filtered
+    /// Render a mesh (OBJ or glTF) from orbit cameras around its bounds (exact box-filtered
     /// anti-aliasing); several views are laid out side by side.
     Render(RenderArgs),
     /// Fit an icosphere's vertex positions and vertex colors to renders of a reference
@@ -34,7 +34,8 @@ pub struct MeshArgs {
 /// Arguments of `diffsvg mesh render`.
 #[derive(clap::Args, Debug)]
 pub struct RenderArgs {
-    /// OBJ file (with its MTL and texture).
+    /// Mesh file: OBJ (with its MTL and texture), or glTF 2.0 (`.gltf` with its buffers and
+    /// images, `.glb`).
     mesh: PathBuf,
     /// Number of orbit views.
     #[arg(long, default_value_t = 1)]
@@ -56,7 +57,7 @@ pub struct RenderArgs {
 /// Arguments of `diffsvg mesh fit`.
 #[derive(clap::Args, Debug)]
 pub struct FitArgs {
-    /// Reference OBJ file, rendered from the training and held-out views.
+    /// Reference mesh (OBJ, `.gltf` or `.glb`), rendered from the training and held-out views.
     reference: PathBuf,
     /// Training views on an orbit.
     #[arg(long, default_value_t = 20)]
@@ -93,7 +94,7 @@ pub struct FitArgs {
 /// Arguments of `diffsvg bench mesh`.
 #[derive(clap::Args, Debug)]
 pub struct MeshBenchArgs {
-    /// OBJ file (default: ../shared/data/meshes/spot/spot.obj).
+    /// Mesh file, OBJ or glTF (default: ../shared/data/meshes/spot/spot.obj).
     mesh: Option<PathBuf>,
     /// Image side, pixels.
     #[arg(long, default_value_t = 256)]
@@ -127,7 +128,7 @@ fn check_size(size: u32, views: usize) -> Result<()> {
 fn run_render(a: RenderArgs) -> Result<()> {
     check_size(a.size, a.orbit)?;
     check_output(&a.output, "png")?;
-    let mesh = read_obj(&a.mesh)?;
+    let mesh = read_mesh(&a.mesh)?;
     let opts = RenderOptions {
         background: (!a.transparent).then_some([1.0; 3]),
         cull_back_faces: !a.no_cull,
@@ -165,7 +166,7 @@ fn run_fit(a: FitArgs) -> Result<()> {
         bail!("--subdivisions {} must be at most 6", a.subdivisions);
     }
     check_output(&a.output, "obj")?;
-    let reference = read_obj(&a.reference)?;
+    let reference = read_mesh(&a.reference)?;
     let opts = FitOptions {
         iters: a.iters,
         lr_positions: a.lr_positions,
@@ -235,7 +236,7 @@ pub fn run_bench(a: MeshBenchArgs) -> Result<()> {
         .mesh
         .clone()
         .unwrap_or_else(|| PathBuf::from("../shared/data/meshes/spot/spot.obj"));
-    let mesh = read_obj(&path)?;
+    let mesh = read_mesh(&path)?;
     let cam = orbit_cameras(&mesh, 8, a.size, 0.0)?[1];
     let opts = RenderOptions {
         background: Some([1.0; 3]),

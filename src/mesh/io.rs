@@ -15,6 +15,19 @@ fn invalid(path: &Path, what: impl Into<String>) -> Error {
     }
 }
 
+/// Reads a mesh by its file's extension: glTF (`.gltf`, `.glb`, [`read_gltf`](super::read_gltf))
+/// or otherwise OBJ ([`read_obj`]).
+pub fn read_mesh(path: &Path) -> Result<Mesh> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    match ext.as_deref() {
+        Some("gltf" | "glb") => super::read_gltf(path),
+        _ => read_obj(path),
+    }
+}
+
 /// Counts `v`, `vt` and fanned `f` triangles in an OBJ's text, to refuse a file past the
 /// limits before the parser allocates.
 fn count_obj(text: &str) -> (usize, usize) {

@@ -29,11 +29,13 @@
 
 pub mod fit;
 mod geom;
+mod gltf;
 mod io;
 pub mod render;
 mod shapes;
 
-pub use io::{read_obj, write_obj};
+pub use gltf::read_gltf;
+pub use io::{read_mesh, read_obj, write_obj};
 pub use render::{MeshGrad, RenderOptions, View, render, render_backward};
 pub use shapes::icosphere;
 

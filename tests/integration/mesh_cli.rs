@@ -144,3 +144,94 @@ fn mesh_render_draws_spot() {
         .count();
     assert!(covered > 300, "{covered} pixels show the cow");
 }
+
+/// The octahedron as glTF: positions and indices in a base64 data URI, the red as a
+/// linear base color factor (glTF's colors are linear; diffsvg keeps sRGB values).
+fn octahedron_gltf(dir: &std::path::Path) -> std::path::PathBuf {
+    use base64::Engine as _;
+    let linear = |c: f64| ((c + 0.055) / 1.055).powf(2.4);
+    let mut buf = Vec::new();
+    for p in [
+        [1.0f32, 0.0, 0.0],
+        [-1.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [0.0, -1.0, 0.0],
+        [0.0, 0.0, 1.0],
+        [0.0, 0.0, -1.0],
+    ] {
+        for v in p {
+            buf.extend_from_slice(&v.to_le_bytes());
+        }
+    }
+    let faces = [
+        [1u32, 3, 5],
+        [3, 2, 5],
+        [2, 4, 5],
+        [4, 1, 5],
+        [3, 1, 6],
+        [2, 3, 6],
+        [4, 2, 6],
+        [1, 4, 6],
+    ];
+    for i in faces.iter().flatten() {
+        buf.extend_from_slice(&(i - 1).to_le_bytes());
+    }
+    let json = format!(
+        r#"{{"asset":{{"version":"2.0"}},"scenes":[{{"nodes":[0]}}],"nodes":[{{"mesh":0}}],
+        "meshes":[{{"primitives":[{{"attributes":{{"POSITION":0}},"indices":1,"material":0}}]}}],
+        "materials":[{{"pbrMetallicRoughness":{{"baseColorFactor":[{},{},{},1]}}}}],
+        "buffers":[{{"byteLength":{},"uri":"data:application/octet-stream;base64,{}"}}],
+        "bufferViews":[{{"buffer":0,"byteLength":72}},{{"buffer":0,"byteOffset":72,"byteLength":96}}],
+        "accessors":[{{"bufferView":0,"componentType":5126,"count":6,"type":"VEC3","min":[-1,-1,-1],"max":[1,1,1]}},
+                     {{"bufferView":1,"componentType":5125,"count":24,"type":"SCALAR"}}]}}"#,
+        linear(0.9),
+        linear(0.1),
+        linear(0.1),
+        buf.len(),
+        base64::engine::general_purpose::STANDARD.encode(&buf)
+    );
+    write(dir, "octa.gltf", &json)
+}
+
+/// `mesh render` draws the same octahedron from OBJ and from glTF; a broken glTF is one
+/// line naming the file.
+#[test]
+fn mesh_render_reads_gltf_like_obj() {
+    let d = scratch("mesh_gltf");
+    let (obj, gltf) = (octahedron(&d), octahedron_gltf(&d));
+    let mut images = Vec::new();
+    for (input, name) in [(&obj, "obj.png"), (&gltf, "gltf.png")] {
+        let out = d.join(name);
+        let r = diffsvg(&[
+            "mesh",
+            "render",
+            s(input),
+            "--orbit",
+            "2",
+            "--size",
+            "32",
+            "-o",
+            s(&out),
+        ]);
+        assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+        images.push(diffsvg::Image::load(&out).unwrap());
+    }
+    let worst = images[0]
+        .data
+        .iter()
+        .zip(&images[1].data)
+        .flat_map(|(a, b)| (0..4).map(move |c| (a[c] - b[c]).abs()))
+        .fold(0.0f32, f32::max);
+    assert!(
+        worst <= 1.0 / 255.0,
+        "OBJ and glTF renders differ by {worst}"
+    );
+    let bad = write(
+        &d,
+        "bad.gltf",
+        r#"{"asset":{"version":"2.0"},"meshes":[{"primitives":[]}]}"#,
+    );
+    let out = d.join("bad.png");
+    let r = diffsvg(&["mesh", "render", s(&bad), "-o", s(&out)]);
+    assert_fails(&r, "bad.gltf", "", &out);
+}
