@@ -217,7 +217,6 @@ pub(crate) fn tie_gradients(tiles: &[TileSlots], grad: &mut [f64]) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::raster::{RenderOptions, render};
     use crate::{Scene, Sizing};
 
     /// A rectangle and a stroke painted with a rotated pattern of two shapes (so that
@@ -309,46 +308,8 @@ mod tests {
         }
     }
 
-    /// The gradient of tile 0's slots is the sum over the copies (checked against central
-    /// differences, which move every copy through `set_params`); a copy's slots get 0.
-    #[test]
-    fn tile_gradients_are_summed_into_the_first_tile() {
-        let s = Scene::from_svg_str(PATTERNED, "p.svg", Sizing::Natural).unwrap();
-        let mut target = s.clone();
-        let mut p = target.params();
-        for (k, v) in p.iter_mut().enumerate() {
-            *v += 0.3 * ((k * 7919 % 13) as f64 / 13.0 - 0.5);
-        }
-        target.set_params(&p);
-        let target = render(&target, &RenderOptions::default());
-        let mut scratch = s.clone();
-        let tiles = super::super::params::walk(&mut scratch, &mut |_, _, _, _| {});
-        let t = tiles.last().unwrap();
-        // Tile 0's slots and the first copy's.
-        let which: Vec<usize> = (t.start..t.start + 2 * t.len).collect();
-        let (grad, num, groups) = crate::gradcheck::check(
-            &s,
-            &target,
-            crate::loss::Loss::Mse,
-            &RenderOptions::default(),
-            None,
-            Some(&which),
-        );
-        for g in &groups {
-            assert!(g.passes(crate::gradcheck::DEFAULT_TOLERANCE), "{g}");
-        }
-        for i in t.start + t.len..t.start + 2 * t.len {
-            assert_eq!((grad[i], num[i]), (0.0, 0.0), "copy slot {i}");
-        }
-        assert!(
-            grad[t.start..t.start + t.len]
-                .iter()
-                .any(|g| g.abs() > 1e-6)
-        );
-    }
-
     /// Written back, a tiled group is a `<pattern>` holding tile 0, read back as the same
-    /// tiles with the same parameters and pixels.
+    /// tiles with the same parameters (the pixels: `layers::patterns_are_written_back_as_patterns`).
     #[test]
     fn patterns_are_written_as_patterns() {
         let s = Scene::from_svg_str(PATTERNED, "p.svg", Sizing::Natural).unwrap();
@@ -359,15 +320,6 @@ mod tests {
         let b = Scene::from_svg_str(&text, "back.svg", Sizing::Natural).unwrap();
         assert_eq!(b.params().len(), s.params().len());
         assert_eq!(tiled(&b).len(), tiled(&s).len());
-        let opts = RenderOptions::default();
-        let (x, y) = (render(&s, &opts), render(&b, &opts));
-        let worst = x
-            .data
-            .iter()
-            .zip(&y.data)
-            .flat_map(|(a, b)| (0..4).map(move |c| (a[c] - b[c]).abs()))
-            .fold(0.0f32, f32::max);
-        assert!(worst < 1e-3, "round trip moved a pixel by {worst}\n{text}");
         for (a, b) in s.params().iter().zip(b.params()) {
             assert!((a - b).abs() < 1e-3, "{a} became {b}");
         }

@@ -346,6 +346,50 @@ fn pattern_gradients_reach_the_tiles() {
     );
 }
 
+/// A rotated pattern holding a pattern, on a fill and a stroke: the tiles share the first
+/// tile's parameters (central differences move every copy; a copy's own slots get 0), and
+/// SVG out writes one `<pattern>` per pattern, read back to the same pixels.
+#[test]
+fn patterns_are_written_back_as_patterns() {
+    let s = scene(
+        r##"<svg xmlns="http://www.w3.org/2000/svg" width="30" height="26">
+        <pattern id="inner" patternUnits="userSpaceOnUse" width="4" height="4">
+          <rect x="0.5" y="0.5" width="1.6" height="1.4" fill="#f0e0a0"/></pattern>
+        <pattern id="outer" patternUnits="userSpaceOnUse" x="2" y="1" width="13" height="10"
+                 patternTransform="rotate(-15) scale(0.9)">
+          <path d="M 2 1 L 11 3 L 7 9 Z" fill="url(#inner)"/>
+          <ellipse cx="4" cy="7" rx="3" ry="2" fill="#3050a0" fill-opacity="0.7"/>
+        </pattern>
+        <circle cx="15" cy="13" r="10" fill="url(#outer)" stroke="url(#outer)" stroke-width="3"/></svg>"##,
+    );
+    // Every slot of the first tiles and a spread of the rest (all of them take minutes).
+    let n = ParamLayout::new(&s).len();
+    let which: Vec<usize> = (0..n).filter(|&i| i < 120 || i % 37 == 0).collect();
+    let (grad, num, groups) = diffsvg::gradcheck::check(
+        &s,
+        &nudged_target(&s, 0.5, WHITE),
+        Loss::Mse,
+        &RenderOptions::default(),
+        WHITE,
+        Some(&which),
+    );
+    for &i in &which {
+        assert!(
+            grad[i] != 0.0 || num[i].abs() < 1e-9,
+            "slot {i}: 0 against {}",
+            num[i]
+        );
+    }
+    for g in &groups {
+        assert!(g.worst <= 1e-2, "{g}");
+    }
+    // Most slots are copies': their gradient is 0.
+    let zeros = grad.iter().filter(|g| **g == 0.0).count();
+    assert!(zeros * 2 > grad.len(), "{zeros} of {} slots", grad.len());
+    let text = assert_round_trip(&s, std::path::Path::new("patterns.svg"));
+    assert_eq!(text.matches("<pattern ").count(), 4, "{text}");
+}
+
 #[test]
 fn pattern_tiles_are_bounded() {
     let svg = |w: f64| {
