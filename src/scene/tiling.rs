@@ -169,7 +169,6 @@ pub(crate) fn retile(nodes: &mut [Node]) {
 }
 
 /// [`retile`] on a tiled group and everything under it.
-
 fn retile_group(g: &mut Group) {
     match &g.tiling {
         Some(t) if t.per_tile > 0 && g.children.len() == t.per_tile * t.cells.len() => {
