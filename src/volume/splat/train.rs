@@ -41,6 +41,12 @@
 //! rate, and are returned in [`TrainOutcome::exposures`]. Held-out views are rendered
 //! without them.
 //!
+//! **Pose refinement** ([`TrainOptions::refine_poses`]): each training view's camera
+//! carries its own learned correction ([`crate::volume::pose`]: a turn about its center and
+//! a move), starting at zero, stepped by Adam with the gradient [`Gradients::pose`] of
+//! the view's loss, and returned in [`TrainOutcome::poses`]. Held-out views keep their
+//! poses.
+//!
 //! Results are deterministic for a fixed seed, on any number of threads (the renderer,
 //! the backward pass and the loss are).
 
@@ -60,6 +66,7 @@ use crate::limits::MAX_GAUSSIANS;
 use crate::optim::{Moments, Rule, exponential, progress};
 use crate::rng::Rng;
 use crate::volume::dataset::View;
+use crate::volume::pose::{self, PoseDelta};
 use crate::volume::sh;
 
 /// Adaptive density control (see the module documentation). Iteration counts are of
@@ -176,6 +183,12 @@ pub struct TrainOptions {
     /// Learning rate of the exposure transforms, at the first and the last iteration
     /// (exponential decay between).
     pub lr_exposure: [f32; 2],
+    /// Learn a pose correction of each training view ([`crate::volume::pose`]).
+    pub refine_poses: bool,
+    /// Learning rate of the corrections' rotation (radians), at the first and the last
+    /// iteration (exponential decay between); the translation's is this times the
+    /// extent.
+    pub lr_poses: [f32; 2],
 }
 
 impl Default for TrainOptions {
@@ -198,6 +211,8 @@ impl Default for TrainOptions {
             densify: Densify::default(),
             exposure: false,
             lr_exposure: [1e-2, 1e-3],
+            refine_poses: false,
+            lr_poses: [1e-3, 1e-5],
         }
     }
 }
@@ -236,6 +251,9 @@ pub struct TrainOutcome {
     /// With [`TrainOptions::exposure`], the learned transform of each training view, in
     /// the order of the views ([`exposure`] module); else empty.
     pub exposures: Vec<[f32; 12]>,
+    /// With [`TrainOptions::refine_poses`], the learned correction of each training
+    /// view, in the order of the views ([`crate::volume::pose`]); else empty.
+    pub poses: Vec<PoseDelta>,
 }
 
 /// `count` Gaussians at uniformly random places in the cube `center ± half`, with random
@@ -453,7 +471,11 @@ pub fn train(
         seconds: 0.0,
         parts: [0.0; 5],
         exposures: Vec::new(),
+        poses: Vec::new(),
     };
+    let mut poses = vec![[0.0f32; 6]; if opts.refine_poses { views.len() } else { 0 }];
+    let mut pose_moments: Vec<Moments<f32>> =
+        (0..poses.len()).map(|_| Moments::new(ADAM, 6)).collect();
     let mut exposures = vec![exposure::IDENTITY; if opts.exposure { views.len() } else { 0 }];
     let mut exposure_moments: Vec<Moments<f32>> = (0..exposures.len())
         .map(|_| Moments::new(ADAM, 12))
@@ -478,12 +500,16 @@ pub fn train(
         }
         let vi = order.pop().expect("refilled above");
         let view = &views[vi];
+        let camera = match poses.get(vi) {
+            Some(delta) => pose::apply(&view.camera, delta),
+            None => view.camera,
+        };
         let mut clock = Instant::now();
         let mut lap = |part: usize, outcome: &mut TrainOutcome| {
             outcome.parts[part] += clock.elapsed().as_secs_f32();
             clock = Instant::now();
         };
-        let out = render(gaussians, &view.camera, &opts.render).map_err(invalid)?;
+        let out = render(gaussians, &camera, &opts.render).map_err(invalid)?;
         lap(0, &mut outcome);
         d_img.resize(out.rgb.len(), [0.0; 3]);
         let (w, h) = (view.width as usize, view.height as usize);
@@ -504,15 +530,14 @@ pub fn train(
             adam(&mut exposure_moments[vi], &mut exposures[vi], &dm, |_| lr);
         }
         lap(1, &mut outcome);
-        backward_into(
-            gaussians,
-            &view.camera,
-            &opts.render,
-            &out,
-            &d_img,
-            &mut grads,
-        )
-        .map_err(invalid)?;
+        backward_into(gaussians, &camera, &opts.render, &out, &d_img, &mut grads)
+            .map_err(invalid)?;
+        if let Some(delta) = poses.get_mut(vi) {
+            let g = pose::delta_gradient(delta, &grads.pose);
+            let lr = exponential(opts.lr_poses, frac);
+            let rates = [lr, lr * opts.extent];
+            adam(&mut pose_moments[vi], delta, &g, |j| rates[j / 3]);
+        }
         // View-space gradient statistics for densification.
         let half = glam::Vec2::new(0.5 * w as f32, 0.5 * h as f32);
         for p in &out.projected {
@@ -579,6 +604,7 @@ pub fn train(
     }
     outcome.seconds = (start.elapsed() - observing).as_secs_f32();
     outcome.exposures = exposures;
+    outcome.poses = poses;
     Ok(outcome)
 }
 
@@ -631,6 +657,8 @@ fn validate(
     let rates = [
         opts.lr_exposure[0],
         opts.lr_exposure[1],
+        opts.lr_poses[0],
+        opts.lr_poses[1],
         opts.lr_means[0],
         opts.lr_means[1],
         opts.lr_log_scales,

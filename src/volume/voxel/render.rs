@@ -246,10 +246,12 @@ pub(crate) struct SampleRec {
     pub(crate) sigma: f32,
     /// The sample's color after the sigmoid.
     pub(crate) c: [f32; 3],
+    /// The sample's ray parameter `t_k`, in the grid-space units of [`Setup`].
+    pub(crate) t: f32,
 }
 
 /// A ray in grid space (vertex units) clipped to the box.
-struct Setup {
+pub(crate) struct Setup {
     o: Vec3,
     d: Vec3,
     t_start: f32,
@@ -292,7 +294,7 @@ fn setup(grid: &Grid, ray: &Ray, settings: &RenderSettings) -> Option<Setup> {
 /// Visits every sample (in order) whose cell has an allocated corner, with the corner
 /// slots and trilinear weights; `visit` returns false to stop.
 #[inline(always)]
-fn march(grid: &Grid, s: &Setup, mut visit: impl FnMut(&[i32; 8], &[f32; 8]) -> bool) {
+fn march(grid: &Grid, s: &Setup, mut visit: impl FnMut(&[i32; 8], &[f32; 8], f32) -> bool) {
     let res = grid.res();
     let r = res as f32;
     let last = res - 1;
@@ -336,7 +338,7 @@ fn march(grid: &Grid, s: &Setup, mut visit: impl FnMut(&[i32; 8], &[f32; 8]) -> 
             continue;
         }
         let w = trilinear(q.x - cx as f32, q.y - cy as f32, q.z - cz as f32);
-        if !visit(&slots, &w) {
+        if !visit(&slots, &w, t) {
             break;
         }
     }
@@ -368,7 +370,7 @@ pub(crate) fn forward<const K: usize>(
     let stop = settings.early_stop;
     let mut tr = 1.0f32;
     let mut col = [0.0f32; 3];
-    march(grid, &s, |slots, w| {
+    march(grid, &s, |slots, w, t| {
         let mut raw = 0.0;
         for c in 0..8 {
             if slots[c] >= 0 {
@@ -410,6 +412,7 @@ pub(crate) fn forward<const K: usize>(
             t_after: tr,
             sigma: raw,
             c: cc,
+            t,
         });
         tr >= stop
     });
@@ -499,6 +502,131 @@ pub(crate) fn backward<const K: usize, S: Sink>(
         let d_sparse = sparse * 4.0 * r.sigma / (1.0 + 2.0 * r.sigma * r.sigma);
         sink.add::<K>(&r.slots, &r.w, (d_sigma + d_sparse) * delta, &d_sh);
     }
+}
+
+/// The gradient of the loss with respect to the ray itself, `(∂L/∂origin, ∂L/∂dir)`
+/// in world axes (`dir` as given, its length not held fixed), for the samples `tape`
+/// that [`forward`] recorded for `ray`, its color `color`, `g = ∂L/∂color`, and the
+/// sparsity weight `sparse` as in [`backward`]. The samples move with the ray: their
+/// positions `o + t_k·d` (through the trilinear weights of density and color), the box
+/// entry `t₀` the `t_k` start from, and the spacing `Δ = step / |d ⊘ voxel_size|`; the
+/// colors' SH basis depends on `dir` too. Exact where [`backward`] is, and also except
+/// where a sample crosses the end of the box (the count of samples changes).
+pub(crate) fn ray_gradient<const K: usize>(
+    grid: &Grid,
+    ray: &Ray,
+    settings: &RenderSettings,
+    tape: &[SampleRec],
+    color: [f32; 3],
+    g: [f32; 3],
+    sparse: f32,
+) -> (Vec3, Vec3) {
+    let Some(s) = setup(grid, ray, settings) else {
+        return (Vec3::ZERO, Vec3::ZERO);
+    };
+    if tape.is_empty() {
+        return (Vec3::ZERO, Vec3::ZERO);
+    }
+    let r = grid.res() as f32;
+    let last = grid.res() - 1;
+    let basis = sh::basis(grid.degree(), ray.dir);
+    let (dens, shd) = (grid.density(), grid.sh());
+    let delta = s.dt;
+    let mut prefix = [0.0f32; 3];
+    // Gradients in grid space: origin, direction, entry parameter, spacing.
+    let (mut g_o, mut g_d) = (Vec3::ZERO, Vec3::ZERO);
+    let (mut g_t0, mut g_dt) = (0.0f32, 0.0f32);
+    let mut g_basis = [0.0f32; K];
+    for rec in tape {
+        let mut through = 0.0;
+        let mut d_pre = [0.0f32; 3];
+        for ch in 0..3 {
+            prefix[ch] += rec.weight * rec.c[ch];
+            let rest = color[ch] - prefix[ch];
+            through += g[ch] * (rec.t_after * rec.c[ch] - rest);
+            d_pre[ch] = g[ch] * rec.weight * rec.c[ch] * (1.0 - rec.c[ch]);
+        }
+        // α = 1 − exp(−σΔ): σ and Δ enter as their product; the sparsity term is
+        // Δ·ln(1 + 2σ²).
+        let sig = rec.sigma;
+        let d_sigma = delta * (through + sparse * 4.0 * sig / (1.0 + 2.0 * sig * sig));
+        g_dt += sig * through + sparse * (1.0 + 2.0 * sig * sig).ln();
+        let q = (s.o + s.d * rec.t).clamp(Vec3::ZERO, Vec3::splat(r));
+        let cell = Vec3::new(
+            (q.x as u32).min(last) as f32,
+            (q.y as u32).min(last) as f32,
+            (q.z as u32).min(last) as f32,
+        );
+        let gw = trilinear_gradient(q - cell);
+        let mut g_q = Vec3::ZERO;
+        for c in 0..8 {
+            if rec.slots[c] < 0 {
+                continue;
+            }
+            let at = rec.slots[c] as usize;
+            let mut sc = dens[at] * d_sigma;
+            for ch in 0..3 {
+                let row = &shd[at * 3 * K + ch * K..at * 3 * K + (ch + 1) * K];
+                let mut pre = 0.0;
+                for k in 0..K {
+                    pre += row[k] * basis[k];
+                    g_basis[k] += d_pre[ch] * rec.w[c] * row[k];
+                }
+                sc += d_pre[ch] * pre;
+            }
+            g_q += gw[c] * sc;
+        }
+        // q = o + d·t_k, t_k = t₀ + (k + ½)·Δ.
+        g_o += g_q;
+        g_d += g_q * rec.t;
+        let g_t = g_q.dot(s.d);
+        g_t0 += g_t;
+        let half_k = ((rec.t - s.t_start) / s.dt - 0.5).round() + 0.5;
+        g_dt += g_t * half_k;
+    }
+    // Δ = step / |d|.
+    g_d -= s.d * (g_dt * delta / s.d.length_squared());
+    // t₀ is the near plane or the entry into the box through one axis' plane.
+    let mut t0 = settings.t_min;
+    let mut entry = None;
+    for a in 0..3 {
+        if s.d[a].abs() >= PARALLEL {
+            let inv = 1.0 / s.d[a];
+            let near = (-s.o[a] * inv).min((r - s.o[a]) * inv);
+            if near > t0 {
+                t0 = near;
+                entry = Some(a);
+            }
+        }
+    }
+    if let Some(a) = entry {
+        // t₀ = (plane − o_a) / d_a.
+        g_o[a] -= g_t0 / s.d[a];
+        g_d[a] -= g_t0 * t0 / s.d[a];
+    }
+    let gb = sh::basis_gradient(grid.degree(), ray.dir);
+    let mut g_dir = Vec3::ZERO;
+    for k in 0..K {
+        g_dir += gb[k] * g_basis[k];
+    }
+    let inv_vs = Vec3::splat(r) / (grid.max() - grid.min());
+    (g_o * inv_vs, g_dir + g_d * inv_vs)
+}
+
+/// `∂wᵢ/∂(fx, fy, fz)` of [`trilinear`]'s weights.
+#[inline(always)]
+fn trilinear_gradient(f: Vec3) -> [Vec3; 8] {
+    std::array::from_fn(|c| {
+        let pick = |bit: usize, v: f32| {
+            if c & bit != 0 {
+                (v, 1.0)
+            } else {
+                (1.0 - v, -1.0)
+            }
+        };
+        let ((wx, dx), (wy, dy), (wz, dz)) = (pick(1, f.x), pick(2, f.y), pick(4, f.z));
+        Vec3::new(dx * wy * wz, wx * dy * wz, wx * wy * dz)
+    })
 }
 
 #[cfg(test)]
@@ -630,6 +758,74 @@ mod tests {
                 }
             }
             assert!(checked > 40);
+        }
+    }
+
+    /// [`ray_gradient`] against central differences of the f32 renderer, for a ray that
+    /// enters the box (the entry point moves with it) and one that starts inside (at the
+    /// near plane), with the sparsity term; the perturbations keep the count of samples.
+    #[test]
+    fn ray_gradient_matches_central_differences() {
+        for degree in [0, 2] {
+            let grid = test_grid(degree);
+            let s = RenderSettings {
+                early_stop: 0.0,
+                background: [0.2, 0.9, 0.5],
+                t_min: 0.05,
+                ..RenderSettings::default()
+            };
+            let inside = Ray {
+                origin: Vec3::new(0.1, -0.2, 0.3),
+                dir: Vec3::new(-0.4, 0.7, 0.2).normalize(),
+            };
+            for ray in [oblique(), inside] {
+                let run = |ray: &Ray| {
+                    let mut tape = Vec::new();
+                    let (c, _) =
+                        with_k!(degree, K => forward::<K>(&grid, ray, &s, |r| tape.push(r)));
+                    (c, tape)
+                };
+                let loss = |ray: &Ray| -> (f64, usize) {
+                    let (c, tape) = run(ray);
+                    let sparse: f64 = tape
+                        .iter()
+                        .map(|r| (1.0 + 2.0 * (r.sigma as f64).powi(2)).ln())
+                        .sum::<f64>();
+                    let delta = setup(&grid, ray, &s).unwrap().dt as f64;
+                    let v = (0..3).map(|i| G[i] as f64 * c[i] as f64).sum::<f64>()
+                        + SPARSE as f64 * delta * sparse;
+                    (v, tape.len())
+                };
+                let (c, tape) = run(&ray);
+                let (g_o, g_d) = with_k!(degree, K => ray_gradient::<K>(
+                    &grid, &ray, &s, &tape, c, G, SPARSE
+                ));
+                let analytic = [g_o.x, g_o.y, g_o.z, g_d.x, g_d.y, g_d.z];
+                let largest = analytic.iter().fold(0.0f32, |m, v| m.max(v.abs())) as f64;
+                assert!(largest > 1e-2, "{analytic:?}");
+                // Small steps: a sample near a cell face has a kink (trilinear weights).
+                let h = 3e-4f32;
+                for j in 0..6 {
+                    let (mut plus, mut minus) = (ray, ray);
+                    let (p, m) = if j < 3 {
+                        (&mut plus.origin, &mut minus.origin)
+                    } else {
+                        (&mut plus.dir, &mut minus.dir)
+                    };
+                    p[j % 3] += h;
+                    m[j % 3] -= h;
+                    let ((lp, np), (lm, nm)) = (loss(&plus), loss(&minus));
+                    assert_eq!((np, nm), (tape.len(), tape.len()), "sample count changed");
+                    let fd = (lp - lm) / (2.0 * h as f64);
+                    let an = analytic[j] as f64;
+                    assert!(
+                        (fd - an).abs() <= 0.01 * largest + 0.01 * fd.abs(),
+                        "degree {degree}, ray {ray:?}, {}[{}]: analytic {an} vs {fd}",
+                        if j < 3 { "origin" } else { "dir" },
+                        j % 3
+                    );
+                }
+            }
         }
     }
 
