@@ -10,7 +10,7 @@
 //!
 //! The renderers' backward passes give the gradient with respect to a correction
 //! `[ε, u]` applied on top of the camera they rendered (at `ε = u = 0`, the *local*
-//! gradient). [`delta_gradient`] turns it into the gradient with respect to the stored
+//! gradient). `delta_gradient` turns it into the gradient with respect to the stored
 //! correction, through the left Jacobian of SO(3): `exp(ω + δ) = exp(J(ω)·δ)·exp(ω)` to
 //! first order.
 

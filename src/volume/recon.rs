@@ -704,7 +704,7 @@ pub fn recon_voxel(
         last = Some(*s);
         let test = evaluate_now(job.eval_every, s.iteration, job.iters, &data)
             .then(|| voxel_psnr(g, &test_rays, &data.test, &render));
-        if test.is_some() || s.iteration % 50 == 0 {
+        if test.is_some() || s.iteration.is_multiple_of(50) {
             log.push((*s, test));
         }
         observe(s, test)
