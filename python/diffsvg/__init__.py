@@ -111,6 +111,15 @@ def _whole_or_none(v: Any, name: str, top: int = _U32) -> Optional[int]:
     return None if v is None else _whole(v, name, top)
 
 
+def _pair(p: Any) -> Optional[Tuple[float, float]]:
+    if p is None:
+        return None
+    t = tuple(float(v) for v in p)
+    if len(t) != 2:
+        raise DiffsvgError(f"perturb_poses: expected (degrees, units), got {p!r}")
+    return t
+
+
 def _color(c: Color, name: str):
     if c is None:
         return None
@@ -877,7 +886,9 @@ def recon_voxel(scene, output, *, res: int = 128, iters: int = 3000, batch: int 
                 downscale: int = 1, degree: int = 2, bound: Optional[float] = None,
                 step: float = 0.5, tv_density: Optional[float] = None,
                 tv_sh: Optional[float] = None, sparsity: Optional[float] = None,
-                seed: int = 0, eval_every: int = 0, progress: Progress = None) -> ReconInfo:
+                seed: int = 0, eval_every: int = 0, refine_poses: bool = False,
+                perturb_poses: Optional[Tuple[float, float]] = None,
+                progress: Progress = None) -> ReconInfo:
     """Fits a sparse voxel grid of density and spherical-harmonic color (Plenoxels) to
     the posed photos in the folder ``scene`` and writes it to ``output`` (``.vox``),
     exactly as ``diffsvg recon voxel`` with the same options (same file, bit for bit).
@@ -896,19 +907,28 @@ def recon_voxel(scene, output, *, res: int = 128, iters: int = 3000, batch: int 
     ``res``, ``allocated`` (voxel slots), ``batch`` (rays per iteration used) and ``log``:
     rows of iteration, seconds, res, allocated, batch PSNR, test PSNR (NaN where not
     evaluated), one per 50 iterations and per evaluation, the last the end of the run.
+
+    ``refine_poses``: learn a small correction of each training view's camera pose (a turn
+    about its center and a move); test views keep theirs. ``perturb_poses=(degrees,
+    units)``: a testing aid that first moves every training camera by a random turn and
+    move of those sizes; the dict's ``pose_error`` is then ``{"before": (degrees, units),
+    "after": (degrees, units)}``, the mean distance of the training poses from the loaded
+    ones before and after training (else ``None``).
     """
     return _native.recon_voxel(
         os.fspath(scene), os.fspath(output), _whole(res, "res"), _whole(iters, "iters", _U64),
         _whole(batch, "batch", _U64), _whole(downscale, "downscale"), _whole(degree, "degree"),
         bound, step, tv_density, tv_sh, sparsity, _whole(seed, "seed", _U64),
-        _whole(eval_every, "eval_every", _U64), progress)
+        _whole(eval_every, "eval_every", _U64), bool(refine_poses), _pair(perturb_poses),
+        progress)
 
 
 def recon_splat(scene, output, *, iters: int = 5000, downscale: int = 1,
                 max_gaussians: int = 300_000, initial: int = 50_000, degree: int = 3,
                 bound: Optional[float] = None, seed: int = 0, eval_every: int = 0,
                 test_every: Optional[int] = None, antialias: bool = False,
-                exposure: bool = False, mcmc: bool = False,
+                exposure: bool = False, mcmc: bool = False, refine_poses: bool = False,
+                perturb_poses: Optional[Tuple[float, float]] = None,
                 progress: Progress = None) -> ReconInfo:
     """Fits 3D Gaussians (splatting) to the posed photos in ``scene`` and writes them to
     ``output`` (``.ply``, the layout Gaussian-splatting viewers read), as ``diffsvg recon
@@ -926,7 +946,8 @@ def recon_splat(scene, output, *, iters: int = 5000, downscale: int = 1,
     ``test_every``: hold out every N-th view of instant-ngp and COLMAP folders (0: none;
     default every 8th). ``antialias``: anti-aliased splats, saved with the model.
     ``exposure``: learn a per-image color transform of each training photo. ``mcmc``: a
-    fixed budget of ``max_gaussians`` by relocation. As the CLI's flags of the same names.
+    fixed budget of ``max_gaussians`` by relocation. ``refine_poses``, ``perturb_poses``
+    and ``pose_error``: as in :func:`recon_voxel`. As the CLI's flags of the same names.
     """
     return _native.recon_splat(
         os.fspath(scene), os.fspath(output), _whole(iters, "iters", _U64),
@@ -934,7 +955,8 @@ def recon_splat(scene, output, *, iters: int = 5000, downscale: int = 1,
         _whole(initial, "initial", _U64), _whole(degree, "degree"), bound,
         _whole(seed, "seed", _U64), _whole(eval_every, "eval_every", _U64),
         _whole_or_none(test_every, "test_every", _U64),
-        bool(antialias), bool(exposure), bool(mcmc), progress)
+        bool(antialias), bool(exposure), bool(mcmc), bool(refine_poses), _pair(perturb_poses),
+        progress)
 
 
 def view(model, scene=None, *, split: str = "test", orbit: int = 0, elevation: float = 30.0,

@@ -94,12 +94,16 @@ def recon_voxel(scene: str | PathLike[str], output: str | PathLike[str], res: in
                 bound: Optional[float] = None, step: float = 0.5,
                 tv_density: Optional[float] = None, tv_sh: Optional[float] = None,
                 sparsity: Optional[float] = None, seed: int = 0, eval_every: int = 0,
+                refine_poses: bool = False,
+                perturb_poses: Optional[Tuple[float, float]] = None,
                 progress: Progress = None) -> ReconInfo: ...
 def recon_splat(scene: str | PathLike[str], output: str | PathLike[str], iters: int = 5000,
                 downscale: int = 1, max_gaussians: int = 300000, initial: int = 50000,
                 degree: int = 3, bound: Optional[float] = None, seed: int = 0,
                 eval_every: int = 0, test_every: Optional[int] = None,
                 antialias: bool = False, exposure: bool = False, mcmc: bool = False,
+                refine_poses: bool = False,
+                perturb_poses: Optional[Tuple[float, float]] = None,
                 progress: Progress = None) -> ReconInfo: ...
 def view(model: str | PathLike[str], scene: Optional[str | PathLike[str]] = None,
          split: str = "test", orbit: int = 0, elevation: float = 30.0, downscale: int = 1,

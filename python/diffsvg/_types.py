@@ -4,7 +4,7 @@ checkers and readers; at run time they are plain dicts)."""
 from __future__ import annotations
 
 import sys
-from typing import Callable, List, Optional, Sequence, Tuple, Union
+from typing import Callable, Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -155,6 +155,7 @@ class ReconInfo(TypedDict):
     batch: NotRequired[int]
     gaussians: NotRequired[int]
     undistorted: NotRequired[Optional[float]]
+    pose_error: Optional[Dict[str, Tuple[float, float]]]
 
 
 class Views(TypedDict):

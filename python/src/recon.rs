@@ -65,7 +65,7 @@ fn summary<'py>(
 #[pyfunction]
 #[pyo3(signature = (scene, output, res=128, iters=3000, batch=8192, downscale=1, degree=2,
     bound=None, step=0.5, tv_density=None, tv_sh=None, sparsity=None, seed=0, eval_every=0,
-    progress=None))]
+    refine_poses=false, perturb_poses=None, progress=None))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn recon_voxel<'py>(
     py: Python<'py>,
@@ -83,6 +83,8 @@ pub(crate) fn recon_voxel<'py>(
     sparsity: Option<f32>,
     seed: u64,
     eval_every: usize,
+    refine_poses: bool,
+    perturb_poses: Option<(f32, f32)>,
     progress: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     check_output(&output, "vox")?;
@@ -100,6 +102,8 @@ pub(crate) fn recon_voxel<'py>(
         seed,
         eval_every,
         test_every: None,
+        refine_poses,
+        perturb_poses: perturb_poses.map(|(d, u)| [d, u]),
     };
     job.validate().map_err(to_py)?;
     let mut prog = Progress::new(progress);
@@ -138,6 +142,7 @@ pub(crate) fn recon_voxel<'py>(
     d.set_item("res", out.grid.res())?;
     d.set_item("allocated", out.grid.allocated())?;
     d.set_item("batch", out.batch)?;
+    set_pose_error(&d, &out.pose_error)?;
     Ok(d)
 }
 
@@ -147,7 +152,8 @@ pub(crate) fn recon_voxel<'py>(
 #[pyfunction]
 #[pyo3(signature = (scene, output, iters=5000, downscale=1, max_gaussians=300_000,
     initial=50_000, degree=3, bound=None, seed=0, eval_every=0, test_every=None,
-    antialias=false, exposure=false, mcmc=false, progress=None))]
+    antialias=false, exposure=false, mcmc=false, refine_poses=false, perturb_poses=None,
+    progress=None))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn recon_splat<'py>(
     py: Python<'py>,
@@ -165,6 +171,8 @@ pub(crate) fn recon_splat<'py>(
     antialias: bool,
     exposure: bool,
     mcmc: bool,
+    refine_poses: bool,
+    perturb_poses: Option<(f32, f32)>,
     progress: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     check_output(&output, "ply")?;
@@ -181,6 +189,8 @@ pub(crate) fn recon_splat<'py>(
         antialias,
         exposure,
         mcmc,
+        refine_poses,
+        perturb_poses: perturb_poses.map(|(d, u)| [d, u]),
     };
     job.validate().map_err(to_py)?;
     let mut prog = Progress::new(progress);
@@ -217,7 +227,25 @@ pub(crate) fn recon_splat<'py>(
     let d = summary(py, output, ended, (out.load_seconds, out.test_psnr), rows)?;
     d.set_item("gaussians", out.model.len())?;
     d.set_item("undistorted", out.undistorted)?;
+    set_pose_error(&d, &out.pose_error)?;
     Ok(d)
+}
+
+/// `d["pose_error"]`: `None`, or `{"before": (degrees, units), "after": (…)}` when the
+/// training poses were perturbed.
+fn set_pose_error(
+    d: &Bound<'_, PyDict>,
+    e: &Option<diffsvg::volume::recon::PoseError>,
+) -> PyResult<()> {
+    match e {
+        Some(e) => {
+            let inner = PyDict::new(d.py());
+            inner.set_item("before", (e.before[0], e.before[1]))?;
+            inner.set_item("after", (e.after[0], e.after[1]))?;
+            d.set_item("pose_error", inner)
+        }
+        None => d.set_item("pose_error", d.py().None()),
+    }
 }
 
 /// Renders a trained model (`.vox` or Gaussian PLY, told apart by its header) as

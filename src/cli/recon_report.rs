@@ -24,6 +24,53 @@ pub(super) struct Reporting {
     pub quiet: bool,
 }
 
+/// Pose refinement flags of `recon voxel` and `recon splat`.
+#[derive(clap::Args, Debug)]
+pub(super) struct PoseArgs {
+    /// Learn a small correction of each training view's camera pose (a turn about its
+    /// center and a move, by gradient descent next to the model); test views keep their
+    /// poses.
+    #[arg(long)]
+    pub refine_poses: bool,
+    /// Testing aid: before training, move every training camera by a random turn of DEG
+    /// degrees about its center and a move of UNITS world units (seeded by --seed); test
+    /// views keep their poses. The summary says how far the poses were from the loaded
+    /// ones before and after training.
+    #[arg(long, value_name = "DEG,UNITS", value_parser = parse_perturbation)]
+    pub perturb_poses: Option<[f32; 2]>,
+}
+
+fn parse_perturbation(s: &str) -> std::result::Result<[f32; 2], String> {
+    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+    let bad = || format!("{s:?}: expected DEG,UNITS, two numbers such as 0.5,0.04");
+    if parts.len() != 2 {
+        return Err(bad());
+    }
+    let deg: f32 = parts[0].parse().map_err(|_| bad())?;
+    let units: f32 = parts[1].parse().map_err(|_| bad())?;
+    Ok([deg, units])
+}
+
+/// The pose error line of the summary, when poses were perturbed.
+pub(super) fn pose_error_text(e: &Option<diffsvg::volume::recon::PoseError>) -> String {
+    match e {
+        Some(e) => format!(
+            "; training poses off by {:.3}° and {:.4} units before, {:.3}° and {:.4} after",
+            e.before[0], e.before[1], e.after[0], e.after[1]
+        ),
+        None => String::new(),
+    }
+}
+
+/// The pose error as JSON (`null` when poses were not perturbed).
+pub(super) fn pose_error_json(e: &Option<diffsvg::volume::recon::PoseError>) -> serde_json::Value {
+    match e {
+        Some(e) => serde_json::json!({"before": {"degrees": e.before[0], "units": e.before[1]},
+            "after": {"degrees": e.after[0], "units": e.after[1]}}),
+        None => serde_json::Value::Null,
+    }
+}
+
 /// A test PSNR for the summary line: `"31.20 dB"` or why there is none.
 pub(super) fn psnr_text(p: Option<f64>) -> String {
     p.map(|p| format!("{p:.2} dB"))

@@ -73,6 +73,8 @@ pub struct SplatArgs {
     #[arg(long)]
     mcmc: bool,
     #[command(flatten)]
+    poses: super::recon_report::PoseArgs,
+    #[command(flatten)]
     report: Reporting,
 }
 
@@ -96,6 +98,8 @@ pub fn run(a: SplatArgs) -> Result<()> {
         antialias: a.antialias,
         exposure: a.exposure,
         mcmc: a.mcmc,
+        refine_poses: a.poses.refine_poses,
+        perturb_poses: a.poses.perturb_poses,
     };
     job.validate().map_err(flag_error)?;
     install_interrupt_handler();
@@ -153,13 +157,14 @@ pub fn run(a: SplatArgs) -> Result<()> {
             json!({"done": true, "output": a.output, "iterations": outcome.iterations,
                 "seconds": outcome.seconds, "load_seconds": out.load_seconds,
                 "test_psnr": out.test_psnr, "gaussians": model.len(), "stopped": outcome.stopped,
+                "pose_error": super::recon_report::pose_error_json(&out.pose_error),
                 "seconds_per_part": {"render": r, "loss": l, "backward": b, "update": u,
                     "density_control": d}})
         );
     } else {
         println!(
             "recon splat: {} iterations in {:.1} s ({:.0}% render, {:.0}% loss, {:.0}% backward, \
-             {:.0}% update, {:.0}% density control), {} Gaussians, test PSNR {}; wrote {}",
+             {:.0}% update, {:.0}% density control), {} Gaussians, test PSNR {}{}; wrote {}",
             outcome.iterations,
             outcome.seconds,
             100.0 * r / outcome.seconds,
@@ -169,6 +174,7 @@ pub fn run(a: SplatArgs) -> Result<()> {
             100.0 * d / outcome.seconds,
             model.len(),
             psnr_text(out.test_psnr),
+            super::recon_report::pose_error_text(&out.pose_error),
             a.output.display()
         );
     }

@@ -93,6 +93,8 @@ pub struct VoxelArgs {
     #[arg(long, value_name = "N")]
     test_every: Option<usize>,
     #[command(flatten)]
+    poses: super::recon_report::PoseArgs,
+    #[command(flatten)]
     report: Reporting,
 }
 
@@ -131,7 +133,7 @@ pub struct ViewArgs {
     /// Sample spacing along rays, in voxels (voxel models).
     #[arg(long, default_value_t = 0.5)]
     step: f32,
-    /// Also write depth images of every view (Gaussian models): NAME.depth-expected and
+    /// Also write depth images of every view (Gaussian and voxel models): NAME.depth-expected and
     /// NAME.depth-median, each as a 16-bit PNG (level × units_per_level = depth, the
     /// scale in depth.csv) and a float32 .npy; depths along the viewing axis, world
     /// units, 0 where none.
@@ -171,6 +173,8 @@ fn run_voxel(a: VoxelArgs) -> Result<()> {
         seed: a.seed,
         eval_every: a.report.eval_every,
         test_every: a.test_every,
+        refine_poses: a.poses.refine_poses,
+        perturb_poses: a.poses.perturb_poses,
     };
     job.validate().map_err(flag_error)?;
     install_interrupt_handler();
@@ -225,12 +229,13 @@ fn run_voxel(a: VoxelArgs) -> Result<()> {
             json!({"done": true, "output": a.output, "iterations": outcome.iterations,
                 "seconds": outcome.seconds, "load_seconds": out.load_seconds,
                 "test_psnr": out.test_psnr, "allocated": grid.allocated(), "dense": dense,
-                "res": grid.res(), "stopped": outcome.stopped})
+                "res": grid.res(), "stopped": outcome.stopped,
+                "pose_error": super::recon_report::pose_error_json(&out.pose_error)})
         );
     } else {
         println!(
             "recon voxel: {} iterations in {:.1} s, {}³ grid with {} of {} voxels allocated ({:.1}%), \
-             test PSNR {}; wrote {}",
+             test PSNR {}{}; wrote {}",
             outcome.iterations,
             outcome.seconds,
             grid.res(),
@@ -238,6 +243,7 @@ fn run_voxel(a: VoxelArgs) -> Result<()> {
             dense,
             100.0 * grid.allocated() as f64 / dense as f64,
             psnr_text(out.test_psnr),
+            super::recon_report::pose_error_text(&out.pose_error),
             a.output.display()
         );
     }
@@ -311,8 +317,10 @@ pub fn run_view(a: ViewArgs) -> Result<()> {
     if a.scene.is_none() && a.orbit == 0 {
         bail!("nothing to render: give --scene DIR and/or --orbit N");
     }
-    if a.depth && matches!(model, Model::Voxel(..) | Model::Ngp(..)) {
-        bail!("--depth: depth images are drawn for Gaussian (.ply) models only");
+    if a.depth && matches!(model, Model::Ngp(..)) {
+        bail!(
+            "--depth: depth images are drawn for Gaussian (.ply, .spz) and voxel (.vox) models only"
+        );
     }
     check_downscale(a.downscale).map_err(flag_error)?;
     let data = match &a.scene {

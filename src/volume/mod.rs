@@ -25,6 +25,7 @@ pub mod dataset;
 pub mod depth;
 pub mod field;
 pub mod metrics;
+pub mod pose;
 
 use glam::Vec3;
 

@@ -32,6 +32,7 @@ use crate::volume::Ray;
 use crate::volume::dataset::{Dataset, Loading, View};
 use crate::volume::field::{self, HashShape, Ngp, NgpShape};
 use crate::volume::metrics::psnr;
+use crate::volume::pose::{self, PoseDelta};
 use crate::volume::splat::{self, Gaussians};
 use crate::volume::voxel::{self, Grid, RenderSettings};
 
@@ -70,6 +71,13 @@ pub struct VoxelJob {
     pub eval_every: usize,
     /// Which views are held out ([`Loading::test_every`]); `None`: the format's default.
     pub test_every: Option<usize>,
+    /// Learn a pose correction of each training view ([`crate::volume::pose`],
+    /// [`voxel::TrainOptions::refine_poses`]); test views keep their poses.
+    pub refine_poses: bool,
+    /// For testing pose refinement: before training, move every training camera by a
+    /// random turn of `[0]` degrees about its center and a move of `[1]` world units
+    /// ([`pose::perturb`], seeded by `seed`); test views keep their poses.
+    pub perturb_poses: Option<[f32; 2]>,
 }
 
 impl Default for VoxelJob {
@@ -88,6 +96,8 @@ impl Default for VoxelJob {
             seed: 0,
             eval_every: 0,
             test_every: None,
+            refine_poses: false,
+            perturb_poses: None,
         }
     }
 }
@@ -125,6 +135,11 @@ pub struct SplatJob {
     /// A fixed budget of [`max_gaussians`](Self::max_gaussians) by relocation
     /// (3DGS-MCMC, [`splat::Densify::mcmc`]) instead of cloning and splitting.
     pub mcmc: bool,
+    /// Learn a pose correction of each training view ([`crate::volume::pose`],
+    /// [`splat::TrainOptions::refine_poses`]); test views keep their poses.
+    pub refine_poses: bool,
+    /// As [`VoxelJob::perturb_poses`].
+    pub perturb_poses: Option<[f32; 2]>,
 }
 
 impl Default for SplatJob {
@@ -142,6 +157,8 @@ impl Default for SplatJob {
             antialias: false,
             exposure: false,
             mcmc: false,
+            refine_poses: false,
+            perturb_poses: None,
         }
     }
 }
@@ -400,6 +417,23 @@ pub struct VoxelResult {
     pub load_seconds: f64,
     /// Rays per iteration used: the job's, or the number of training pixels if fewer.
     pub batch: usize,
+    /// With [`VoxelJob::refine_poses`], the learned correction of each training view
+    /// ([`crate::volume::pose`]); else empty.
+    pub poses: Vec<PoseDelta>,
+    /// With [`VoxelJob::perturb_poses`], how far the training poses were from the
+    /// loaded ones before and after training.
+    pub pose_error: Option<PoseError>,
+}
+
+/// The mean distance of the training poses from the loaded ones ([`pose::pose_error`]),
+/// when they were perturbed: `[degrees, world units]` as perturbed and as corrected by
+/// training (the same when poses were not refined).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PoseError {
+    /// Mean rotation angle (degrees) and center distance (world units) before training.
+    pub before: [f64; 2],
+    /// The same after training, with the learned corrections applied.
+    pub after: [f64; 2],
 }
 
 /// Fitted Gaussians and how the run went.
@@ -421,6 +455,61 @@ pub struct SplatResult {
     /// When the photos had lens distortion: the fraction of undistorted pixels that fell
     /// outside the photos (and repeat its edge).
     pub undistorted: Option<f64>,
+    /// As [`VoxelResult::poses`].
+    pub poses: Vec<PoseDelta>,
+    /// As [`VoxelResult::pose_error`].
+    pub pose_error: Option<PoseError>,
+}
+
+/// Checks [`VoxelJob::perturb_poses`].
+fn check_perturbation(p: Option<[f32; 2]>) -> Result<()> {
+    if let Some([deg, dist]) = p
+        && !(deg.is_finite() && (0.0..=180.0).contains(&deg) && dist.is_finite() && dist >= 0.0)
+    {
+        return Err(setting(
+            "perturb_poses",
+            format!("{deg},{dist}: need degrees in [0, 180] and a finite distance ≥ 0"),
+        ));
+    }
+    Ok(())
+}
+
+/// Perturbs the training views as `perturb` asks (seeded by `seed`), returning the loaded
+/// cameras to measure against.
+fn perturb_training(
+    data: &mut Dataset,
+    perturb: Option<[f32; 2]>,
+    seed: u64,
+) -> Option<Vec<crate::volume::camera::Camera>> {
+    let [deg, dist] = perturb?;
+    let loaded = data.train.iter().map(|v| v.camera).collect();
+    pose::perturb(&mut data.train, deg, dist, seed);
+    Some(loaded)
+}
+
+/// [`PoseError`] of the training views (perturbed) against `loaded`, before and after
+/// the learned corrections `poses` (empty: none).
+fn pose_error_of(
+    loaded: &[crate::volume::camera::Camera],
+    views: &[View],
+    poses: &[PoseDelta],
+) -> PoseError {
+    let mean = |f: &dyn Fn(usize) -> crate::volume::camera::Camera| {
+        let mut sum = [0.0f64; 2];
+        for (i, l) in loaded.iter().enumerate() {
+            let (a, d) = pose::pose_error(l, &f(i));
+            sum[0] += a;
+            sum[1] += d;
+        }
+        sum.map(|v| v / loaded.len().max(1) as f64)
+    };
+    PoseError {
+        before: mean(&|i| views[i].camera),
+        after: mean(&|i| match poses.get(i) {
+            Some(d) => pose::apply(&views[i].camera, d),
+            None => views[i].camera,
+        }),
+    }
 }
 
 /// An option error naming `name` (a field of the job).
@@ -482,6 +571,7 @@ impl VoxelJob {
             }
         }
         self.render()?;
+        check_perturbation(self.perturb_poses)?;
         Ok(())
     }
 
@@ -526,6 +616,7 @@ impl SplatJob {
         if let Some(b) = self.bound {
             check_positive(b)?;
         }
+        check_perturbation(self.perturb_poses)?;
         Ok(())
     }
 }
@@ -557,11 +648,21 @@ pub fn recon_voxel(
     job.validate()?;
     let render = job.render()?;
     let t_load = Instant::now();
-    let data = Dataset::load_with(scene, &job.loading())?;
+    let mut data = Dataset::load_with(scene, &job.loading())?;
     if data.train.is_empty() {
         return Err(no_training_views(scene));
     }
+    let loaded = perturb_training(&mut data, job.perturb_poses, job.seed);
     let (rays, colors) = pixels(&data.train);
+    let view_of_ray: Vec<u32> = if job.refine_poses {
+        data.train
+            .iter()
+            .enumerate()
+            .flat_map(|(i, v)| std::iter::repeat_n(i as u32, v.rgb.len()))
+            .collect()
+    } else {
+        Vec::new()
+    };
     // The test views' rays, made once for every evaluation.
     let test_rays: Vec<Vec<Ray>> = data.test.iter().map(|v| v.camera.rays()).collect();
     let defaults = Defaults::for_dataset(&data);
@@ -594,19 +695,23 @@ pub fn recon_voxel(
         tv_density: job.tv_density.unwrap_or(defaults.tv_density),
         tv_sh: job.tv_sh.unwrap_or(defaults.tv_sh),
         sparsity: job.sparsity.unwrap_or(defaults.sparsity),
+        refine_poses: job.refine_poses,
         ..voxel::TrainOptions::default()
     };
     let mut log: Vec<(voxel::TrainStep, Option<f64>)> = Vec::new();
     let mut last: Option<voxel::TrainStep> = None;
-    let outcome = voxel::train(&mut grid, &rays, &colors, &opts, &mut |s, g| {
+    let observe = &mut |s: &voxel::TrainStep, g: &Grid| {
         last = Some(*s);
         let test = evaluate_now(job.eval_every, s.iteration, job.iters, &data)
             .then(|| voxel_psnr(g, &test_rays, &data.test, &render));
-        if test.is_some() || s.iteration % 50 == 0 {
+        if test.is_some() || s.iteration.is_multiple_of(50) {
             log.push((*s, test));
         }
         observe(s, test)
-    })?;
+    };
+    let (outcome, poses) =
+        voxel::train_with_poses(&mut grid, &rays, &colors, &view_of_ray, &opts, observe)?;
+    let pose_error = loaded.map(|l| pose_error_of(&l, &data.train, &poses));
     let test_psnr =
         (!data.test.is_empty()).then(|| voxel_psnr(&grid, &test_rays, &data.test, &render));
     if let Some(s) = last {
@@ -626,6 +731,8 @@ pub fn recon_voxel(
         test_psnr,
         load_seconds,
         batch,
+        poses,
+        pose_error,
     })
 }
 
@@ -647,7 +754,8 @@ pub fn recon_splat(
 ) -> Result<SplatResult> {
     job.validate()?;
     let t_load = Instant::now();
-    let (data, undistorted) = load_for_splat(scene, &job.loading())?;
+    let (mut data, undistorted) = load_for_splat(scene, &job.loading())?;
+    let loaded = perturb_training(&mut data, job.perturb_poses, job.seed);
     let settings = splat::RenderSettings {
         background: background(&data),
         ..splat::RenderSettings::default()
@@ -689,6 +797,7 @@ pub fn recon_splat(
             ..splat::Densify::default()
         },
         exposure: job.exposure,
+        refine_poses: job.refine_poses,
         ..splat::TrainOptions::default()
     };
     let load_seconds = t_load.elapsed().as_secs_f64();
@@ -720,7 +829,10 @@ pub fn recon_splat(
         Some(splat_psnr(&model, &data.test, &settings)?)
     };
     log.retain(|r| r.0.iteration != outcome.iterations);
+    let pose_error = loaded.map(|l| pose_error_of(&l, &data.train, &outcome.poses));
     Ok(SplatResult {
+        poses: outcome.poses.clone(),
+        pose_error,
         warnings: data.warnings.clone(),
         model,
         outcome,

@@ -138,17 +138,19 @@ impl Model {
     }
 
     /// The depth images of the view of `camera` ([`splat::Depth`]: expected and median
-    /// depth along the viewing axis, world units).
+    /// depth along the viewing axis, world units; for voxels,
+    /// [`voxel::render_depth`]).
     ///
     /// # Errors
-    /// For a voxel model (depth images are drawn for Gaussians only), or the renderer's
-    /// refusal of the camera.
+    /// For a neural field (depth images are drawn for Gaussians and voxels), or the
+    /// renderer's refusal of the camera.
     pub fn render_depth(&self, camera: &Camera) -> Result<splat::Depth> {
         match self {
-            Model::Voxel(..) | Model::Ngp(..) => Err(Error::Setting {
+            Model::Ngp(..) => Err(Error::Setting {
                 name: "depth".into(),
-                message: "depth images are drawn for Gaussian (.ply) models only".into(),
+                message: "depth images are drawn for Gaussian and voxel models only".into(),
             }),
+            Model::Voxel(g, s) => Ok(voxel::render_depth(g, camera, s)),
             Model::Splat(g, s) => splat::render(g, camera, s)
                 .map(|r| r.depth())
                 .map_err(|what| Error::InvalidValue {

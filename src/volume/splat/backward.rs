@@ -63,6 +63,10 @@ pub struct Gradients {
     pub mean2d: Vec<[f32; 2]>,
     /// Whether each Gaussian survived culling in the view (it was projected and binned).
     pub visible: Vec<bool>,
+    /// ∂L/∂(a pose correction `[ε, u]` of the camera, at zero; see
+    /// [`crate::volume::pose`]): turning the camera about its center by `exp([ε]×)` and
+    /// moving it by `u`, world axes (radians, world units).
+    pub pose: [f64; 6],
 }
 
 impl Gradients {
@@ -88,6 +92,7 @@ impl Gradients {
         zero(&mut self.sh, n * k3, 0.0);
         zero(&mut self.mean2d, n, [0.0; 2]);
         zero(&mut self.visible, n, false);
+        self.pose = [0.0; 6];
     }
 }
 
@@ -169,6 +174,9 @@ pub fn backward_into(
         out.sh[i * k3..(i + 1) * k3].copy_from_slice(&g.sh[..k3]);
         out.mean2d[i] = [acc[0], acc[1]];
         out.visible[i] = true;
+        for (acc, v) in out.pose.iter_mut().zip(g.pose) {
+            *acc += v as f64;
+        }
     }
     Ok(())
 }
@@ -275,6 +283,8 @@ struct Param {
     rotation: [f32; 4],
     logit: f32,
     sh: [f32; 48],
+    /// This Gaussian's share of [`Gradients::pose`].
+    pose: [f32; 6],
 }
 
 /// Step 3 for one projected Gaussian, given its summed [`PairGrad`].
@@ -363,10 +373,23 @@ fn projection_backward(gaussians: &Gaussians, cam: &Pinhole, p: &Projected, g: &
     d_p.y += dmy * fy / z;
     d_p.z -= (dmx * fx * pc.x + dmy * fy * pc.y) / (z * z);
     // p = W·mean + t.
-    d_mean += cam.rot.transpose() * d_p;
+    let d_projected = cam.rot.transpose() * d_p;
+    d_mean += d_projected;
 
     // C = W·Σ·Wᵀ, Σ = M·Mᵀ, M = R·diag(s).
     let g_sigma = cam.rot.transpose() * g_cov * cam.rot;
+    // The camera turned by exp([ε]×) about its center sees the world turned by
+    // exp(−[ε]×) about it: r = mean − origin moves by −ε × r, Σ by Σ[ε]× − [ε]×Σ (the
+    // view direction of the colors does not change). Moving it by u moves every mean
+    // by −u relative to it, the colors' view direction included.
+    let sigma = geo.m * geo.m.transpose();
+    let r = mean - cam.origin;
+    let mut d_eps = d_projected.cross(r);
+    for a in 0..3 {
+        let e = crate::volume::pose::skew(Vec3::AXES[a]);
+        d_eps[a] += frobenius(g_sigma, sigma * e - e * sigma);
+    }
+    let pose = [d_eps.x, d_eps.y, d_eps.z, -d_mean.x, -d_mean.y, -d_mean.z];
     let g_m = (g_sigma + g_sigma.transpose()) * geo.m;
     let scale = gaussians.scale(i);
     let r = Mat3::from_quat(gaussians.rotation(i));
@@ -386,7 +409,13 @@ fn projection_backward(gaussians: &Gaussians, cam: &Pinhole, p: &Projected, g: &
         rotation: quaternion_backward(gaussians.rotations[i], g_r),
         logit,
         sh: sh_grad,
+        pose,
     }
+}
+
+/// `Σ_ij a_ij·b_ij`.
+fn frobenius(a: Mat3, b: Mat3) -> f32 {
+    a.x_axis.dot(b.x_axis) + a.y_axis.dot(b.y_axis) + a.z_axis.dot(b.z_axis)
 }
 
 /// `a·bᵀ`.
@@ -606,6 +635,34 @@ mod tests {
                 );
             }
             eprintln!("{name}: largest |gradient| {largest:.4}, worst error {worst:.2e} of it");
+        }
+        check_pose_gradient(&g0, &cam, &s, &w, &grads);
+    }
+
+    /// [`Gradients::pose`] against central differences of the rendering by the camera
+    /// with a small correction ([`crate::volume::pose::apply`]).
+    fn check_pose_gradient(
+        g: &Gaussians,
+        cam: &Camera,
+        s: &RenderSettings,
+        w: &[[f32; 3]],
+        grads: &Gradients,
+    ) {
+        let largest = grads.pose.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        assert!(largest > 1e-2, "pose gradient vanishes: {:?}", grads.pose);
+        let h = 1e-3f32;
+        for k in 0..6 {
+            let (mut plus, mut minus) = ([0.0f32; 6], [0.0f32; 6]);
+            plus[k] = h;
+            minus[k] = -h;
+            let fd = (loss(g, &crate::volume::pose::apply(cam, &plus), s, w)
+                - loss(g, &crate::volume::pose::apply(cam, &minus), s, w))
+                / (2.0 * h as f64);
+            let an = grads.pose[k];
+            assert!(
+                (fd - an).abs() <= 0.01 * largest + 1e-3 * fd.abs(),
+                "pose[{k}]: analytic {an} vs central difference {fd}"
+            );
         }
     }
 

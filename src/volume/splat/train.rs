@@ -41,6 +41,12 @@
 //! rate, and are returned in [`TrainOutcome::exposures`]. Held-out views are rendered
 //! without them.
 //!
+//! **Pose refinement** ([`TrainOptions::refine_poses`]): each training view's camera
+//! carries its own learned correction ([`crate::volume::pose`]: a turn about its center and
+//! a move), starting at zero, stepped by Adam with the gradient [`Gradients::pose`] of
+//! the view's loss, and returned in [`TrainOutcome::poses`]. Held-out views keep their
+//! poses.
+//!
 //! Results are deterministic for a fixed seed, on any number of threads (the renderer,
 //! the backward pass and the loss are).
 
@@ -60,6 +66,7 @@ use crate::limits::MAX_GAUSSIANS;
 use crate::optim::{Moments, Rule, exponential, progress};
 use crate::rng::Rng;
 use crate::volume::dataset::View;
+use crate::volume::pose::{self, PoseDelta};
 use crate::volume::sh;
 
 /// Adaptive density control (see the module documentation). Iteration counts are of
@@ -176,6 +183,12 @@ pub struct TrainOptions {
     /// Learning rate of the exposure transforms, at the first and the last iteration
     /// (exponential decay between).
     pub lr_exposure: [f32; 2],
+    /// Learn a pose correction of each training view ([`crate::volume::pose`]).
+    pub refine_poses: bool,
+    /// Learning rate of the corrections' rotation (radians), at the first and the last
+    /// iteration (exponential decay between); the translation's is this times the
+    /// extent.
+    pub lr_poses: [f32; 2],
 }
 
 impl Default for TrainOptions {
@@ -198,6 +211,8 @@ impl Default for TrainOptions {
             densify: Densify::default(),
             exposure: false,
             lr_exposure: [1e-2, 1e-3],
+            refine_poses: false,
+            lr_poses: [1e-3, 1e-5],
         }
     }
 }
@@ -236,6 +251,9 @@ pub struct TrainOutcome {
     /// With [`TrainOptions::exposure`], the learned transform of each training view, in
     /// the order of the views ([`exposure`] module); else empty.
     pub exposures: Vec<[f32; 12]>,
+    /// With [`TrainOptions::refine_poses`], the learned correction of each training
+    /// view, in the order of the views ([`crate::volume::pose`]); else empty.
+    pub poses: Vec<PoseDelta>,
 }
 
 /// `count` Gaussians at uniformly random places in the cube `center ± half`, with random
@@ -453,7 +471,11 @@ pub fn train(
         seconds: 0.0,
         parts: [0.0; 5],
         exposures: Vec::new(),
+        poses: Vec::new(),
     };
+    let mut poses = vec![[0.0f32; 6]; if opts.refine_poses { views.len() } else { 0 }];
+    let mut pose_moments: Vec<Moments<f32>> =
+        (0..poses.len()).map(|_| Moments::new(ADAM, 6)).collect();
     let mut exposures = vec![exposure::IDENTITY; if opts.exposure { views.len() } else { 0 }];
     let mut exposure_moments: Vec<Moments<f32>> = (0..exposures.len())
         .map(|_| Moments::new(ADAM, 12))
@@ -478,12 +500,16 @@ pub fn train(
         }
         let vi = order.pop().expect("refilled above");
         let view = &views[vi];
+        let camera = match poses.get(vi) {
+            Some(delta) => pose::apply(&view.camera, delta),
+            None => view.camera,
+        };
         let mut clock = Instant::now();
         let mut lap = |part: usize, outcome: &mut TrainOutcome| {
             outcome.parts[part] += clock.elapsed().as_secs_f32();
             clock = Instant::now();
         };
-        let out = render(gaussians, &view.camera, &opts.render).map_err(invalid)?;
+        let out = render(gaussians, &camera, &opts.render).map_err(invalid)?;
         lap(0, &mut outcome);
         d_img.resize(out.rgb.len(), [0.0; 3]);
         let (w, h) = (view.width as usize, view.height as usize);
@@ -504,15 +530,14 @@ pub fn train(
             adam(&mut exposure_moments[vi], &mut exposures[vi], &dm, |_| lr);
         }
         lap(1, &mut outcome);
-        backward_into(
-            gaussians,
-            &view.camera,
-            &opts.render,
-            &out,
-            &d_img,
-            &mut grads,
-        )
-        .map_err(invalid)?;
+        backward_into(gaussians, &camera, &opts.render, &out, &d_img, &mut grads)
+            .map_err(invalid)?;
+        if let Some(delta) = poses.get_mut(vi) {
+            let g = pose::delta_gradient(delta, &grads.pose);
+            let lr = exponential(opts.lr_poses, frac);
+            let rates = [lr, lr * opts.extent];
+            adam(&mut pose_moments[vi], delta, &g, |j| rates[j / 3]);
+        }
         // View-space gradient statistics for densification.
         let half = glam::Vec2::new(0.5 * w as f32, 0.5 * h as f32);
         for p in &out.projected {
@@ -579,6 +604,7 @@ pub fn train(
     }
     outcome.seconds = (start.elapsed() - observing).as_secs_f32();
     outcome.exposures = exposures;
+    outcome.poses = poses;
     Ok(outcome)
 }
 
@@ -631,6 +657,8 @@ fn validate(
     let rates = [
         opts.lr_exposure[0],
         opts.lr_exposure[1],
+        opts.lr_poses[0],
+        opts.lr_poses[1],
         opts.lr_means[0],
         opts.lr_means[1],
         opts.lr_log_scales,
@@ -1229,19 +1257,7 @@ mod tests {
     /// Renders of three colored Gaussians from 6 cameras around them, 48 × 40, white
     /// background; view `i`'s colors multiplied by `gain(i)`.
     fn ring_views(gain: impl Fn(usize) -> f32) -> (Vec<View>, RenderSettings) {
-        let mut truth = Gaussians::new(0);
-        let colors = [[0.9, 0.1, 0.1], [0.1, 0.8, 0.2], [0.2, 0.3, 0.9]];
-        for (k, c) in colors.iter().enumerate() {
-            let dc = c.map(|v| (v - 0.5) / SH_C0);
-            let x = k as f32 * 0.4 - 0.4;
-            truth.push(
-                [x, 0.0, 0.0],
-                [-1.6, -2.0, -1.8],
-                [1.0, 0.2, 0.0, 0.1],
-                3.0,
-                &dc,
-            );
-        }
+        let truth = ring_truth();
         let settings = RenderSettings {
             background: [1.0; 3],
             ..Default::default()
@@ -1380,6 +1396,132 @@ mod tests {
         assert!(
             psnr_with > psnr_without + 1.0,
             "PSNR {psnr_without} without, {psnr_with} with"
+        );
+    }
+
+    /// The three colored Gaussians of [`ring_views`].
+    fn ring_truth() -> Gaussians {
+        let mut truth = Gaussians::new(0);
+        let colors = [[0.9, 0.1, 0.1], [0.1, 0.8, 0.2], [0.2, 0.3, 0.9]];
+        for (k, c) in colors.iter().enumerate() {
+            let dc = c.map(|v| (v - 0.5) / SH_C0);
+            let x = k as f32 * 0.4 - 0.4;
+            truth.push(
+                [x, 0.0, 0.0],
+                [-1.6, -2.0, -1.8],
+                [1.0, 0.2, 0.0, 0.1],
+                3.0,
+                &dc,
+            );
+        }
+        truth
+    }
+
+    /// Eight Gaussians of different colors at the corners of a cube of side 1 (so
+    /// that the views have parallax: a turn of the camera is not a move), seen from 8
+    /// cameras around it on a sphere of radius 3, 48 × 40, white background; but the
+    /// cameras perturbed by 1.5° and 0.06 units. Starting from the true model (held
+    /// fixed, so that only the poses can explain the photos), pose refinement brings the
+    /// cameras back (the mean pose error falls to a third) and the photos' PSNR rises;
+    /// without it nothing moves.
+    #[test]
+    fn pose_refinement_recovers_perturbed_cameras() {
+        let mut cube = Gaussians::new(0);
+        for k in 0..8 {
+            let corner = [k & 1, (k >> 1) & 1, (k >> 2) & 1].map(|b| 1.2 * b as f32 - 0.6);
+            let color = [
+                0.2 + 0.6 * corner[0].abs(),
+                (k as f32) / 8.0,
+                0.9 - 0.1 * k as f32,
+            ];
+            let dc = color.map(|v| (v - 0.5) / SH_C0);
+            cube.push(corner, [-2.3, -2.1, -2.5], [1.0, 0.1, 0.2, 0.0], 3.0, &dc);
+        }
+        let settings = RenderSettings {
+            background: [1.0; 3],
+            ..Default::default()
+        };
+        let mut views: Vec<View> = (0..8)
+            .map(|i| {
+                let a = i as f32 * std::f32::consts::TAU / 8.0;
+                let eye = Vec3::new(2.2 * a.cos(), 0.8 - 0.2 * i as f32, 2.2 * a.sin());
+                let cam =
+                    crate::volume::camera::Camera::look_at(eye, Vec3::ZERO, Vec3::Y, 1.3, 48, 40)
+                        .unwrap();
+                let rgb = render(&cube, &cam, &settings).unwrap().rgb;
+                View {
+                    name: format!("v{i}"),
+                    camera: cam,
+                    width: 48,
+                    height: 40,
+                    rgb,
+                }
+            })
+            .collect();
+        let truth: Vec<_> = views.iter().map(|v| v.camera).collect();
+        crate::volume::pose::perturb(&mut views, 1.5, 0.06, 5);
+        let opts = |refine_poses| TrainOptions {
+            iterations: 800,
+            render: settings,
+            sh_degree: 0,
+            extent: 3.3,
+            lr_means: [0.0; 2],
+            lr_log_scales: 0.0,
+            lr_rotations: 0.0,
+            lr_opacities: 0.0,
+            lr_sh_dc: 0.0,
+            lr_sh_rest: 0.0,
+            densify: Densify {
+                from: 100_000,
+                reset_every: 0,
+                ..Densify::default()
+            },
+            refine_poses,
+            lr_poses: [1e-2, 1e-4],
+            ..TrainOptions::default()
+        };
+        let error = |poses: &[PoseDelta]| -> (f64, f64) {
+            let mut sum = (0.0, 0.0);
+            for (i, v) in views.iter().enumerate() {
+                let cam = poses.get(i).map_or(v.camera, |d| pose::apply(&v.camera, d));
+                let (a, d) = pose::pose_error(&truth[i], &cam);
+                sum = (sum.0 + a / 8.0, sum.1 + d / 8.0);
+            }
+            sum
+        };
+        let run = |refine| {
+            let mut g = cube.clone();
+            let (mut first, mut last) = (Vec::new(), Vec::new());
+            let out = train(&mut g, &views, &opts(refine), &mut |s, _| {
+                if s.iteration <= 8 {
+                    first.push(s.psnr);
+                } else if s.iteration > 792 {
+                    last.push(s.psnr);
+                }
+                true
+            })
+            .unwrap();
+            let mean = |v: &[f32]| v.iter().sum::<f32>() / v.len() as f32;
+            (out, mean(&first), mean(&last))
+        };
+        let (with, before, after) = run(true);
+        let (without, _, after_without) = run(false);
+        assert!(without.poses.is_empty());
+        assert_eq!(with.poses.len(), 8);
+        let (e0, e1) = (error(&[]), error(&with.poses));
+        eprintln!("pose error {e0:?} → {e1:?}, PSNR {before} → {after} ({after_without} without)");
+        assert!(
+            (e0.0 - 1.5).abs() < 1e-3 && (e0.1 - 0.06).abs() < 1e-4,
+            "{e0:?}"
+        );
+        assert!(
+            e1.0 < e0.0 / 3.0 && e1.1 < e0.1 / 3.0,
+            "pose error {e0:?} → {e1:?}"
+        );
+        assert!(after > before + 5.0, "PSNR {before} → {after}");
+        assert!(
+            after > after_without + 5.0,
+            "PSNR {after} with, {after_without} without"
         );
     }
 

@@ -48,5 +48,7 @@ mod train;
 
 pub use grid::{Grid, MAX_RES};
 pub use io::{load, save};
-pub use render::{Grads, RenderSettings, max_weights, ray_backward, render_ray, render_rays};
-pub use train::{TrainOptions, TrainOutcome, TrainStep, train};
+pub use render::{
+    Grads, RenderSettings, max_weights, ray_backward, render_depth, render_ray, render_rays,
+};
+pub use train::{TrainOptions, TrainOutcome, TrainStep, train, train_with_poses};

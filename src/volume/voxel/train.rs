@@ -8,16 +8,26 @@
 //! (the update is lazy: untouched slots keep their values and optimizer moments). Results
 //! are deterministic for a fixed seed and thread count (the split into parts, and so the
 //! order of float sums, depends on the thread count).
+//!
+//! **Pose refinement** ([`TrainOptions::refine_poses`], with [`train_with_poses`]): each
+//! training view carries a learned correction of its camera ([`crate::volume::pose`]),
+//! starting at zero. A ray of view `v` is rendered as the corrected camera sees it, and
+//! its gradient with respect to its origin and direction ([`ray_gradient`]) gives the
+//! gradient with respect to `v`'s correction, summed per view in the order of the batch
+//! (so the same for any thread count) and stepped by Adam with its own rate.
 
 use std::time::Instant;
 
 use rayon::prelude::*;
 
 use super::grid::{Grid, MAX_RES};
-use super::render::{RenderSettings, Sink, backward, forward, max_weights, scatter, with_k};
+use super::render::{
+    RenderSettings, Sink, backward, forward, max_weights, ray_gradient, scatter, with_k,
+};
 use crate::error::{Error, Result};
 use crate::optim::{LazyStep, Moments, Rule, exponential, progress};
 use crate::rng::Rng;
+use crate::volume::pose::{self, PoseDelta};
 use crate::volume::{Ray, sh};
 
 /// Everything [`train`] needs besides the grid and the rays.
@@ -74,6 +84,13 @@ pub struct TrainOptions {
     /// state of the slots that stay; 0 disables. Empty space is only recognizable once
     /// training has cleared it, which is often after the coarse-to-fine steps.
     pub prune_every: usize,
+    /// Learn a pose correction of each training view ([`train_with_poses`]; [`train`]
+    /// refuses this).
+    pub refine_poses: bool,
+    /// Learning rate of the corrections' rotation (radians per step), first and last
+    /// iteration (exponential decay between); the translation's is this times the
+    /// grid's largest side.
+    pub lr_poses: [f32; 2],
 }
 
 impl Default for TrainOptions {
@@ -110,6 +127,8 @@ impl Default for TrainOptions {
             prune_dilate: 1,
             prune_rays: 1 << 20,
             prune_every: 0,
+            refine_poses: false,
+            lr_poses: [1e-3, 1e-5],
         }
     }
 }
@@ -161,10 +180,54 @@ pub fn train(
     opts: &TrainOptions,
     observe: &mut dyn FnMut(&TrainStep, &Grid) -> bool,
 ) -> Result<TrainOutcome> {
-    validate(rays, colors, opts).map_err(|what| Error::InvalidValue {
-        path: "voxel training".into(),
-        what,
-    })?;
+    if opts.refine_poses {
+        return Err(Error::InvalidValue {
+            path: "voxel training".into(),
+            what: "refine_poses needs each ray's view: use train_with_poses".into(),
+        });
+    }
+    train_with_poses(grid, rays, colors, &[], opts, observe).map(|(o, _)| o)
+}
+
+/// [`train`] that also knows which training view each ray comes from:
+/// `view_of_ray[i]` is ray `i`'s view (all rays of a view share its camera's center).
+/// With [`TrainOptions::refine_poses`], returns the learned correction of each view
+/// `0 ..= max(view_of_ray)` ([`crate::volume::pose`]); else an empty list, and
+/// `view_of_ray` may be empty.
+///
+/// # Errors
+/// As [`train`], and `view_of_ray` not one entry per ray when refining poses.
+pub fn train_with_poses(
+    grid: &mut Grid,
+    rays: &[Ray],
+    colors: &[[f32; 3]],
+    view_of_ray: &[u32],
+    opts: &TrainOptions,
+    observe: &mut dyn FnMut(&TrainStep, &Grid) -> bool,
+) -> Result<(TrainOutcome, Vec<PoseDelta>)> {
+    validate(rays, colors, opts)
+        .and_then(|()| {
+            if opts.refine_poses && view_of_ray.len() != rays.len() {
+                Err(format!(
+                    "{} view indices for {} rays",
+                    view_of_ray.len(),
+                    rays.len()
+                ))
+            } else {
+                Ok(())
+            }
+        })
+        .map_err(|what| Error::InvalidValue {
+            path: "voxel training".into(),
+            what,
+        })?;
+    let n_views = if opts.refine_poses {
+        view_of_ray.iter().max().map_or(0, |&v| v as usize + 1)
+    } else {
+        0
+    };
+    let mut poses = Poses::new(n_views);
+    let extent = (grid.max() - grid.min()).max_element();
     let threads = rayon::current_num_threads().max(1);
     let mut schedule = opts.upsample.clone();
     schedule.sort_by_key(|u| u.0);
@@ -184,12 +247,12 @@ pub fn train(
     for it in 0..n_it {
         let mut resampled = false;
         while let Some((_, res)) = sched.next_if(|u| u.0 <= it) {
-            resample(grid, rays, opts, res, &mut rng);
+            resample(grid, rays, &poses, view_of_ray, opts, res, &mut rng);
             state = State::new(grid, threads, opts);
             resampled = true;
         }
         if !resampled && it > 0 && opts.prune_every > 0 && it % opts.prune_every == 0 {
-            prune_in_place(grid, rays, opts, &mut rng, &mut state);
+            prune_in_place(grid, rays, &poses, view_of_ray, opts, &mut rng, &mut state);
         }
         let t_step = Instant::now();
         let batch: Vec<u32> = (0..opts.batch_size)
@@ -200,15 +263,35 @@ pub fn train(
         let scale = 2.0 / (3.0 * batch.len() as f32);
         let sparse = opts.sparsity / batch.len() as f32;
         let g: &Grid = grid;
+        let refine = opts.refine_poses;
+        poses.grads.clear();
+        poses
+            .grads
+            .resize(if refine { batch.len() } else { 0 }, [0.0; 6]);
+        let mut pose_parts: Vec<&mut [[f32; 6]]> = if refine {
+            poses.grads.chunks_mut(part).collect()
+        } else {
+            (0..state.accs.len()).map(|_| &mut [][..]).collect()
+        };
+        let (rots, moves) = (&poses.rotations, &poses.moves);
         let sse: f64 = with_k!(g.degree(), K => state
             .accs
             .par_iter_mut()
             .zip(batch.par_chunks(part))
-            .map(|(acc, idx)| {
+            .zip(pose_parts.par_iter_mut())
+            .map(|((acc, idx), pose_g)| {
                 let mut tape = Vec::with_capacity(256);
                 let mut sse = 0.0f64;
-                for &i in idx {
+                for (b, &i) in idx.iter().enumerate() {
                     let (ray, y) = (&rays[i as usize], colors[i as usize]);
+                    let moved;
+                    let ray = if refine {
+                        let v = view_of_ray[i as usize] as usize;
+                        moved = pose::apply_to_ray(ray, &rots[v], moves[v]);
+                        &moved
+                    } else {
+                        ray
+                    };
                     tape.clear();
                     let (c, delta) = forward::<K>(g, ray, &opts.render, |r| tape.push(r));
                     let mut d = [0.0f32; 3];
@@ -219,10 +302,18 @@ pub fn train(
                     }
                     let basis = sh::basis(g.degree(), ray.dir);
                     backward::<K, _>(&tape, &basis, delta, c, d, sparse, acc);
+                    if refine {
+                        let (g_o, g_d) =
+                            ray_gradient::<K>(g, ray, &opts.render, &tape, c, d, sparse);
+                        // The camera turned by ε about its center turns d by ε × d.
+                        let g_eps = ray.dir.cross(g_d);
+                        pose_g[b] = [g_eps.x, g_eps.y, g_eps.z, g_o.x, g_o.y, g_o.z];
+                    }
                 }
                 sse
             })
             .sum());
+        drop(pose_parts);
         let loss = (sse / (3.0 * batch.len() as f64)) as f32;
         if opts.tv_fraction > 0.0 && (opts.tv_density > 0.0 || opts.tv_sh > 0.0) {
             let n = g.allocated();
@@ -236,6 +327,10 @@ pub fn train(
             exponential(opts.lr_sh, frac),
         ];
         state.update(grid, lr);
+        if refine {
+            let lr = exponential(opts.lr_poses, frac);
+            poses.step(&batch, view_of_ray, [lr, lr * extent]);
+        }
         let secs = t_step.elapsed().as_secs_f32();
         let step = TrainStep {
             iteration: it + 1,
@@ -257,10 +352,77 @@ pub fn train(
         }
     }
     if opts.prune_every > 0 && outcome.iterations > 0 {
-        prune_in_place(grid, rays, opts, &mut rng, &mut state);
+        prune_in_place(grid, rays, &poses, view_of_ray, opts, &mut rng, &mut state);
     }
     outcome.seconds = (start.elapsed() - observing).as_secs_f32();
-    Ok(outcome)
+    Ok((outcome, poses.deltas))
+}
+
+/// The pose corrections of the views while training, with their optimizer state.
+struct Poses {
+    deltas: Vec<PoseDelta>,
+    moments: Vec<Moments<f32>>,
+    /// `rotation(ω)` and `v` of each correction, for moving rays.
+    rotations: Vec<glam::Mat3>,
+    moves: Vec<glam::Vec3>,
+    /// Per batch entry, the local pose gradient of its ray.
+    grads: Vec<[f32; 6]>,
+}
+
+impl Poses {
+    fn new(views: usize) -> Poses {
+        Poses {
+            deltas: vec![[0.0; 6]; views],
+            moments: (0..views)
+                .map(|_| {
+                    Moments::new(
+                        Rule::Adam {
+                            beta1: 0.9,
+                            beta2: 0.999,
+                            eps: 1e-15,
+                        },
+                        6,
+                    )
+                })
+                .collect(),
+            rotations: vec![glam::Mat3::IDENTITY; views],
+            moves: vec![glam::Vec3::ZERO; views],
+            grads: Vec::new(),
+        }
+    }
+
+    /// Ray `i` as its view's corrected camera sees it (unchanged without corrections).
+    fn ray(&self, rays: &[Ray], view_of_ray: &[u32], i: usize) -> Ray {
+        if self.deltas.is_empty() {
+            return rays[i];
+        }
+        let v = view_of_ray[i] as usize;
+        pose::apply_to_ray(&rays[i], &self.rotations[v], self.moves[v])
+    }
+
+    /// Sums the batch's gradients per view (in batch order), steps each view that had
+    /// rays with rates `[rotation, translation]`, and refreshes the rotations.
+    fn step(&mut self, batch: &[u32], view_of_ray: &[u32], rates: [f32; 2]) {
+        let mut sums = vec![[0.0f64; 6]; self.deltas.len()];
+        let mut seen = vec![false; self.deltas.len()];
+        for (&i, g) in batch.iter().zip(&self.grads) {
+            let v = view_of_ray[i as usize] as usize;
+            seen[v] = true;
+            for k in 0..6 {
+                sums[v][k] += g[k] as f64;
+            }
+        }
+        for v in (0..self.deltas.len()).filter(|&v| seen[v]) {
+            let g = pose::delta_gradient(&self.deltas[v], &sums[v]);
+            let mut step = self.moments[v].lazy_step();
+            for k in 0..6 {
+                step.apply(k, &mut self.deltas[v][k], g[k], rates[k / 3]);
+            }
+            let d = self.deltas[v];
+            self.rotations[v] = pose::rotation(glam::Vec3::new(d[0], d[1], d[2]));
+            self.moves[v] = glam::Vec3::new(d[3], d[4], d[5]);
+        }
+    }
 }
 
 fn validate(rays: &[Ray], colors: &[[f32; 3]], o: &TrainOptions) -> Result<(), String> {
@@ -269,7 +431,7 @@ fn validate(rays: &[Ray], colors: &[[f32; 3]], o: &TrainOptions) -> Result<(), S
         return Err("batch_size is 0".into());
     }
     o.render.validate()?;
-    let rates = [o.lr_density, o.lr_sh].concat();
+    let rates = [o.lr_density, o.lr_sh, o.lr_poses].concat();
     if !rates.iter().all(|r| r.is_finite() && *r >= 0.0) {
         return Err(format!("learning rates {rates:?} must be finite and ≥ 0"));
     }
@@ -298,9 +460,17 @@ fn validate(rays: &[Ray], colors: &[[f32; 3]], o: &TrainOptions) -> Result<(), S
 }
 
 /// Prune (by rendering weight over training rays) and resample to `res`.
-fn resample(grid: &mut Grid, rays: &[Ray], opts: &TrainOptions, res: u32, rng: &mut Rng) {
+fn resample(
+    grid: &mut Grid,
+    rays: &[Ray],
+    poses: &Poses,
+    view_of_ray: &[u32],
+    opts: &TrainOptions,
+    res: u32,
+    rng: &mut Rng,
+) {
     if opts.prune_threshold > 0.0 {
-        let keep = prune_mask(grid, rays, opts, rng);
+        let keep = prune_mask(grid, rays, poses, view_of_ray, opts, rng);
         grid.prune(|s| keep[s]);
     }
     if res != grid.res() {
@@ -309,12 +479,26 @@ fn resample(grid: &mut Grid, rays: &[Ray], opts: &TrainOptions, res: u32, rng: &
 }
 
 /// Which slots pass the pruning threshold (or its margin) over the pruning rays.
-fn prune_mask(grid: &Grid, rays: &[Ray], opts: &TrainOptions, rng: &mut Rng) -> Vec<bool> {
+fn prune_mask(
+    grid: &Grid,
+    rays: &[Ray],
+    poses: &Poses,
+    view_of_ray: &[u32],
+    opts: &TrainOptions,
+    rng: &mut Rng,
+) -> Vec<bool> {
     let weights = if opts.prune_rays == 0 || opts.prune_rays >= rays.len() {
-        max_weights(grid, rays, &opts.render)
+        if poses.deltas.is_empty() {
+            max_weights(grid, rays, &opts.render)
+        } else {
+            let moved: Vec<Ray> = (0..rays.len())
+                .map(|i| poses.ray(rays, view_of_ray, i))
+                .collect();
+            max_weights(grid, &moved, &opts.render)
+        }
     } else {
         let pick: Vec<Ray> = (0..opts.prune_rays)
-            .map(|_| rays[rng.below(rays.len())])
+            .map(|_| poses.ray(rays, view_of_ray, rng.below(rays.len())))
             .collect();
         max_weights(grid, &pick, &opts.render)
     };
@@ -325,6 +509,8 @@ fn prune_mask(grid: &Grid, rays: &[Ray], opts: &TrainOptions, rng: &mut Rng) -> 
 fn prune_in_place(
     grid: &mut Grid,
     rays: &[Ray],
+    poses: &Poses,
+    view_of_ray: &[u32],
     opts: &TrainOptions,
     rng: &mut Rng,
     state: &mut State,
@@ -332,7 +518,7 @@ fn prune_in_place(
     if opts.prune_threshold <= 0.0 {
         return;
     }
-    let keep = prune_mask(grid, rays, opts, rng);
+    let keep = prune_mask(grid, rays, poses, view_of_ray, opts, rng);
     if keep.iter().all(|&k| k) {
         return;
     }

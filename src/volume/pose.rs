@@ -1,0 +1,232 @@
+//! Camera pose corrections, learned next to a model ("pose refinement"), and the
+//! perturbation of poses used to test them.
+//!
+//! A **correction** is six numbers `[ωx, ωy, ωz, vx, vy, vz]` ([`PoseDelta`]), all in
+//! world axes: the corrected camera turns about its own center by the rotation
+//! `exp([ω]×)` (axis-angle, radians) and then moves by `v` (world units). With the loaded
+//! camera-to-world rotation `R` and center `c`, the corrected camera has rotation
+//! `exp([ω]×)·R` and center `c + v`; a ray `(o, d)` of the loaded camera becomes
+//! `(o + v, exp([ω]×)·d)`. The zero correction changes nothing.
+//!
+//! The renderers' backward passes give the gradient with respect to a correction
+//! `[ε, u]` applied on top of the camera they rendered (at `ε = u = 0`, the *local*
+//! gradient). `delta_gradient` turns it into the gradient with respect to the stored
+//! correction, through the left Jacobian of SO(3): `exp(ω + δ) = exp(J(ω)·δ)·exp(ω)` to
+//! first order.
+
+use glam::{Affine3A, Mat3, Mat3A, Vec3};
+
+use super::camera::Camera;
+use super::{Ray, dataset::View};
+use crate::rng::Rng;
+
+/// A pose correction `[ωx, ωy, ωz, vx, vy, vz]` (module documentation): rotation
+/// vector in radians, then translation in world units, both in world axes.
+pub type PoseDelta = [f32; 6];
+
+/// `exp([ω]×)`: the rotation by `|ω|` radians about `ω / |ω|`.
+pub(crate) fn rotation(omega: Vec3) -> Mat3 {
+    let angle = omega.length();
+    if angle < 1e-12 {
+        // First order; exact to f32 precision at this size.
+        return Mat3::IDENTITY + skew(omega);
+    }
+    Mat3::from_axis_angle(omega / angle, angle)
+}
+
+/// `[a]×`, the matrix with `[a]×·b = a × b`.
+pub(crate) fn skew(a: Vec3) -> Mat3 {
+    Mat3::from_cols(
+        Vec3::new(0.0, a.z, -a.y),
+        Vec3::new(-a.z, 0.0, a.x),
+        Vec3::new(a.y, -a.x, 0.0),
+    )
+}
+
+/// The left Jacobian of SO(3): `I + (1 − cos θ)/θ²·W + (θ − sin θ)/θ³·W²`, `W = [ω]×`,
+/// `θ = |ω|` (in f64, series near 0).
+fn left_jacobian(omega: Vec3) -> [[f64; 3]; 3] {
+    let w = [omega.x as f64, omega.y as f64, omega.z as f64];
+    let t2 = w[0] * w[0] + w[1] * w[1] + w[2] * w[2];
+    let t = t2.sqrt();
+    let (a, b) = if t < 1e-4 {
+        (0.5 - t2 / 24.0, 1.0 / 6.0 - t2 / 120.0)
+    } else {
+        ((1.0 - t.cos()) / t2, (t - t.sin()) / (t2 * t))
+    };
+    let k = [[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]];
+    let mut j = [[0.0; 3]; 3];
+    for r in 0..3 {
+        for c in 0..3 {
+            let k2: f64 = (0..3).map(|m| k[r][m] * k[m][c]).sum();
+            j[r][c] = if r == c { 1.0 } else { 0.0 } + a * k[r][c] + b * k2;
+        }
+    }
+    j
+}
+
+/// The gradient with respect to the stored correction `delta` from the local gradient
+/// `local = ∂L/∂[ε, u]` of a correction applied on top of the corrected camera (module
+/// documentation): `∂L/∂ω = J(ω)ᵀ·∂L/∂ε`, `∂L/∂v = ∂L/∂u`.
+pub(crate) fn delta_gradient(delta: &PoseDelta, local: &[f64; 6]) -> PoseDelta {
+    let j = left_jacobian(Vec3::new(delta[0], delta[1], delta[2]));
+    let mut out = [0.0f32; 6];
+    for c in 0..3 {
+        out[c] = (0..3).map(|r| j[r][c] * local[r]).sum::<f64>() as f32;
+        out[3 + c] = local[3 + c] as f32;
+    }
+    out
+}
+
+/// `camera` with the correction `delta` applied (module documentation).
+pub fn apply(camera: &Camera, delta: &PoseDelta) -> Camera {
+    let r = rotation(Vec3::new(delta[0], delta[1], delta[2]));
+    let v = Vec3::new(delta[3], delta[4], delta[5]);
+    let c2w = Affine3A {
+        matrix3: Mat3A::from(r) * camera.c2w.matrix3,
+        translation: camera.c2w.translation + glam::Vec3A::from(v),
+    };
+    Camera { c2w, ..*camera }
+}
+
+/// The ray `ray` of a loaded camera as the camera corrected by `(rot, v)` sees it, where
+/// `rot = rotation(ω)`: `(o + v, rot·d)`.
+#[inline]
+pub(crate) fn apply_to_ray(ray: &Ray, rot: &Mat3, v: Vec3) -> Ray {
+    Ray {
+        origin: ray.origin + v,
+        dir: *rot * ray.dir,
+    }
+}
+
+/// How far pose `b` is from pose `a`: the angle of `R_b·R_aᵀ` in degrees and the
+/// distance between the centers in world units.
+pub fn pose_error(a: &Camera, b: &Camera) -> (f64, f64) {
+    let ra = Mat3::from(a.c2w.matrix3);
+    let rb = Mat3::from(b.c2w.matrix3);
+    let rel = rb * ra.transpose();
+    let trace = (rel.x_axis.x + rel.y_axis.y + rel.z_axis.z) as f64;
+    let angle = ((trace - 1.0) / 2.0).clamp(-1.0, 1.0).acos().to_degrees();
+    (angle, a.position().distance(b.position()) as f64)
+}
+
+/// Moves each view's camera by a random correction of exactly `degrees` of rotation
+/// (about a uniformly random axis through the camera's center) and `distance` world
+/// units of translation (in a uniformly random direction), drawn from `seed`; returns
+/// the corrections applied, in the order of `views`. Used to test pose refinement.
+pub fn perturb(views: &mut [View], degrees: f32, distance: f32, seed: u64) -> Vec<PoseDelta> {
+    let mut rng = Rng::new(seed ^ 0x5eed_905e);
+    let unit = |rng: &mut Rng| loop {
+        let p = Vec3::new(rng.uniform(), rng.uniform(), rng.uniform()) * 2.0 - 1.0;
+        let l = p.length();
+        if l > 1e-3 && l <= 1.0 {
+            return p / l;
+        }
+    };
+    views
+        .iter_mut()
+        .map(|v| {
+            let w = unit(&mut rng) * degrees.to_radians();
+            let t = unit(&mut rng) * distance;
+            let delta = [w.x, w.y, w.z, t.x, t.y, t.z];
+            v.camera = apply(&v.camera, &delta);
+            delta
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cam() -> Camera {
+        Camera::look_at(Vec3::new(1.0, -2.0, 3.0), Vec3::ZERO, Vec3::Z, 0.8, 8, 6).unwrap()
+    }
+
+    #[test]
+    fn rotation_is_rodrigues_and_rays_follow_the_camera() {
+        let w = Vec3::new(0.1, -0.2, 0.3);
+        let r = rotation(w);
+        // A rotation fixes its axis and turns by |ω|.
+        assert!((r * w - w).length() < 1e-6);
+        let x = w.normalize().any_orthonormal_vector();
+        assert!((x.dot(r * x) - w.length().cos()).abs() < 1e-5);
+        // The corrected camera's rays are the corrected rays of the loaded camera.
+        let delta = [0.1, -0.2, 0.3, 0.5, 0.25, -1.0];
+        let (c0, c1) = (cam(), apply(&cam(), &delta));
+        c1.validate().unwrap();
+        let v = Vec3::new(delta[3], delta[4], delta[5]);
+        for (a, b) in c0.rays().iter().zip(c1.rays()) {
+            let moved = apply_to_ray(a, &r, v);
+            assert!((moved.origin - b.origin).length() < 1e-5);
+            assert!((moved.dir - b.dir).length() < 1e-5);
+        }
+        let (angle, dist) = pose_error(&c0, &c1);
+        assert!(
+            (angle - (w.length() as f64).to_degrees()).abs() < 1e-3,
+            "{angle}"
+        );
+        assert!((dist - v.length() as f64).abs() < 1e-5);
+    }
+
+    /// `delta_gradient` against central differences: for `L(ω) = a·(exp(ω)·b)`, the local
+    /// gradient at `ω` is `(exp(ω)·b) × a` (rotating by `ε` on top moves `x` by `ε × x`).
+    #[test]
+    fn delta_gradient_matches_central_differences() {
+        let (a, b) = (Vec3::new(0.3, -1.1, 0.7), Vec3::new(0.9, 0.4, -0.5));
+        for omega in [Vec3::new(0.4, -0.7, 1.2), Vec3::new(1e-6, 0.0, 2e-6)] {
+            let f = |w: Vec3| -> f64 {
+                let x = rotation(w) * b;
+                (a.x as f64) * x.x as f64 + (a.y as f64) * x.y as f64 + (a.z as f64) * x.z as f64
+            };
+            let x = rotation(omega) * b;
+            let local = x.cross(a);
+            let delta = [omega.x, omega.y, omega.z, 0.0, 0.0, 0.0];
+            let g = delta_gradient(
+                &delta,
+                &[
+                    local.x as f64,
+                    local.y as f64,
+                    local.z as f64,
+                    1.0,
+                    2.0,
+                    3.0,
+                ],
+            );
+            assert_eq!(&g[3..], &[1.0, 2.0, 3.0]);
+            let h = 1e-3f32;
+            for k in 0..3 {
+                let mut e = Vec3::ZERO;
+                e[k] = h;
+                let fd = (f(omega + e) - f(omega - e)) / (2.0 * h as f64);
+                assert!(
+                    (fd - g[k] as f64).abs() < 1e-3,
+                    "ω {omega}, {k}: {} vs {fd}",
+                    g[k]
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn perturbation_has_the_asked_size() {
+        let c = cam();
+        let mut views: Vec<View> = (0..5)
+            .map(|i| View {
+                name: format!("v{i}"),
+                camera: c,
+                width: c.width,
+                height: c.height,
+                rgb: vec![[0.0; 3]; (c.width * c.height) as usize],
+            })
+            .collect();
+        let deltas = perturb(&mut views, 0.5, 0.02, 3);
+        assert_eq!(deltas.len(), 5);
+        assert_ne!(deltas[0], deltas[1]);
+        for v in &views {
+            let (angle, dist) = pose_error(&c, &v.camera);
+            assert!((angle - 0.5).abs() < 1e-2, "{angle}");
+            assert!((dist - 0.02).abs() < 1e-5, "{dist}");
+        }
+    }
+}
