@@ -107,6 +107,13 @@ pub(crate) struct ExactCell {
     /// Whether the exact coverage replaced the accumulated one (windings spanning more
     /// than two adjacent values).
     pub(crate) active: bool,
+    /// Integrated on [`SAMPLE_ROWS`] scanlines (more than [`EXACT_PIECES`] pieces): its
+    /// portions are the scanlines' crossings, the derivative of the sampled coverage.
+    sampled: bool,
+    /// Whether the gradient goes through [`portions`](Self::portions) rather than the
+    /// accumulated slopes: every resolved cell but a sampled one that kept the
+    /// accumulated value.
+    pub(crate) grad: bool,
 }
 
 /// A portion of an edge inside one cell along which the winding on either side is
@@ -135,6 +142,9 @@ struct Piece {
     ta: f64,
     tb: f64,
     half: bool,
+    /// It lies on the box's right or bottom line: `slot` is the cell inside the box
+    /// beside it, which alone gets it (half).
+    beyond: bool,
 }
 
 /// A piece in cell coordinates, for the area computation.
@@ -214,29 +224,54 @@ impl Overlaps {
         if self.state.len() < cols * rows {
             self.state.resize(cols * rows, CellState::default());
         }
-        // 1. Candidates; every piece is kept (its cell in `slot` for now).
+        // 1. Candidates; every piece is kept (its cell in `slot` for now). A piece on a
+        // grid line makes the cells on both sides candidates: each gets half of its
+        // gradient, with the windings on both sides of it, which the accumulated slope of
+        // a cell beside it can get wrong (it assumes the cell's own pair of windings). The
+        // walk reaches one cell beyond the box's right and bottom lines for such pieces
+        // (the line between two row bands: the band below has the piece's own cell).
         let (state, touched) = (&mut self.state, &mut self.touched);
         let all = &mut self.all;
         all.clear();
+        let walk_box = [bx[0], bx[1], bx[2] + 1.0, bx[3] + 1.0];
         item.for_each_edge_near(bx[1], bx[3], |ia, ib| {
             let (p, q) = (item.pts[ia], item.pts[ib]);
             let bits = dir_bits(q[0] - p[0], q[1] - p[1]);
-            walk(p, q, bx, &mut |col, row, ta, tb| {
-                let k = row * cols + col;
-                all.push(Piece {
-                    slot: k as u32,
+            let on_v = p[0] == q[0] && p[0] == floor_f64(p[0]);
+            let on_h = p[1] == q[1] && p[1] == floor_f64(p[1]);
+            walk(p, q, walk_box, &mut |col, row, ta, tb| {
+                let piece = |slot: usize, beyond: bool| Piece {
+                    slot: slot as u32,
                     a: ia as u32,
                     b: ib as u32,
                     ta,
                     tb,
                     half: false,
-                });
+                    beyond,
+                };
+                if col == cols || row == rows {
+                    // Beyond the box: only a piece on the line, for the cell inside.
+                    if col == cols && row < rows && on_v && col > 0 {
+                        let k = row * cols + col - 1;
+                        mark_candidate(state, touched, k);
+                        all.push(piece(k, true));
+                    } else if row == rows && col < cols && on_h && row > 0 {
+                        let k = (row - 1) * cols + col;
+                        mark_candidate(state, touched, k);
+                        all.push(piece(k, true));
+                    }
+                    return;
+                }
+                let k = row * cols + col;
+                all.push(piece(k, false));
                 let s = &mut state[k];
                 let (ia, ib) = (ia as u32, ib as u32);
-                if s.count == 0 {
+                if s.count == 0 && !s.candidate {
                     touched.push(k as u32);
                     s.head = if ta == 0.0 { ia } else { NONE };
                     s.tail = if tb == 1.0 { ib } else { NONE };
+                } else if s.count == 0 {
+                    // Marked by a neighbour's piece on a grid line: already touched.
                 } else if s.tail != NONE && s.tail == ia && ta == 0.0 {
                     s.tail = if tb == 1.0 { ib } else { NONE };
                 } else if s.head != NONE && s.head == ib && tb == 1.0 {
@@ -248,6 +283,14 @@ impl Overlaps {
                 s.dirs |= bits;
                 if s.dirs == 0b1111 {
                     s.candidate = true;
+                }
+                if on_v || on_h {
+                    s.candidate = true;
+                    if on_v && col > 0 {
+                        mark_candidate(state, touched, k - 1);
+                    } else if on_h && row > 0 {
+                        mark_candidate(state, touched, k - cols);
+                    }
                 }
             });
         });
@@ -285,6 +328,9 @@ impl Overlaps {
                     }
                 };
                 push(k);
+                if piece.beyond {
+                    continue;
+                }
                 let (row, col) = (k / cols, k % cols);
                 if on_v && col > 0 {
                     push(k - 1);
@@ -407,6 +453,11 @@ impl Overlaps {
             };
             if near[0] <= cx + ON && far[0] > cx + ON {
                 left.push((near[1], -s.sx));
+            } else if s.dir != 0 && far[0] <= cx + ON {
+                // On the left side: the strips start left of it (it adds its `dir` in
+                // them), while the pieces above count the winding just inside.
+                left.push((s.ylo, -s.dir));
+                left.push((s.yhi, s.dir));
             }
         }
         let w_left = |y: f64| -> i32 { left.iter().filter(|l| l.0 < y).map(|l| l.1).sum() };
@@ -425,8 +476,27 @@ impl Overlaps {
                 None => hist.push((rel, area)),
             }
         };
-        let mut add_portion = |j: usize, y0: f64, y1: f64, rel_lo: i32| {
+        let mut add_portion = |j: usize, y0: f64, y1: f64, rel_lo: i32, scanline: Option<f64>| {
             let p = &pieces[j];
+            if let Some(h) = scanline {
+                // A scanline's crossing at `y0`: `h / |dy|` of the edge's parameter at
+                // `t`, written as a portion of that length centred on `t` (whose first
+                // moment is then `t` times it): the derivative of the sampled coverage.
+                let (pa, pb) = (item.pts[p.a as usize], item.pts[p.b as usize]);
+                let dy = pb[1] - pa[1];
+                let (t, m) = ((y0 - pa[1]) / dy, h / dy.abs());
+                if t.is_finite() && m.is_finite() {
+                    portions.push(Portion {
+                        a: p.a,
+                        b: p.b,
+                        t0: t - 0.5 * m,
+                        t1: t + 0.5 * m,
+                        rel_lo,
+                        half: p.half,
+                    });
+                }
+                return;
+            }
             let (pa, pb) = (item.pts[p.a as usize], item.pts[p.b as usize]);
             let dy = pb[1] - pa[1];
             let (u0, u1) = ((y0 - pa[1]) / dy, (y1 - pa[1]) / dy);
@@ -474,9 +544,11 @@ impl Overlaps {
                 add_area(w, h * (x - x_prev));
                 let wl = w;
                 w += segs[j].dir;
-                if want_portions {
+                if want_portions && exact {
                     let s = &segs[j];
-                    add_portion(j, ya.max(s.ylo), yb.min(s.yhi), wl.min(w));
+                    add_portion(j, ya.max(s.ylo), yb.min(s.yhi), wl.min(w), None);
+                } else if want_portions {
+                    add_portion(j, ym, ym, wl.min(w), Some(h));
                 }
                 x_prev = x;
             }
@@ -491,20 +563,24 @@ impl Overlaps {
                 }
                 let yh = s.q0[1];
                 let below = yh < cy + 1.0;
-                // The strip beside the piece.
+                // The strip beside the piece: the nearest one of some height (a piece
+                // ending within rounding of the cell's side leaves a sliver strip, which
+                // the areas skip too).
                 let Some(k) = ys.iter().position(|&y| y >= yh) else {
                     continue;
                 };
-                let (ya, yb) = if below {
-                    match ys.get(k + 1) {
-                        Some(&yb) => (ys[k], yb),
-                        None => continue,
-                    }
+                let strip = if below {
+                    (k + 1..ys.len())
+                        .map(|i| (ys[i - 1], ys[i]))
+                        .find(|(ya, yb)| yb - ya > 1e-12)
                 } else {
-                    if k == 0 {
-                        continue;
-                    }
-                    (ys[k - 1], ys[k])
+                    (1..=k)
+                        .rev()
+                        .map(|i| (ys[i - 1], ys[i]))
+                        .find(|(ya, yb)| yb - ya > 1e-12)
+                };
+                let Some((ya, yb)) = strip else {
+                    continue;
                 };
                 let ym = 0.5 * (ya + yb);
                 let (xl, xr) = (s.q0[0].min(s.q1[0]), s.q0[0].max(s.q1[0]));
@@ -577,6 +653,8 @@ impl Overlaps {
             portions: (portions_start as u32, self.portions.len() as u32),
             w0: 0,
             active: false,
+            sampled: !exact,
+            grad: false,
         });
     }
 
@@ -625,18 +703,27 @@ impl Overlaps {
                 }
             }
             let w0 = (integral as f64 - moment).round();
-            if hi <= lo.saturating_add(1) || !w0.is_finite() || w0.abs() > 1e9 {
+            if !w0.is_finite() || w0.abs() > 1e9 {
                 continue;
             }
             let w0 = w0 as i32;
+            c.w0 = w0;
+            // A cell whose windings span two adjacent values keeps its accumulated value
+            // (the same area); its gradient still goes through its pieces when they are
+            // integrated exactly, with the windings on both sides of the pieces on its
+            // sides.
+            c.grad = !c.sampled;
+            if hi <= lo.saturating_add(1) {
+                continue;
+            }
             let cov: f64 = hist
                 .iter()
                 .filter(|e| inside(w0.saturating_add(e.0), evenodd))
                 .map(|e| e.1)
                 .sum();
             covs[col] = cov.clamp(0.0, 1.0) as f32;
-            c.w0 = w0;
             c.active = true;
+            c.grad = true;
         }
         start..self.next
     }
@@ -653,6 +740,16 @@ pub(crate) fn inside(w: i32, evenodd: bool) -> bool {
 #[inline]
 pub(crate) fn portion_weight(w: i32, evenodd: bool) -> f64 {
     inside(w.saturating_add(1), evenodd) as i32 as f64 - inside(w, evenodd) as i32 as f64
+}
+
+/// Makes cell `k` a candidate, touched.
+#[inline]
+fn mark_candidate(state: &mut [CellState], touched: &mut Vec<u32>, k: usize) {
+    let s = &mut state[k];
+    if s.count == 0 && !s.candidate {
+        touched.push(k as u32);
+    }
+    s.candidate = true;
 }
 
 /// Bits for the directions of `(dx, dy)`: +x, −x, +y, −y.

@@ -37,7 +37,7 @@ impl Default for RenderOptions {
     fn default() -> Self {
         RenderOptions {
             tolerance: crate::scene::geom::DEFAULT_TOLERANCE,
-            exact_overlaps: false,
+            exact_overlaps: true,
             exact_filters: false,
         }
     }
