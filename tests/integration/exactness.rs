@@ -244,8 +244,15 @@ fn test_issue_29_coincident_rectangles_cover_half() {
     let opts = exact_overlaps();
     let nonzero = alpha_sum_with(&polygon_scene(8, 8, &rings, FillRule::NonZero), &opts);
     assert!((nonzero - 2.0).abs() < 1e-4, "{nonzero}");
-    // Without the option, the clamped integral over-covers (the limit issue 29 names).
-    let clamped = alpha_sum(&polygon_scene(8, 8, &rings, FillRule::NonZero));
+    // The default is exact too; without the option, the clamped integral over-covers
+    // (the limit issue 29 names).
+    let default = alpha_sum(&polygon_scene(8, 8, &rings, FillRule::NonZero));
+    assert!((default - 2.0).abs() < 1e-4, "{default}");
+    let off = RenderOptions {
+        exact_overlaps: false,
+        ..RenderOptions::default()
+    };
+    let clamped = alpha_sum_with(&polygon_scene(8, 8, &rings, FillRule::NonZero), &off);
     assert!((clamped - 4.0).abs() < 1e-4, "{clamped}");
     let evenodd = alpha_sum_with(&polygon_scene(8, 8, &rings, FillRule::EvenOdd), &opts);
     assert!(evenodd.abs() < 1e-4, "{evenodd}");
