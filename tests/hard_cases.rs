@@ -215,9 +215,9 @@ fn self_intersecting_nonzero_and_evenodd() {
             r#"<path id="star" d="M 16 2 L 24 28 L 2 11 L 30 11 L 8 28 Z" fill="rgb(90,20,160)"
                  fill-opacity="0.8" fill-rule="{rule}"/>"#
         ));
-        // A pixel holding a crossing gets the clamped winding integral, an approximation
-        // of its coverage (as in every scanline rasterizer), so the function is checked
-        // for finiteness there, and against differences where crossings stay inside.
+        // Pixels holding crossings are integrated exactly (issue 29), and the horizontal
+        // edge lies on the pixel line y = 11 through two of the crossings: the cells on
+        // both sides of it take their gradient from the windings on both sides.
         finite(rule, &s);
         agrees(rule, &s);
     }

@@ -820,7 +820,7 @@ fn record_row(
     };
     let mut next_exact = exact
         .iter()
-        .filter(|c| c.active)
+        .filter(|c| c.grad)
         .map(|c| c.col as usize)
         .peekable();
     // A gradient's colors only where some coverage is (where `over` reads them), over
@@ -908,7 +908,7 @@ fn band_backward(
                     record_row(item, wrow, sc, ov, dst, x0, y, row, &mut cells);
                 }
                 let ex_first = ex_cells.len();
-                for c in r.overlaps.cells.iter().filter(|c| c.active) {
+                for c in r.overlaps.cells.iter().filter(|c| c.grad) {
                     let at = ex_portions.len() as u32;
                     ex_portions.extend_from_slice(
                         &r.overlaps.portions[c.portions.0 as usize..c.portions.1 as usize],

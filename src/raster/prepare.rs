@@ -53,6 +53,10 @@ pub(crate) struct Item {
     /// ([`rings_cannot_overlap`](super::overlap::rings_cannot_overlap)). Only such items look for the cells whose
     /// coverage [`overlap`](super::overlap) computes exactly.
     pub(crate) can_overlap: bool,
+    /// The cell boxes of the runs of [`runs`](Self::runs) (filled with
+    /// [`can_overlap`](Self::can_overlap)): which rows of a band the search for cells of
+    /// exact coverage needs to walk ([`run_boxes`](super::overlap::run_boxes)).
+    pub(crate) run_boxes: Vec<super::overlap::RunBox>,
     /// Drawn without anti-aliasing ([`Path::crisp`](crate::scene::Path::crisp)): the
     /// deltas are winding numbers at pixel centers
     /// ([`accumulate_centers`](super::coverage::accumulate_centers)), and its edges get
@@ -61,7 +65,7 @@ pub(crate) struct Item {
 }
 
 /// Edges per run of [`Item::runs`].
-const RUN_EDGES: usize = 16;
+pub(crate) const RUN_EDGES: usize = 16;
 
 /// [`Prepared::work`] below which a scene is drawn on the calling thread alone: the
 /// bundled 128×128 glyph outlines (about 24 000) took longer on two threads than on one,
@@ -253,6 +257,9 @@ impl Prepared {
         if on {
             for it in &mut self.items {
                 it.can_overlap = !super::overlap::rings_cannot_overlap(&it.pts, &it.rings);
+                if it.can_overlap && !it.crisp && it.run_boxes.is_empty() {
+                    it.run_boxes = super::overlap::run_boxes(&it.pts, &it.rings);
+                }
             }
         }
     }
@@ -852,6 +859,7 @@ fn item(
         grid_aligned,
         // Found by `Prepared::set_exact_overlaps` when it is asked for.
         can_overlap: true,
+        run_boxes: Vec::new(),
         crisp: false,
         path,
         kind,

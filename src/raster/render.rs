@@ -19,10 +19,9 @@ pub struct RenderOptions {
     /// Largest distance between a curve and its flattened chords, in device pixels.
     pub tolerance: f64,
     /// Integrate exactly the pixels where a path overlaps itself (issue 29,
-    /// `raster/overlap.rs`); off: the clamped winding integral there, as before.
-    /// Off by default until its gradient agrees with finite differences at edges lying on
-    /// pixel lines beside an overlap and in pixels of more than 32 edge pieces (see
-    /// docs/parity.md).
+    /// `raster/overlap.rs`), and differentiate that coverage; on by default. Off: the
+    /// clamped winding integral there, which over-covers such pixels (two coincident
+    /// half-covering rectangles in one path give 1.0, not 0.5).
     pub exact_overlaps: bool,
     /// Evaluate filters as the SVG specification defines them rather than as resvg
     /// approximates them: feGaussianBlur (and feDropShadow's blur) as a true Gaussian
@@ -37,7 +36,7 @@ impl Default for RenderOptions {
     fn default() -> Self {
         RenderOptions {
             tolerance: crate::scene::geom::DEFAULT_TOLERANCE,
-            exact_overlaps: false,
+            exact_overlaps: true,
             exact_filters: false,
         }
     }
