@@ -47,6 +47,10 @@ pub struct Args {
     /// Faster on large flat drawings, slower on small or busy ones (docs/performance.md).
     #[arg(long)]
     rgba8: bool,
+    /// Time diffsvg with the pixels where a path overlaps itself integrated exactly, as
+    /// `render --exact-overlaps` draws them (`RenderOptions::exact_overlaps`).
+    #[arg(long)]
+    exact_overlaps: bool,
     #[command(flatten)]
     fonts: FontArgs,
 }
@@ -207,7 +211,10 @@ pub fn run(a: Args) -> Result<()> {
     for (name, tree, sizing) in &cases {
         let path = std::path::Path::new(name);
         let scene = from_tree(tree, path, *sizing)?;
-        let opts = RenderOptions::default();
+        let opts = RenderOptions {
+            exact_overlaps: a.exact_overlaps,
+            ..RenderOptions::default()
+        };
         // Per thread count, resvg and diffsvg take turns run by run in that count's pool,
         // both timed on a worker of it (inside the pool, without handing the work over),
         // so that a slower or faster spell of a shared machine weighs on both alike, and

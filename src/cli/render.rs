@@ -33,15 +33,12 @@ pub struct Args {
     /// Flattening tolerance in pixels.
     #[arg(long, default_value_t = RenderOptions::default().tolerance)]
     tolerance: f64,
-    /// Accepted for old scripts: pixels where a path overlaps itself are integrated
-    /// exactly by default now (two coincident half-pixel rectangles in one path cover
-    /// half the pixel, not all of it).
-    #[arg(long, hide = true, conflicts_with = "no_exact_overlaps")]
-    exact_overlaps: bool,
-    /// Keep the clamped winding integral where a path overlaps itself (the coverage from
-    /// before exact overlaps, which over-covers such pixels; see docs/parity.md).
+    /// Integrate exactly the pixels where a path overlaps itself (two coincident
+    /// half-pixel rectangles in one path cover half the pixel, not all of it); the
+    /// default keeps the clamped winding integral there, which is faster on thin strokes
+    /// and glyphs (see docs/parity.md and docs/performance.md).
     #[arg(long)]
-    no_exact_overlaps: bool,
+    exact_overlaps: bool,
     /// Evaluate filters as the SVG specification defines them: true Gaussian blurs and
     /// offsets by fractions of a pixel, as `fit --exact-filters` optimizes them (the
     /// default is resvg's box blurs and whole-pixel offsets).
@@ -61,7 +58,7 @@ pub fn run(a: Args) -> Result<()> {
     let tree = parse_tree_with(&data, &a.input, &a.fonts.fonts())?;
     let scene = from_tree(&tree, &a.input, sizing)?;
     let opts = RenderOptions {
-        exact_overlaps: !a.no_exact_overlaps,
+        exact_overlaps: a.exact_overlaps,
         exact_filters: a.exact_filters,
         tolerance: a.tolerance,
     };

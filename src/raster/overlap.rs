@@ -48,7 +48,8 @@
 //! consecutive runs meeting in their junction's cell alone). Only the edges near those
 //! cells are walked; a band without any walks none.
 //!
-//! **On by default** ([`RenderOptions::exact_overlaps`](super::RenderOptions)); off, the
+//! **Off by default** ([`RenderOptions::exact_overlaps`](super::RenderOptions)): the search
+//! still costs up to 2.5× on thin strokes and glyphs (docs/performance.md); off, the
 //! clamped winding integral everywhere, as before issue 29.
 //!
 //! **Bounds.** A cell with up to [`EXACT_PIECES`] pieces is exact (its pairwise crossings

@@ -19,9 +19,11 @@ pub struct RenderOptions {
     /// Largest distance between a curve and its flattened chords, in device pixels.
     pub tolerance: f64,
     /// Integrate exactly the pixels where a path overlaps itself (issue 29,
-    /// `raster/overlap.rs`), and differentiate that coverage; on by default. Off: the
-    /// clamped winding integral there, which over-covers such pixels (two coincident
-    /// half-covering rectangles in one path give 1.0, not 0.5).
+    /// `raster/overlap.rs`), and differentiate that coverage exactly (checked against
+    /// central differences in `tests/hard_cases.rs`). Off (the default): the clamped
+    /// winding integral there, which over-covers such pixels (two coincident
+    /// half-covering rectangles in one path give 1.0, not 0.5). Off by default because
+    /// its search costs up to 2.5× on thin strokes and glyphs (docs/performance.md).
     pub exact_overlaps: bool,
     /// Evaluate filters as the SVG specification defines them rather than as resvg
     /// approximates them: feGaussianBlur (and feDropShadow's blur) as a true Gaussian
@@ -36,7 +38,7 @@ impl Default for RenderOptions {
     fn default() -> Self {
         RenderOptions {
             tolerance: crate::scene::geom::DEFAULT_TOLERANCE,
-            exact_overlaps: true,
+            exact_overlaps: false,
             exact_filters: false,
         }
     }

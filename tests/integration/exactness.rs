@@ -244,24 +244,17 @@ fn test_issue_29_coincident_rectangles_cover_half() {
     let opts = exact_overlaps();
     let nonzero = alpha_sum_with(&polygon_scene(8, 8, &rings, FillRule::NonZero), &opts);
     assert!((nonzero - 2.0).abs() < 1e-4, "{nonzero}");
-    // The default is exact too; without the option, the clamped integral over-covers
-    // (the limit issue 29 names).
-    let default = alpha_sum(&polygon_scene(8, 8, &rings, FillRule::NonZero));
-    assert!((default - 2.0).abs() < 1e-4, "{default}");
-    let off = RenderOptions {
-        exact_overlaps: false,
-        ..RenderOptions::default()
-    };
-    let clamped = alpha_sum_with(&polygon_scene(8, 8, &rings, FillRule::NonZero), &off);
+    // Without the option (the default), the clamped integral over-covers (the limit
+    // issue 29 names).
+    let clamped = alpha_sum(&polygon_scene(8, 8, &rings, FillRule::NonZero));
     assert!((clamped - 4.0).abs() < 1e-4, "{clamped}");
     let evenodd = alpha_sum_with(&polygon_scene(8, 8, &rings, FillRule::EvenOdd), &opts);
     assert!(evenodd.abs() < 1e-4, "{evenodd}");
 }
 
-/// `diffsvg render`: one path of two coincident rectangles, each the left half of a
-/// 2-pixel-wide column, covers half of each pixel (alpha 128 of 255) by default and with
-/// the old `--exact-overlaps` (now a no-op); `--no-exact-overlaps` keeps the clamped
-/// winding integral, which covers all of it.
+/// `diffsvg render --exact-overlaps`: one path of two coincident rectangles, each the left
+/// half of a 2-pixel-wide column, covers half of each pixel (alpha 128 of 255), where the
+/// default's clamped winding integral covers all of it.
 #[test]
 fn render_exact_overlaps_from_the_command_line() {
     use super::common::{diffsvg, s, scratch, write};
@@ -284,7 +277,6 @@ fn render_exact_overlaps_from_the_command_line() {
         );
         diffsvg::Image::load(&png).unwrap().get(1, 2)[3]
     };
-    assert!((alpha_at(None) - 128.0 / 255.0).abs() < 1e-6);
+    assert_eq!(alpha_at(None), 1.0);
     assert!((alpha_at(Some("--exact-overlaps")) - 128.0 / 255.0).abs() < 1e-6);
-    assert_eq!(alpha_at(Some("--no-exact-overlaps")), 1.0);
 }
