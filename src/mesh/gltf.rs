@@ -15,22 +15,16 @@ use std::path::Path;
 
 use base64::Engine as _;
 
+use super::io::invalid;
 use super::{Mesh, Texture};
 use crate::Image;
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::image_io::{decode_embedded, read_bounded};
 use crate::limits::{MAX_IMAGE_PIXELS, MAX_MESH_FILE_BYTES, MAX_MESH_TRIANGLES, MAX_MESH_VERTICES};
 
 /// Nodes deeper than this in a scene's tree are refused (the format forbids cycles; this
 /// bounds a file that has one anyway).
 const MAX_NODE_DEPTH: usize = 64;
-
-fn invalid(path: &Path, what: impl Into<String>) -> Error {
-    Error::InvalidValue {
-        path: path.to_path_buf(),
-        what: what.into(),
-    }
-}
 
 /// Reads a glTF 2.0 mesh (`.gltf` or `.glb`); see the [module docs](self). Every buffer
 /// and image is read bounded ([`MAX_MESH_FILE_BYTES`] each, images checked from their
@@ -105,13 +99,7 @@ pub fn read_gltf(path: &Path) -> Result<Mesh> {
             }
         }
     }
-    let mut mesh = Mesh {
-        positions: Vec::new(),
-        triangles: Vec::new(),
-        uvs: None,
-        colors: None,
-        texture: None,
-    };
+    let mut mesh = Mesh::default();
     let (mut uvs, mut colors) = (Vec::new(), Vec::new());
     let (mut any_uv, mut all_uv, mut any_color) = (false, true, false);
     let mut texture: Option<::gltf::Texture> = None;

@@ -8,7 +8,7 @@ use crate::error::{Error, Result};
 use crate::image_io::{read_bounded, write_atomic};
 use crate::limits::{MAX_MESH_FILE_BYTES, MAX_MESH_TRIANGLES, MAX_MESH_VERTICES};
 
-fn invalid(path: &Path, what: impl Into<String>) -> Error {
+pub(super) fn invalid(path: &Path, what: impl Into<String>) -> Error {
     Error::InvalidValue {
         path: path.to_path_buf(),
         what: what.into(),
@@ -100,13 +100,7 @@ pub fn read_obj(path: &Path) -> Result<Mesh> {
         return Err(e);
     }
     let materials = materials.unwrap_or_default();
-    let mut mesh = Mesh {
-        positions: Vec::new(),
-        triangles: Vec::new(),
-        uvs: None,
-        colors: None,
-        texture: None,
-    };
+    let mut mesh = Mesh::default();
     let all_uv = models.iter().all(|m| !m.mesh.texcoords.is_empty());
     let all_colors = models
         .iter()

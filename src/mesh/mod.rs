@@ -82,7 +82,7 @@ impl Texture {
 
 /// A triangle mesh: positions, triangles, and optional per-vertex UVs and colors and a
 /// texture. Attributes are per vertex (an OBJ vertex used with two UVs is split).
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct Mesh {
     /// Vertex positions, world units.
     pub positions: Vec<[f64; 3]>,
