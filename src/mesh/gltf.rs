@@ -26,7 +26,7 @@ use crate::limits::{MAX_IMAGE_PIXELS, MAX_MESH_FILE_BYTES, MAX_MESH_TRIANGLES, M
 /// bounds a file that has one anyway).
 const MAX_NODE_DEPTH: usize = 64;
 
-/// Reads a glTF 2.0 mesh (`.gltf` or `.glb`); see the [module docs](self). Every buffer
+/// Reads a glTF 2.0 mesh (`.gltf` or `.glb`): what is read is listed in docs/mesh.md. Every buffer
 /// and image is read bounded ([`MAX_MESH_FILE_BYTES`] each, images checked from their
 /// header), vertex and triangle counts are added up from the accessors' declared counts
 /// before any is read ([`MAX_MESH_VERTICES`], [`MAX_MESH_TRIANGLES`]); every error names

@@ -2,7 +2,7 @@
 //!
 //! A shape painted with a `<pattern>` is read as a layer clipped by the shape whose
 //! children are the pattern's tiles: the tile content placed at each cell that covers the
-//! shape ([`svg_in`](super::svg_in)). When the content translates exactly ([`translatable`]: no
+//! shape (`svg_in.rs`). When the content translates exactly (`translatable`: no
 //! filter in it, filter regions are whole pixels), the group carries a [`Tiling`] and its tiles are
 //! **translated copies of the first**: tile `k` is tile 0 moved by the device vector
 //! between their cells.
@@ -10,15 +10,15 @@
 //! **One parameter, many copies** (as a closed path's closing point is its start's,
 //! [`params`](super::params)): every tile keeps its slots in the parameter vector, but the
 //! values are tile 0's. [`Scene::set_params`](super::Scene::set_params) writes tile 0 and
-//! rebuilds the other tiles from it ([`retile`]); the gradient of each copy's slot is
-//! added to the matching slot of tile 0 and the copy's is set to 0 ([`tie_gradients`]).
+//! rebuilds the other tiles from it (`retile`); the gradient of each copy's slot is
+//! added to the matching slot of tile 0 and the copy's is set to 0 (`tie_gradients`).
 //! The map from tile 0 to a copy is a translation, whose Jacobian is the identity on
 //! every slot (positions move by the same vector, everything else is equal), so the
 //! sum is the exact gradient. Patterns inside a pattern's tile are tied the same way,
 //! innermost first when writing and outermost first when adding.
 //!
 //! The SVG writer writes such a group back as a `<pattern>` paint of its shape
-//! ([`svg_out`](super::svg_out)), from tile 0.
+//! (`svg_out.rs`), from tile 0.
 
 use super::geom::add_scaled;
 use super::{Affine, Group, Node, Paint, Path, Point, apply, concat};
