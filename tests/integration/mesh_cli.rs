@@ -14,24 +14,28 @@ fn octahedron(dir: &std::path::Path) -> std::path::PathBuf {
     )
 }
 
-#[test]
-fn mesh_render_draws_a_generated_mesh_and_refuses_bad_files() {
-    let d = scratch("mesh_render");
-    let obj = octahedron(&d);
-    let out = d.join("octa.png");
+/// `diffsvg mesh render MESH --orbit 2 --size 32 -o OUT`, which must succeed; the image.
+fn render_two_views(mesh: &std::path::Path, out: &std::path::Path) -> diffsvg::Image {
     let r = diffsvg(&[
         "mesh",
         "render",
-        s(&obj),
+        s(mesh),
         "--orbit",
         "2",
         "--size",
         "32",
         "-o",
-        s(&out),
+        s(out),
     ]);
     assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
-    let img = diffsvg::Image::load(&out).unwrap();
+    diffsvg::Image::load(out).unwrap()
+}
+
+#[test]
+fn mesh_render_draws_a_generated_mesh_and_refuses_bad_files() {
+    let d = scratch("mesh_render");
+    let obj = octahedron(&d);
+    let img = render_two_views(&obj, &d.join("octa.png"));
     assert_eq!((img.width, img.height), (64, 32));
     // Red inside, white around, and anti-aliased pixels between.
     let red = img
@@ -201,20 +205,7 @@ fn mesh_render_reads_gltf_like_obj() {
     let (obj, gltf) = (octahedron(&d), octahedron_gltf(&d));
     let mut images = Vec::new();
     for (input, name) in [(&obj, "obj.png"), (&gltf, "gltf.png")] {
-        let out = d.join(name);
-        let r = diffsvg(&[
-            "mesh",
-            "render",
-            s(input),
-            "--orbit",
-            "2",
-            "--size",
-            "32",
-            "-o",
-            s(&out),
-        ]);
-        assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
-        images.push(diffsvg::Image::load(&out).unwrap());
+        images.push(render_two_views(input, &d.join(name)));
     }
     let worst = images[0]
         .data
