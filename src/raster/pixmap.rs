@@ -1,20 +1,23 @@
 //! Forward rendering straight to 8-bit RGBA, where big opaque fills cost what a memset
 //! costs.
 //!
-//! Each band is drawn into a [`ChunkCanvas`]: the band's `f32` pixels in runs of
-//! [`CHUNK`] columns (aligned to the canvas), each run either **solid** (all its pixels one
-//! color, held once, the pixels themselves unwritten) or **mixed** (its pixels written).
-//! A run of a solid paint that covers all of a chunk stays solid: an opaque one replaces
-//! the chunk's color, a translucent one composites onto it once (the `over` of each pixel
-//! would give the same bits). Anything else turns the chunk mixed first (its color is
-//! written out) and composites pixel by pixel as [`render_prepared`] does. At the end of
-//! the band, solid chunks are converted once and copied, mixed ones pixel by pixel, and a
-//! row of solid chunks equal to the row above is copied whole. A solid paint reads only
-//! the chunks its edges can touch ([`touched_chunks`]); between them its coverage is one
-//! value, snapped to an exact 0 or 1 within a few `f32` steps ([`SLACK`]). So the bytes
-//! are those of converting [`render_prepared`]'s image (tested; within one level where the
-//! snap meets a rounding boundary), while a drawing of a few big fills writes each byte of
-//! the result once, plus a few values per chunk, and a row costs its edges, not its width.
+//! Each band is drawn into a [`RunCanvas`]: every row of the band is a short list of
+//! **runs** of columns, each either **solid** (all its pixels one color, held once, the
+//! pixels themselves unwritten) or **mixed** (its pixels written in an `f32` buffer). A
+//! solid paint at one coverage over a stretch of columns composites each solid run there
+//! once (the `over` of each pixel would give the same bits), and an opaque one at
+//! coverage 1 replaces them with one solid run; anything else makes its columns mixed
+//! first (their color written out) and composites pixel by pixel as [`render_prepared`]
+//! does. A row holds at most [`MAX_RUNS`] runs; past that it becomes one mixed run, so a
+//! row crossed by many small shapes costs its pixels, not a search per shape. A solid
+//! paint reads only the chunks of [`CHUNK`] columns its edges can touch
+//! ([`touched_chunks`]); between them its coverage is one value, snapped to an exact 0 or
+//! 1 within a few `f32` steps ([`SLACK`]). At the end of the band each solid run is
+//! converted once and written as copies of its four bytes, mixed runs pixel by pixel, and
+//! a row of solid runs equal to the row above is copied whole. So the bytes are those of
+//! converting [`render_prepared`]'s image (tested; within one level where the snap meets a
+//! rounding boundary), while a drawing of a few big fills writes each byte of the result
+//! once plus a few runs per row, and a row costs its edges, not its width.
 //!
 //! [`render_prepared`]: super::render_prepared
 
@@ -92,109 +95,270 @@ fn render_rgba8_with(p: &Prepared, alpha: Alpha, slack: f32) -> Vec<u8> {
 
 thread_local! {
     /// [`render_rgba8`]'s band canvas, kept from one band to the next.
-    static BAND_CANVAS: std::cell::RefCell<ChunkCanvas> =
-        std::cell::RefCell::new(ChunkCanvas::default());
+    static BAND_CANVAS: std::cell::RefCell<RunCanvas> =
+        std::cell::RefCell::new(RunCanvas::default());
 }
 
-/// One band's pixels in chunks that are solid or mixed (see the module's documentation).
+/// The most runs a band row holds before it is made one mixed run: a row crossed by
+/// hundreds of small shapes then costs what compositing its pixels costs, not a search
+/// and a splice per shape.
+const MAX_RUNS: usize = 64;
+
+/// Columns `x0..x1` of one band row: one color (solid) or pixels of their own (mixed).
+#[derive(Clone, Copy, Debug)]
+struct Run {
+    x0: u32,
+    x1: u32,
+    /// Whether the pixels are held in [`RunCanvas::px`]; otherwise all are `color`.
+    mixed: bool,
+    /// The run's color when solid (premultiplied).
+    color: [f32; 4],
+}
+
+impl Run {
+    fn solid(x0: usize, x1: usize, color: [f32; 4]) -> Self {
+        Run {
+            x0: x0 as u32,
+            x1: x1 as u32,
+            mixed: false,
+            color,
+        }
+    }
+
+    fn mixed(x0: usize, x1: usize) -> Self {
+        Run {
+            x0: x0 as u32,
+            x1: x1 as u32,
+            mixed: true,
+            color: [0.0; 4],
+        }
+    }
+
+    fn cols(&self) -> std::ops::Range<usize> {
+        self.x0 as usize..self.x1 as usize
+    }
+
+    /// Whether `self` followed by `next` can be one run: both mixed, or both solid with
+    /// the same color bits.
+    fn joins(&self, next: &Run) -> bool {
+        self.mixed && next.mixed
+            || !self.mixed && !next.mixed && bits(self.color) == bits(next.color)
+    }
+
+    /// The same columns, kind and color bits.
+    fn same(&self, o: &Run) -> bool {
+        self.x0 == o.x0 && self.x1 == o.x1 && self.mixed == o.mixed && self.joins(o)
+    }
+}
+
+fn bits(c: [f32; 4]) -> [u32; 4] {
+    c.map(f32::to_bits)
+}
+
+/// Whether two slices hold the same bits: one OR over the differences, without early
+/// exits, which the compiler turns into vector instructions.
+fn bits_equal(a: &[f32], b: &[f32]) -> bool {
+    a.iter()
+        .zip(b)
+        .fold(0u32, |acc, (x, y)| acc | (x.to_bits() ^ y.to_bits()))
+        == 0
+}
+
+/// One band's pixels as rows of runs that are solid or mixed (see the module's
+/// documentation).
 #[derive(Default)]
-pub(crate) struct ChunkCanvas {
+pub(crate) struct RunCanvas {
     /// Columns and rows.
     w: usize,
     rows: usize,
-    /// Chunks per row.
-    per_row: usize,
-    /// Pixels, row-major; valid only in mixed chunks.
+    /// Pixels, row-major; valid only in mixed runs.
     px: Vec<[f32; 4]>,
-    /// Per chunk, row-major: its color when solid.
-    color: Vec<[f32; 4]>,
-    /// Per chunk: whether it is solid.
-    solid: Vec<bool>,
+    /// Per band row: its runs, in column order, covering `0..w` (rows past `rows` are
+    /// spare buffers).
+    runs: Vec<Vec<Run>>,
+    /// Per band row: whether it holds the same runs and pixels as the row above
+    /// (false for the first).
+    same_above: Vec<bool>,
+    /// Scratch: `same_above` before an item is drawn.
+    before: Vec<bool>,
     /// Scratch for [`touched_chunks`].
     touched: Vec<(u32, u32, u32)>,
     /// How far from 0 or 1 a run's coverage may be and count as 0 or 1 ([`snap_run`]).
     slack: f32,
 }
 
-impl ChunkCanvas {
+impl RunCanvas {
     /// A `w × rows` band of one color.
     fn reset(&mut self, w: usize, rows: usize, fill: [f32; 4]) {
         self.w = w;
         self.rows = rows;
-        self.per_row = w.div_ceil(CHUNK);
-        let n = self.per_row * rows;
-        // The pixels keep whatever they held: every chunk is solid, so none is read.
+        // The pixels keep whatever they held: every run is solid, so none is read.
         self.px.resize(w * rows, [0.0; 4]);
-        self.color.clear();
-        self.color.resize(n, fill);
-        self.solid.clear();
-        self.solid.resize(n, true);
-    }
-
-    /// Writes chunk `k` of row `r` out as pixels, if it is solid, and marks it mixed.
-    #[inline]
-    fn mix(&mut self, r: usize, k: usize) {
-        let c = r * self.per_row + k;
-        if self.solid[c] {
-            self.solid[c] = false;
-            let x0 = k * CHUNK;
-            let x1 = (x0 + CHUNK).min(self.w);
-            self.px[r * self.w + x0..r * self.w + x1].fill(self.color[c]);
+        if self.runs.len() < rows {
+            self.runs.resize_with(rows, Vec::new);
+        }
+        for runs in &mut self.runs[..rows] {
+            runs.clear();
+            runs.push(Run::solid(0, w, fill));
+        }
+        self.same_above.clear();
+        self.same_above.resize(rows, true);
+        if let Some(first) = self.same_above.first_mut() {
+            *first = false;
         }
     }
 
-    /// Marks every chunk of `area` (band-relative rows) mixed.
+    /// The index of the run of `row` holding column `x < w`.
+    #[inline]
+    fn find(&self, row: usize, x: usize) -> usize {
+        self.runs[row].partition_point(|r| r.x1 as usize <= x)
+    }
+
+    /// The index of the run of `row` that starts at column `x` (`0 ..= w`), splitting the
+    /// run that holds it; the number of runs for `x = w`.
+    fn cut(&mut self, row: usize, x: usize) -> usize {
+        let i = self.find(row, x);
+        let runs = &mut self.runs[row];
+        if i == runs.len() || runs[i].x0 as usize == x {
+            return i;
+        }
+        let mut right = runs[i];
+        right.x0 = x as u32;
+        runs[i].x1 = x as u32;
+        runs.insert(i + 1, right);
+        i + 1
+    }
+
+    /// Replaces the runs of `row` over columns `a..b` (`a < b`) with `run`, joined to
+    /// its neighbors where they [join](Run::joins); keeps the row within [`MAX_RUNS`].
+    fn replace(&mut self, row: usize, a: usize, b: usize, run: Run) {
+        let runs = &mut self.runs[row];
+        if a == 0 && b == self.w {
+            runs.clear();
+            runs.push(run);
+            return;
+        }
+        let i = self.cut(row, a);
+        let j = self.cut(row, b);
+        let runs = &mut self.runs[row];
+        runs[i] = run;
+        runs.drain(i + 1..j);
+        if i + 1 < runs.len() && runs[i].joins(&runs[i + 1]) {
+            runs[i].x1 = runs[i + 1].x1;
+            runs.remove(i + 1);
+        }
+        if i > 0 && runs[i - 1].joins(&runs[i]) {
+            runs[i - 1].x1 = runs[i].x1;
+            runs.remove(i);
+        }
+        if runs.len() > MAX_RUNS {
+            self.mix(row, 0, self.w);
+        }
+    }
+
+    /// Makes columns `a..b` of band row `row` part of a mixed run, writing out the
+    /// colors of the solid runs there.
+    fn mix(&mut self, row: usize, a: usize, b: usize) {
+        if a >= b {
+            return;
+        }
+        self.touch(row);
+        let i = self.find(row, a);
+        let first = self.runs[row][i];
+        if first.mixed && first.x1 as usize >= b {
+            return;
+        }
+        let line = &mut self.px[row * self.w..][..self.w];
+        for r in &self.runs[row][i..] {
+            if r.x0 as usize >= b {
+                break;
+            }
+            if !r.mixed {
+                line[r.x0.max(a as u32) as usize..r.x1.min(b as u32) as usize].fill(r.color);
+            }
+        }
+        self.replace(row, a, b, Run::mixed(a, b));
+    }
+
+    /// Marks every column `x0..x1` of band rows `r0..r1` mixed.
     fn mix_area(&mut self, x0: usize, x1: usize, r0: usize, r1: usize) {
         for r in r0..r1 {
-            for k in x0 / CHUNK..x1.div_ceil(CHUNK) {
-                self.mix(r, k);
+            self.mix(r, x0, x1);
+        }
+    }
+
+    /// Composites columns `a..b` of band row `row` with one solid color `s` at one
+    /// coverage `cov`: a solid run once (the `over` of each of its pixels would give the
+    /// same bits), a mixed run pixel by pixel; an opaque `s` at coverage 1 replaces the
+    /// runs with one solid run.
+    fn fill(&mut self, row: usize, a: usize, b: usize, s: [f32; 4], cov: f32) {
+        if cov <= 0.0 || a >= b {
+            return;
+        }
+        self.touch(row);
+        let i = self.find(row, a);
+        let first = self.runs[row][i];
+        if first.mixed && first.x1 as usize >= b {
+            // Inside one mixed run (a row of many small shapes): pixel by pixel.
+            for p in &mut self.px[row * self.w + a..row * self.w + b] {
+                over(p, s, cov);
             }
+            return;
+        }
+        if cov == 1.0 && s[3] == 1.0 {
+            return self.replace(row, a, b, Run::solid(a, b, s));
+        }
+        let i = self.cut(row, a);
+        let j = self.cut(row, b);
+        let line = &mut self.px[row * self.w..][..self.w];
+        for r in &mut self.runs[row][i..j] {
+            if r.mixed {
+                for p in &mut line[r.cols()] {
+                    over(p, s, cov);
+                }
+            } else {
+                over(&mut r.color, s, cov);
+            }
+        }
+        if self.runs[row].len() > MAX_RUNS {
+            self.mix(row, 0, self.w);
         }
     }
 
     /// Converts the band to bytes (`w × rows × 4`).
     fn write_bytes(&self, bytes: &mut [u8], alpha: Alpha) {
-        let n = self.per_row;
+        let row_bytes = self.w * 4;
         for r in 0..self.rows {
-            let solid = &self.solid[r * n..][..n];
-            let color = &self.color[r * n..][..n];
-            // A row of solid chunks with the colors of the row above, itself all solid (the
-            // inside of a flag's stripe): the same bytes, copied.
-            if r > 0
-                && !solid.contains(&false)
-                && !self.solid[(r - 1) * n..][..n].contains(&false)
-                && same_bits(color, &self.color[(r - 1) * n..][..n])
-            {
-                let row_bytes = self.w * 4;
+            let runs = &self.runs[r];
+            // A row equal to the row above (the inside of a flag's stripe, or solid runs
+            // drawn by separate items to the same ends and colors): the same bytes, copied.
+            let same = r > 0
+                && (self.same_above[r]
+                    || runs.len() == self.runs[r - 1].len()
+                        && runs
+                            .iter()
+                            .zip(&self.runs[r - 1])
+                            .all(|(x, y)| !x.mixed && x.same(y)));
+            if same {
                 bytes.copy_within((r - 1) * row_bytes..r * row_bytes, r * row_bytes);
                 continue;
             }
-            let line = &mut bytes[r * self.w * 4..][..self.w * 4];
+            let line = &mut bytes[r * row_bytes..][..row_bytes];
             let px = &self.px[r * self.w..][..self.w];
-            let mut k = 0;
-            while k < self.per_row {
-                let (x0, x1) = (k * CHUNK, ((k + 1) * CHUNK).min(self.w));
-                if solid[k] {
-                    // A run of solid chunks of one color: its bytes once, then copies.
-                    let bits = color[k].map(f32::to_bits);
-                    let mut e = k + 1;
-                    while e < self.per_row && solid[e] && color[e].map(f32::to_bits) == bits {
-                        e += 1;
-                    }
-                    let b = alpha.bytes(color[k]);
-                    let run: [u8; 4 * CHUNK] = std::array::from_fn(|i| b[i % 4]);
-                    let out = &mut line[x0 * 4..(e * CHUNK).min(self.w) * 4];
+            for run in runs {
+                let (x0, x1) = (run.x0 as usize, run.x1 as usize);
+                let out = &mut line[x0 * 4..x1 * 4];
+                if !run.mixed {
+                    // Its bytes once, then copies.
+                    let b = alpha.bytes(run.color);
+                    let pattern: [u8; 4 * CHUNK] = std::array::from_fn(|i| b[i % 4]);
                     let mut whole = out.chunks_exact_mut(4 * CHUNK);
                     for o in &mut whole {
-                        o.copy_from_slice(&run);
+                        o.copy_from_slice(&pattern);
                     }
                     let rest = whole.into_remainder();
-                    rest.copy_from_slice(&run[..rest.len()]);
-                    k = e;
-                    continue;
-                }
-                let out = &mut line[x0 * 4..x1 * 4];
-                if alpha == Alpha::Premultiplied {
+                    rest.copy_from_slice(&pattern[..rest.len()]);
+                } else if alpha == Alpha::Premultiplied {
                     // Channel by channel over flat slices: vector instructions.
                     for (o, &f) in out.iter_mut().zip(px[x0..x1].as_flattened()) {
                         *o = to_u8(f);
@@ -204,29 +368,6 @@ impl ChunkCanvas {
                         o.copy_from_slice(&straight_rgba8(c));
                     }
                 }
-                k += 1;
-            }
-        }
-    }
-
-    /// Composites the whole chunks `k0..k1` of band row `row` with one solid color `s` at
-    /// one coverage `cov > 0`.
-    fn span(&mut self, row: usize, k0: usize, k1: usize, s: [f32; 4], cov: f32) {
-        let (c0, c1) = (row * self.per_row + k0, row * self.per_row + k1);
-        if cov == 1.0 && s[3] == 1.0 {
-            self.color[c0..c1].fill(s);
-            self.solid[c0..c1].fill(true);
-            return;
-        }
-        for k in k0..k1 {
-            let c = row * self.per_row + k;
-            if cov == 1.0 && self.solid[c] {
-                over(&mut self.color[c], s, 1.0);
-                continue;
-            }
-            self.mix(row, k);
-            for p in &mut self.px[row * self.w + k * CHUNK..][..CHUNK] {
-                over(p, s, cov);
             }
         }
     }
@@ -236,10 +377,10 @@ impl ChunkCanvas {
     ///
     /// Only the chunks an edge can have touched ([`touched_chunks`]) are read, pixel by
     /// pixel, with the running sum and the coverage rule of [`coverage_row`] (the same
-    /// bits); such a chunk whose pixels all get one coverage is still drawn as a chunk
-    /// ([`span`](Self::span), the same bits as pixel by pixel). Between them the winding
-    /// integral, and so the coverage, is one value over the whole stretch
-    /// ([`stretch`](Self::stretch)). So a row of a big fill costs its edges, not its width.
+    /// bits); such a chunk whose pixels all get one coverage is drawn as one stretch
+    /// ([`fill`](Self::fill), the same bits as pixel by pixel). Between them the winding
+    /// integral, and so the coverage, is one value over the whole stretch. So a row of a
+    /// big fill costs its edges, not its width.
     fn draw_solid(&mut self, r: &mut BandRenderer<'_>, item: &Item, s: [f32; 4]) {
         let acc = &mut r.acc;
         let (x0, aw) = (acc.x0 as usize, acc.w);
@@ -248,25 +389,70 @@ impl ChunkCanvas {
         let end = x0 + cols;
         let mut touched = std::mem::take(&mut self.touched);
         touched_chunks(item, acc, self.w, &mut touched);
-        let mut next = touched.iter().peekable();
+        // Which rows equalled the row above before this item.
+        let mut before = std::mem::take(&mut self.before);
+        before.clear();
+        before.extend_from_slice(&self.same_above[band_row0..band_row0 + acc.h]);
+        // Columns `lo..hi` of `acc`'s rows that a touched range covers.
+        let local = |ka: u32, kb: u32| {
+            let lo = (ka as usize * CHUNK).max(x0) - x0;
+            (lo, (kb as usize * CHUNK).min(x0 + aw) - x0)
+        };
         let mut covs = [0.0f32; CHUNK];
+        let (mut t0, mut repeat) = (0, false);
         for k in 0..acc.h {
             let row = band_row0 + k;
+            let t1 = t0
+                + touched[t0..]
+                    .iter()
+                    .take_while(|t| t.0 as usize == k)
+                    .count();
+            let ranges = &touched[t0..t1];
+            t0 = t1;
+            // The next row repeats this one when its edges write the same deltas into the
+            // same chunks (compared before this row's are cleared).
+            let repeats_next = k + 1 < acc.h && {
+                let n = touched[t1..]
+                    .iter()
+                    .take_while(|t| t.0 as usize == k + 1)
+                    .count();
+                let next = &touched[t1..t1 + n];
+                let (this, below) = acc.data[k * aw..].split_at(aw);
+                n == ranges.len()
+                    && ranges
+                        .iter()
+                        .zip(next)
+                        .all(|(a, b)| (a.1, a.2) == (b.1, b.2))
+                    && ranges.iter().all(|&(_, ka, kb)| {
+                        let (lo, hi) = local(ka, kb);
+                        bits_equal(&this[lo..hi], &below[lo..hi])
+                    })
+            };
             let deltas = &mut acc.data[k * aw..(k + 1) * aw];
+            if repeat && before[k] {
+                // This row and the one above were equal and get the same drawing: copy.
+                self.copy_row_above(row);
+                for &(_, ka, kb) in ranges {
+                    let (lo, hi) = local(ka, kb);
+                    deltas[lo..hi].fill(0.0);
+                }
+                deltas[cols..].fill(0.0);
+                repeat = repeats_next;
+                continue;
+            }
+            repeat = repeats_next;
             let mut sum = 0.0f32;
             let mut x = x0;
-            while let Some(&(_, ka, kb)) = next.next_if(|t| t.0 as usize == k) {
+            // Stretches of one coverage are drawn when the coverage changes: a row of a
+            // big fill is one `fill`. The columns drawn in between lie right of them.
+            let mut pending = Stretch::new(x0);
+            for &(_, ka, kb) in ranges {
                 let (lo, hi) = ((ka as usize * CHUNK).max(x), (kb as usize * CHUNK).min(end));
                 if lo >= hi {
                     continue;
                 }
-                self.stretch(
-                    row,
-                    x,
-                    lo,
-                    s,
-                    snap_run(coverage(sum, item.evenodd).0, self.slack),
-                );
+                let run_cov = snap_run(coverage(sum, item.evenodd).0, self.slack);
+                pending.extend(self, row, x, lo, s, run_cov);
                 let mut a = lo;
                 while a < hi {
                     let b = ((a / CHUNK + 1) * CHUNK).min(hi);
@@ -281,15 +467,15 @@ impl ChunkCanvas {
                         *c = coverage(sum, item.evenodd).0;
                     }
                     covs[m..n].fill(coverage(sum, item.evenodd).0);
-                    if n == CHUNK && covs.iter().all(|c| c.to_bits() == covs[0].to_bits()) {
-                        if covs[0] > 0.0 {
-                            self.span(row, a / CHUNK, a / CHUNK + 1, s, covs[0]);
-                        }
-                    } else {
-                        for (i, &cov) in covs[..n].iter().enumerate() {
+                    let covs = &covs[..n];
+                    if covs.iter().all(|c| c.to_bits() == covs[0].to_bits()) {
+                        pending.extend(self, row, a, b, s, covs[0]);
+                    } else if let Some((i, j)) = covered_span(covs) {
+                        self.mix(row, a + i, a + j);
+                        let line = &mut self.px[row * self.w + a..][..n];
+                        for (p, &cov) in line[i..j].iter_mut().zip(&covs[i..j]) {
                             if cov > 0.0 {
-                                self.mix(row, a / CHUNK);
-                                over(&mut self.px[row * self.w + a + i], s, cov);
+                                over(p, s, cov);
                             }
                         }
                     }
@@ -297,35 +483,41 @@ impl ChunkCanvas {
                 }
                 x = hi;
             }
-            self.stretch(
-                row,
-                x,
-                end,
-                s,
-                snap_run(coverage(sum, item.evenodd).0, self.slack),
-            );
+            let run_cov = snap_run(coverage(sum, item.evenodd).0, self.slack);
+            pending.extend(self, row, x, end, s, run_cov);
+            pending.flush(self, row, s);
             // Columns right of the canvas hold deltas too; leave them cleared.
             deltas[cols..].fill(0.0);
         }
         self.touched = touched;
+        self.before = before;
     }
 
-    /// Composites columns `xa..xb` of band row `row` with one solid color `s` at one
-    /// coverage `cov`: whole chunks with [`span`](Self::span), the ends pixel by pixel.
-    fn stretch(&mut self, row: usize, xa: usize, xb: usize, s: [f32; 4], cov: f32) {
-        if cov <= 0.0 || xa >= xb {
-            return;
+    /// Makes band row `row` a copy of the row above (runs and mixed pixels).
+    fn copy_row_above(&mut self, row: usize) {
+        let (above, this) = self.runs.split_at_mut(row);
+        let above = &above[row - 1];
+        this[0].clear();
+        this[0].extend_from_slice(above);
+        let w = self.w;
+        for run in above.iter().filter(|r| r.mixed) {
+            let c = run.cols();
+            self.px.copy_within(
+                (row - 1) * w + c.start..(row - 1) * w + c.end,
+                row * w + c.start,
+            );
         }
-        let (ka, kb) = (xa.div_ceil(CHUNK), xb / CHUNK);
-        let (pa, pb) = if ka < kb {
-            self.span(row, ka, kb, s, cov);
-            ((xa, ka * CHUNK), (kb * CHUNK, xb))
-        } else {
-            ((xa, xb), (xb, xb))
-        };
-        for x in (pa.0..pa.1).chain(pb.0..pb.1) {
-            self.mix(row, x / CHUNK);
-            over(&mut self.px[row * self.w + x], s, cov);
+        self.touch(row);
+        self.same_above[row] = true;
+    }
+
+    /// Notes that band row `row` changes: it and the row below no longer equal their
+    /// rows above.
+    #[inline]
+    fn touch(&mut self, row: usize) {
+        self.same_above[row] = false;
+        if let Some(s) = self.same_above.get_mut(row + 1) {
+            *s = false;
         }
     }
 
@@ -346,7 +538,7 @@ impl ChunkCanvas {
             return;
         };
         let (xa, xb) = (x0 + a, x0 + b);
-        self.mix_area(xa, xb, r, r + 1);
+        self.mix(r, xa, xb);
         item.paint.row(xa, y, &mut colors[a..b]);
         let dst = &mut self.px[r * self.w + xa..r * self.w + xb];
         for ((&cov, d), s) in covs[a..b].iter().zip(dst).zip(&colors[a..b]) {
@@ -354,6 +546,53 @@ impl ChunkCanvas {
                 over(d, *s, cov);
             }
         }
+    }
+}
+
+/// Columns `a..b` of a row waiting to be drawn at one coverage by
+/// [`RunCanvas::draw_solid`].
+struct Stretch {
+    a: usize,
+    b: usize,
+    cov: f32,
+}
+
+impl Stretch {
+    fn new(x: usize) -> Self {
+        Stretch {
+            a: x,
+            b: x,
+            cov: 0.0,
+        }
+    }
+
+    /// Adds columns `a..b` (starting where the stretch ends) at coverage `cov`, drawing
+    /// the stretch first if its coverage differs.
+    #[inline]
+    fn extend(
+        &mut self,
+        canvas: &mut RunCanvas,
+        row: usize,
+        a: usize,
+        b: usize,
+        s: [f32; 4],
+        cov: f32,
+    ) {
+        if a >= b {
+            return;
+        }
+        if a != self.b || cov.to_bits() != self.cov.to_bits() {
+            self.flush(canvas, row, s);
+            *self = Stretch { a, b, cov };
+        } else {
+            self.b = b;
+        }
+    }
+
+    /// Draws the stretch.
+    fn flush(&mut self, canvas: &mut RunCanvas, row: usize, s: [f32; 4]) {
+        canvas.fill(row, self.a, self.b, s, self.cov);
+        self.a = self.b;
     }
 }
 
@@ -415,17 +654,6 @@ fn touched_chunks(
     out.truncate(n);
 }
 
-/// Whether two rows of colors hold the same bits: one OR over the differences, without
-/// early exits, which the compiler turns into vector instructions (as
-/// [`all_zero`](super::render::all_zero)).
-fn same_bits(a: &[[f32; 4]], b: &[[f32; 4]]) -> bool {
-    a.as_flattened()
-        .iter()
-        .zip(b.as_flattened())
-        .fold(0u32, |acc, (x, y)| acc | (x.to_bits() ^ y.to_bits()))
-        == 0
-}
-
 /// A run's coverage within `slack` of 1 taken as 1, and within it of 0 as 0, so that a
 /// fill beside a slanted edge sets (or leaves) its chunks rather than blending them.
 ///
@@ -449,7 +677,7 @@ fn snap_run(cov: f32, slack: f32) -> f32 {
 /// in [`render_rgba8`]: four `f32` steps below 1 (each `2⁻²⁴`).
 const SLACK: f32 = 2.0 * f32::EPSILON;
 
-impl Canvas for ChunkCanvas {
+impl Canvas for RunCanvas {
     fn draw(&mut self, r: &mut BandRenderer<'_>, item: &Item, _area: Area) {
         if !r.deltas(item) {
             return;

@@ -412,7 +412,7 @@ impl<'a> BandRenderer<'a> {
 }
 
 /// What a band's top level is drawn onto: `f32` pixels, or
-/// [`ChunkCanvas`](super::pixmap::ChunkCanvas) for 8-bit output.
+/// [`RunCanvas`](super::pixmap::RunCanvas) for 8-bit output.
 pub(crate) trait Canvas {
     /// Draws one item source-over onto the band `area`.
     fn draw(&mut self, r: &mut BandRenderer<'_>, item: &Item, area: Area);
@@ -439,10 +439,15 @@ impl Canvas for [[f32; 4]] {
 
 impl Drop for BandRenderer<'_> {
     /// Leaves the buffers to the thread's next band renderer; the values of `acc` only
-    /// when they are all zero again (as drawing an item leaves them), else none.
+    /// when they are all zero again (`clean`: as drawing an item leaves them), else none.
     fn drop(&mut self) {
         let mut acc = std::mem::take(&mut self.acc.data);
-        if !all_zero(&acc) {
+        // Every drawing reads (and so clears) every row of the deltas it accumulates.
+        debug_assert!(
+            !self.clean || all_zero(&acc),
+            "deltas left in the accumulator"
+        );
+        if !self.clean {
             acc.clear();
         }
         let kept = BandBuffers {
