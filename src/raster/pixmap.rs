@@ -183,6 +183,8 @@ pub(crate) struct RunCanvas {
     before: Vec<bool>,
     /// Scratch for [`touched_chunks`].
     touched: Vec<(u32, u32, u32)>,
+    /// Scratch: one row's coverages.
+    covs: Vec<f32>,
     /// How far from 0 or 1 a run's coverage may be and count as 0 or 1 ([`snap_run`]).
     slack: f32,
 }
@@ -398,7 +400,7 @@ impl RunCanvas {
             let lo = (ka as usize * CHUNK).max(x0) - x0;
             (lo, (kb as usize * CHUNK).min(x0 + aw) - x0)
         };
-        let mut covs = [0.0f32; CHUNK];
+        let mut covs = std::mem::take(&mut self.covs);
         let (mut t0, mut repeat) = (0, false);
         for k in 0..acc.h {
             let row = band_row0 + k;
@@ -448,40 +450,34 @@ impl RunCanvas {
             let mut pending = Stretch::new(x0);
             for &(_, ka, kb) in ranges {
                 let (lo, hi) = ((ka as usize * CHUNK).max(x), (kb as usize * CHUNK).min(end));
-                if lo >= hi {
+                // Only the columns from the range's first delta to its last are read pixel
+                // by pixel; before and after them the coverage holds.
+                let ds = &mut deltas[lo.min(hi) - x0..hi - x0];
+                let Some(first) = ds.iter().position(|&d| d != 0.0) else {
                     continue;
-                }
+                };
+                let last = ds.iter().rposition(|&d| d != 0.0).map_or(0, |j| j + 1);
                 let run_cov = snap_run(coverage(sum, item.evenodd).0, self.slack);
-                pending.extend(self, row, x, lo, s, run_cov);
-                let mut a = lo;
-                while a < hi {
-                    let b = ((a / CHUNK + 1) * CHUNK).min(hi);
-                    let n = b - a;
-                    // The running sum is a chain of dependent additions: run it only up
-                    // to the chunk's last delta; past it the coverage holds.
-                    let ds = &mut deltas[a - x0..b - x0];
-                    let m = ds.iter().rposition(|&d| d != 0.0).map_or(0, |j| j + 1);
-                    for (c, dv) in covs.iter_mut().zip(&mut ds[..m]) {
-                        sum += *dv;
-                        *dv = 0.0;
-                        *c = coverage(sum, item.evenodd).0;
-                    }
-                    covs[m..n].fill(coverage(sum, item.evenodd).0);
-                    let covs = &covs[..n];
-                    if covs.iter().all(|c| c.to_bits() == covs[0].to_bits()) {
-                        pending.extend(self, row, a, b, s, covs[0]);
-                    } else if let Some((i, j)) = covered_span(covs) {
-                        self.mix(row, a + i, a + j);
-                        let line = &mut self.px[row * self.w + a..][..n];
-                        for (p, &cov) in line[i..j].iter_mut().zip(&covs[i..j]) {
-                            if cov > 0.0 {
-                                over(p, s, cov);
-                            }
+                pending.extend(self, row, x, lo + first, s, run_cov);
+                covs.clear();
+                for dv in &mut ds[first..last] {
+                    sum += *dv;
+                    *dv = 0.0;
+                    covs.push(coverage(sum, item.evenodd).0);
+                }
+                let a = lo + first;
+                if covs.iter().all(|c| c.to_bits() == covs[0].to_bits()) {
+                    pending.extend(self, row, a, a + covs.len(), s, covs[0]);
+                } else if let Some((i, j)) = covered_span(&covs) {
+                    self.mix(row, a + i, a + j);
+                    let line = &mut self.px[row * self.w + a..][..covs.len()];
+                    for (p, &cov) in line[i..j].iter_mut().zip(&covs[i..j]) {
+                        if cov > 0.0 {
+                            over(p, s, cov);
                         }
                     }
-                    a = b;
                 }
-                x = hi;
+                x = lo + last;
             }
             let run_cov = snap_run(coverage(sum, item.evenodd).0, self.slack);
             pending.extend(self, row, x, end, s, run_cov);
@@ -491,6 +487,7 @@ impl RunCanvas {
         }
         self.touched = touched;
         self.before = before;
+        self.covs = covs;
     }
 
     /// Makes band row `row` a copy of the row above (runs and mixed pixels).
