@@ -233,25 +233,60 @@ impl RunCanvas {
 
     /// Replaces the runs of `row` over columns `a..b` (`a < b`) with `run`, joined to
     /// its neighbors where they [join](Run::joins); keeps the row within [`MAX_RUNS`].
-    fn replace(&mut self, row: usize, a: usize, b: usize, run: Run) {
-        let runs = &mut self.runs[row];
+    fn replace(&mut self, row: usize, a: usize, b: usize, mut run: Run) {
         if a == 0 && b == self.w {
+            let runs = &mut self.runs[row];
             runs.clear();
             runs.push(run);
             return;
         }
-        let i = self.cut(row, a);
-        let j = self.cut(row, b);
+        // Runs `i..=j` meet `a..b`; they and any neighbor that joins `run` become at most
+        // three runs, in one splice.
+        let i = self.find(row, a);
+        let j = self.find(row, b - 1);
         let runs = &mut self.runs[row];
-        runs[i] = run;
-        runs.drain(i + 1..j);
-        if i + 1 < runs.len() && runs[i].joins(&runs[i + 1]) {
-            runs[i].x1 = runs[i + 1].x1;
-            runs.remove(i + 1);
+        let (first, last) = (runs[i], runs[j]);
+        let (mut lo, mut hi) = (i, j + 1);
+        let mut new = [run; 3];
+        let mut n = 0;
+        if first.x0 as usize == a && i > 0 && runs[i - 1].joins(&run) {
+            lo = i - 1;
+            run.x0 = runs[i - 1].x0;
+        } else if first.x0 as usize != a {
+            if first.joins(&run) {
+                run.x0 = first.x0;
+            } else {
+                new[0] = Run {
+                    x1: a as u32,
+                    ..first
+                };
+                n = 1;
+            }
         }
-        if i > 0 && runs[i - 1].joins(&runs[i]) {
-            runs[i - 1].x1 = runs[i].x1;
-            runs.remove(i);
+        let mut right = None;
+        if last.x1 as usize == b && hi < runs.len() && runs[hi].joins(&run) {
+            run.x1 = runs[hi].x1;
+            hi += 1;
+        } else if last.x1 as usize != b {
+            if last.joins(&run) {
+                run.x1 = last.x1;
+            } else {
+                right = Some(Run {
+                    x0: b as u32,
+                    ..last
+                });
+            }
+        }
+        new[n] = run;
+        n += 1;
+        if let Some(r) = right {
+            new[n] = r;
+            n += 1;
+        }
+        if hi - lo == n {
+            runs[lo..hi].copy_from_slice(&new[..n]);
+        } else {
+            runs.splice(lo..hi, new[..n].iter().copied());
         }
         if runs.len() > MAX_RUNS {
             self.mix(row, 0, self.w);
@@ -806,6 +841,31 @@ mod tests {
             }
         }
         assert!(n >= 15, "{n} drawings");
+    }
+
+    /// Rows crossed by hundreds of small shapes (more runs than [`MAX_RUNS`], so rows
+    /// become one mixed run part way), opaque and translucent, under and over big
+    /// fills; and a band of rows that repeat the row above only in part.
+    #[test]
+    fn bytes_of_many_small_shapes() {
+        let mut rng = Rng::new(11);
+        let mut body =
+            String::from(r##"<rect x="3.5" y="2" width="190" height="30" fill="#345"/>"##);
+        for i in 0..400 {
+            let (x, y) = (rng.uniform() * 200.0, rng.uniform() * 36.0);
+            let (w, h) = (0.3 + rng.uniform() * 2.5, 0.5 + rng.uniform() * 12.0);
+            let opacity = if i % 3 == 0 { 0.6 } else { 1.0 };
+            body += &format!(
+                r##"<rect x="{x:.3}" y="{y:.3}" width="{w:.3}" height="{h:.3}" fill="#{:06x}" fill-opacity="{opacity}"/>"##,
+                (rng.uniform() * 16_777_215.0) as u32
+            );
+        }
+        body +=
+            r##"<rect x="20" y="5.25" width="150" height="20" fill="#fa0" fill-opacity="0.8"/>"##;
+        body += r##"<rect x="0" y="9" width="201" height="5" fill="#0a0"/>"##;
+        same_bytes(&format!(
+            r#"<svg xmlns="http://www.w3.org/2000/svg" width="201" height="37">{body}</svg>"#
+        ));
     }
 
     /// Random polygons of a few big solid fills, slanted and straight, on a canvas whose
