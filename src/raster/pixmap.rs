@@ -73,23 +73,38 @@ pub fn render_rgba8(p: &Prepared, alpha: Alpha) -> Vec<u8> {
 fn render_rgba8_with(p: &Prepared, alpha: Alpha, slack: f32) -> Vec<u8> {
     let (w, h) = (p.width as usize, p.height as usize);
     let (start, group, fill) = opaque_start(p);
-    let mut out = vec![0u8; w * h * 4];
     if w == 0 || h == 0 {
+        return Vec::new();
+    }
+    let band_bytes = w * 4 * BAND_ROWS;
+    let draw = |band: usize, bytes: &mut [u8]| {
+        let rows = bytes.len() / (4 * w);
+        BAND_CANVAS.with(|canvas| {
+            let mut canvas = canvas.borrow_mut();
+            canvas.reset(w, rows, fill);
+            canvas.slack = slack;
+            BandRenderer::new(p, band * BAND_ROWS, rows).run(&mut *canvas, start, group);
+            canvas.write_bytes(bytes, alpha);
+        });
+    };
+    if rayon::current_num_threads() == 1 {
+        // One band after the other, each zeroed just before it is written (while its
+        // bytes are in cache) rather than the whole image first, as `vec![0; n]` does
+        // when the allocator hands back memory used before: the zeroing of a big image
+        // is a pass over memory of its own.
+        let mut out = Vec::with_capacity(w * h * 4);
+        for band in 0..h.div_ceil(BAND_ROWS) {
+            let at = out.len();
+            out.resize((at + band_bytes).min(w * h * 4), 0);
+            draw(band, &mut out[at..]);
+        }
         return out;
     }
-    out.par_chunks_mut(w * 4 * BAND_ROWS)
+    let mut out = vec![0u8; w * h * 4];
+    out.par_chunks_mut(band_bytes)
         .with_min_len(p.min_bands_per_task())
         .enumerate()
-        .for_each(|(band, bytes)| {
-            let rows = bytes.len() / (4 * w);
-            BAND_CANVAS.with(|canvas| {
-                let mut canvas = canvas.borrow_mut();
-                canvas.reset(w, rows, fill);
-                canvas.slack = slack;
-                BandRenderer::new(p, band * BAND_ROWS, rows).run(&mut *canvas, start, group);
-                canvas.write_bytes(bytes, alpha);
-            });
-        });
+        .for_each(|(band, bytes)| draw(band, bytes));
     out
 }
 
