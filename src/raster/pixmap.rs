@@ -77,8 +77,9 @@ fn render_rgba8_with(p: &Prepared, alpha: Alpha, slack: f32) -> Vec<u8> {
         return Vec::new();
     }
     let band_bytes = w * 4 * BAND_ROWS;
-    let draw = |band: usize, bytes: &mut [u8]| {
-        let rows = bytes.len() / (4 * w);
+    // Appends band `band`'s bytes to `bytes`.
+    let draw = |band: usize, bytes: &mut Vec<u8>| {
+        let rows = BAND_ROWS.min(h - band * BAND_ROWS);
         BAND_CANVAS.with(|canvas| {
             let mut canvas = canvas.borrow_mut();
             canvas.reset(w, rows, fill);
@@ -88,15 +89,12 @@ fn render_rgba8_with(p: &Prepared, alpha: Alpha, slack: f32) -> Vec<u8> {
         });
     };
     if rayon::current_num_threads() == 1 {
-        // One band after the other, each zeroed just before it is written (while its
-        // bytes are in cache) rather than the whole image first, as `vec![0; n]` does
-        // when the allocator hands back memory used before: the zeroing of a big image
-        // is a pass over memory of its own.
+        // One band after the other, appended: each byte of the image is written once.
+        // (`vec![0; n]` zeroes memory the allocator hands back from earlier use: for a big
+        // image of a few fills that is a pass as long as drawing it.)
         let mut out = Vec::with_capacity(w * h * 4);
         for band in 0..h.div_ceil(BAND_ROWS) {
-            let at = out.len();
-            out.resize((at + band_bytes).min(w * h * 4), 0);
-            draw(band, &mut out[at..]);
+            draw(band, &mut out);
         }
         return out;
     }
@@ -104,11 +102,20 @@ fn render_rgba8_with(p: &Prepared, alpha: Alpha, slack: f32) -> Vec<u8> {
     out.par_chunks_mut(band_bytes)
         .with_min_len(p.min_bands_per_task())
         .enumerate()
-        .for_each(|(band, bytes)| draw(band, bytes));
+        .for_each(|(band, bytes)| {
+            BAND_BYTES.with(|b| {
+                let mut b = b.borrow_mut();
+                b.clear();
+                draw(band, &mut b);
+                bytes.copy_from_slice(&b);
+            })
+        });
     out
 }
 
 thread_local! {
+    /// [`render_rgba8`]'s bytes of one band, on a pool of several threads.
+    static BAND_BYTES: std::cell::RefCell<Vec<u8>> = const { std::cell::RefCell::new(Vec::new()) };
     /// [`render_rgba8`]'s band canvas, kept from one band to the next.
     static BAND_CANVAS: std::cell::RefCell<RunCanvas> =
         std::cell::RefCell::new(RunCanvas::default());
@@ -200,6 +207,8 @@ pub(crate) struct RunCanvas {
     touched: Vec<(u32, u32, u32)>,
     /// Scratch: one row's coverages.
     covs: Vec<f32>,
+    /// Scratch: one row's bytes.
+    line: Vec<u8>,
     /// How far from 0 or 1 a run's coverage may be and count as 0 or 1 ([`snap_run`]).
     slack: f32,
 }
@@ -377,9 +386,13 @@ impl RunCanvas {
         }
     }
 
-    /// Converts the band to bytes (`w × rows × 4`).
-    fn write_bytes(&self, bytes: &mut [u8], alpha: Alpha) {
+    /// Appends the band's bytes (`w × rows × 4`) to `bytes`, writing each byte once (no
+    /// zeroing first).
+    fn write_bytes(&mut self, bytes: &mut Vec<u8>, alpha: Alpha) {
         let row_bytes = self.w * 4;
+        let mut line = std::mem::take(&mut self.line);
+        // Every byte of the row is written below, so the scratch row is never cleared.
+        line.resize(row_bytes, 0);
         for r in 0..self.rows {
             let runs = &self.runs[r];
             // A row equal to the row above (the inside of a flag's stripe, or solid runs
@@ -392,10 +405,10 @@ impl RunCanvas {
                             .zip(&self.runs[r - 1])
                             .all(|(x, y)| !x.mixed && x.same(y)));
             if same {
-                bytes.copy_within((r - 1) * row_bytes..r * row_bytes, r * row_bytes);
+                let end = bytes.len();
+                bytes.extend_from_within(end - row_bytes..end);
                 continue;
             }
-            let line = &mut bytes[r * row_bytes..][..row_bytes];
             let px = &self.px[r * self.w..][..self.w];
             for run in runs {
                 let (x0, x1) = (run.x0 as usize, run.x1 as usize);
@@ -421,7 +434,9 @@ impl RunCanvas {
                     }
                 }
             }
+            bytes.extend_from_slice(&line);
         }
+        self.line = line;
     }
 
     /// Draws a solid-paint item's rows (without cells of exact overlap coverage) straight
