@@ -610,7 +610,7 @@ impl<'a> View<'a> {
         }
         if let (Some(tex), Some(uvs)) = (&mesh.texture, &mesh.uvs) {
             let uv = uv_at(uvs, tri, b);
-            let t = sample(tex, uv).0;
+            let t = sample_value(tex, uv);
             for c in 0..3 {
                 col[c] *= t[c];
             }
@@ -694,7 +694,8 @@ impl<'a> View<'a> {
             let g = g.map(|v| v as f64);
             let q = [f.x as f64 + 0.5, y as f64 + 0.5];
             let tri = self.mesh.triangles[self.prims[f.prim as usize].tri as usize];
-            let (col, bary) = self.shade(tri, q);
+            let a = f.area;
+            let col = self.shade_backward(tri, q, [g[0] * a, g[1] * a, g[2] * a], acc);
             // ∂L/∂a = Σ_c g_c (col_c − bg_c) (+ g_α without a background).
             let mut ga = (0..3).map(|c| g[c] * (col[c] - bgc[c])).sum::<f64>();
             if bg.is_none() {
@@ -703,13 +704,21 @@ impl<'a> View<'a> {
             for &(v0, v1) in &rv.pieces[f.pieces.0 as usize..f.pieces.1 as usize] {
                 geom::area_backward(&rv.verts[v0 as usize..v1 as usize], ga, &self.sv, acc);
             }
-            let a = f.area;
-            self.shade_backward(tri, &bary, [g[0] * a, g[1] * a, g[2] * a], acc);
         }
     }
 
-    fn shade_backward(&self, tri: [u32; 3], bary: &Bary, gcol: [f64; 3], sink: &mut Acc) {
+    /// Adds the contributions of `gcol = ∂L/∂color` of triangle `tri` at screen point
+    /// `q` (through the vertex colors, the texture and the barycentrics) and returns the
+    /// color (what [`View::shade`] gives, with one texture sample for both).
+    fn shade_backward(
+        &self,
+        tri: [u32; 3],
+        q: [f64; 2],
+        gcol: [f64; 3],
+        sink: &mut Acc,
+    ) -> [f64; 3] {
         let mesh = self.mesh;
+        let bary = self.bary(tri, q);
         let b = bary.b;
         let mut base = [1.0; 3];
         if let Some(vc) = &mesh.colors {
@@ -741,6 +750,7 @@ impl<'a> View<'a> {
                 gb[k] += guv[0] * uvk[0] + guv[1] * uvk[1];
             }
         }
+        let col = [base[0] * t[0], base[1] * t[1], base[2] * t[2]];
         let gbase = [gcol[0] * t[0], gcol[1] * t[1], gcol[2] * t[2]];
         if let Some(vc) = &mesh.colors {
             for k in 0..3 {
@@ -749,7 +759,7 @@ impl<'a> View<'a> {
             }
         }
         if !(bary.sum > 0.0 && bary.sum.is_finite()) || gb == [0.0; 3] {
-            return;
+            return col;
         }
         // b = m / Σm: ∂b_i/∂m_j = (δ_ij − b_i) / Σm.
         let gb_dot_b = gb[0] * b[0] + gb[1] * b[1] + gb[2] * b[2];
@@ -769,6 +779,7 @@ impl<'a> View<'a> {
         for k in 0..3 {
             axpy(&mut sink.cam[tri[k] as usize], 1.0, gp[k]);
         }
+        col
     }
 
     /// Renders the image (premultiplied RGBA, see [`crate::mesh`]).
@@ -1050,12 +1061,10 @@ fn uv_at(uvs: &[[f64; 2]], tri: [u32; 3], b: [f64; 3]) -> [f64; 2] {
     uv
 }
 
-/// A texture sample: the value, the four taps `(texel, weight)` and `∂value_c/∂(u, v)`.
-type Sample = ([f64; 3], [(u32, f64); 4], [[f64; 2]; 3]);
-
-/// Bilinear sample of `tex` at `uv` (repeat): the value, the four taps `(texel, weight)`
-/// and `∂value_c/∂(u, v)`.
-fn sample(tex: &Texture, uv: [f64; 2]) -> Sample {
+/// The four bilinear taps `(texel, weight)` of `tex` at `uv` (repeat), and the
+/// fractional position `(fx, fy)` between them.
+#[inline]
+fn taps(tex: &Texture, uv: [f64; 2]) -> ([(u32, f64); 4], f64, f64) {
     let (w, h) = (tex.width as f64, tex.height as f64);
     let tx = uv[0] * w - 0.5;
     let ty = (1.0 - uv[1]) * h - 0.5;
@@ -1071,12 +1080,40 @@ fn sample(tex: &Texture, uv: [f64; 2]) -> Sample {
     let (xa, xb) = (wrap(x0, tex.width), wrap(x0 + 1.0, tex.width));
     let (ya, yb) = (wrap(y0, tex.height), wrap(y0 + 1.0, tex.height));
     let idx = |x: u32, y: u32| y * tex.width + x;
-    let taps = [
-        (idx(xa, ya), (1.0 - fx) * (1.0 - fy)),
-        (idx(xb, ya), fx * (1.0 - fy)),
-        (idx(xa, yb), (1.0 - fx) * fy),
-        (idx(xb, yb), fx * fy),
-    ];
+    (
+        [
+            (idx(xa, ya), (1.0 - fx) * (1.0 - fy)),
+            (idx(xb, ya), fx * (1.0 - fy)),
+            (idx(xa, yb), (1.0 - fx) * fy),
+            (idx(xb, yb), fx * fy),
+        ],
+        fx,
+        fy,
+    )
+}
+
+/// The bilinear sample of `tex` at `uv` (what [`sample`] gives first).
+#[inline]
+fn sample_value(tex: &Texture, uv: [f64; 2]) -> [f64; 3] {
+    let (taps, _, _) = taps(tex, uv);
+    let mut v = [0.0; 3];
+    for c in 0..3 {
+        v[c] = taps
+            .iter()
+            .map(|&(i, wt)| wt * tex.data[i as usize][c])
+            .sum();
+    }
+    v
+}
+
+/// A texture sample: the value, the four taps `(texel, weight)` and `∂value_c/∂(u, v)`.
+type Sample = ([f64; 3], [(u32, f64); 4], [[f64; 2]; 3]);
+
+/// Bilinear sample of `tex` at `uv` (repeat): the value, the four taps `(texel, weight)`
+/// and `∂value_c/∂(u, v)`.
+fn sample(tex: &Texture, uv: [f64; 2]) -> Sample {
+    let (w, h) = (tex.width as f64, tex.height as f64);
+    let (taps, fx, fy) = taps(tex, uv);
     let t = taps.map(|(i, _)| tex.data[i as usize]);
     let mut v = [0.0; 3];
     let mut d = [[0.0; 2]; 3];
