@@ -1394,6 +1394,13 @@ mod tests {
         };
         let one = run(1);
         assert!(one.1.positions.iter().any(|g| g != &[0.0; 3]));
+        // The backward pass of a view never rendered recomputes the visible pieces that
+        // a rendered one keeps: the same bits.
+        let fresh = View::new(&mesh, &cam, RenderOptions::default())
+            .unwrap()
+            .backward(&wts, true)
+            .unwrap();
+        assert_eq!(fresh, one.1, "kept pieces and recomputed ones differ");
         for n in [2, 3] {
             let other = run(n);
             assert!(
