@@ -224,41 +224,105 @@ fn line_backward(line: Line, lambda: f64, p: [f64; 2], sv: &[[f64; 2]], grad: &m
 }
 
 /// The pixel square `[x, x+1] × [y, y+1]` as a counter-clockwise polygon.
+#[cfg(test)]
 pub(crate) fn pixel_box(x: f64, y: f64) -> Poly {
+    let mut b = Poly::with_capacity(8);
+    set_pixel_box(x, y, &mut b);
+    b
+}
+
+/// Sets `out` to the pixel square `[x, x+1] × [y, y+1]` (counter-clockwise).
+#[inline]
+pub(crate) fn set_pixel_box(x: f64, y: f64, out: &mut Poly) {
     let (x1, y1) = (x + 1.0, y + 1.0);
     let v = |p, next| Vertex {
         p,
         origin: Origin::Fixed,
         next,
     };
-    vec![
+    out.clear();
+    out.extend_from_slice(&[
         v([x, y], Line::Y(y)),
         v([x1, y], Line::X(x1)),
         v([x1, y1], Line::Y(y1)),
         v([x, y1], Line::X(x)),
-    ]
+    ]);
+}
+
+/// A list of polygons whose buffers are kept and reused: the first `len` are in use, so
+/// that the per-pixel loop allocates nothing once the buffers have grown.
+#[derive(Default)]
+pub(crate) struct Polys {
+    polys: Vec<Poly>,
+    len: usize,
+}
+
+impl Polys {
+    /// Empties the list (keeping the buffers).
+    #[inline]
+    pub(crate) fn clear(&mut self) {
+        self.len = 0;
+    }
+
+    /// Number of polygons in use.
+    #[inline]
+    pub(crate) fn len(&self) -> usize {
+        self.len
+    }
+
+    /// The polygons in use.
+    #[inline]
+    pub(crate) fn as_slice(&self) -> &[Poly] {
+        &self.polys[..self.len]
+    }
+
+    /// Appends an empty polygon and returns it.
+    #[inline]
+    pub(crate) fn push_new(&mut self) -> &mut Poly {
+        if self.len == self.polys.len() {
+            self.polys.push(Poly::new());
+        }
+        let p = &mut self.polys[self.len];
+        p.clear();
+        self.len += 1;
+        p
+    }
+
+    /// Appends a copy of `poly`.
+    #[inline]
+    pub(crate) fn push_copy(&mut self, poly: &[Vertex]) {
+        self.push_new().extend_from_slice(poly);
+    }
+
+    /// Removes the last polygon.
+    #[inline]
+    pub(crate) fn pop(&mut self) {
+        self.len -= 1;
+    }
 }
 
 /// `poly` minus the convex polygon whose counter-clockwise edges are `edges`: the
-/// pieces (convex, disjoint) are appended to `out`. `tmp` and `rest` are scratch.
+/// pieces (convex, disjoint) are appended to `out`. `rest` and `inside` are scratch.
 pub(crate) fn subtract(
     poly: &[Vertex],
     edges: &[Line],
     sv: &[[f64; 2]],
-    out: &mut Vec<Poly>,
+    out: &mut Polys,
     min_area: f64,
+    rest: &mut Poly,
+    inside: &mut Poly,
 ) {
-    let mut rest: Poly = poly.to_vec();
-    let mut piece = Poly::new();
-    let mut inside = Poly::new();
+    rest.clear();
+    rest.extend_from_slice(poly);
     for &e in edges {
-        clip(&rest, e, -1.0, sv, &mut piece);
-        if area(&piece) > min_area {
-            out.push(std::mem::take(&mut piece));
+        let piece = out.push_new();
+        clip(rest, e, -1.0, sv, piece);
+        if !(area(piece) > min_area) {
+            out.pop();
         }
-        clip(&rest, e, 1.0, sv, &mut inside);
-        std::mem::swap(&mut rest, &mut inside);
-        if area(&rest) <= min_area {
+        clip(rest, e, 1.0, sv, inside);
+        std::mem::swap(rest, inside);
+        if area(rest) <= min_area {
             return;
         }
     }
@@ -285,15 +349,17 @@ mod tests {
             clip(&t, Line::Edge(k, (k + 1) % 3), 1.0, sv, &mut tmp);
             std::mem::swap(&mut t, &mut tmp);
         }
-        let mut pieces = Vec::new();
+        let mut pieces = Polys::default();
         subtract(
             &t,
             &[Line::Edge(3, 4), Line::Edge(4, 5), Line::Edge(5, 3)],
             sv,
             &mut pieces,
             0.0,
+            &mut Poly::new(),
+            &mut Poly::new(),
         );
-        pieces
+        pieces.as_slice().to_vec()
     }
 
     /// Area of (triangle 0 ∩ pixel) minus triangle 1, as a function of the vertices.
@@ -323,15 +389,17 @@ mod tests {
         }
         assert!((area(&t) - 0.5).abs() < 1e-15, "{}", area(&t));
         // The box minus that triangle: the other half.
-        let mut pieces = Vec::new();
+        let mut pieces = Polys::default();
         subtract(
             &b,
             &[Line::Edge(0, 1), Line::Edge(1, 2), Line::Edge(2, 0)],
             &sv,
             &mut pieces,
             0.0,
+            &mut Poly::new(),
+            &mut Poly::new(),
         );
-        let rest: f64 = pieces.iter().map(|p| area(p)).sum();
+        let rest: f64 = pieces.as_slice().iter().map(|p| area(p)).sum();
         assert!((rest - 0.5).abs() < 1e-15, "{rest}");
     }
 

@@ -37,7 +37,7 @@ mod shapes;
 pub use gltf::read_gltf;
 pub use io::{read_mesh, read_obj, write_obj};
 pub use render::{MeshGrad, RenderOptions, View, render, render_backward};
-pub use shapes::icosphere;
+pub use shapes::{icosphere, torus_knot};
 
 use crate::Image;
 

@@ -15,7 +15,7 @@
 
 use rayon::prelude::*;
 
-use super::geom::{self, GradSink, Line, Poly};
+use super::geom::{self, GradSink, Line, Poly, Polys};
 use super::{Mesh, Texture};
 use crate::Image;
 use crate::error::{Error, Result};
@@ -74,9 +74,18 @@ struct Prim {
     /// Camera-space plane normal `(P1 − P0) × (P2 − P0)` and `normal · P0`.
     normal: [f64; 3],
     nd: f64,
+    /// Inverse depth of the plane, affine on screen: `inv · (x, y, 1)`.
+    inv: [f64; 3],
 }
 
 impl Prim {
+    /// The inverse depth (1 / distance along the optical axis) of the prim's plane under
+    /// screen point `q`; larger is nearer.
+    #[inline]
+    fn inv_depth(&self, q: [f64; 2]) -> f64 {
+        self.inv[0] * q[0] + self.inv[1] * q[1] + self.inv[2]
+    }
+
     fn edges(&self) -> impl Iterator<Item = Line> + '_ {
         let n = self.n as usize;
         (0..n).map(move |k| Line::Edge(self.sv[k], self.sv[(k + 1) % n]))
@@ -101,6 +110,8 @@ pub struct View<'a> {
     prims: Vec<Prim>,
     row_start: Vec<u32>,
     row_prims: Vec<u32>,
+    /// The first render's visible fragments per row, reused by the backward pass.
+    cache: std::sync::OnceLock<Vec<RowVis>>,
 }
 
 #[inline]
@@ -179,6 +190,7 @@ impl<'a> View<'a> {
             prims: Vec::new(),
             row_start: Vec::new(),
             row_prims: Vec::new(),
+            cache: std::sync::OnceLock::new(),
         };
         view.pc = mesh
             .positions
@@ -280,6 +292,13 @@ impl<'a> View<'a> {
                 hi,
                 normal,
                 nd,
+                // 1/depth = normal · ray(q) / nd, ray(q) = ((x − cx)/fx, −(y − cy)/fy, −1).
+                inv: [
+                    normal[0] / (self.fx * nd),
+                    -normal[1] / (self.fy * nd),
+                    (-normal[0] * self.cx / self.fx + normal[1] * self.cy / self.fy - normal[2])
+                        / nd,
+                ],
             });
         }
     }
@@ -360,9 +379,13 @@ impl<'a> View<'a> {
     }
 
     /// The visible pieces of every fragment of pixel `(x, y)`, given its candidate prims
-    /// (in prim order): `(prim, pieces)` pairs.
-    fn visible(&self, x: usize, y: usize, cands: &[u32], out: &mut Vec<(u32, Vec<Poly>)>) {
-        out.clear();
+    /// (in prim order), into `s.vis` (prim and range of `s.pieces`, in prim order).
+    fn visible(&self, x: usize, y: usize, cands: &[u32], s: &mut Scratch) {
+        s.vis.clear();
+        s.pieces.clear();
+        s.reach.clear();
+        s.frag_prims.clear();
+        s.frag_polys.clear();
         let (xf, yf) = (x as f64, y as f64);
         let corners = [
             [xf, yf],
@@ -370,96 +393,169 @@ impl<'a> View<'a> {
             [xf + 1.0, yf + 1.0],
             [xf, yf + 1.0],
         ];
-        let mut frags: Vec<(u32, Poly)> = Vec::with_capacity(cands.len());
-        let mut tmp = Poly::new();
+        let center = [xf + 0.5, yf + 0.5];
+        // Which candidates reach the pixel, and which of their edges cross it; the
+        // nearest (at the center) of those that cover the whole pixel.
+        let mut full: Option<(u32, f64)> = None;
         for &pi in cands {
             let p = &self.prims[pi as usize];
-            let mut poly = geom::pixel_box(xf, yf);
-            let mut all_in = true;
+            let n = p.n as usize;
+            let mut mask = 0u8;
             let mut empty = false;
-            for e in p.edges() {
-                let (a, b) = match e {
-                    Line::Edge(a, b) => (self.sv[a as usize], self.sv[b as usize]),
-                    _ => unreachable!(),
-                };
+            for k in 0..n {
+                let a = self.sv[p.sv[k] as usize];
+                let b = self.sv[p.sv[(k + 1) % n] as usize];
                 let side =
                     |q: [f64; 2]| (b[0] - a[0]) * (q[1] - a[1]) - (b[1] - a[1]) * (q[0] - a[0]);
-                let s = corners.map(side);
-                if s.iter().all(|&v| v <= 0.0) {
+                let sd = corners.map(side);
+                if sd.iter().all(|&v| v <= 0.0) {
                     empty = true;
                     break;
                 }
-                if s.iter().all(|&v| v >= 0.0) {
-                    continue;
+                if !sd.iter().all(|&v| v >= 0.0) {
+                    mask |= 1 << k;
                 }
-                all_in = false;
-                geom::clip(&poly, e, 1.0, &self.sv, &mut tmp);
-                std::mem::swap(&mut poly, &mut tmp);
             }
-            if empty || (!all_in && !(geom::area(&poly) > 0.0)) {
+            if empty {
                 continue;
             }
-            frags.push((pi, poly));
+            if mask == 0 {
+                let d = p.inv_depth(center);
+                if full.is_none_or(|(_, e)| d > e) {
+                    full = Some((pi, d));
+                }
+            }
+            s.reach.push((pi, mask));
         }
-        let k = frags.len();
+        // A candidate whose plane lies behind a whole-pixel fragment's at the four
+        // corners (so everywhere in the pixel) is hidden: it is dropped before any
+        // clipping (the pairwise test below would give it no visible piece).
+        if let Some((fp, _)) = full
+            && s.reach.len() > 1
+        {
+            let f = &self.prims[fp as usize];
+            let fc = corners.map(|c| f.inv_depth(c));
+            s.reach.retain(|&(pi, _)| {
+                pi == fp || {
+                    let p = &self.prims[pi as usize];
+                    !(0..4).all(|k| p.inv_depth(corners[k]) < fc[k] - INV_DEPTH_TOL * fc[k].abs())
+                }
+            });
+        }
+        for &(pi, mask) in &s.reach {
+            let p = &self.prims[pi as usize];
+            let poly = s.frag_polys.push_new();
+            geom::set_pixel_box(xf, yf, poly);
+            if mask == 0 {
+                s.frag_prims.push(pi);
+                continue;
+            }
+            for (k, e) in p.edges().enumerate() {
+                if mask & (1 << k) != 0 {
+                    geom::clip(poly, e, 1.0, &self.sv, &mut s.tmp);
+                    std::mem::swap(poly, &mut s.tmp);
+                }
+            }
+            if !(geom::area(poly) > 0.0) {
+                s.frag_polys.pop();
+                continue;
+            }
+            s.frag_prims.push(pi);
+        }
+        let k = s.frag_prims.len();
         if k == 1 {
-            let (pi, poly) = frags.pop().expect("one fragment");
-            out.push((pi, vec![poly]));
+            std::mem::swap(&mut s.pieces, &mut s.frag_polys);
+            s.vis.push((s.frag_prims[0], 0, 1));
             return;
         }
         // occludes[i * k + j]: fragment j is in front of fragment i on their overlap.
-        let mut occludes = vec![false; k * k];
-        let mut overlap = Poly::new();
+        s.occludes.clear();
+        s.occludes.resize(k * k, false);
+        let frags = s.frag_polys.as_slice();
         for i in 0..k {
             for j in i + 1..k {
                 let (pi, pj) = (
-                    &self.prims[frags[i].0 as usize],
-                    &self.prims[frags[j].0 as usize],
+                    &self.prims[s.frag_prims[i] as usize],
+                    &self.prims[s.frag_prims[j] as usize],
                 );
                 // Disjoint when one polygon lies outside an edge of the other (the common
                 // case of neighbours in a mesh): a separating line, up to a hair of
                 // round-off along a shared edge.
-                if self.separated(pj, &frags[i].1) || self.separated(pi, &frags[j].1) {
+                if self.separated(pj, &frags[i]) || self.separated(pi, &frags[j]) {
                     continue;
                 }
-                overlap.clone_from(&frags[i].1);
+                // One plane in front of the other at every vertex of fragment i is in
+                // front on all of their overlap (inverse depth is affine on screen).
+                let (mut j_front, mut i_front) = (true, true);
+                for v in &frags[i] {
+                    let (di, dj) = (pi.inv_depth(v.p), pj.inv_depth(v.p));
+                    let tol = INV_DEPTH_TOL * di.abs().max(dj.abs());
+                    j_front &= dj - di > tol;
+                    i_front &= di - dj > tol;
+                }
+                if j_front {
+                    s.occludes[i * k + j] = true;
+                    continue;
+                }
+                if i_front {
+                    s.occludes[j * k + i] = true;
+                    continue;
+                }
+                s.overlap.clone_from(&frags[i]);
                 for e in pj.edges() {
-                    geom::clip(&overlap, e, 1.0, &self.sv, &mut tmp);
-                    std::mem::swap(&mut overlap, &mut tmp);
-                    if overlap.len() < 3 {
+                    geom::clip(&s.overlap, e, 1.0, &self.sv, &mut s.tmp);
+                    std::mem::swap(&mut s.overlap, &mut s.tmp);
+                    if s.overlap.len() < 3 {
                         break;
                     }
                 }
-                if !(geom::area(&overlap) > MIN_OVERLAP) {
+                if !(geom::area(&s.overlap) > MIN_OVERLAP) {
                     continue;
                 }
-                let Some(c) = geom::centroid(&overlap) else {
+                let Some(c) = geom::centroid(&s.overlap) else {
                     continue;
                 };
                 let (di, dj) = (self.depth(pi, c), self.depth(pj, c));
                 // Ties go to the earlier triangle (the lower index).
                 if dj < di {
-                    occludes[i * k + j] = true;
+                    s.occludes[i * k + j] = true;
                 } else {
-                    occludes[j * k + i] = true;
+                    s.occludes[j * k + i] = true;
                 }
             }
         }
         for i in 0..k {
-            let mut pieces = vec![frags[i].1.clone()];
+            s.cur.clear();
+            s.cur.push_copy(&s.frag_polys.as_slice()[i]);
             for j in 0..k {
-                if !occludes[i * k + j] || pieces.is_empty() {
+                if !s.occludes[i * k + j] || s.cur.len() == 0 {
                     continue;
                 }
-                let edges: Vec<Line> = self.prims[frags[j].0 as usize].edges().collect();
-                let mut next = Vec::with_capacity(pieces.len() + 2);
-                for piece in &pieces {
-                    geom::subtract(piece, &edges, &self.sv, &mut next, 0.0);
+                let pj = &self.prims[s.frag_prims[j] as usize];
+                let mut edges = [Line::X(0.0); 4];
+                for (e, l) in edges.iter_mut().zip(pj.edges()) {
+                    *e = l;
                 }
-                pieces = next;
+                s.next.clear();
+                for piece in s.cur.as_slice() {
+                    geom::subtract(
+                        piece,
+                        &edges[..pj.n as usize],
+                        &self.sv,
+                        &mut s.next,
+                        0.0,
+                        &mut s.tmp,
+                        &mut s.overlap,
+                    );
+                }
+                std::mem::swap(&mut s.cur, &mut s.next);
             }
-            if !pieces.is_empty() {
-                out.push((frags[i].0, pieces));
+            if s.cur.len() > 0 {
+                let start = s.pieces.len();
+                for p in s.cur.as_slice() {
+                    s.pieces.push_copy(p);
+                }
+                s.vis.push((s.frag_prims[i], start, s.pieces.len()));
             }
         }
     }
@@ -514,7 +610,7 @@ impl<'a> View<'a> {
         }
         if let (Some(tex), Some(uvs)) = (&mesh.texture, &mesh.uvs) {
             let uv = uv_at(uvs, tri, b);
-            let t = sample(tex, uv).0;
+            let t = sample_value(tex, uv);
             for c in 0..3 {
                 col[c] *= t[c];
             }
@@ -522,62 +618,107 @@ impl<'a> View<'a> {
         (col, bary)
     }
 
-    /// Renders pixel `(x, y)`; with `grad = Some((g, sink))`, `g = ∂L/∂pixel`
-    /// (premultiplied RGBA), adds the pixel's contributions into `sink`.
-    fn pixel(
+    /// Renders row `y`: the visible fragments of each pixel into `rv` (their pieces
+    /// that have a moving vertex), and with `out` the pixel values.
+    fn row_forward(
         &self,
-        x: usize,
         y: usize,
-        cands: &[u32],
-        vis: &mut Vec<(u32, Vec<Poly>)>,
-        grad: Option<([f32; 4], &mut RowSink)>,
-    ) -> [f64; 4] {
+        s: &mut Scratch,
+        mut out: Option<&mut [[f64; 4]]>,
+        rv: &mut RowVis,
+    ) {
+        rv.frags.clear();
+        rv.pieces.clear();
+        rv.verts.clear();
         let bg = self.opts.background;
-        if cands.is_empty() {
-            return background_px(bg);
-        }
-        self.visible(x, y, cands, vis);
-        let q = [x as f64 + 0.5, y as f64 + 0.5];
-        let mut rgb = [0.0f64; 3];
-        let mut cover = 0.0f64;
-        let mut shaded = Vec::with_capacity(vis.len());
-        for (pi, pieces) in vis.iter() {
-            let a: f64 = pieces.iter().map(|p| geom::area(p)).sum();
-            let tri = self.mesh.triangles[self.prims[*pi as usize].tri as usize];
-            let (col, bary) = self.shade(tri, q);
-            axpy(&mut rgb, a, col);
-            cover += a;
-            shaded.push((a, col, bary));
-        }
-        let alpha = match bg {
-            Some(b) => {
-                axpy(&mut rgb, 1.0 - cover, b);
-                1.0
-            }
-            None => cover,
-        };
-        if let Some((g, sink)) = grad {
-            let g = g.map(|v| v as f64);
-            let bgc = bg.unwrap_or([0.0; 3]);
-            for ((pi, pieces), (a, col, bary)) in vis.iter().zip(&shaded) {
-                // ∂L/∂a = Σ_c g_c (col_c − bg_c) (+ g_α without a background).
-                let mut ga = (0..3).map(|c| g[c] * (col[c] - bgc[c])).sum::<f64>();
-                if bg.is_none() {
-                    ga += g[3];
+        self.row(y, |x, cands| {
+            if cands.is_empty() {
+                if let Some(o) = out.as_deref_mut() {
+                    o[x] = background_px(bg);
                 }
-                for p in pieces {
-                    geom::area_backward(p, ga, &self.sv, sink);
-                }
-                let gcol = [g[0] * a, g[1] * a, g[2] * a];
-                let tri = self.mesh.triangles[self.prims[*pi as usize].tri as usize];
-                self.shade_backward(tri, bary, gcol, sink);
+                return;
             }
-        }
-        [rgb[0], rgb[1], rgb[2], alpha]
+            self.visible(x, y, cands, s);
+            let q = [x as f64 + 0.5, y as f64 + 0.5];
+            let mut rgb = [0.0f64; 3];
+            let mut cover = 0.0f64;
+            let pieces = s.pieces.as_slice();
+            for &(pi, p0, p1) in &s.vis {
+                let a: f64 = pieces[p0..p1].iter().map(|p| geom::area(p)).sum();
+                if out.is_some() {
+                    let tri = self.mesh.triangles[self.prims[pi as usize].tri as usize];
+                    let (col, _) = self.shade(tri, q);
+                    axpy(&mut rgb, a, col);
+                }
+                cover += a;
+                let first = rv.pieces.len() as u32;
+                for p in &pieces[p0..p1] {
+                    // A piece made only of pixel corners has no area gradient.
+                    if p.iter().any(|v| v.origin != geom::Origin::Fixed) {
+                        let v0 = rv.verts.len() as u32;
+                        rv.verts.extend_from_slice(p);
+                        rv.pieces.push((v0, rv.verts.len() as u32));
+                    }
+                }
+                rv.frags.push(VisFrag {
+                    x: x as u32,
+                    prim: pi,
+                    area: a,
+                    pieces: (first, rv.pieces.len() as u32),
+                });
+            }
+            if let Some(o) = out.as_deref_mut() {
+                let alpha = match bg {
+                    Some(b) => {
+                        axpy(&mut rgb, 1.0 - cover, b);
+                        1.0
+                    }
+                    None => cover,
+                };
+                o[x] = [rgb[0], rgb[1], rgb[2], alpha];
+            }
+        });
     }
 
-    fn shade_backward(&self, tri: [u32; 3], bary: &Bary, gcol: [f64; 3], sink: &mut RowSink) {
+    /// Adds row `y`'s contributions to the gradient, given its visible fragments `rv`
+    /// and `d_img = ∂L/∂image`.
+    fn row_backward(&self, y: usize, rv: &RowVis, d_img: &Image, acc: &mut Acc) {
+        let w = self.width as usize;
+        let bg = self.opts.background;
+        let bgc = bg.unwrap_or([0.0; 3]);
+        for f in &rv.frags {
+            let g = d_img.data[y * w + f.x as usize];
+            if g == [0.0; 4] {
+                continue;
+            }
+            let g = g.map(|v| v as f64);
+            let q = [f.x as f64 + 0.5, y as f64 + 0.5];
+            let tri = self.mesh.triangles[self.prims[f.prim as usize].tri as usize];
+            let a = f.area;
+            let col = self.shade_backward(tri, q, [g[0] * a, g[1] * a, g[2] * a], acc);
+            // ∂L/∂a = Σ_c g_c (col_c − bg_c) (+ g_α without a background).
+            let mut ga = (0..3).map(|c| g[c] * (col[c] - bgc[c])).sum::<f64>();
+            if bg.is_none() {
+                ga += g[3];
+            }
+            for &(v0, v1) in &rv.pieces[f.pieces.0 as usize..f.pieces.1 as usize] {
+                geom::area_backward(&rv.verts[v0 as usize..v1 as usize], ga, &self.sv, acc);
+            }
+        }
+    }
+
+    /// Adds the contributions of `gcol = ∂L/∂color` of triangle `tri` at screen point
+    /// `q` (through the vertex colors, the texture and the barycentrics) and returns the
+    /// color (what [`View::shade`] gives, with one texture sample for both).
+    fn shade_backward(
+        &self,
+        tri: [u32; 3],
+        q: [f64; 2],
+        gcol: [f64; 3],
+        sink: &mut Acc,
+    ) -> [f64; 3] {
         let mesh = self.mesh;
+        let bary = self.bary(tri, q);
         let b = bary.b;
         let mut base = [1.0; 3];
         if let Some(vc) = &mesh.colors {
@@ -609,15 +750,16 @@ impl<'a> View<'a> {
                 gb[k] += guv[0] * uvk[0] + guv[1] * uvk[1];
             }
         }
+        let col = [base[0] * t[0], base[1] * t[1], base[2] * t[2]];
         let gbase = [gcol[0] * t[0], gcol[1] * t[1], gcol[2] * t[2]];
         if let Some(vc) = &mesh.colors {
             for k in 0..3 {
-                sink.color.push((tri[k], gbase.map(|v| v * b[k])));
+                axpy(&mut sink.color[tri[k] as usize], b[k], gbase);
                 gb[k] += dot(gbase, vc[tri[k] as usize]);
             }
         }
         if !(bary.sum > 0.0 && bary.sum.is_finite()) || gb == [0.0; 3] {
-            return;
+            return col;
         }
         // b = m / Σm: ∂b_i/∂m_j = (δ_ij − b_i) / Σm.
         let gb_dot_b = gb[0] * b[0] + gb[1] * b[1] + gb[2] * b[2];
@@ -635,8 +777,9 @@ impl<'a> View<'a> {
             axpy(&mut gp[k], gc, cross(r, p[j]));
         }
         for k in 0..3 {
-            sink.cam.push((tri[k], gp[k]));
+            axpy(&mut sink.cam[tri[k] as usize], 1.0, gp[k]);
         }
+        col
     }
 
     /// Renders the image (premultiplied RGBA, see [`crate::mesh`]).
@@ -649,16 +792,21 @@ impl<'a> View<'a> {
         }
     }
 
-    /// The image in `f64` (what the gradient is the exact derivative of).
+    /// The image in `f64` (what the gradient is the exact derivative of). The visible
+    /// pieces are kept for [`View::backward`] (the first render's).
     pub(crate) fn render_f64(&self) -> Vec<[f64; 4]> {
         let w = self.width as usize;
         let mut data = vec![[0.0f64; 4]; w * self.height as usize];
-        data.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
-            let mut vis = Vec::new();
-            self.row(y, |x, cands| {
-                row[x] = self.pixel(x, y, cands, &mut vis, None);
-            });
-        });
+        let rows: Vec<RowVis> = data
+            .par_chunks_mut(w)
+            .enumerate()
+            .map_init(Scratch::default, |s, (y, row)| {
+                let mut rv = RowVis::default();
+                self.row_forward(y, s, Some(row), &mut rv);
+                rv
+            })
+            .collect();
+        let _ = self.cache.set(rows);
         data
     }
 
@@ -704,25 +852,36 @@ impl<'a> View<'a> {
                 ),
             });
         }
-        let w = self.width as usize;
-        let rows: Vec<RowSink> = (0..self.height as usize)
+        let h = self.height as usize;
+        let mesh = self.mesh;
+        let cache = self.cache.get();
+        // Fixed chunks of rows (whatever the number of threads), each summed densely in
+        // row order, then the chunks summed in order: the same bits on any thread count.
+        let chunks: Vec<Acc> = (0..h.div_ceil(CHUNK_ROWS))
             .into_par_iter()
-            .map(|y| {
-                let mut sink = RowSink {
+            .map(|c| {
+                let mut acc = Acc {
                     texels,
-                    ..RowSink::default()
+                    sv: vec![[0.0; 2]; self.sv.len()],
+                    cam: vec![[0.0; 3]; self.pc.len()],
+                    color: vec![[0.0; 3]; mesh.colors.as_ref().map_or(0, |c| c.len())],
+                    texel: Vec::new(),
                 };
-                let mut vis = Vec::new();
-                self.row(y, |x, cands| {
-                    let g = d_img.data[y * w + x];
-                    if g != [0.0; 4] {
-                        self.pixel(x, y, cands, &mut vis, Some((g, &mut sink)));
-                    }
-                });
-                sink
+                let mut s = Scratch::default();
+                let mut own = RowVis::default();
+                for y in c * CHUNK_ROWS..((c + 1) * CHUNK_ROWS).min(h) {
+                    let rv = match cache {
+                        Some(rows) => &rows[y],
+                        None => {
+                            self.row_forward(y, &mut s, None, &mut own);
+                            &own
+                        }
+                    };
+                    self.row_backward(y, rv, d_img, &mut acc);
+                }
+                acc
             })
             .collect();
-        let mesh = self.mesh;
         let mut gsv = vec![[0.0f64; 2]; self.sv.len()];
         let mut gcam = vec![[0.0f64; 3]; self.pc.len()];
         let mut gcol = mesh.colors.as_ref().map(|c| vec![[0.0f64; 3]; c.len()]);
@@ -730,26 +889,26 @@ impl<'a> View<'a> {
             (Some(t), true) => Some(vec![[0.0f64; 3]; t.data.len()]),
             _ => None,
         };
-        for r in &rows {
-            for &(i, g) in &r.sv {
-                gsv[i as usize][0] += g[0];
-                gsv[i as usize][1] += g[1];
+        for a in &chunks {
+            for (d, g) in gsv.iter_mut().zip(&a.sv) {
+                d[0] += g[0];
+                d[1] += g[1];
             }
-            for &(i, g) in &r.cam {
-                axpy(&mut gcam[i as usize], 1.0, g);
+            for (d, g) in gcam.iter_mut().zip(&a.cam) {
+                axpy(d, 1.0, *g);
             }
             if let Some(gc) = &mut gcol {
-                for &(i, g) in &r.color {
-                    axpy(&mut gc[i as usize], 1.0, g);
+                for (d, g) in gc.iter_mut().zip(&a.color) {
+                    axpy(d, 1.0, *g);
                 }
             }
             if let Some(gt) = &mut gtex {
-                for &(i, g) in &r.texel {
+                for &(i, g) in &a.texel {
                     axpy(&mut gt[i as usize], 1.0, g);
                 }
             }
         }
-        drop(rows);
+        drop(chunks);
         // Screen vertices back to camera space.
         for (s, g) in self.src.iter().zip(&gsv) {
             if *g == [0.0; 2] {
@@ -824,22 +983,65 @@ struct Bary {
     r: [f64; 3],
 }
 
-/// One row's gradient contributions, added in row order.
-#[derive(Default)]
-struct RowSink {
+/// Rows per chunk of the backward pass (fixed, so that sums do not depend on threads).
+const CHUNK_ROWS: usize = 16;
+
+/// Relative margin under which two planes' inverse depths count as equal (then the
+/// overlap's centroid decides).
+const INV_DEPTH_TOL: f64 = 1e-9;
+
+/// A chunk of rows' gradient: dense per screen vertex, camera-space vertex and color;
+/// texel contributions as a list (the texture is large).
+struct Acc {
     texels: bool,
-    sv: Vec<(u32, [f64; 2])>,
-    cam: Vec<(u32, [f64; 3])>,
-    color: Vec<(u32, [f64; 3])>,
+    sv: Vec<[f64; 2]>,
+    cam: Vec<[f64; 3]>,
+    color: Vec<[f64; 3]>,
     texel: Vec<(u32, [f64; 3])>,
 }
 
-impl GradSink for RowSink {
+impl GradSink for Acc {
+    #[inline]
     fn add(&mut self, i: u32, g: [f64; 2]) {
-        if g != [0.0; 2] {
-            self.sv.push((i, g));
-        }
+        let d = &mut self.sv[i as usize];
+        d[0] += g[0];
+        d[1] += g[1];
     }
+}
+
+/// One visible fragment of a row: its pixel, prim, visible area and range of pieces.
+#[derive(Clone, Copy, Debug)]
+struct VisFrag {
+    x: u32,
+    prim: u32,
+    area: f64,
+    pieces: (u32, u32),
+}
+
+/// The visible fragments of one row, in pixel order, with the pieces (vertex ranges of
+/// `verts`) that have a vertex that moves with the mesh.
+#[derive(Default)]
+struct RowVis {
+    frags: Vec<VisFrag>,
+    pieces: Vec<(u32, u32)>,
+    verts: Vec<geom::Vertex>,
+}
+
+/// Buffers of the per-pixel visibility, reused from pixel to pixel.
+#[derive(Default)]
+struct Scratch {
+    /// Candidates that reach the pixel and the mask of their edges that cross it.
+    reach: Vec<(u32, u8)>,
+    frag_prims: Vec<u32>,
+    frag_polys: Polys,
+    occludes: Vec<bool>,
+    tmp: Poly,
+    overlap: Poly,
+    cur: Polys,
+    next: Polys,
+    /// The visible fragments: prim and range of `pieces`.
+    vis: Vec<(u32, usize, usize)>,
+    pieces: Polys,
 }
 
 fn background_px(bg: Option<[f64; 3]>) -> [f64; 4] {
@@ -859,12 +1061,10 @@ fn uv_at(uvs: &[[f64; 2]], tri: [u32; 3], b: [f64; 3]) -> [f64; 2] {
     uv
 }
 
-/// A texture sample: the value, the four taps `(texel, weight)` and `∂value_c/∂(u, v)`.
-type Sample = ([f64; 3], [(u32, f64); 4], [[f64; 2]; 3]);
-
-/// Bilinear sample of `tex` at `uv` (repeat): the value, the four taps `(texel, weight)`
-/// and `∂value_c/∂(u, v)`.
-fn sample(tex: &Texture, uv: [f64; 2]) -> Sample {
+/// The four bilinear taps `(texel, weight)` of `tex` at `uv` (repeat), and the
+/// fractional position `(fx, fy)` between them.
+#[inline]
+fn taps(tex: &Texture, uv: [f64; 2]) -> ([(u32, f64); 4], f64, f64) {
     let (w, h) = (tex.width as f64, tex.height as f64);
     let tx = uv[0] * w - 0.5;
     let ty = (1.0 - uv[1]) * h - 0.5;
@@ -880,12 +1080,40 @@ fn sample(tex: &Texture, uv: [f64; 2]) -> Sample {
     let (xa, xb) = (wrap(x0, tex.width), wrap(x0 + 1.0, tex.width));
     let (ya, yb) = (wrap(y0, tex.height), wrap(y0 + 1.0, tex.height));
     let idx = |x: u32, y: u32| y * tex.width + x;
-    let taps = [
-        (idx(xa, ya), (1.0 - fx) * (1.0 - fy)),
-        (idx(xb, ya), fx * (1.0 - fy)),
-        (idx(xa, yb), (1.0 - fx) * fy),
-        (idx(xb, yb), fx * fy),
-    ];
+    (
+        [
+            (idx(xa, ya), (1.0 - fx) * (1.0 - fy)),
+            (idx(xb, ya), fx * (1.0 - fy)),
+            (idx(xa, yb), (1.0 - fx) * fy),
+            (idx(xb, yb), fx * fy),
+        ],
+        fx,
+        fy,
+    )
+}
+
+/// The bilinear sample of `tex` at `uv` (what [`sample`] gives first).
+#[inline]
+fn sample_value(tex: &Texture, uv: [f64; 2]) -> [f64; 3] {
+    let (taps, _, _) = taps(tex, uv);
+    let mut v = [0.0; 3];
+    for c in 0..3 {
+        v[c] = taps
+            .iter()
+            .map(|&(i, wt)| wt * tex.data[i as usize][c])
+            .sum();
+    }
+    v
+}
+
+/// A texture sample: the value, the four taps `(texel, weight)` and `∂value_c/∂(u, v)`.
+type Sample = ([f64; 3], [(u32, f64); 4], [[f64; 2]; 3]);
+
+/// Bilinear sample of `tex` at `uv` (repeat): the value, the four taps `(texel, weight)`
+/// and `∂value_c/∂(u, v)`.
+fn sample(tex: &Texture, uv: [f64; 2]) -> Sample {
+    let (w, h) = (tex.width as f64, tex.height as f64);
+    let (taps, fx, fy) = taps(tex, uv);
     let t = taps.map(|(i, _)| tex.data[i as usize]);
     let mut v = [0.0; 3];
     let mut d = [[0.0; 2]; 3];
@@ -1166,6 +1394,13 @@ mod tests {
         };
         let one = run(1);
         assert!(one.1.positions.iter().any(|g| g != &[0.0; 3]));
+        // The backward pass of a view never rendered recomputes the visible pieces that
+        // a rendered one keeps: the same bits.
+        let fresh = View::new(&mesh, &cam, RenderOptions::default())
+            .unwrap()
+            .backward(&wts, true)
+            .unwrap();
+        assert_eq!(fresh, one.1, "kept pieces and recomputed ones differ");
         for n in [2, 3] {
             let other = run(n);
             assert!(
@@ -1277,6 +1512,219 @@ mod tests {
             assert!(worst < 0.5 / 255.0, "cull {cull}: max error {worst}");
             assert!(worst > 0.0);
         }
+    }
+
+    /// Spot (`$DIFFSVG_DATA/meshes/spot/spot.obj` or `../shared/data` beside the
+    /// checkout), or `None` with the reason printed.
+    fn spot() -> Option<Mesh> {
+        if cfg!(debug_assertions) {
+            eprintln!("SKIPPED: spot checks run in release (cargo test --release)");
+            return None;
+        }
+        let path = std::env::var_os("DIFFSVG_DATA")
+            .map(std::path::PathBuf::from)
+            .unwrap_or_else(|| {
+                std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data")
+            })
+            .join("meshes/spot/spot.obj");
+        if !path.exists() {
+            eprintln!("SKIPPED: {} not found (set DIFFSVG_DATA)", path.display());
+            return None;
+        }
+        Some(super::super::read_obj(&path).unwrap())
+    }
+
+    /// Pixel `(x, y)` from `n × n` point samples, each taking the nearest prim whose
+    /// projection contains it, colored as the renderer colors that prim in the pixel (at
+    /// the pixel center): the box filter by brute force.
+    fn supersampled_pixel(view: &View, x: usize, y: usize, cands: &[u32], n: usize) -> [f64; 3] {
+        let bg = view.opts.background.unwrap();
+        let center = [x as f64 + 0.5, y as f64 + 0.5];
+        let mut acc = [0.0; 3];
+        let mut colors: Vec<Option<[f64; 3]>> = vec![None; cands.len()];
+        for sy in 0..n {
+            for sx in 0..n {
+                let q = [
+                    x as f64 + (sx as f64 + 0.5) / n as f64,
+                    y as f64 + (sy as f64 + 0.5) / n as f64,
+                ];
+                let mut best: (f64, Option<usize>) = (f64::INFINITY, None);
+                for (ci, &pi) in cands.iter().enumerate() {
+                    let p = &view.prims[pi as usize];
+                    let k = p.n as usize;
+                    let inside = (0..k).all(|e| {
+                        let (a, b) = (
+                            view.sv[p.sv[e] as usize],
+                            view.sv[p.sv[(e + 1) % k] as usize],
+                        );
+                        (b[0] - a[0]) * (q[1] - a[1]) - (b[1] - a[1]) * (q[0] - a[0]) >= 0.0
+                    });
+                    if inside {
+                        let d = view.depth(p, q);
+                        if d < best.0 {
+                            best = (d, Some(ci));
+                        }
+                    }
+                }
+                let c = match best.1 {
+                    None => bg,
+                    Some(ci) => *colors[ci].get_or_insert_with(|| {
+                        let p = &view.prims[cands[ci] as usize];
+                        view.shade(view.mesh.triangles[p.tri as usize], center).0
+                    }),
+                };
+                for k in 0..3 {
+                    acc[k] += c[k];
+                }
+            }
+        }
+        acc.map(|v| v / (n * n) as f64)
+    }
+
+    #[test]
+    fn spot_matches_a_supersampled_reference() {
+        let Some(mesh) = spot() else { return };
+        let o = RenderOptions {
+            background: Some([1.0; 3]),
+            ..RenderOptions::default()
+        };
+        // The whole 64² image, and a band of 24 rows through the middle of the 256² one.
+        for (size, rows) in [(64u32, 0..64), (256, 116..140)] {
+            let cam = super::super::fit::orbit_cameras(&mesh, 8, size, 0.0).unwrap()[1];
+            let view = View::new(&mesh, &cam, o).unwrap();
+            let img = view.render_f64();
+            let (mut worst, mut covered) = (0.0f64, 0);
+            for y in rows {
+                view.row(y, |x, cands| {
+                    if cands.is_empty() {
+                        return;
+                    }
+                    covered += 1;
+                    let r = supersampled_pixel(&view, x, y, cands, 64);
+                    let p = img[y * size as usize + x];
+                    for c in 0..3 {
+                        worst = worst.max((p[c] - r[c]).abs());
+                    }
+                });
+            }
+            eprintln!(
+                "spot {size}²: max error against 64×64 samples over {covered} pixels: \
+                 {worst:.2e} ({:.3}/255)",
+                worst * 255.0
+            );
+            assert!(covered > 500, "{covered}");
+            assert!(worst < 0.5 / 255.0, "{size}²: max error {worst}");
+        }
+    }
+
+    #[test]
+    fn spot_gradients_match_differences_on_random_vertices() {
+        let Some(mesh) = spot() else { return };
+        let size = 64;
+        let o = RenderOptions {
+            background: Some([1.0; 3]),
+            ..RenderOptions::default()
+        };
+        let cam = super::super::fit::orbit_cameras(&mesh, 8, size, 0.0).unwrap()[1];
+        let wts = weights(size, size);
+        let view = View::new(&mesh, &cam, o).unwrap();
+        let g = view.backward(&wts, false).unwrap();
+        // Vertices of visible prims, and those on the silhouette (also on a culled
+        // triangle); the image is 64² for 5,856 triangles, so most are sub-pixel.
+        let mut visible = vec![false; mesh.positions.len()];
+        for p in &view.prims {
+            for &i in &mesh.triangles[p.tri as usize] {
+                visible[i as usize] = true;
+            }
+        }
+        let all = View::new(
+            &mesh,
+            &cam,
+            RenderOptions {
+                cull_back_faces: false,
+                ..o
+            },
+        )
+        .unwrap();
+        let mut back = vec![false; mesh.positions.len()];
+        for p in &all.prims {
+            if p.nd > 0.0 {
+                for &i in &mesh.triangles[p.tri as usize] {
+                    back[i as usize] = true;
+                }
+            }
+        }
+        let mut pool: Vec<usize> = (0..mesh.positions.len()).filter(|&i| visible[i]).collect();
+        let mut s = 0x9e37_79b9_7f4a_7c15u64;
+        let mut pick = Vec::new();
+        while pick.len() < 100 && !pool.is_empty() {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            pick.push(pool.swap_remove((s % pool.len() as u64) as usize));
+        }
+        let silhouette = pick.iter().filter(|&&i| back[i]).count();
+        // The image is piecewise smooth: at 64² the 1024² texture is minified 16 times,
+        // so a bilinear kink (a texel center crossing a pixel center's sample) lies
+        // within a step of some coordinates. Where the one-sided differences disagree,
+        // the analytic gradient must match one of them (the side it sits on).
+        // OBJ vertices split at UV seams share a position: moving one copy alone opens
+        // a crack (a kink of the image at the rest position), so a position is moved
+        // with all its copies, and its gradient is the sum over them.
+        let copies = |v: usize| -> Vec<usize> {
+            (0..mesh.positions.len())
+                .filter(|&i| mesh.positions[i] == mesh.positions[v])
+                .collect()
+        };
+        let h = 1e-7;
+        let f0 = loss(&mesh, &cam, o, &wts);
+        let mut work = mesh.clone();
+        let (mut worst, mut nonzero, mut kinks, mut seams) = (0.0f64, 0, 0, 0);
+        for &v in &pick {
+            let same = copies(v);
+            seams += (same.len() > 1) as usize;
+            for k in 0..3 {
+                // One copy of the mesh, moved and put back (the texture is 24 MiB).
+                let mut at = |d: f64| {
+                    for &c in &same {
+                        work.positions[c][k] = mesh.positions[c][k] + d;
+                    }
+                    let l = loss(&work, &cam, o, &wts);
+                    for &c in &same {
+                        work.positions[c][k] = mesh.positions[c][k];
+                    }
+                    l
+                };
+                let (fp, fm) = (at(h), at(-h));
+                let fd = (fp - fm) / (2.0 * h);
+                let (right, left) = ((fp - f0) / h, (f0 - fm) / h);
+                let an: f64 = same.iter().map(|&c| g.positions[c][k]).sum();
+                let scale = an.abs().max(1.0);
+                let err = (fd - an).abs() / scale;
+                nonzero += (an.abs() > 1e-3) as usize;
+                if err < 1e-3 {
+                    worst = worst.max(err);
+                    continue;
+                }
+                kinks += 1;
+                let side = (right - an).abs().min((left - an).abs()) / scale;
+                assert!(
+                    (right - left).abs() / scale > 1e-3 && side < 1e-3,
+                    "vertex {v} axis {k}: analytic {an} vs fd {fd} (one-sided {left}, {right})"
+                );
+            }
+        }
+        eprintln!(
+            "spot 64²: {} vertices ({silhouette} on the silhouette, {seams} on UV seams), \
+             {nonzero} nonzero gradients, max relative error {worst:.2e}; {kinks} \
+             coordinates at a kink (matching a one-sided difference)",
+            pick.len()
+        );
+        assert!(kinks <= 30, "{kinks} kinks");
+        assert_eq!(pick.len(), 100);
+        assert!(silhouette >= 5, "{silhouette} silhouette vertices");
+        // Many front faces are hidden (zero gradient, checked too).
+        assert!(nonzero > 50, "{nonzero}");
     }
 
     #[test]

@@ -131,6 +131,35 @@ fn bench_mesh_prints_a_table() {
 }
 
 #[test]
+fn bench_mesh_tutorial_gives_a_camera_gradient() {
+    let r = diffsvg(&[
+        "bench",
+        "mesh",
+        "--tutorial",
+        "--size",
+        "48",
+        "--runs",
+        "1",
+        "--threads",
+        "1,2",
+    ]);
+    let stdout = String::from_utf8_lossy(&r.stdout);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    assert!(stdout.contains("2560 triangles"), "{stdout}");
+    // | threads | ms | loss | (gx, gy, gz) |: a positive loss (the two silhouettes
+    // differ) and a nonzero gradient, the same on one and two threads.
+    let rows: Vec<Vec<&str>> = stdout
+        .lines()
+        .filter(|l| l.starts_with("| 1 |") || l.starts_with("| 2 |"))
+        .map(|l| l.split('|').map(str::trim).collect())
+        .collect();
+    assert_eq!(rows.len(), 2, "{stdout}");
+    assert!(rows[0][3].parse::<f64>().unwrap() > 0.0, "{stdout}");
+    assert!(rows[0][4] != "(0.000, 0.000, 0.000)", "{stdout}");
+    assert_eq!(rows[0][3..], rows[1][3..], "{stdout}");
+}
+
+#[test]
 fn mesh_render_draws_spot() {
     let Some(data) = shared_data("mesh_render_draws_spot") else {
         return;
