@@ -18,7 +18,7 @@
 //!
 //! **Which groups.** The reader makes one of a group of two or more shapes (one shape has
 //! parameters of its own, and usvg puts a shape's own `transform` on a group of its own)
-//! whose transform lies in the range a fit keeps it in ([`GroupTransform::project`]). Its
+//! whose transform lies in the range a fit keeps it in ([`SCALE_RANGE`], docs/limits.md). Its
 //! content must be plain groups (opacity, blend mode, isolation) and paths: no clip path,
 //! mask, filter, image, pattern or text inside, which hold device quantities that are no
 //! parameters (a clip region, a pattern's tiles) and would need a frame of their own. A
@@ -126,13 +126,13 @@ impl GroupTransform {
             linear: None,
         };
         // `A·x + (e, f) = A·(x − pivot) + pivot + translate`.
-        let ap = g.linear(pivot);
+        let ap = g.apply_linear(pivot);
         g.translate = [e - pivot[0] + ap[0], f - pivot[1] + ap[1]];
         Some(g)
     }
 
     /// `t` (local frame → parent frame) as a general affine transform about `pivot`
-    /// ([`linear`](Self::linear) set), when it is invertible and finite; `None` otherwise.
+    /// ([`linear`](GroupTransform::linear) set), when it is invertible and finite; `None` otherwise.
     pub fn from_affine_general(t: &Affine, pivot: Point) -> Option<Self> {
         let [a, b, c, d, e, f] = *t;
         let det = a * d - b * c;
@@ -143,7 +143,7 @@ impl GroupTransform {
             linear: Some([a, b, c, d]),
             ..GroupTransform::identity(pivot)
         };
-        let ap = g.linear(pivot);
+        let ap = g.apply_linear(pivot);
         g.translate = [e - pivot[0] + ap[0], f - pivot[1] + ap[1]];
         Some(g)
     }
@@ -172,7 +172,7 @@ impl GroupTransform {
     }
 
     /// `scale · R · v`, or the general linear part applied to `v`.
-    fn linear(&self, v: Point) -> Point {
+    fn apply_linear(&self, v: Point) -> Point {
         if let Some([a, b, c, d]) = self.linear {
             return [a * v[0] + c * v[1], b * v[0] + d * v[1]];
         }
@@ -184,7 +184,7 @@ impl GroupTransform {
     /// The matrix (local → parent), as SVG's `matrix(a b c d e f)`.
     pub fn affine(&self) -> Affine {
         let [a, b, c, d] = self.linear_part();
-        let lp = self.linear(self.pivot);
+        let lp = self.apply_linear(self.pivot);
         [
             a,
             b,

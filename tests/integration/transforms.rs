@@ -233,7 +233,6 @@ fn freezing_transforms_holds_affine_slots() {
     render(&nudged_target_scene(&scene), &RenderOptions::default())
         .save_png(&png)
         .unwrap();
-    let slots = group_transform_slots(&scene);
     let rest = "points,colors,opacities,widths,paint,stops";
     for (freeze, transforms_move) in [("transforms", false), (rest, true)] {
         let out = dir.join("fit.svg");
