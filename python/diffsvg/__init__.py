@@ -378,8 +378,11 @@ class Scene:
         for j, t in enumerate(st["transforms"]):
             at = t["offset"]
             out.append((at, 2, ("transforms", j, "translate"), (2,)))
-            out.append((at + 2, 1, ("transforms", j, "angle"), ()))
-            out.append((at + 3, 1, ("transforms", j, "scale"), ()))
+            if t["len"] == 6:  # a general affine map: its linear part [a, b, c, d]
+                out.append((at + 2, 4, ("transforms", j, "linear"), (4,)))
+            else:
+                out.append((at + 2, 1, ("transforms", j, "angle"), ()))
+                out.append((at + 3, 1, ("transforms", j, "scale"), ()))
         for j, f in enumerate(st["filters"]):
             out.append((f["offset"], f["len"], ("filters", j, "values"), (f["len"],)))
         out.sort(key=lambda p: p[0])
@@ -539,6 +542,9 @@ class Scene:
         out = {"shapes": shapes, "groups": groups}
         if st["transforms"]:
             out["transforms"] = [
+                {"id": t["id"], "translate": g[t["offset"]:t["offset"] + 2].tolist(),
+                 "linear": g[t["offset"] + 2:t["offset"] + 6].tolist()}
+                if t["len"] == 6 else
                 {"id": t["id"], "translate": g[t["offset"]:t["offset"] + 2].tolist(),
                  "angle": float(g[t["offset"] + 2]), "scale": float(g[t["offset"] + 3])}
                 for t in st["transforms"]]

@@ -314,8 +314,8 @@ impl PyScene {
     /// rectangle's `kind`, `offset` and `fields`, [(name, length)], or None), `segments`
     /// per subpath, `closed` per subpath, `kinds` of the written segments ("L", "Q", "C"), `fill` and `stroke` paint
     /// entries or None, `stroke_width` offset or None), `groups` (`id`, `offset` of the
-    /// opacity), `transforms` (`id`, `offset` of a group transform's `tx, ty, angle,
-    /// scale`) and `filters` (`id`, `offset` and `len` of a filtered group's filter
+    /// opacity), `transforms` (`id`, `offset` and `len` of a group transform's `tx, ty,
+    /// angle, scale`, or `tx, ty, a, b, c, d` for a general affine one) and `filters` (`id`, `offset` and `len` of a filtered group's filter
     /// parameters, docs/filters.md).
     fn structure<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let st = Structure::of(&self.inner);
@@ -348,6 +348,7 @@ impl PyScene {
                 let e = PyDict::new(py);
                 e.set_item("id", &g.id)?;
                 e.set_item("offset", g.offset)?;
+                e.set_item("len", g.len)?;
                 list.append(e)?;
             }
             Ok(list)

@@ -178,10 +178,17 @@ impl LearningRates {
         // A group transform's angle and scale move its content's edge by the reach
         // times the change (the scale's by the reach over the scale).
         let reaches = crate::scene::transform::reaches(&scene.nodes);
-        for (&at, (reach, s)) in layout.transforms.iter().zip(reaches) {
+        // A general map's linear entries move it by the reach over the mean scale.
+        for (&at, (reach, s, n)) in layout.transforms.iter().zip(reaches) {
             let per = |r: f64| if reach > 0.0 { r / reach } else { 0.0 };
-            rates[at + 2] = per(rates[at + 2]);
-            rates[at + 3] = per(rates[at + 3]) * s;
+            if n == 4 {
+                rates[at + 2] = per(rates[at + 2]);
+                rates[at + 3] = per(rates[at + 3]) * s;
+            } else {
+                for r in &mut rates[at + 2..at + n] {
+                    *r = per(*r) * s;
+                }
+            }
         }
         rates
     }

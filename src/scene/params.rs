@@ -5,7 +5,7 @@
 //!
 //! * nodes in paint order, depth first; a [`Group`](super::Group) drawn as a layer
 //!   contributes its opacity, then a group with a transform parameter its `tx, ty, angle,
-//!   scale` ([`transform`](super::transform)), whose content's slots are then in the
+//!   scale` (or `tx, ty, a, b, c, d`, [`transform`](super::transform)), whose content's slots are then in the
 //!   group's own frame, then a group with filters its primitives' numbers, filter by
 //!   filter ([`FilterPrimitive::slots_mut`](super::filter::FilterPrimitive::slots_mut));
 //! * per path: all control points (`x, y` per point, in [`Path::points`] order), or for
@@ -156,8 +156,9 @@ pub struct ParamLayout {
     pub paths: Vec<PathOffsets>,
     /// Offset of each group's opacity, in walk order (groups drawn as layers only).
     pub groups: Vec<usize>,
-    /// Offset of each group transform's first slot (`tx, ty, angle, scale` follow), in
-    /// walk order ([`transform`](super::transform)).
+    /// Offset of each group transform's first slot (`tx, ty, angle, scale` follow, or
+    /// `tx, ty, a, b, c, d` for a general affine one), in walk order
+    /// ([`transform`](super::transform)).
     pub transforms: Vec<usize>,
     /// The slots of each filtered group's filter parameters, in walk order (groups whose
     /// filters have parameters only; [`FilterPrimitive::slots_mut`](super::filter::FilterPrimitive::slots_mut)).
@@ -563,6 +564,11 @@ impl Scene {
     /// Writes a parameter vector back into the scene. Panics if the length differs from
     /// [`ParamLayout::len`]; callers build vectors from [`Scene::params`].
     pub fn set_params(&mut self, values: &[f64]) {
+        // What a transformed group holds that is no parameter (a gradient paint's
+        // transform) into its frame first, so that mapping forward below is exact.
+        if super::transform::any(&self.nodes) {
+            super::transform::localize(&mut self.nodes);
+        }
         let mut i = 0;
         walk(self, &mut |_, _, _, v| {
             *v = values[i];

@@ -99,13 +99,18 @@ pub fn perturb(scene: &Scene, max_px: f64, max_color: f64, seed: u64) -> Scene {
     // A group transform moves its content's edge by up to a quarter of `max_px` through
     // each of its translation, angle and scale.
     let reaches = super::transform::reaches(&scene.nodes);
-    for (&at, (reach, _)) in layout.transforms.iter().zip(reaches) {
+    for (&at, (reach, s, n)) in layout.transforms.iter().zip(reaches) {
         let q = 0.25 * max_px;
         p[at] += rng.range(-q, q);
         p[at + 1] += rng.range(-q, q);
-        if reach > 0.0 {
+        if reach > 0.0 && n == 4 {
             p[at + 2] += rng.range(-q, q) / reach;
             p[at + 3] *= 1.0 + rng.range(-q, q).clamp(-0.5 * reach, 0.5 * reach) / reach;
+        } else if reach > 0.0 {
+            // A general map's linear entries: each moves the edge by up to `q`.
+            for v in &mut p[at + 2..at + n] {
+                *v += s * rng.range(-q, q).clamp(-0.25 * reach, 0.25 * reach) / reach;
+            }
         }
     }
     let mut out = scene.clone();

@@ -66,13 +66,16 @@ pub struct ShapeSlots {
     pub stroke_width: Option<usize>,
 }
 
-/// One group's opacity slot.
+/// One group's opacity slot, or its transform's slots.
 #[derive(Clone, Debug, PartialEq)]
 pub struct GroupSlots {
     /// The group's id.
     pub id: String,
-    /// The opacity's slot.
+    /// The opacity's slot, or the transform's first.
     pub offset: usize,
+    /// How many slots: 1 for an opacity; 4 for a similarity transform (`tx, ty, angle,
+    /// scale`), 6 for a general affine one (`tx, ty, a, b, c, d`).
+    pub len: usize,
 }
 
 /// Every shape's and group's slots, paths in paint order, groups in document order.
@@ -82,8 +85,8 @@ pub struct Structure {
     pub shapes: Vec<ShapeSlots>,
     /// Per group drawn as a layer: its opacity.
     pub groups: Vec<GroupSlots>,
-    /// Per group with a transform parameter: its first slot (`tx, ty, angle, scale`
-    /// follow; [`transform`](super::transform)).
+    /// Per group with a transform parameter: its slots (`tx, ty, angle, scale`, or
+    /// `tx, ty, a, b, c, d`; [`transform`](super::transform)).
     pub transforms: Vec<GroupSlots>,
     /// Per filtered group whose filters have parameters: their slots
     /// ([`FilterPrimitive::slots_mut`](super::filter::FilterPrimitive::slots_mut), filter by
@@ -184,18 +187,27 @@ impl Structure {
                 stroke_width: p.stroke.as_ref().map(|_| off.stroke_width),
             });
         });
-        let slots = |keep: fn(&super::Group) -> bool, offsets: &[usize]| {
+        let slots = |keep: fn(&super::Group) -> bool, offsets: &[usize], lens: &[usize]| {
             let mut ids = Vec::new();
             group_ids(&scene.nodes, keep, &mut ids);
             ids.into_iter()
                 .zip(offsets)
-                .map(|(id, &offset)| GroupSlots { id, offset })
+                .enumerate()
+                .map(|(i, (id, &offset))| GroupSlots {
+                    id,
+                    offset,
+                    len: lens.get(i).copied().unwrap_or(1),
+                })
                 .collect()
         };
+        let lens: Vec<usize> = super::transform::reaches(&scene.nodes)
+            .into_iter()
+            .map(|(_, _, n)| n)
+            .collect();
         Structure {
             shapes,
-            groups: slots(|g| g.layer, &layout.groups),
-            transforms: slots(|g| g.transform.is_some(), &layout.transforms),
+            groups: slots(|g| g.layer, &layout.groups, &[]),
+            transforms: slots(|g| g.transform.is_some(), &layout.transforms, &lens),
             filters: layout
                 .filters
                 .iter()
@@ -278,8 +290,12 @@ impl Structure {
             .transforms
             .iter()
             .map(|g| {
-                let v = &grad[g.offset..g.offset + 4];
-                json!({"id": g.id, "translate": [v[0], v[1]], "angle": v[2], "scale": v[3]})
+                let v = &grad[g.offset..g.offset + g.len];
+                if g.len == 6 {
+                    json!({"id": g.id, "translate": [v[0], v[1]], "linear": v[2..6]})
+                } else {
+                    json!({"id": g.id, "translate": [v[0], v[1]], "angle": v[2], "scale": v[3]})
+                }
             })
             .collect();
         let filters: Vec<Value> = self

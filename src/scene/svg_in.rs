@@ -927,18 +927,32 @@ fn convert_group_children(g: &usvg::Group, ctx: &Ctx, t: &Affine, role: Role) ->
                 let movable = role == Role::Paint
                     && !ctx.in_pattern.get()
                     && !g.transform().is_identity()
-                    && shapes_in(g, 2) >= 2
-                    && movable_group(g)
-                    && is_uniform(&gt);
+                    && shapes_in(g, 2) >= 2;
                 let relative = invert(&ctx.frame.get()).map(|f| concat(&f, &gt));
                 // Within the range a fit keeps it in, so that the first step does not
                 // jump (a scale of 1e-6 stays baked).
-                let own = relative.filter(|_| movable).filter(|r| {
-                    GroupTransform::from_affine(r, [0.0; 2]).is_some_and(|t| {
+                let in_range = |t: Option<GroupTransform>| {
+                    t.is_some_and(|t| {
                         let mut kept = t;
                         kept.project();
                         kept == t
                     })
+                };
+                // A similarity where strokes stay round; else a general affine map over
+                // content that only fills (`transform::movable`); `true` for the latter.
+                let own = relative.filter(|_| movable).and_then(|r| {
+                    if movable_group(g, false)
+                        && is_uniform(&gt)
+                        && in_range(GroupTransform::from_affine(&r, [0.0; 2]))
+                    {
+                        Some((r, false))
+                    } else if movable_group(g, true)
+                        && in_range(GroupTransform::from_affine_general(&r, [0.0; 2]))
+                    {
+                        Some((r, true))
+                    } else {
+                        None
+                    }
                 });
                 let outer = ctx.frame.get();
                 if own.is_some() {
@@ -948,14 +962,18 @@ fn convert_group_children(g: &usvg::Group, ctx: &Ctx, t: &Affine, role: Role) ->
                 ctx.frame.set(outer);
                 let mut children = converted?;
                 let transform = match own {
-                    Some(r) if super::transform::movable(&children) => {
+                    Some((r, general)) if super::transform::movable(&children, general) => {
                         // Rotate and scale about the content's center in the local frame
                         // (which a change of the transform leaves where it is, so a file
                         // written and read back gets the same parameters).
                         let pivot = invert(&gt)
                             .and_then(|i| local_center(&children, &i))
                             .unwrap_or([0.0; 2]);
-                        GroupTransform::from_affine(&r, pivot)
+                        if general {
+                            GroupTransform::from_affine_general(&r, pivot)
+                        } else {
+                            GroupTransform::from_affine(&r, pivot)
+                        }
                     }
                     Some(_) => {
                         bake(&mut children);
@@ -1042,18 +1060,30 @@ fn convert_group_children(g: &usvg::Group, ctx: &Ctx, t: &Affine, role: Role) ->
 
 /// Whether a usvg group's content can live in a frame of its own
 /// ([`transform`](super::transform)): plain groups whose transforms keep strokes round,
-/// paths with solid paints and undashed strokes; no text, image, clip path, mask or filter.
-fn movable_group(g: &usvg::Group) -> bool {
+/// paths with solid or gradient paints and undashed strokes; no text, image, pattern,
+/// clip path, mask or filter. Under a general affine map (`general`): no stroke and no
+/// radial gradient either, and nested transforms of any kind.
+fn movable_group(g: &usvg::Group, general: bool) -> bool {
     g.clip_path().is_none()
         && g.mask().is_none()
         && g.filters().is_empty()
         && g.children().iter().all(|n| match n {
-            usvg::Node::Group(c) => is_uniform(&to_affine(c.transform())) && movable_group(c),
+            usvg::Node::Group(c) => {
+                (general || is_uniform(&to_affine(c.transform()))) && movable_group(c, general)
+            }
             usvg::Node::Path(p) => {
-                let solid = |paint: &usvg::Paint| matches!(paint, usvg::Paint::Color(_));
-                p.fill().is_none_or(|f| solid(f.paint()))
-                    && p.stroke()
-                        .is_none_or(|s| solid(s.paint()) && s.dasharray().is_none())
+                let paint_ok = |paint: &usvg::Paint| match paint {
+                    usvg::Paint::Color(_) | usvg::Paint::LinearGradient(_) => true,
+                    usvg::Paint::RadialGradient(_) => !general,
+                    usvg::Paint::Pattern(_) => false,
+                };
+                p.fill().is_none_or(|f| paint_ok(f.paint()))
+                    && if general {
+                        p.stroke().is_none()
+                    } else {
+                        p.stroke()
+                            .is_none_or(|s| paint_ok(s.paint()) && s.dasharray().is_none())
+                    }
             }
             usvg::Node::Image(_) | usvg::Node::Text(_) => false,
         })

@@ -18,24 +18,54 @@
 //!
 //! **Which groups.** The reader makes one of a group of two or more shapes (one shape has
 //! parameters of its own, and usvg puts a shape's own `transform` on a group of its own)
-//! whose transform lies in the range a fit keeps it in. The content must be paths with
-//! solid paints, undashed strokes drawn in device space, and plain groups (opacity, blend
-//! mode, isolation): no clip path, mask, filter, image or gradient paint inside. Those hold device quantities that are not
-//! parameters (a gradient's transform, a clip region, a dash pattern) and would need a
-//! frame of their own; such a group keeps its transform baked into the points, as every
-//! group did before.
+//! whose transform lies in the range a fit keeps it in ([`SCALE_RANGE`], docs/limits.md). Its
+//! content must be plain groups (opacity, blend mode, isolation) and paths: no clip path,
+//! mask, filter, image, pattern or text inside, which hold device quantities that are no
+//! parameters (a clip region, a pattern's tiles) and would need a frame of their own. A
+//! group that does not qualify keeps its transform baked into the points, as every group
+//! did before. Two kinds:
 //!
-//! **Slots**, after the group's opacity: `tx, ty` (device pixels of the parent frame),
-//! `angle` (radians, clockwise on screen as [`Primitive::angle`](super::Primitive::angle)),
-//! `scale` (> 0), in the group [`ParamGroup::Transform`](super::ParamGroup::Transform).
-//! The map is `x ↦ scale · R(angle) · (x − pivot) + pivot + (tx, ty)`, where `pivot` (not
-//! a parameter) is the center of the content's bounds in the local frame when the file
-//! was read, so that turning or scaling does not also swing the group across the canvas.
+//! * a **similarity** (a uniform scale, a rotation and a translation, positive
+//!   determinant) over paths with solid or gradient paints and undashed strokes drawn in
+//!   device space (under a similarity a stroke of the mapped path is the mapped stroke),
+//!   circles, ellipses and rectangles included: four slots;
+//! * any other invertible map (a skew, a non-uniform scale, a mirror) as a **general
+//!   affine** one, over paths that only fill, with solid or linear-gradient paints: six
+//!   slots. A stroke under a non-uniform map is not the stroke of the mapped path (its
+//!   pen would be an ellipse), the affine image of a rectangle is no rectangle, and a
+//!   radial gradient's circles become ellipses, so content with a stroke, a primitive or
+//!   a radial gradient keeps such a transform baked (an unstroked rectangle under an
+//!   axis-aligned scale still keeps its own parameters then, [`shape`](super::shape)).
+//!
+//! **Gradient paints** inside either kind: the paint's transform (gradient space →
+//! device) is held in the local frame and mapped forward with the content, as points are;
+//! its geometry and stops, in gradient space, are parameters as anywhere else. The
+//! backward pass carries the geometry's gradient onto the group's slots: a change
+//! `T → T·(1 + h·G)` of the group's map is the change `M → M·(1 + h·E)`, `E = M⁻¹·G·M`,
+//! of the paint's, which draws as a change of the geometry (a linear gradient's `t` is an
+//! affine function of the point, which its end points can follow exactly; a radial one's
+//! circles follow a similarity `E`, which is why a radial gradient needs a similarity
+//! group and a transform `M` that scales uniformly, else its group stays baked).
+//!
+//! **Slots**, after the group's opacity, in the group
+//! [`ParamGroup::Transform`](super::ParamGroup::Transform):
+//!
+//! * similarity: `tx, ty` (device pixels of the parent frame), `angle` (radians,
+//!   clockwise on screen as [`Primitive::angle`](super::Primitive::angle)), `scale` (> 0).
+//!   The map is `x ↦ scale · R(angle) · (x − pivot) + pivot + (tx, ty)`;
+//! * general affine: `tx, ty` (as above), then the linear part `a, b, c, d` (unitless,
+//!   SVG's `matrix(a b c d e f)` order: `L·v = (a·vx + c·vy, b·vx + d·vy)`); the map is
+//!   `x ↦ L · (x − pivot) + pivot + (tx, ty)` ([`GroupTransform::linear`]).
+//!
+//! `pivot` (not a parameter) is the center of the content's bounds in the local frame
+//! when the file was read, so that turning or scaling does not also swing the group
+//! across the canvas. SVG out writes either kind as `transform="matrix(…)"` (`f32`, as
+//! it is read), so a written file reads back to the same kinds and slots.
 
 use super::geom::{add_scaled, scale};
 use super::params::ParamLayout;
 use super::shape::Shape;
-use super::{Affine, Group, Node, Paint, Path, Point, Role, apply, invert};
+use super::{Affine, GradientKind, Group, Node, Paint, Path, Point, Role, apply, concat, invert};
 
 /// The least and greatest scale a projected transform keeps.
 pub const SCALE_RANGE: [f64; 2] = [1e-3, 1e3];
@@ -51,6 +81,10 @@ pub struct GroupTransform {
     pub scale: f64,
     /// The fixed point of the rotation and scale, in the group's own frame.
     pub pivot: Point,
+    /// A general affine transform's linear part `[a, b, c, d]` (SVG's `matrix` order:
+    /// `x ↦ (a·x + c·y, b·x + d·y)`) about the pivot; then `angle` is 0 and `scale` 1, and
+    /// neither is a slot (module docs).
+    pub linear: Option<[f64; 4]>,
 }
 
 /// A similarity as it is applied: its matrix, scale and angle.
@@ -69,6 +103,7 @@ impl GroupTransform {
             angle: 0.0,
             scale: 1.0,
             pivot,
+            linear: None,
         }
     }
 
@@ -88,11 +123,42 @@ impl GroupTransform {
             angle,
             scale: s,
             pivot,
+            linear: None,
         };
         // `A·x + (e, f) = A·(x − pivot) + pivot + translate`.
-        let ap = g.linear(pivot);
+        let ap = g.apply_linear(pivot);
         g.translate = [e - pivot[0] + ap[0], f - pivot[1] + ap[1]];
         Some(g)
+    }
+
+    /// `t` (local frame → parent frame) as a general affine transform about `pivot`
+    /// ([`linear`](GroupTransform::linear) set), when it is invertible and finite; `None` otherwise.
+    pub fn from_affine_general(t: &Affine, pivot: Point) -> Option<Self> {
+        let [a, b, c, d, e, f] = *t;
+        let det = a * d - b * c;
+        if !(t.iter().all(|v| v.is_finite()) && det != 0.0 && det.is_finite()) {
+            return None;
+        }
+        let mut g = GroupTransform {
+            linear: Some([a, b, c, d]),
+            ..GroupTransform::identity(pivot)
+        };
+        let ap = g.apply_linear(pivot);
+        g.translate = [e - pivot[0] + ap[0], f - pivot[1] + ap[1]];
+        Some(g)
+    }
+
+    /// The number of slots: 4 for a similarity, 6 for a general affine transform.
+    pub fn slot_count(&self) -> usize {
+        if self.linear.is_some() { 6 } else { 4 }
+    }
+
+    /// The linear part's `√|det|`: the scale of a similarity, a general map's mean scale.
+    pub fn mean_scale(&self) -> f64 {
+        match self.linear {
+            Some([a, b, c, d]) => (a * d - b * c).abs().sqrt(),
+            None => self.scale,
+        }
     }
 
     /// `[cos, sin]` of the angle; exactly `[1, 0]` at 0.
@@ -105,8 +171,11 @@ impl GroupTransform {
         }
     }
 
-    /// `scale · R · v`.
-    fn linear(&self, v: Point) -> Point {
+    /// `scale · R · v`, or the general linear part applied to `v`.
+    fn apply_linear(&self, v: Point) -> Point {
+        if let Some([a, b, c, d]) = self.linear {
+            return [a * v[0] + c * v[1], b * v[0] + d * v[1]];
+        }
         let [c, s] = self.rotation();
         let k = self.scale;
         [k * (c * v[0] - s * v[1]), k * (s * v[0] + c * v[1])]
@@ -114,23 +183,36 @@ impl GroupTransform {
 
     /// The matrix (local → parent), as SVG's `matrix(a b c d e f)`.
     pub fn affine(&self) -> Affine {
-        let [c, s] = self.rotation();
-        let k = self.scale;
-        let lp = self.linear(self.pivot);
+        let [a, b, c, d] = self.linear_part();
+        let lp = self.apply_linear(self.pivot);
         [
-            k * c,
-            k * s,
-            -k * s,
-            k * c,
+            a,
+            b,
+            c,
+            d,
             self.pivot[0] + self.translate[0] - lp[0],
             self.pivot[1] + self.translate[1] - lp[1],
         ]
     }
 
+    /// The linear part `[a, b, c, d]`, either kind.
+    fn linear_part(&self) -> [f64; 4] {
+        match self.linear {
+            Some(l) => l,
+            None => {
+                let [c, s] = self.rotation();
+                let k = self.scale;
+                [k * c, k * s, -k * s, k * c]
+            }
+        }
+    }
+
+    /// (A general map's `scale` and `angle` are those of no similarity: its content holds
+    /// no primitive and no stroke, which are all that read them.)
     fn forward(&self) -> Map {
         Map {
             affine: self.affine(),
-            scale: self.scale,
+            scale: self.mean_scale(),
             angle: self.angle,
         }
     }
@@ -138,23 +220,44 @@ impl GroupTransform {
     fn inverse(&self) -> Map {
         Map {
             affine: invert(&self.affine()).unwrap_or(super::IDENTITY),
-            scale: 1.0 / self.scale,
+            scale: 1.0 / self.mean_scale(),
             angle: -self.angle,
         }
     }
 
-    /// The slots' values in order: `tx, ty, angle, scale`.
-    pub(crate) fn slots_mut(&mut self) -> [&mut f64; 4] {
+    /// The slots' values in order: `tx, ty, angle, scale`, or `tx, ty, a, b, c, d`.
+    pub(crate) fn slots_mut(&mut self) -> Vec<&mut f64> {
         let [tx, ty] = &mut self.translate;
-        [tx, ty, &mut self.angle, &mut self.scale]
+        match &mut self.linear {
+            Some([a, b, c, d]) => vec![tx, ty, a, b, c, d],
+            None => vec![tx, ty, &mut self.angle, &mut self.scale],
+        }
     }
 
     /// Clamps into the valid range: translation within ±`MAX_COORDINATE`/8, the angle
-    /// finite, the scale in [`SCALE_RANGE`]; NaN becomes 0 (the scale 1).
+    /// finite, the scale in [`SCALE_RANGE`]; NaN becomes 0 (the scale 1). A general
+    /// linear part: each entry within ±`SCALE_RANGE[1]` (NaN: the identity's), and one
+    /// whose `|det|` falls below `SCALE_RANGE[0]²` (near singular) becomes
+    /// `SCALE_RANGE[0]` times the identity.
     pub(crate) fn project(&mut self) {
         const BOUND: f64 = crate::limits::MAX_COORDINATE / 8.0;
         for v in &mut self.translate {
             super::params::clamp_coordinate(v, BOUND);
+        }
+        if let Some(l) = &mut self.linear {
+            for (i, v) in l.iter_mut().enumerate() {
+                let id = if i == 0 || i == 3 { 1.0 } else { 0.0 };
+                *v = if v.is_nan() {
+                    id
+                } else {
+                    v.clamp(-SCALE_RANGE[1], SCALE_RANGE[1])
+                };
+            }
+            let det = l[0] * l[3] - l[1] * l[2];
+            if !(det.abs() >= SCALE_RANGE[0] * SCALE_RANGE[0]) {
+                *l = [SCALE_RANGE[0], 0.0, 0.0, SCALE_RANGE[0]];
+            }
+            return;
         }
         if !self.angle.is_finite() {
             self.angle = 0.0;
@@ -167,20 +270,47 @@ impl GroupTransform {
     }
 }
 
-/// Whether a group's content can live in a frame of its own (module docs).
-pub(crate) fn movable(nodes: &[Node]) -> bool {
+/// Whether a group's content can live in a frame of its own (module docs): under a
+/// similarity, or under a general affine transform when `general`.
+pub(crate) fn movable(nodes: &[Node], general: bool) -> bool {
     nodes.iter().all(|n| match n {
         Node::Group(g) => {
-            g.clip.is_none() && g.mask.is_none() && g.filters.is_empty() && movable(&g.children)
+            g.clip.is_none()
+                && g.mask.is_none()
+                && g.filters.is_empty()
+                && g.tiling.is_none()
+                && movable(&g.children, general)
         }
         Node::Path(p) => {
-            let solid = |paint: &Paint| matches!(paint, Paint::Solid(_));
-            p.fill.as_ref().is_none_or(|f| solid(&f.paint))
-                && p.stroke.as_ref().is_none_or(|s| {
-                    solid(&s.paint) && s.dash.is_none() && s.frame == super::FRAME_IDENTITY
-                })
+            let paint_ok = |paint: &Paint| match paint {
+                Paint::Solid(_) => true,
+                Paint::Gradient(gr) => match gr.kind {
+                    GradientKind::Linear { .. } => true,
+                    // A radial gradient's circles stay circles only under maps that
+                    // are similarities in its own space.
+                    GradientKind::Radial { .. } => !general && conformal(&gr.transform),
+                },
+                Paint::Image(_) => false,
+            };
+            p.fill.as_ref().is_none_or(|f| paint_ok(&f.paint))
+                && if general {
+                    // The stroke of a skewed path is not the skewed stroke, and a primitive
+                    // under a skew is no longer one.
+                    p.stroke.is_none() && p.primitive.is_none()
+                } else {
+                    p.stroke.as_ref().is_none_or(|s| {
+                        paint_ok(&s.paint) && s.dash.is_none() && s.frame == super::FRAME_IDENTITY
+                    })
+                }
         }
     })
+}
+
+/// Whether `t`'s linear part is a rotation and uniform scale, possibly mirrored.
+fn conformal(t: &Affine) -> bool {
+    let [a, b, c, d, _, _] = *t;
+    let (sx, sy) = (a.hypot(b), c.hypot(d));
+    sx > 0.0 && (sx - sy).abs() <= 1e-9 * sx && (a * c + b * d).abs() <= 1e-9 * sx * sy
 }
 
 /// Applies `m` to every geometric quantity under `nodes` (points, primitives, stroke
@@ -212,6 +342,16 @@ fn map_path(p: &mut Path, m: &Map) {
     }
     if let Some(s) = &mut p.stroke {
         s.width *= m.scale;
+    }
+    // A gradient's own space rides with the content: its geometry (in that space) stays.
+    let paints = [
+        p.fill.as_mut().map(|f| &mut f.paint),
+        p.stroke.as_mut().map(|s| &mut s.paint),
+    ];
+    for paint in paints.into_iter().flatten() {
+        if let Paint::Gradient(g) = paint {
+            g.transform = concat(&m.affine, &g.transform);
+        }
     }
 }
 
@@ -276,7 +416,10 @@ pub(crate) fn map_outermost(nodes: &mut [Node], k: f64, d: Point) {
                     for i in 0..2 {
                         t.translate[i] = k * (t.pivot[i] + t.translate[i]) + d[i] - t.pivot[i];
                     }
-                    t.scale *= k;
+                    match &mut t.linear {
+                        Some(l) => l.iter_mut().for_each(|v| *v *= k),
+                        None => t.scale *= k,
+                    }
                 }
                 None => {
                     map_outermost(&mut g.children, k, d);
@@ -293,16 +436,17 @@ pub(crate) fn map_outermost(nodes: &mut [Node], k: f64, d: Point) {
 }
 
 /// Per transform, in walk order (as [`ParamLayout::transforms`]): how far its content
-/// reaches from its pivot, device pixels (0 for empty content), and its scale. A fit
+/// reaches from its pivot, device pixels (0 for empty content), its scale
+/// ([`GroupTransform::mean_scale`]) and its slot count. A fit
 /// divides the rates of the angle and the scale by it, so that every rate is a motion at
 /// the content's edge in pixels.
-pub(crate) fn reaches(nodes: &[Node]) -> Vec<(f64, f64)> {
+pub(crate) fn reaches(nodes: &[Node]) -> Vec<(f64, f64, usize)> {
     let mut out = Vec::new();
     reach_nodes(nodes, &mut out);
     out
 }
 
-fn reach_nodes(nodes: &[Node], out: &mut Vec<(f64, f64)>) {
+fn reach_nodes(nodes: &[Node], out: &mut Vec<(f64, f64, usize)>) {
     for n in nodes {
         if let Node::Group(g) = n {
             reach_group(g, out);
@@ -310,7 +454,7 @@ fn reach_nodes(nodes: &[Node], out: &mut Vec<(f64, f64)>) {
     }
 }
 
-fn reach_group(g: &Group, out: &mut Vec<(f64, f64)>) {
+fn reach_group(g: &Group, out: &mut Vec<(f64, f64, usize)>) {
     if let Some(t) = &g.transform {
         // Half the diagonal of the content's device bounds.
         let mut b: Option<[f64; 4]> = None;
@@ -327,7 +471,7 @@ fn reach_group(g: &Group, out: &mut Vec<(f64, f64)>) {
             }
         });
         let reach = b.map_or(0.0, |r| 0.5 * (r[2] - r[0]).hypot(r[3] - r[1]));
-        out.push((reach, t.scale));
+        out.push((reach, t.mean_scale(), t.slot_count()));
     }
     reach_nodes(&g.children, out);
     if let Some(c) = &g.clip {
@@ -396,13 +540,16 @@ impl Chain<'_> {
             // The content in this group's frame (its ancestors' frames are already
             // undone): the values the local gradient is taken at.
             map_nodes(&mut g.children, &t.inverse());
-            let mut acc = [0.0; 4];
+            let mut acc = [0.0; 6];
+            let gens = generators(&t);
             let mut k = self.path_ix;
             super::paths_of(&g.children, Role::Paint, &mut |p, _| {
-                chain_path(p, &self.layout.paths[k], &t, self.grad, &mut acc);
+                let off = &self.layout.paths[k];
+                chain_path(p, off, &t, self.grad, &mut acc);
+                chain_paints(p, off, &gens, self.grad, &mut acc);
                 k += 1;
             });
-            for (i, v) in acc.iter().enumerate() {
+            for (i, v) in acc.iter().take(t.slot_count()).enumerate() {
                 self.grad[base + i] += v;
             }
         }
@@ -416,15 +563,159 @@ impl Chain<'_> {
     }
 }
 
-/// One path's share: `acc` gets `∂L/∂(tx, ty, angle, scale)`, and the path's slots in
-/// `grad` are turned from device into local gradients. `p` holds local values.
+/// A linear part `[a, b, c, d]` (SVG order) applied to `v`.
+fn lin(l: [f64; 4], v: Point) -> Point {
+    [l[0] * v[0] + l[2] * v[1], l[1] * v[0] + l[3] * v[1]]
+}
+
+/// `l · m` (apply `m` first).
+fn lin_mul(l: [f64; 4], m: [f64; 4]) -> [f64; 4] {
+    let [a, b] = lin(l, [m[0], m[1]]);
+    let [c, d] = lin(l, [m[2], m[3]]);
+    [a, b, c, d]
+}
+
+/// Per slot `j`, the transform's derivative `T⁻¹·∂T/∂θⱼ` in its own frame: an
+/// infinitesimal affine map `x ↦ L·x + e`, as `[L (SVG order), e]`.
+fn generators(t: &GroupTransform) -> Vec<Affine> {
+    let inv = invert(&t.affine()).unwrap_or(super::IDENTITY);
+    let li = [inv[0], inv[1], inv[2], inv[3]];
+    // `T(x) = A·(x − p) + p + t`: `∂T = [∂A | ∂t − ∂A·p]`.
+    let mut d_a: Vec<[f64; 4]> = vec![[0.0; 4]; 2];
+    match t.linear {
+        Some(_) => {
+            for i in 0..4 {
+                let mut u = [0.0; 4];
+                u[i] = 1.0;
+                d_a.push(u);
+            }
+        }
+        None => {
+            let [c, s] = t.rotation();
+            let k = t.scale;
+            d_a.push([-k * s, k * c, -k * c, -k * s]);
+            d_a.push([c, s, -s, c]);
+        }
+    }
+    d_a.iter()
+        .enumerate()
+        .map(|(j, &da)| {
+            let ap = lin(da, t.pivot);
+            let mut dt = [-ap[0], -ap[1]];
+            if j < 2 {
+                dt[j] += 1.0;
+            }
+            let l = lin_mul(li, da);
+            let e = lin(li, dt);
+            [l[0], l[1], l[2], l[3], e[0], e[1]]
+        })
+        .collect()
+}
+
+/// The change of a gradient's geometry (in its own space, slot order) that draws as the
+/// change `M → M·(1 + h·E)` of its transform does, to first order in `h`: `None` where
+/// no change of geometry does (a radial gradient under a map that is no similarity in
+/// its space) or the geometry is degenerate.
+fn geometry_change(kind: &GradientKind, e: &Affine) -> Option<Vec<f64>> {
+    let l = [e[0], e[1], e[2], e[3]];
+    let map = |v: Point| add_scaled(lin(l, v), [e[4], e[5]], 1.0);
+    let dot = |a: Point, b: Point| a[0] * b[0] + a[1] * b[1];
+    match *kind {
+        GradientKind::Linear { p1, p2 } => {
+            // `t(q) = (q − p1)·d/|d|²` pulled back by `1 − h·E`: `p1` rides along (it
+            // stays on the level 0), `d` follows the level lines' normal.
+            let d = add_scaled(p2, p1, -1.0);
+            let dd = dot(d, d);
+            if !(dd > 0.0) {
+                return None;
+            }
+            let lt_d = [l[0] * d[0] + l[1] * d[1], l[2] * d[0] + l[3] * d[1]];
+            let w = 2.0 * dot(d, lin(l, d)) / dd;
+            let dp1 = map(p1);
+            let dd_ = [w * d[0] - lt_d[0], w * d[1] - lt_d[1]];
+            Some(vec![dp1[0], dp1[1], dp1[0] + dd_[0], dp1[1] + dd_[1]])
+        }
+        GradientKind::Radial { c, r, f, fr } => {
+            // A similarity's generator: `σ·I + ω·J`.
+            let sigma = 0.5 * (l[0] + l[3]);
+            let omega = 0.5 * (l[1] - l[2]);
+            let tol = 1e-6 * (sigma.abs() + omega.abs());
+            if (l[0] - l[3]).abs() > tol || (l[1] + l[2]).abs() > tol {
+                return None;
+            }
+            let (dc, df) = (map(c), map(f));
+            Some(vec![dc[0], dc[1], sigma * r, df[0], df[1], sigma * fr])
+        }
+    }
+}
+
+/// A path's gradient paints' share of `acc`: their geometry's gradient (which stays
+/// as it is: the geometry is in the paint's own space) carried onto the transform's
+/// slots through the paint's transform `M` (local values in `p`).
+fn chain_paints(
+    p: &Path,
+    off: &super::params::PathOffsets,
+    gens: &[Affine],
+    grad: &[f64],
+    acc: &mut [f64; 6],
+) {
+    let paints = [
+        (p.fill.as_ref().map(|f| &f.paint), off.fill),
+        (p.stroke.as_ref().map(|s| &s.paint), off.stroke),
+    ];
+    for (paint, at) in paints {
+        let (Some(Paint::Gradient(g)), Some(at)) = (paint, at) else {
+            continue;
+        };
+        let Some(mi) = invert(&g.transform) else {
+            continue;
+        };
+        let m = g.transform;
+        let (ml, mi_l) = ([m[0], m[1], m[2], m[3]], [mi[0], mi[1], mi[2], mi[3]]);
+        let g_geo = &grad[at.base..at.stops];
+        for (j, generator) in gens.iter().enumerate() {
+            // `E = M⁻¹·G·M`: `[Mi·GL·ML | Mi·(GL·m + g)]` (G has no homogeneous 1).
+            let gl = [generator[0], generator[1], generator[2], generator[3]];
+            let l = lin_mul(mi_l, lin_mul(gl, ml));
+            let e = lin(
+                mi_l,
+                add_scaled(lin(gl, [m[4], m[5]]), [generator[4], generator[5]], 1.0),
+            );
+            let e = [l[0], l[1], l[2], l[3], e[0], e[1]];
+            if let Some(dg) = geometry_change(&g.kind, &e) {
+                acc[j] += g_geo.iter().zip(&dg).map(|(a, b)| a * b).sum::<f64>();
+            }
+        }
+    }
+}
+
+/// One path's share: `acc` gets `∂L/∂(tx, ty, angle, scale)` (or `tx, ty, a, b, c, d`)
+/// through its geometry, and the path's slots in `grad` are turned from device into
+/// local gradients. `p` holds local values.
 fn chain_path(
     p: &Path,
     off: &super::params::PathOffsets,
     t: &GroupTransform,
     grad: &mut [f64],
-    acc: &mut [f64; 4],
+    acc: &mut [f64; 6],
 ) {
+    if let Some(l) = t.linear {
+        // Points only (`movable`): `x = L·(v − p) + p + t`.
+        for (i, q) in p.points.iter().enumerate() {
+            let at = off.points + 2 * i;
+            let g = [grad[at], grad[at + 1]];
+            let r = [q[0] - t.pivot[0], q[1] - t.pivot[1]];
+            acc[0] += g[0];
+            acc[1] += g[1];
+            acc[2] += g[0] * r[0];
+            acc[3] += g[1] * r[0];
+            acc[4] += g[0] * r[1];
+            acc[5] += g[1] * r[1];
+            grad[at] = l[0] * g[0] + l[1] * g[1];
+            grad[at + 1] = l[2] * g[0] + l[3] * g[1];
+        }
+        return;
+    }
     let [c, s] = t.rotation();
     let k = t.scale;
     // `R·v`, `R′·v` (the derivative in the angle) and `Rᵀ·g`.
@@ -433,7 +724,7 @@ fn chain_path(
     let rot_t = |g: Point| [c * g[0] + s * g[1], -s * g[0] + c * g[1]];
     let dot = |a: Point, b: Point| a[0] * b[0] + a[1] * b[1];
     // A position `v` mapped to `k·R·(v − pivot) + pivot + t`, with gradient `g` there.
-    let position = |v: Point, g: Point, acc: &mut [f64; 4]| -> Point {
+    let position = |v: Point, g: Point, acc: &mut [f64; 6]| -> Point {
         let r = [v[0] - t.pivot[0], v[1] - t.pivot[1]];
         acc[0] += g[0];
         acc[1] += g[1];
@@ -575,10 +866,8 @@ mod tests {
         let t = g.transform.unwrap();
         let pivot = apply(&t.affine(), t.pivot);
         let turn = GroupTransform {
-            translate: [0.0; 2],
             angle: 0.3,
-            scale: 1.0,
-            pivot,
+            ..GroupTransform::identity(pivot)
         };
         let (before, after) = (device_points(&s), device_points(&moved));
         // The baked triangle, last, does not move.
@@ -630,12 +919,100 @@ mod tests {
     }
 
     #[test]
+    fn general_maps_round_trip_and_project() {
+        let m = [1.2, 0.3, -0.5, 0.7, 4.0, -3.0];
+        let t = GroupTransform::from_affine_general(&m, [10.0, 20.0]).unwrap();
+        assert_eq!(t.slot_count(), 6);
+        let back = t.affine();
+        assert!(
+            m.iter().zip(&back).all(|(a, b)| (a - b).abs() < 1e-12),
+            "{back:?}"
+        );
+        // The pivot moves by the translation only.
+        let p = apply(&back, t.pivot);
+        assert!((p[0] - 10.0 - t.translate[0]).abs() < 1e-12);
+        assert!((p[1] - 20.0 - t.translate[1]).abs() < 1e-12);
+        for bad in [
+            [1.0, 2.0, 0.5, 1.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0, f64::NAN, 0.0, 0.0],
+        ] {
+            assert!(GroupTransform::from_affine_general(&bad, [0.0; 2]).is_none());
+        }
+        // Projection: entries clamped, NaN back to the identity's, a near-singular part
+        // replaced.
+        let mut q = t;
+        q.linear = Some([f64::NAN, 5e3, 0.0, 1.0]);
+        q.project();
+        assert_eq!(q.linear, Some([1.0, 1e3, 0.0, 1.0]));
+        q.linear = Some([1e-4, 0.0, 0.0, 1e-4]);
+        q.project();
+        assert_eq!(q.linear, Some([1e-3, 0.0, 0.0, 1e-3]));
+    }
+
+    /// A skewed group of fills (one with a linear gradient): six slots, local values as
+    /// written, and `set_params` the inverse of `params`, paint transforms included.
+    #[test]
+    fn skewed_group_keeps_a_general_transform() {
+        let svg = r##"<svg xmlns="http://www.w3.org/2000/svg" width="40" height="30">
+          <defs><linearGradient id="l" gradientUnits="userSpaceOnUse" x1="2" y1="2" x2="20"
+            y2="12"><stop offset="0" stop-color="#000"/><stop offset="1" stop-color="#fff"/>
+          </linearGradient></defs>
+          <g id="k" transform="translate(3 2) skewX(20) scale(1 1.5)">
+            <path d="M2 2 L20 2 L12 14 Z" fill="url(#l)"/>
+            <path d="M14 4 L24 4 L20 12 Z" fill="#a33"/>
+          </g></svg>"##;
+        let s = Scene::from_svg_str(svg, "k.svg", Sizing::Natural).unwrap();
+        let layout = ParamLayout::new(&s);
+        assert_eq!(layout.transforms.len(), 1);
+        let Node::Group(g) = &s.nodes[0] else {
+            panic!("{:?}", s.nodes[0])
+        };
+        let t = g.transform.unwrap();
+        let k = 20f64.to_radians().tan();
+        assert_eq!(t.slot_count(), 6);
+        let l = t.linear.unwrap();
+        assert!((l[0] - 1.0).abs() < 1e-6 && l[1].abs() < 1e-6, "{l:?}");
+        assert!(
+            (l[2] - 1.5 * k).abs() < 1e-6 && (l[3] - 1.5).abs() < 1e-6,
+            "{l:?}"
+        );
+        // The first path's points are in the group's frame: as written.
+        let v = s.params();
+        let at = layout.paths[0].points;
+        assert!(
+            (v[at] - 2.0).abs() < 1e-5 && (v[at + 1] - 2.0).abs() < 1e-5,
+            "{v:?}"
+        );
+        let mut again = s.clone();
+        again.set_params(&v);
+        assert!(close(&device_points(&again), &device_points(&s), 1e-9));
+        let paint = |s: &Scene| {
+            let mut out = Vec::new();
+            s.for_each_path(|p| {
+                if let Some(Paint::Gradient(g)) = p.fill.as_ref().map(|f| &f.paint) {
+                    out.push(g.transform);
+                }
+            });
+            out
+        };
+        let (a, b) = (paint(&s), paint(&again));
+        assert_eq!(a.len(), 1);
+        assert!(a[0].iter().zip(&b[0]).all(|(x, y)| (x - y).abs() < 1e-9));
+        // The device paint transform is the group's map of the local one.
+        assert!((a[0][2] - 1.5 * k).abs() < 1e-6, "{:?}", a[0]);
+        // A stroke keeps such a group baked.
+        let stroked = svg.replace("fill=\"#a33\"", "fill=\"#a33\" stroke=\"#000\"");
+        let s = Scene::from_svg_str(&stroked, "k.svg", Sizing::Natural).unwrap();
+        assert!(ParamLayout::new(&s).transforms.is_empty());
+    }
+
+    #[test]
     fn from_affine_round_trips_and_refuses_non_similarities() {
         let t = GroupTransform {
             translate: [3.0, -2.0],
             angle: 0.7,
             scale: 1.5,
-            pivot: [10.0, 20.0],
+            ..GroupTransform::identity([10.0, 20.0])
         };
         let back = GroupTransform::from_affine(&t.affine(), t.pivot).unwrap();
         for (a, b) in [

@@ -27,5 +27,6 @@ mod roundtrip;
 mod splat;
 mod splat_cli;
 mod text;
+mod transforms;
 mod vectorize;
 mod volume;

@@ -76,19 +76,9 @@ fn single_circle_recovers_center_and_radius() {
     assert!(err <= 1e-3, "center {center:?}, r {r}: off by {err:.2e} px");
 }
 
-const DRAWING: &str = r##"<svg xmlns="http://www.w3.org/2000/svg" width="96" height="80">
-  <rect id="ground" x="0" y="0" width="96" height="80" fill="#f4efe2"/>
-  <rect id="card" x="10" y="12" width="44" height="30" rx="6" fill="#2b6cb0"
-        stroke="#1a365d" stroke-width="2.5"/>
-  <g id="turned" transform="rotate(25 62 50)">
-    <rect id="bar" x="48" y="44" width="30" height="10" fill="#e53e3e" fill-opacity="0.85"/>
-    <ellipse id="leaf" cx="70" cy="28" rx="14" ry="7" fill="#38a169"/>
-  </g>
-  <circle id="sun" cx="30" cy="58" r="11" fill="#ecc94b" stroke="#b7791f" stroke-width="2"/>
-  <g transform="translate(4 2) scale(1.5)">
-    <circle id="dot" cx="50" cy="40" r="4" fill="#805ad5"/>
-  </g>
-</svg>"##;
+/// Rectangles, circles, an ellipse, a turned group of two shapes, a scaled group of one
+/// (baked) and a skewed group of two filled paths (a general affine transform).
+const DRAWING: &str = include_str!("../../svg-samples/shapes/drawing.svg");
 
 /// Every primitive parameter (positions, sizes, corner radii, rotations) and its paints
 /// against central differences, on shapes under rotated and scaled groups, with strokes.
@@ -105,7 +95,9 @@ fn primitive_parameters_match_differences() {
             Some("rect"),
             Some("ellipse"),
             Some("circle"),
-            Some("circle")
+            Some("circle"),
+            None,
+            None
         ]
     );
     let layout = ParamLayout::new(&scene);
@@ -121,7 +113,8 @@ fn primitive_parameters_match_differences() {
 }
 
 /// Nested groups whose transforms are parameters (a path, strokes, a rounded rectangle, an
-/// ellipse and a circle in them), beside a skewed group that stays baked.
+/// ellipse and a circle in them), beside a skewed group of two fills (a general affine
+/// transform parameter).
 const NESTED: &str = r##"<svg xmlns="http://www.w3.org/2000/svg" width="80" height="60">
   <rect width="80" height="60" fill="#f0ece0"/>
   <g id="outer" transform="translate(6 4) rotate(12 40 30)">
@@ -144,7 +137,14 @@ const NESTED: &str = r##"<svg xmlns="http://www.w3.org/2000/svg" width="80" heig
 fn group_transforms_match_differences() {
     let scene = Scene::from_svg_str(NESTED, "nested.svg", Sizing::Natural).unwrap();
     let layout = ParamLayout::new(&scene);
-    assert_eq!(layout.transforms.len(), 2, "outer and inner, not the skew");
+    // Outer and inner as similarities; the skewed pair of fills as a general map.
+    assert_eq!(layout.transforms.len(), 3);
+    let lens: Vec<usize> = diffsvg::scene::structure::Structure::of(&scene)
+        .transforms
+        .iter()
+        .map(|t| t.len)
+        .collect();
+    assert_eq!(lens, [4, 4, 6]);
     let target = nudged_target(&scene, 1.0, None);
     assert_agrees("group transforms", &scene, &target, Loss::Mse, None);
     let dir = scratch("group-transforms");
@@ -154,9 +154,9 @@ fn group_transforms_match_differences() {
     assert!(parity.passes(), "{:?}", parity.comparison);
 }
 
-/// A drawing of rectangles, circles and ellipses (rotated and scaled by their groups),
-/// perturbed in those parameters and fitted back: ≥ 45 dB, written back with the same
-/// elements.
+/// A drawing of rectangles, circles and ellipses (rotated and scaled by their groups) and
+/// a skewed group of paths, perturbed in those parameters and fitted back: ≥ 45 dB,
+/// written back with the same elements and the two groups' transforms.
 #[test]
 fn primitives_drawing_is_fitted_back_as_itself() {
     let dir = scratch("primitives-fit");
@@ -208,12 +208,12 @@ fn primitives_drawing_is_fitted_back_as_itself() {
             count("ellipse"),
             count("path")
         ),
-        (3, 2, 1, 0),
+        (3, 2, 1, 2),
         "{text}"
     );
-    // The turned group of two shapes keeps its transform (a parameter); the scaled group
-    // of one circle is baked into it.
-    assert_eq!(text.matches("transform=\"matrix(").count(), 1, "{text}");
+    // The turned group of two shapes and the skewed one of two paths keep their
+    // transforms (parameters); the scaled group of one circle is baked into it.
+    assert_eq!(text.matches("transform=\"matrix(").count(), 2, "{text}");
 }
 
 /// `fit --free-shapes`: the same drawing fitted with its shapes' outlines as free paths,
@@ -236,7 +236,7 @@ fn free_shapes_are_fitted_as_paths() {
     ]));
     assert!(sum["psnr"].as_f64().unwrap() > 40.0, "{sum}");
     let text = std::fs::read_to_string(&out_svg).unwrap();
-    assert_eq!(text.matches("<path ").count(), 6, "{text}");
+    assert_eq!(text.matches("<path ").count(), 8, "{text}");
     assert!(
         !text.contains("<circle") && !text.contains("<rect"),
         "{text}"

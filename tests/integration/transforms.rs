@@ -1,0 +1,307 @@
+//! Group transforms as parameters beyond primitives.rs's similarities over solid paints:
+//! gradient paints inside transformed groups, and general affine maps (skews, non-uniform
+//! scales) over filled paths; every transform slot against central differences, and
+//! through a written file.
+
+use diffsvg::gradcheck::check;
+use diffsvg::loss::Loss;
+use diffsvg::raster::{RenderOptions, render};
+use diffsvg::scene::structure::Structure;
+use diffsvg::scene::{ParamGroup, ParamLayout};
+use diffsvg::{Scene, Sizing};
+
+use crate::gradients::nudged_target;
+
+/// A turned and scaled group whose two shapes cover the canvas: one filled with a linear
+/// gradient, one with a radial one (half transparent), so that the group's slots move
+/// the picture through the paints alone; and a second group whose triangle has a radial
+/// fill and a stroke with a linear gradient in `objectBoundingBox` units (a transform
+/// that does not scale uniformly).
+const GRADIENTS: &str = r##"<svg xmlns="http://www.w3.org/2000/svg" width="48" height="40">
+  <defs>
+    <linearGradient id="lin" gradientUnits="userSpaceOnUse" x1="6" y1="8" x2="40" y2="30">
+      <stop offset="0.1" stop-color="#1f4e9c"/><stop offset="0.6" stop-color="#e0a030"/>
+      <stop offset="0.95" stop-color="#b02040"/>
+    </linearGradient>
+    <radialGradient id="rad" gradientUnits="userSpaceOnUse" cx="22" cy="18" r="14" fx="18"
+                    fy="15" fr="1">
+      <stop offset="0" stop-color="#ffffff"/><stop offset="1" stop-color="#20a060"/>
+    </radialGradient>
+    <linearGradient id="box" x1="0" y1="0" x2="1" y2="0.3">
+      <stop offset="0" stop-color="#000000"/><stop offset="1" stop-color="#ffee00"/>
+    </linearGradient>
+  </defs>
+  <g id="turned" transform="translate(2 1) rotate(14 24 20) scale(1.05)">
+    <path id="wall" d="M-60 -60 L110 -60 L110 110 L-60 110 Z" fill="url(#lin)"/>
+    <path id="veil" d="M-60 -60 L110 -60 L110 110 L-60 110 Z" fill="url(#rad)"
+          fill-opacity="0.5"/>
+  </g>
+  <g id="small" transform="translate(4 3) rotate(-9 24 20)">
+    <path id="tri" d="M10 12 L34 9 L27 33 Z" fill="url(#rad)" stroke="url(#box)"
+          stroke-width="3"/>
+    <path id="dot" d="M36 28 L42 28 L42 34 L36 34 Z" fill="#335577"/>
+  </g>
+</svg>"##;
+
+/// A skewed, non-uniformly scaled group of filled paths (one with a linear gradient), a
+/// mirrored one inside it, and a stroked group under a skew that stays baked.
+const SKEWED: &str = r##"<svg xmlns="http://www.w3.org/2000/svg" width="56" height="44">
+  <defs>
+    <linearGradient id="lin" gradientUnits="userSpaceOnUse" x1="8" y1="6" x2="40" y2="36">
+      <stop offset="0" stop-color="#2255aa"/><stop offset="1" stop-color="#ee8833"/>
+    </linearGradient>
+  </defs>
+  <rect width="56" height="44" fill="#f3efe6"/>
+  <g id="leaning" transform="matrix(1.1 0.17 0.35 0.8 -2 4)">
+    <path id="kite" d="M8 6 C20 2 30 8 34 16 L22 34 L6 22 Z" fill="url(#lin)"/>
+    <path id="tri" d="M26 4 L44 10 L32 20 Z" fill="#338855" fill-opacity="0.8"/>
+    <g id="flipped" transform="matrix(-1 0 0.2 1.3 60 -8)">
+      <path d="M14 22 L24 22 L20 30 Z" fill="#aa3344"/>
+      <path d="M10 14 L16 12 L14 20 Z" fill="#4433aa"/>
+    </g>
+  </g>
+  <g id="stroked" transform="skewX(15)">
+    <path d="M4 36 L16 36 L12 42 Z" fill="#777777" stroke="#222222"/>
+    <path d="M20 36 L28 36 L24 42 Z" fill="#555555"/>
+  </g>
+</svg>"##;
+
+/// The slots of the groups' transforms (not the primitives' rotations).
+fn group_transform_slots(scene: &Scene) -> Vec<usize> {
+    let layout = ParamLayout::new(scene);
+    (0..layout.slots.len())
+        .filter(|&i| {
+            let s = layout.slots[i];
+            s.group == ParamGroup::Transform && layout.owners[s.owner].is_group
+        })
+        .collect()
+}
+
+/// `which` against central differences, each group within 1e-2 (relative, absolute
+/// below 1e-2 of the group's largest), and not all zero.
+fn assert_slots_agree(name: &str, scene: &Scene, which: &[usize]) {
+    let target = nudged_target(scene, 1.0, None);
+    let (grad, _, groups) = check(
+        scene,
+        &target,
+        Loss::Mse,
+        &RenderOptions::default(),
+        None,
+        Some(which),
+    );
+    for g in &groups {
+        println!("{name}: {g}");
+        assert!(g.worst <= 1e-2, "{name}: {g}");
+    }
+    assert!(
+        which.iter().all(|&i| grad[i].is_finite()) && which.iter().any(|&i| grad[i] != 0.0),
+        "{name}: {:?}",
+        which.iter().map(|&i| grad[i]).collect::<Vec<_>>()
+    );
+}
+
+#[test]
+fn gradient_paints_keep_their_groups_transform() {
+    let scene = Scene::from_svg_str(GRADIENTS, "gradients.svg", Sizing::Natural).unwrap();
+    let st = Structure::of(&scene);
+    let kept: Vec<(&str, usize)> = st
+        .transforms
+        .iter()
+        .map(|t| (t.id.as_str(), t.len))
+        .collect();
+    assert_eq!(kept, [("turned", 4), ("small", 4)]);
+    let slots = group_transform_slots(&scene);
+    assert_eq!(slots.len(), 8);
+    // The paints' own parameters too: geometry and stops, in gradient space.
+    let layout = ParamLayout::new(&scene);
+    let paint: Vec<usize> = (0..layout.slots.len())
+        .filter(|&i| {
+            matches!(
+                layout.slots[i].group,
+                ParamGroup::PaintGeometry | ParamGroup::StopOffset
+            )
+        })
+        .collect();
+    assert!(!paint.is_empty());
+    assert_slots_agree("gradient paints: transforms", &scene, &slots);
+    assert_slots_agree("gradient paints: paint", &scene, &paint);
+}
+
+#[test]
+fn radial_gradients_under_non_uniform_maps_stay_baked() {
+    // A radial gradient in `objectBoundingBox` units of a wide path: its circles are
+    // ellipses on the canvas, which a turn of the group would not keep.
+    let svg = r##"<svg xmlns="http://www.w3.org/2000/svg" width="40" height="20">
+      <defs><radialGradient id="r"><stop offset="0" stop-color="#fff"/>
+        <stop offset="1" stop-color="#000"/></radialGradient></defs>
+      <g transform="rotate(10 20 10)"><path d="M2 2 L38 2 L38 18 L2 18 Z" fill="url(#r)"/>
+        <path d="M5 5 L9 5 L9 9 Z" fill="#f00"/></g>
+      <g transform="skewX(10)"><path d="M2 2 L18 2 L18 18 Z" fill="url(#r)"/>
+        <path d="M5 5 L9 5 L9 9 Z" fill="#f00"/></g>
+    </svg>"##;
+    let scene = Scene::from_svg_str(svg, "radial.svg", Sizing::Natural).unwrap();
+    assert!(ParamLayout::new(&scene).transforms.is_empty());
+}
+
+#[test]
+fn skewed_groups_of_fills_are_affine_parameters() {
+    let scene = Scene::from_svg_str(SKEWED, "skewed.svg", Sizing::Natural).unwrap();
+    let st = Structure::of(&scene);
+    let kept: Vec<(&str, usize)> = st
+        .transforms
+        .iter()
+        .map(|t| (t.id.as_str(), t.len))
+        .collect();
+    // The stroked group under a skew is baked.
+    assert_eq!(kept, [("leaning", 6), ("flipped", 6)]);
+    let v = scene.params();
+    let at = st.transforms[0].offset + 2;
+    for (got, want) in v[at..at + 4].iter().zip([1.1, 0.17, 0.35, 0.8]) {
+        assert!((got - want).abs() < 1e-6, "{:?}", &v[at..at + 4]);
+    }
+    let slots = group_transform_slots(&scene);
+    assert_eq!(slots.len(), 12);
+    assert_slots_agree("affine groups", &scene, &slots);
+    // The points in the groups' frames, and the linear gradient's geometry.
+    let layout = ParamLayout::new(&scene);
+    let rest: Vec<usize> = (0..layout.slots.len())
+        .filter(|&i| {
+            matches!(
+                layout.slots[i].group,
+                ParamGroup::Points | ParamGroup::PaintGeometry
+            )
+        })
+        .collect();
+    assert_slots_agree("affine groups: points and paint", &scene, &rest);
+}
+
+/// Written and read back: the same kinds of transform, the same slots (to `f32`) and
+/// the same pixels; moved slots are written as they are.
+#[test]
+fn affine_transforms_and_gradient_paints_survive_a_round_trip() {
+    for (name, svg) in [("skewed", SKEWED), ("gradients", GRADIENTS)] {
+        let scene = Scene::from_svg_str(svg, name, Sizing::Natural).unwrap();
+        let mut moved = scene.clone();
+        // The outermost groups' slots (a nested group's change would move its content
+        // in its parent's frame, and with it the parent's pivot: the same map, other
+        // numbers).
+        let mut v = scene.params();
+        for t in Structure::of(&scene).transforms {
+            if t.id != "flipped" {
+                for x in &mut v[t.offset..t.offset + t.len] {
+                    *x += 0.03;
+                }
+            }
+        }
+        moved.set_params(&v);
+        let text = moved.to_svg_string();
+        let back = Scene::from_svg_str(&text, "back.svg", Sizing::Natural).unwrap();
+        let lens = |s: &Scene| -> Vec<usize> {
+            Structure::of(s).transforms.iter().map(|t| t.len).collect()
+        };
+        assert_eq!(lens(&back), lens(&scene), "{name}: {text}");
+        let (a, b) = (moved.params(), back.params());
+        assert_eq!(a.len(), b.len(), "{name}");
+        for (i, (x, y)) in a.iter().zip(&b).enumerate() {
+            assert!(
+                (x - y).abs() <= 2e-3 * x.abs().max(1.0),
+                "{name} slot {i}: {x} vs {y}"
+            );
+        }
+        let opts = RenderOptions::default();
+        let (p, q) = (render(&moved, &opts), render(&back, &opts));
+        let worst = p
+            .data
+            .iter()
+            .zip(&q.data)
+            .flat_map(|(a, b)| a.iter().zip(b).map(|(x, y)| (x - y).abs()))
+            .fold(0.0f32, f32::max);
+        assert!(worst < 2e-3, "{name}: pixels differ by {worst}");
+        assert!(text.contains("transform=\"matrix("), "{text}");
+    }
+}
+
+/// `--freeze transforms` holds the new slots, and they are what a fit moves when the
+/// rest is frozen.
+#[test]
+fn freezing_transforms_holds_affine_slots() {
+    use crate::common::{diffsvg, json_summary, s, scratch, write};
+    let dir = scratch("affine-freeze");
+    let src = write(&dir, "skewed.svg", SKEWED);
+    let scene = Scene::load(&src, Sizing::Natural).unwrap();
+    let png = dir.join("target.png");
+    render(&nudged_target_scene(&scene), &RenderOptions::default())
+        .save_png(&png)
+        .unwrap();
+    let rest = "points,colors,opacities,widths,paint,stops";
+    for (freeze, transforms_move) in [("transforms", false), (rest, true)] {
+        let out = dir.join("fit.svg");
+        // (A fit writes its best step: enough of them to improve.)
+        let sum = json_summary(&diffsvg(&[
+            "fit",
+            s(&src),
+            s(&png),
+            "-o",
+            s(&out),
+            "--iters",
+            "20",
+            "--freeze",
+            freeze,
+            "--json",
+        ]));
+        let (initial, psnr) = (
+            sum["initial_psnr"].as_f64().unwrap(),
+            sum["psnr"].as_f64().unwrap(),
+        );
+        assert!(
+            psnr > initial + 3.0,
+            "{freeze}: {initial:.2} → {psnr:.2} dB"
+        );
+        let fitted = Scene::load(&out, Sizing::Natural).unwrap();
+        let (a, b) = (scene.params(), fitted.params());
+        let moved = |i: usize| (a[i] - b[i]).abs() > 1e-3 * a[i].abs().max(1.0);
+        // The maps themselves (a file read back puts the pivot at its content's center,
+        // which moving the content moves, and the translation slots with it).
+        let (ma, mb) = (maps(&scene), maps(&fitted));
+        assert_eq!(ma.len(), mb.len());
+        let map_moved = ma
+            .iter()
+            .zip(&mb)
+            .any(|(p, q)| p.iter().zip(q).any(|(x, y)| (x - y).abs() > 1e-3));
+        assert_eq!(map_moved, transforms_move, "{freeze}: {ma:?} {mb:?}");
+        // (A rectangle's rotation is in the same group.)
+        let layout = ParamLayout::new(&scene);
+        let others: Vec<usize> = (0..a.len())
+            .filter(|&i| layout.slots[i].group != ParamGroup::Transform && moved(i))
+            .collect();
+        assert_eq!(!others.is_empty(), !transforms_move, "{freeze}: {others:?}");
+    }
+}
+
+/// Every group transform's matrix, in walk order.
+fn maps(scene: &Scene) -> Vec<[f64; 6]> {
+    fn walk(nodes: &[diffsvg::scene::Node], out: &mut Vec<[f64; 6]>) {
+        for n in nodes {
+            if let diffsvg::scene::Node::Group(g) = n {
+                if let Some(t) = &g.transform {
+                    out.push(t.affine());
+                }
+                walk(&g.children, out);
+            }
+        }
+    }
+    let mut out = Vec::new();
+    walk(&scene.nodes, &mut out);
+    out
+}
+
+/// The scene with its group transforms moved a little: a target only they can reach.
+fn nudged_target_scene(scene: &Scene) -> Scene {
+    let mut t = scene.clone();
+    let mut v = t.params();
+    for (k, &i) in group_transform_slots(scene).iter().enumerate() {
+        v[i] += if k % 2 == 0 { 0.02 } else { -0.015 };
+    }
+    t.set_params(&v);
+    t
+}
