@@ -80,6 +80,12 @@ pub const MAX_DECOMPRESSED_BYTES: u64 = 256 << 20;
 /// stroke), in the forward and backward passes alike; `raster::warnings` reports it.
 pub const MAX_DASHES_PER_PATH: usize = 100_000;
 
+/// Most dashes cut from all the paths of one drawing, granted path by path in paint order
+/// (each also within [`MAX_DASHES_PER_PATH`]): a pattern's tiles, or a style that dashes
+/// every element, would otherwise multiply the per-path limit. A dashed stroke past it is
+/// drawn **solid**, as past the per-path limit, and `raster::warnings` names it.
+pub const MAX_DASHES_PER_SCENE: usize = 1_000_000;
+
 /// Most values in one feConvolveMatrix kernel (`order` columns × rows): a convolution
 /// costs that many multiply-adds per pixel of the filter region; a larger kernel is
 /// refused when the SVG is read, naming the file.

@@ -6,7 +6,7 @@ use super::filter::{self, FilterLayer, crop, layer_rect};
 use super::flatten::{ChordCounts, Flattened, flatten};
 use super::paint::PaintEval;
 use super::stroke::{Style, outline};
-use crate::limits::MAX_DASHES_PER_PATH;
+use crate::limits::{MAX_DASHES_PER_PATH, MAX_DASHES_PER_SCENE};
 use crate::scene::geom::{flatten_rect, frame_tolerance};
 use crate::scene::{BlendMode, FillRule, Group, MaskKind, Node, Path, Point, Role, Scene, Stroke};
 use rayon::prelude::*;
@@ -350,10 +350,22 @@ fn prepare_with(
     // walk that lays out groups.
     let mut paths: Vec<(&Path, Role)> = Vec::new();
     scene.for_each_path_role(|q, role| paths.push((q, role)));
+    let fixed = |ix: usize| counts.and_then(|c| c.get(ix)).map(|c| c.as_slice());
+    let size = (scene.width, scene.height);
+    let only: Vec<&Path> = paths.iter().map(|(q, _)| *q).collect();
+    let verdicts = dash_verdicts(&only, size, tolerance, fixed);
     let build = |(ix, &(path, role)): (usize, &(&Path, Role))| {
-        let fixed = counts.and_then(|c| c.get(ix)).map(|c| c.as_slice());
-        let size = (scene.width, scene.height);
-        build_path(path, role, ix, size, tolerance, fixed, for_backward)
+        let cut = verdicts[ix].as_ref().is_some_and(|v| v.cut);
+        build_path(
+            path,
+            role,
+            ix,
+            size,
+            tolerance,
+            fixed(ix),
+            for_backward,
+            cut,
+        )
     };
     let built: Vec<Built> = if paths.len() >= PARALLEL_PATHS {
         paths.par_iter().enumerate().map(build).collect()
@@ -459,31 +471,82 @@ fn dash_cost(
 /// [`MAX_DASHES_PER_PATH`] dashes are drawn solid. Flattens only the dashed strokes;
 /// call it after loading, before rendering.
 pub fn warnings(scene: &Scene, opts: &super::RenderOptions) -> Vec<String> {
-    let mut out = Vec::new();
-    let mut ix = 0usize;
-    scene.for_each_path(|path| {
-        let k = ix;
-        ix += 1;
-        let Some(s) = &path.stroke else { return };
-        let Some(pattern) = &s.dash else { return };
-        if !(s.width > 0.0) {
-            return;
-        }
-        let Some(inv) = frame_inverse(s) else { return };
-        let visible = flatten_rect(path, scene.width, scene.height);
-        let (flat, _) = flatten(path, opts.tolerance, visible, None);
-        let fpts: Vec<Point> = flat
-            .pts
-            .iter()
-            .map(|q| [inv[0] * q[0] + inv[2] * q[1], inv[1] * q[0] + inv[3] * q[1]])
-            .collect();
-        let style = stroke_style(s, opts.tolerance, false);
-        let cost = dash_cost(s, pattern, &flat, &fpts, &style, scene.width, scene.height);
-        if cost > MAX_DASHES_PER_PATH as f64 {
-            out.push(dash_warning(path, k, cost));
-        }
-    });
-    out
+    let mut paths: Vec<&Path> = Vec::new();
+    scene.for_each_path(|q| paths.push(q));
+    let size = (scene.width, scene.height);
+    dash_verdicts(&paths, size, opts.tolerance, |_| None)
+        .iter()
+        .enumerate()
+        .filter_map(|(k, v)| {
+            let v = v.as_ref().filter(|v| !v.cut)?;
+            Some(dash_warning(paths[k], k, v.cost))
+        })
+        .collect()
+}
+
+/// Whether a dashed stroke's dashes are cut, and how many it would cut.
+struct DashVerdict {
+    /// The count [`dash_cost`] gives.
+    cost: f64,
+    /// Whether the dashes are cut (else the stroke is drawn solid).
+    cut: bool,
+}
+
+/// The dashes `path`'s stroke would cut ([`dash_cost`]); `None` without a dash pattern
+/// to cut.
+fn path_dash_cost(
+    path: &Path,
+    (width, height): (u32, u32),
+    tolerance: f64,
+    fixed: Option<&[u32]>,
+) -> Option<f64> {
+    let s = path.stroke.as_ref()?;
+    let pattern = s.dash.as_ref()?;
+    if !(s.width > 0.0) {
+        return None;
+    }
+    let inv = frame_inverse(s)?;
+    let visible = flatten_rect(path, width, height);
+    let (flat, _) = flatten(path, tolerance, visible, fixed);
+    let fpts: Vec<Point> = flat
+        .pts
+        .iter()
+        .map(|q| [inv[0] * q[0] + inv[2] * q[1], inv[1] * q[0] + inv[3] * q[1]])
+        .collect();
+    let style = stroke_style(s, tolerance, false);
+    Some(dash_cost(s, pattern, &flat, &fpts, &style, width, height))
+}
+
+/// Per path (paint order): `None` without a dash pattern, else whether its dashes are
+/// cut: at most [`MAX_DASHES_PER_PATH`] from one path, and at most
+/// [`MAX_DASHES_PER_SCENE`] from all, granted in paint order (so the same paths on any
+/// thread count, and in the forward and backward passes).
+fn dash_verdicts<'a>(
+    paths: &[&Path],
+    size: (u32, u32),
+    tolerance: f64,
+    fixed: impl Fn(usize) -> Option<&'a [u32]> + Sync,
+) -> Vec<Option<DashVerdict>> {
+    let cost = |(ix, path): (usize, &&Path)| path_dash_cost(path, size, tolerance, fixed(ix));
+    let costs: Vec<Option<f64>> = if paths.len() >= PARALLEL_PATHS {
+        paths.par_iter().enumerate().map(cost).collect()
+    } else {
+        paths.iter().enumerate().map(cost).collect()
+    };
+    let mut total = 0.0;
+    costs
+        .into_iter()
+        .map(|c| {
+            c.map(|cost| {
+                let cut = cost <= MAX_DASHES_PER_PATH as f64
+                    && total + cost <= MAX_DASHES_PER_SCENE as f64;
+                if cut {
+                    total += cost;
+                }
+                DashVerdict { cost, cut }
+            })
+        })
+        .collect()
 }
 
 fn dash_warning(path: &Path, index: usize, cost: f64) -> String {
@@ -497,6 +560,12 @@ fn dash_warning(path: &Path, index: usize, cost: f64) -> String {
     } else {
         "too many".to_string()
     };
+    if cost <= MAX_DASHES_PER_PATH as f64 {
+        return format!(
+            "{name}: stroke-dasharray would cut {about} dashes, past the drawing's limit of \
+             {MAX_DASHES_PER_SCENE} over all paths; stroked solid"
+        );
+    }
     format!(
         "{name}: stroke-dasharray would cut {about} dashes (limit {MAX_DASHES_PER_PATH}); stroked solid"
     )
@@ -707,6 +776,7 @@ fn build_path(
     tolerance: f64,
     fixed: Option<&[u32]>,
     keep: bool,
+    cut_dashes: bool,
 ) -> Built {
     let visible = flatten_rect(path, width, height);
     let (flat, counts) = flatten(path, tolerance, visible, fixed);
@@ -758,12 +828,9 @@ fn build_path(
         let to_frame = |q: &Point| [inv[0] * q[0] + inv[2] * q[1], inv[1] * q[0] + inv[3] * q[1]];
         let fpts: Vec<Point> = geom.flat.pts.iter().map(to_frame).collect();
         let style = stroke_style(s, tolerance, false);
-        // Past the dash limit the pattern is dropped and the stroke drawn solid.
-        let pattern = s.dash.as_ref().filter(|pattern| {
-            let cost = dash_cost(s, pattern, &geom.flat, &fpts, &style, width, height);
-            solid = cost > MAX_DASHES_PER_PATH as f64;
-            !solid
-        });
+        // Past the dash limits the pattern is dropped and the stroke drawn solid.
+        let pattern = s.dash.as_ref().filter(|_| cut_dashes);
+        solid = s.dash.is_some() && !cut_dashes;
         let mut ol = match pattern {
             Some(pattern) => {
                 let visible = Visible {
@@ -1081,6 +1148,39 @@ mod tests {
             render_backward(&dashed, &opts, &d),
             render_backward(&solid, &opts, &d)
         );
+    }
+
+    /// Dashed strokes each within the per-path limit but together past the drawing's
+    /// (a pattern's tiles, a style dashing every element): the first ones in paint order
+    /// are cut, the rest drawn solid and named.
+    #[test]
+    fn dashes_past_the_drawing_limit_stroke_solid_in_paint_order() {
+        let opts = RenderOptions::default();
+        let one = r#"<rect x="5" y="5" width="28" height="28" fill="none" stroke="black" stroke-width="3" stroke-dasharray="0.001"/>"#;
+        let svg = format!(
+            r#"<svg xmlns="http://www.w3.org/2000/svg" width="40" height="40">{}</svg>"#,
+            one.repeat(30)
+        );
+        let s = load(&svg);
+        let mut paths = Vec::new();
+        s.for_each_path(|q| paths.push(q));
+        let verdicts = dash_verdicts(&paths, (40, 40), opts.tolerance, |_| None);
+        let cost = verdicts[0].as_ref().unwrap().cost;
+        assert!(
+            cost <= MAX_DASHES_PER_PATH as f64 && cost * 30.0 > MAX_DASHES_PER_SCENE as f64,
+            "{cost}"
+        );
+        let granted = (MAX_DASHES_PER_SCENE as f64 / cost).floor() as usize;
+        for (k, v) in verdicts.iter().enumerate() {
+            assert_eq!(v.as_ref().unwrap().cut, k < granted, "path {k}");
+        }
+        let w = warnings(&s, &opts);
+        assert_eq!(w.len(), 30 - granted, "{w:?}");
+        assert!(
+            w[0].starts_with(&format!("path #{}:", granted + 1)),
+            "{w:?}"
+        );
+        assert!(w[0].contains("over all paths"), "{w:?}");
     }
 
     #[test]
