@@ -357,8 +357,7 @@ fn prepare_with(
     let build = |(ix, &(path, role)): (usize, &(&Path, Role))| {
         let cut = verdicts[ix].as_ref().is_some_and(|v| v.cut);
         build_path(
-            path,
-            role,
+            (path, role),
             ix,
             size,
             tolerance,
@@ -767,10 +766,10 @@ fn union(u: Option<[usize; 4]>, r: [usize; 4]) -> [usize; 4] {
 }
 
 /// Flattens path `ix` (paint order) of a `width × height` canvas and builds its items,
-/// with the chord counts `fixed` when given; `keep` keeps what the backward pass needs.
+/// with the chord counts `fixed` when given; `keep` keeps what the backward pass needs;
+/// a dashed stroke is cut when `cut_dashes` ([`dash_verdicts`]), else drawn solid.
 fn build_path(
-    path: &Path,
-    role: Role,
+    (path, role): (&Path, Role),
     ix: usize,
     (width, height): (u32, u32),
     tolerance: f64,
