@@ -44,5 +44,6 @@ rm -rf target/wheels
 wheel_s=$((SECONDS - venv_s))
 # From the tests' folder, so that `import diffsvg` finds the installed wheel, not python/.
 cd python/tests
-"$VENV/bin/python" -m pytest -q -p no:cacheprovider "$@"
+# A test still running after 120 s prints every thread's Python stack (not stopped).
+"$VENV/bin/python" -m pytest -q -p no:cacheprovider -o faulthandler_timeout=120 "$@"
 echo "python/test.sh: environment ${venv_s}s, wheel ${wheel_s}s, tests $((SECONDS - venv_s - wheel_s))s"

@@ -101,6 +101,9 @@ def test_ctrl_c_stops_a_fit():
     target = np.ones((64, 64, 4), np.float32)
     timer = threading.Timer(0.3, _thread.interrupt_main)
     timer.start()
+    # Bounded (about 30 s at 1.4 ms a step): a lost interrupt fails the test rather than
+    # running for hours. One CI run (2026-11-27) hung here with 10**7 steps, once in
+    # many runs; the cause is not known.
     with pytest.raises(KeyboardInterrupt):
-        diffsvg.fit(scene, target, iters=10**7)
+        diffsvg.fit(scene, target, iters=20_000)
     timer.join()

@@ -100,16 +100,19 @@ fn assert_slots_agree(name: &str, scene: &Scene, which: &[usize]) {
     );
 }
 
+/// The groups whose transforms are parameters, as `id:slots`.
+fn kept_transforms(scene: &Scene) -> Vec<String> {
+    let st = Structure::of(scene);
+    st.transforms
+        .iter()
+        .map(|t| format!("{}:{}", t.id, t.len))
+        .collect()
+}
+
 #[test]
 fn gradient_paints_keep_their_groups_transform() {
     let scene = Scene::from_svg_str(GRADIENTS, "gradients.svg", Sizing::Natural).unwrap();
-    let st = Structure::of(&scene);
-    let kept: Vec<(&str, usize)> = st
-        .transforms
-        .iter()
-        .map(|t| (t.id.as_str(), t.len))
-        .collect();
-    assert_eq!(kept, [("turned", 4), ("small", 4)]);
+    assert_eq!(kept_transforms(&scene), ["turned:4", "small:4"]);
     let slots = group_transform_slots(&scene);
     assert_eq!(slots.len(), 8);
     // The paints' own parameters too: geometry and stops, in gradient space.
@@ -147,13 +150,8 @@ fn radial_gradients_under_non_uniform_maps_stay_baked() {
 fn skewed_groups_of_fills_are_affine_parameters() {
     let scene = Scene::from_svg_str(SKEWED, "skewed.svg", Sizing::Natural).unwrap();
     let st = Structure::of(&scene);
-    let kept: Vec<(&str, usize)> = st
-        .transforms
-        .iter()
-        .map(|t| (t.id.as_str(), t.len))
-        .collect();
     // The stroked group under a skew is baked.
-    assert_eq!(kept, [("leaning", 6), ("flipped", 6)]);
+    assert_eq!(kept_transforms(&scene), ["leaning:6", "flipped:6"]);
     let v = scene.params();
     let at = st.transforms[0].offset + 2;
     for (got, want) in v[at..at + 4].iter().zip([1.1, 0.17, 0.35, 0.8]) {
