@@ -2,6 +2,7 @@
 
 import _thread
 import re
+import signal
 import threading
 
 import numpy as np
@@ -99,6 +100,9 @@ def test_ctrl_c_stops_a_fit():
     """KeyboardInterrupt reaches the running job (which has released the GIL) and stops it."""
     scene = diffsvg.random_blobs(8, 64, 64, seed=1)
     target = np.ones((64, 64, 4), np.float32)
+    # Python's own SIGINT handler, whatever an earlier test left (interrupt_main does
+    # nothing under SIG_IGN or SIG_DFL: with the data present, the suite lost it).
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     timer = threading.Timer(0.3, _thread.interrupt_main)
     timer.start()
     # Bounded (about 30 s at 1.4 ms a step): a lost interrupt fails the test rather than
@@ -107,3 +111,4 @@ def test_ctrl_c_stops_a_fit():
     with pytest.raises(KeyboardInterrupt):
         diffsvg.fit(scene, target, iters=20_000)
     timer.join()
+    signal.signal(signal.SIGINT, previous)
