@@ -207,6 +207,10 @@ pub(crate) struct RunCanvas {
     touched: Vec<(u32, u32, u32)>,
     /// Scratch: one row's coverages.
     covs: Vec<f32>,
+    /// Scratch: one row's stretches ([`RunCanvas::apply_row`]).
+    ops: Vec<RowOp>,
+    /// Scratch: the runs [`RunCanvas::apply_row`] writes a row's new list into.
+    spare: Vec<Run>,
     /// Scratch: one row's bytes.
     line: Vec<u8>,
     /// How far from 0 or 1 a run's coverage may be and count as 0 or 1 ([`snap_run`]).
@@ -238,21 +242,6 @@ impl RunCanvas {
     #[inline]
     fn find(&self, row: usize, x: usize) -> usize {
         self.runs[row].partition_point(|r| r.x1 as usize <= x)
-    }
-
-    /// The index of the run of `row` that starts at column `x` (`0 ..= w`), splitting the
-    /// run that holds it; the number of runs for `x = w`.
-    fn cut(&mut self, row: usize, x: usize) -> usize {
-        let i = self.find(row, x);
-        let runs = &mut self.runs[row];
-        if i == runs.len() || runs[i].x0 as usize == x {
-            return i;
-        }
-        let mut right = runs[i];
-        right.x0 = x as u32;
-        runs[i].x1 = x as u32;
-        runs.insert(i + 1, right);
-        i + 1
     }
 
     /// Replaces the runs of `row` over columns `a..b` (`a < b`) with `run`, joined to
@@ -348,41 +337,102 @@ impl RunCanvas {
         }
     }
 
-    /// Composites columns `a..b` of band row `row` with one solid color `s` at one
-    /// coverage `cov`: a solid run once (the `over` of each of its pixels would give the
-    /// same bits), a mixed run pixel by pixel; an opaque `s` at coverage 1 replaces the
-    /// runs with one solid run.
-    fn fill(&mut self, row: usize, a: usize, b: usize, s: [f32; 4], cov: f32) {
-        if cov <= 0.0 || a >= b {
+    /// Draws one row's [`RowOp`]s of a solid color `s` (in column order, disjoint) in one
+    /// pass over the row's runs, writing the new list into a spare one (no search, no
+    /// splice per stretch):
+    /// * a stretch at one coverage composites each solid run there once (the `over` of
+    ///   each of its pixels would give the same bits) and a mixed run pixel by pixel; an
+    ///   opaque `s` at coverage 1 replaces the runs there with one solid run;
+    /// * a stretch of pixels of their own coverages (`covs[op.px..]`) makes its columns
+    ///   mixed (the solid runs' colors written out) and composites pixel by pixel, as
+    ///   [`render_prepared`](super::render_prepared) does.
+    ///
+    /// Neighbors that [join](Run::joins) become one run; a row past [`MAX_RUNS`] becomes one
+    /// mixed run.
+    fn apply_row(&mut self, row: usize, s: [f32; 4], ops: &[RowOp], covs: &[f32]) {
+        if ops.is_empty() {
             return;
         }
         self.touch(row);
-        let i = self.find(row, a);
-        let first = self.runs[row][i];
-        if first.mixed && first.x1 as usize >= b {
-            // Inside one mixed run (a row of many small shapes): pixel by pixel.
-            for p in &mut self.px[row * self.w + a..row * self.w + b] {
-                over(p, s, cov);
+        let w = self.w;
+        let old = std::mem::take(&mut self.runs[row]);
+        let mut new = std::mem::take(&mut self.spare);
+        new.clear();
+        let line = &mut self.px[row * w..][..w];
+        // The old runs are read left to right: run `i`, from column `x` on.
+        let (mut i, mut x) = (0, 0);
+        for op in ops {
+            let (a, b) = (op.a as usize, op.b as usize);
+            // The old runs left of the stretch, kept.
+            while x < a {
+                let r = old[i];
+                let e = (r.x1 as usize).min(a);
+                push_joined(
+                    &mut new,
+                    Run {
+                        x0: x as u32,
+                        x1: e as u32,
+                        ..r
+                    },
+                );
+                (i, x) = if e == r.x1 as usize {
+                    (i + 1, e)
+                } else {
+                    (i, e)
+                };
             }
-            return;
-        }
-        if cov == 1.0 && s[3] == 1.0 {
-            return self.replace(row, a, b, Run::solid(a, b, s));
-        }
-        let i = self.cut(row, a);
-        let j = self.cut(row, b);
-        let line = &mut self.px[row * self.w..][..self.w];
-        for r in &mut self.runs[row][i..j] {
-            if r.mixed {
-                for p in &mut line[r.cols()] {
-                    over(p, s, cov);
+            let pixels = op.px != NO_PIXELS;
+            if !pixels && op.cov == 1.0 && s[3] == 1.0 {
+                push_joined(&mut new, Run::solid(a, b, s));
+                while (old[i].x1 as usize) <= b && i + 1 < old.len() {
+                    i += 1;
                 }
-            } else {
-                over(&mut r.color, s, cov);
+                x = b;
+                continue;
+            }
+            while x < b {
+                let r = old[i];
+                let e = (r.x1 as usize).min(b);
+                let run = if pixels {
+                    if !r.mixed {
+                        line[x..e].fill(r.color);
+                    }
+                    Run::mixed(x, e)
+                } else if r.mixed {
+                    for p in &mut line[x..e] {
+                        over(p, s, op.cov);
+                    }
+                    Run::mixed(x, e)
+                } else {
+                    let mut c = r.color;
+                    over(&mut c, s, op.cov);
+                    Run::solid(x, e, c)
+                };
+                push_joined(&mut new, run);
+                (i, x) = if e == r.x1 as usize {
+                    (i + 1, e)
+                } else {
+                    (i, e)
+                };
+            }
+            if pixels {
+                for (p, &cov) in line[a..b].iter_mut().zip(&covs[op.px as usize..]) {
+                    if cov > 0.0 {
+                        over(p, s, cov);
+                    }
+                }
             }
         }
+        // The old runs right of the last stretch.
+        while x < w {
+            let r = old[i];
+            push_joined(&mut new, Run { x0: x as u32, ..r });
+            (i, x) = (i + 1, r.x1 as usize);
+        }
+        self.runs[row] = new;
+        self.spare = old;
         if self.runs[row].len() > MAX_RUNS {
-            self.mix(row, 0, self.w);
+            self.mix(row, 0, w);
         }
     }
 
@@ -510,9 +560,10 @@ impl RunCanvas {
             repeat = repeats_next;
             let mut sum = 0.0f32;
             let mut x = x0;
-            // Stretches of one coverage are drawn when the coverage changes: a row of a
-            // big fill is one `fill`. The columns drawn in between lie right of them.
-            let mut pending = Stretch::new(x0);
+            // The row's stretches, left to right, drawn in one pass at the end. Stretches of
+            // one coverage are joined: a row of a big fill is one stretch.
+            let mut ops = RowOps::new(std::mem::take(&mut self.ops), x0);
+            covs.clear();
             for &(_, ka, kb) in ranges {
                 let (lo, hi) = ((ka as usize * CHUNK).max(x), (kb as usize * CHUNK).min(end));
                 // Only the columns from the range's first delta to its last are read pixel
@@ -523,30 +574,29 @@ impl RunCanvas {
                 };
                 let last = ds.iter().rposition(|&d| d != 0.0).map_or(0, |j| j + 1);
                 let run_cov = snap_run(coverage(sum, item.evenodd).0, self.slack);
-                pending.extend(self, row, x, lo + first, s, run_cov);
-                covs.clear();
+                ops.stretch(x, lo + first, run_cov);
+                let start = covs.len();
                 for dv in &mut ds[first..last] {
                     sum += *dv;
                     *dv = 0.0;
                     covs.push(coverage(sum, item.evenodd).0);
                 }
                 let a = lo + first;
-                if covs.iter().all(|c| c.to_bits() == covs[0].to_bits()) {
-                    pending.extend(self, row, a, a + covs.len(), s, covs[0]);
-                } else if let Some((i, j)) = covered_span(&covs) {
-                    self.mix(row, a + i, a + j);
-                    let line = &mut self.px[row * self.w + a..][..covs.len()];
-                    for (p, &cov) in line[i..j].iter_mut().zip(&covs[i..j]) {
-                        if cov > 0.0 {
-                            over(p, s, cov);
-                        }
-                    }
+                let here = &covs[start..];
+                if here.iter().all(|c| c.to_bits() == here[0].to_bits()) {
+                    let (n, c) = (here.len(), here[0]);
+                    covs.truncate(start);
+                    ops.stretch(a, a + n, c);
+                } else if let Some((i, j)) = covered_span(here) {
+                    ops.pixels(a + i, a + j, start + i);
                 }
                 x = lo + last;
             }
             let run_cov = snap_run(coverage(sum, item.evenodd).0, self.slack);
-            pending.extend(self, row, x, end, s, run_cov);
-            pending.flush(self, row, s);
+            ops.stretch(x, end, run_cov);
+            let ops = ops.finish();
+            self.apply_row(row, s, &ops, &covs);
+            self.ops = ops;
             // Columns right of the canvas hold deltas too; leave them cleared.
             deltas[cols..].fill(0.0);
         }
@@ -611,50 +661,97 @@ impl RunCanvas {
     }
 }
 
-/// Columns `a..b` of a row waiting to be drawn at one coverage by
-/// [`RunCanvas::draw_solid`].
-struct Stretch {
-    a: usize,
-    b: usize,
+/// A stretch of columns `a..b` of one row to draw with a solid color
+/// ([`RunCanvas::apply_row`]): at one coverage `cov`, or, when `px` is not
+/// [`NO_PIXELS`], at the coverages `covs[px..px + b - a]` of the row's scratch.
+#[derive(Clone, Copy, Debug)]
+struct RowOp {
+    a: u32,
+    b: u32,
     cov: f32,
+    px: u32,
 }
 
-impl Stretch {
-    fn new(x: usize) -> Self {
-        Stretch {
-            a: x,
-            b: x,
+/// [`RowOp::px`] of a stretch at one coverage.
+const NO_PIXELS: u32 = u32::MAX;
+
+/// A row's [`RowOp`]s as [`RunCanvas::draw_solid`] finds them, left to right: adjacent
+/// stretches of one coverage are joined, stretches at coverage 0 dropped.
+struct RowOps {
+    ops: Vec<RowOp>,
+    /// The stretch at one coverage not yet pushed.
+    pending: RowOp,
+}
+
+impl RowOps {
+    /// Empty, reusing `ops`' memory, starting at column `x`.
+    fn new(mut ops: Vec<RowOp>, x: usize) -> Self {
+        ops.clear();
+        let pending = RowOp {
+            a: x as u32,
+            b: x as u32,
             cov: 0.0,
-        }
+            px: NO_PIXELS,
+        };
+        RowOps { ops, pending }
     }
 
-    /// Adds columns `a..b` (starting where the stretch ends) at coverage `cov`, drawing
-    /// the stretch first if its coverage differs.
+    /// Adds columns `a..b` at coverage `cov`, joined to the pending stretch when that ends
+    /// at `a` with the same coverage bits.
     #[inline]
-    fn extend(
-        &mut self,
-        canvas: &mut RunCanvas,
-        row: usize,
-        a: usize,
-        b: usize,
-        s: [f32; 4],
-        cov: f32,
-    ) {
+    fn stretch(&mut self, a: usize, b: usize, cov: f32) {
         if a >= b {
             return;
         }
-        if a != self.b || cov.to_bits() != self.cov.to_bits() {
-            self.flush(canvas, row, s);
-            *self = Stretch { a, b, cov };
+        let p = &mut self.pending;
+        if a as u32 == p.b && cov.to_bits() == p.cov.to_bits() {
+            p.b = b as u32;
         } else {
-            self.b = b;
+            self.flush();
+            self.pending = RowOp {
+                a: a as u32,
+                b: b as u32,
+                cov,
+                px: NO_PIXELS,
+            };
         }
     }
 
-    /// Draws the stretch.
-    fn flush(&mut self, canvas: &mut RunCanvas, row: usize, s: [f32; 4]) {
-        canvas.fill(row, self.a, self.b, s, self.cov);
-        self.a = self.b;
+    /// Adds columns `a..b` at the coverages from `covs[px]` on.
+    fn pixels(&mut self, a: usize, b: usize, px: usize) {
+        self.flush();
+        self.ops.push(RowOp {
+            a: a as u32,
+            b: b as u32,
+            cov: 0.0,
+            px: px as u32,
+        });
+    }
+
+    fn flush(&mut self) {
+        let p = self.pending;
+        if p.a < p.b && p.cov > 0.0 {
+            self.ops.push(p);
+        }
+        self.pending.a = p.b;
+    }
+
+    /// The stretches, in column order.
+    fn finish(mut self) -> Vec<RowOp> {
+        self.flush();
+        self.ops
+    }
+}
+
+/// Appends `run` to a row's runs, as part of the last one when they [join](Run::joins).
+#[inline]
+fn push_joined(runs: &mut Vec<Run>, run: Run) {
+    if let Some(last) = runs.last_mut()
+        && last.joins(&run)
+    {
+        last.x1 = run.x1;
+    } else {
+        runs.push(run);
     }
 }
 
