@@ -782,18 +782,32 @@ fn touched_chunks(
             return;
         }
         let (a, c) = if a[1] < c[1] { (a, c) } else { (c, a) };
-        let slope = (c[0] - a[0]) / (c[1] - a[1]);
-        let x_at = |y: f64| a[0] + (y - a[1]) * slope;
+        // The chunks around columns `xa..xb` (either order), if any.
+        let chunks = |xa: f64, xb: f64| {
+            let lo = (floor_f64(xa.min(xb)) - 1.0).max(first);
+            let hi = (floor_f64(xa.max(xb)) + 3.0).min(last);
+            (lo < hi).then(|| (floor_f64(lo / chunk) as u32, ceil_f64(hi / chunk) as u32))
+        };
         let r1 = ceil_f64(c[1].min(yhi));
         let mut y = floor_f64(a[1].max(ylo));
+        if a[0] == c[0] {
+            // A vertical edge (a stripe's side): the same chunks in every row.
+            let x = a[0].clamp(0.0, xmax);
+            if let Some((ka, kb)) = chunks(x, x) {
+                while y < r1 {
+                    out.push(((y - ylo) as u32, ka, kb));
+                    y += 1.0;
+                }
+            }
+            return;
+        }
+        let slope = (c[0] - a[0]) / (c[1] - a[1]);
+        let x_at = |y: f64| a[0] + (y - a[1]) * slope;
         while y < r1 {
             let (ya, yb) = (y.max(a[1]), (y + 1.0).min(c[1]));
             let (xa, xb) = (x_at(ya).clamp(0.0, xmax), x_at(yb).clamp(0.0, xmax));
-            let lo = (floor_f64(xa.min(xb)) - 1.0).max(first);
-            let hi = (floor_f64(xa.max(xb)) + 3.0).min(last);
-            if lo < hi {
-                let (ka, kb) = (floor_f64(lo / chunk), ceil_f64(hi / chunk));
-                out.push(((y - ylo) as u32, ka as u32, kb as u32));
+            if let Some((ka, kb)) = chunks(xa, xb) {
+                out.push(((y - ylo) as u32, ka, kb));
             }
             y += 1.0;
         }
