@@ -1037,6 +1037,177 @@ fn walk(p0: Point, p1: Point, bx: [f64; 4], f: &mut impl FnMut(usize, usize, f64
     }
 }
 
+/// Whether the winding number of `rings` takes only two values anywhere, 0 and one `o = ±1`
+/// (a glyph, a shape with holes, a stroke's outline): then no pixel holds three, and the
+/// accumulated integral is exact everywhere. `false` when that is not so or not shown
+/// within the budget (conservative: the search for cells then runs).
+///
+/// Shown in two steps:
+/// 1. **No two edges meet**, but consecutive edges of a ring at their shared vertex (and
+///    those not folding back onto each other): a sweep over the edges sorted by their least
+///    `x`, with exact orientation signs in `f64` (any zero sign of two non-consecutive
+///    edges counts as meeting unless they are collinear and apart). So every ring is
+///    simple and no two cross or touch; each has one orientation `o(R)`, the sign of its
+///    area, which is the winding number inside it.
+/// 2. **Orientations alternate with nesting.** The other rings' winding number `W` is
+///    constant along a ring `R` (none crosses it), so the faces beside `R` have windings
+///    `W` (outside) and `W + o(R)` (inside). Both must lie in `{0, o}`; every face lies
+///    beside some ring, or is the outside (0), so every winding does.
+pub(crate) fn windings_two_valued(pts: &[Point], rings: &[(usize, usize)]) -> bool {
+    /// Edge pairs or vertex–edge tests at most, before giving up.
+    const BUDGET: usize = 1 << 16;
+    let orient = |a: Point, b: Point, c: Point| {
+        let v = (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]);
+        if v > 0.0 {
+            1i8
+        } else if v < 0.0 {
+            -1
+        } else {
+            0
+        }
+    };
+    // The rings without repeated vertices (a closing point equal to the first one).
+    let mut clean: Vec<Point> = Vec::with_capacity(pts.len());
+    let mut clean_rings = Vec::with_capacity(rings.len());
+    for &(s, n) in rings {
+        let start = clean.len();
+        for &q in &pts[s..s + n] {
+            if clean.len() == start || clean.last() != Some(&q) {
+                clean.push(q);
+            }
+        }
+        while clean.len() > start + 1 && clean.last() == Some(&clean[start]) {
+            clean.pop();
+        }
+        clean_rings.push((start, clean.len() - start));
+    }
+    let (pts, rings) = (&clean[..], &clean_rings[..]);
+    let total: usize = rings.iter().map(|r| r.1).sum();
+    if rings.iter().any(|r| r.1 < 3) || rings.len().saturating_mul(total) > BUDGET * 4 {
+        return false;
+    }
+    // 1. Edges as (least x, greatest x, least y, greatest y, ring, index in the ring).
+    let mut edges: Vec<([f64; 4], u32, u32)> = Vec::with_capacity(total);
+    for (r, &(s, n)) in rings.iter().enumerate() {
+        for k in 0..n {
+            let (a, b) = (pts[s + k], pts[s + (k + 1) % n]);
+            if !(a[0].is_finite() && a[1].is_finite()) {
+                return false;
+            }
+            let c = pts[s + (k + 2) % n];
+            // Consecutive edges folding back onto each other (or a zero-length edge).
+            if a == b
+                || orient(a, b, c) == 0
+                    && (b[0] - a[0]) * (c[0] - b[0]) + (b[1] - a[1]) * (c[1] - b[1]) <= 0.0
+            {
+                return false;
+            }
+            let bx = [
+                a[0].min(b[0]),
+                a[0].max(b[0]),
+                a[1].min(b[1]),
+                a[1].max(b[1]),
+            ];
+            edges.push((bx, r as u32, k as u32));
+        }
+    }
+    edges.sort_unstable_by(|a, b| a.0[0].total_cmp(&b.0[0]));
+    let ends = |e: &([f64; 4], u32, u32)| {
+        let (s, n) = rings[e.1 as usize];
+        let k = e.2 as usize;
+        (pts[s + k], pts[s + (k + 1) % n])
+    };
+    let mut tests = 0usize;
+    for i in 0..edges.len() {
+        let (bi, ri, ki) = edges[i];
+        for &(bj, rj, kj) in &edges[i + 1..] {
+            if bj[0] > bi[1] {
+                break;
+            }
+            if bj[2] > bi[3] || bi[2] > bj[3] {
+                continue;
+            }
+            tests += 1;
+            if tests > BUDGET {
+                return false;
+            }
+            let n = rings[ri as usize].1 as u32;
+            if ri == rj && ((ki + 1) % n == kj || (kj + 1) % n == ki) {
+                // Consecutive: they share a vertex, and do not fold back (checked above).
+                continue;
+            }
+            let ((p, q), (u, v)) = (ends(&edges[i]), ends(&(bj, rj, kj)));
+            let (o1, o2) = (orient(p, q, u), orient(p, q, v));
+            let (o3, o4) = (orient(u, v, p), orient(u, v, q));
+            if o1 == 0 && o2 == 0 {
+                // Collinear: apart only when their extents along the line are apart
+                // (their boxes overlap, so compare along the longer axis).
+                let ax = if (q[0] - p[0]).abs() >= (q[1] - p[1]).abs() {
+                    0
+                } else {
+                    1
+                };
+                let (lo, hi) = (p[ax].min(q[ax]), p[ax].max(q[ax]));
+                if u[ax].max(v[ax]) < lo || u[ax].min(v[ax]) > hi {
+                    continue;
+                }
+                return false;
+            }
+            if o1 * o2 <= 0 && o3 * o4 <= 0 {
+                return false;
+            }
+        }
+    }
+    // 2. Each ring's orientation and the others' winding number at its first vertex.
+    let winding = |s: usize, n: usize, x: Point| {
+        let mut w = 0i64;
+        for k in 0..n {
+            let (a, b) = (pts[s + k], pts[s + (k + 1) % n]);
+            if a[1] <= x[1] {
+                if b[1] > x[1] && orient(a, b, x) > 0 {
+                    w += 1;
+                }
+            } else if b[1] <= x[1] && orient(a, b, x) < 0 {
+                w -= 1;
+            }
+        }
+        w
+    };
+    let mut other: Option<i64> = None;
+    for (r, &(s, n)) in rings.iter().enumerate() {
+        let twice_area: f64 = (0..n)
+            .map(|k| {
+                let (a, b) = (pts[s + k], pts[s + (k + 1) % n]);
+                a[0] * b[1] - b[0] * a[1]
+            })
+            .sum();
+        let o = if twice_area > 0.0 {
+            1
+        } else if twice_area < 0.0 {
+            -1
+        } else {
+            return false;
+        };
+        let v = pts[s];
+        let w: i64 = rings
+            .iter()
+            .enumerate()
+            .filter(|&(q, _)| q != r)
+            .map(|(_, &(s2, n2))| winding(s2, n2, v))
+            .sum();
+        // The two windings beside this ring, `w` and `w + o`: one is 0, the other the
+        // drawing's one other value.
+        let value = match (w, w + o) {
+            (0, x) | (x, 0) => x,
+            _ => return false,
+        };
+        if *other.get_or_insert(value) != value {
+            return false;
+        }
+    }
+    true
+}
+
 /// Whether no pixel can hold three winding values: every ring is simple (convex, or
 /// monotone in y with its two sides apart) and no two rings share a pixel. `false` when
 /// unsure (many rings close together, a ring neither convex nor y-monotone).
@@ -1236,6 +1407,7 @@ mod tests {
     use crate::Image;
     use crate::raster::render::BandRenderer;
     use crate::raster::{RenderOptions, render, render_backward};
+    use crate::rng::Rng;
     use crate::scene::{Fill, FillRule, Node, Paint, Path, Scene};
 
     /// The options with exact overlaps on.
@@ -1339,6 +1511,144 @@ mod tests {
 
     fn rect(x0: f64, y0: f64, x1: f64, y1: f64) -> Vec<Point> {
         vec![[x0, y0], [x1, y0], [x1, y1], [x0, y1]]
+    }
+
+    /// [`windings_two_valued`] of rings given as point lists.
+    fn two_valued(rings: &[Vec<Point>]) -> bool {
+        let mut pts = Vec::new();
+        let mut spans = Vec::new();
+        for r in rings {
+            spans.push((pts.len(), r.len()));
+            pts.extend_from_slice(r);
+        }
+        windings_two_valued(&pts, &spans)
+    }
+
+    /// A regular polygon of `n` vertices around `c`, counterclockwise in `(x, y)` when
+    /// `ccw`.
+    fn polygon(c: Point, r: f64, n: usize, ccw: bool) -> Vec<Point> {
+        let mut v: Vec<Point> = (0..n)
+            .map(|k| {
+                let t = std::f64::consts::TAU * k as f64 / n as f64;
+                [c[0] + r * t.cos(), c[1] + r * t.sin()]
+            })
+            .collect();
+        if !ccw {
+            v.reverse();
+        }
+        v
+    }
+
+    /// Which rings need no search: two-valued windings (a shape with a hole wound the
+    /// other way, apart rings wound alike, a closing point repeated) against three values
+    /// (a hole wound the same way, rings wound opposite ways side by side, coincident or
+    /// touching rings, a self-crossing star, a fold back).
+    #[test]
+    fn two_valued_windings() {
+        let outer = polygon([10.0, 10.0], 8.0, 40, true);
+        let hole = polygon([10.0, 10.0], 3.0, 24, false);
+        let same_hole = polygon([10.0, 10.0], 3.0, 24, true);
+        assert!(two_valued(&[outer.clone(), hole.clone()]));
+        assert!(two_valued(&[hole.clone(), outer.clone()]));
+        // An island inside the hole, wound like the outer ring.
+        let island = polygon([10.0, 10.0], 1.0, 12, true);
+        assert!(two_valued(&[outer.clone(), hole.clone(), island.clone()]));
+        assert!(!two_valued(&[outer.clone(), same_hole.clone()]));
+        let apart = polygon([30.0, 10.0], 5.0, 16, true);
+        let apart_cw = polygon([30.0, 10.0], 5.0, 16, false);
+        assert!(two_valued(&[outer.clone(), apart]));
+        assert!(!two_valued(&[outer.clone(), apart_cw]));
+        // A repeated closing point is no edge.
+        let mut closed = outer.clone();
+        closed.push(outer[0]);
+        assert!(two_valued(&[closed, hole.clone()]));
+        // Coincident, touching along an edge, and at a vertex.
+        let r = rect(1.0, 1.0, 1.5, 3.0);
+        assert!(!two_valued(&[r.clone(), r.clone()]));
+        assert!(!two_valued(&[r.clone(), rect(1.5, 1.0, 2.25, 3.0)]));
+        assert!(!two_valued(&[r.clone(), rect(1.5, 3.0, 2.0, 4.0)]));
+        // Collinear edges apart are no meeting.
+        assert!(two_valued(&[r.clone(), rect(2.0, 1.0, 2.5, 3.0)]));
+        // A pentagram crosses itself; a ring folding back on itself is not simple.
+        let star: Vec<Point> = (0..5)
+            .map(|k| {
+                let t = std::f64::consts::TAU * (2 * k) as f64 / 5.0;
+                [10.0 + 8.0 * t.cos(), 10.0 + 8.0 * t.sin()]
+            })
+            .collect();
+        assert!(!two_valued(&[star]));
+        assert!(!two_valued(&[vec![
+            [0.0, 0.0],
+            [4.0, 0.0],
+            [2.0, 0.0],
+            [2.0, 3.0]
+        ]]));
+        // Degenerate rings: fewer than three distinct vertices, zero area, non-finite.
+        assert!(!two_valued(&[vec![[0.0, 0.0], [1.0, 1.0]]]));
+        assert!(!two_valued(&[vec![[0.0, 0.0], [1.0, 1.0], [2.0, 2.0]]]));
+        assert!(!two_valued(&[vec![
+            [0.0, 0.0],
+            [f64::NAN, 1.0],
+            [2.0, 0.0]
+        ]]));
+    }
+
+    /// Where [`windings_two_valued`] says so, the clamped integral is the exact coverage:
+    /// random rings (a polygon with a hole close to it, or random polygons) that it accepts
+    /// skip the search and still match, pixel for pixel, the same item integrated exactly.
+    #[test]
+    fn two_valued_items_render_exactly_without_the_search() {
+        let mut rng = Rng::new(29);
+        let mut accepted = 0;
+        for case in 0..60 {
+            let n = 3 + rng.below(9);
+            let c = [rng.range(8.0, 12.0), rng.range(8.0, 12.0)];
+            let rings = if case % 2 == 0 {
+                vec![
+                    polygon(c, 6.0, n + 8, true),
+                    // A hole within a pixel or two of the outer ring, wound either way
+                    // (wound the same way, a pixel there holds three windings).
+                    polygon(
+                        [c[0] + rng.range(0.0, 0.4), c[1]],
+                        rng.range(2.0, 5.2),
+                        n + 3,
+                        rng.below(2) == 0,
+                    ),
+                ]
+            } else {
+                (0..2)
+                    .map(|_| {
+                        (0..n)
+                            .map(|_| [rng.range(1.0, 19.0), rng.range(1.0, 19.0)])
+                            .collect()
+                    })
+                    .collect()
+            };
+            for evenodd in [false, true] {
+                let s = scene(20, 20, &rings, evenodd);
+                let mut p = crate::raster::Prepared::new(&s, &exact());
+                if p.items[0].can_overlap {
+                    continue;
+                }
+                accepted += 1;
+                let got = alpha(&s);
+                // The reference: the same item with the search and exact integration on.
+                let it = &mut p.items[0];
+                it.can_overlap = true;
+                it.run_boxes = run_boxes(&it.pts, &it.rings);
+                let truth = crate::raster::render_prepared(&p);
+                let worst = got
+                    .iter()
+                    .zip(&truth.data)
+                    .map(|(a, b)| (a - b[3] as f64).abs())
+                    .fold(0.0, f64::max);
+                assert!(
+                    worst < 1e-5,
+                    "case {case} even-odd {evenodd}: off by {worst}"
+                );
+            }
+        }
+        assert!(accepted >= 20, "only {accepted} of 120 accepted");
     }
 
     /// Issue 29: two coincident rectangles in one path, each covering the left half of

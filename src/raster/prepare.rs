@@ -256,7 +256,8 @@ impl Prepared {
         self.exact_overlaps = on;
         if on {
             for it in &mut self.items {
-                it.can_overlap = !super::overlap::rings_cannot_overlap(&it.pts, &it.rings);
+                it.can_overlap = !super::overlap::rings_cannot_overlap(&it.pts, &it.rings)
+                    && !super::overlap::windings_two_valued(&it.pts, &it.rings);
                 if it.can_overlap && !it.crisp && it.run_boxes.is_empty() {
                     it.run_boxes = super::overlap::run_boxes(&it.pts, &it.rings);
                 }
