@@ -111,3 +111,170 @@ fn recon_ngp_refuses_bad_flags_before_reading() {
         assert_clean_failure(&r, &[needle], &out);
     }
 }
+
+/// `recon nerf` then `view` on the same scene: a small NeRF field (6 octaves, 32 wide).
+#[test]
+fn recon_nerf_then_view_reproduce_a_synthetic_scene() {
+    let dir = scratch("nerf_e2e");
+    let scene = dir.join("scene");
+    write_scene(&scene, 24, 3, 24);
+    let model = dir.join("out/model.nerf");
+    let r = diffsvg(&[
+        "recon",
+        "nerf",
+        "--scene",
+        s(&scene),
+        "-o",
+        s(&model),
+        "--iters",
+        "150",
+        "--frequencies",
+        "6",
+        "--width",
+        "32",
+        "--density-layers",
+        "2",
+        "--steps",
+        "96",
+        "--samples",
+        "8192",
+        "--lr",
+        "5e-3",
+        "--json",
+    ]);
+    assert!(r.status.success(), "{}", stderr(&r));
+    let sum = summary(&r);
+    println!("recon nerf: {sum}");
+    assert_eq!(sum["iterations"], json!(150));
+    let test_psnr = sum["test_psnr"].as_f64().expect("a test PSNR");
+    let empty = empty_model_psnr(&scene);
+    assert!(
+        test_psnr > empty + 5.0,
+        "held-out {test_psnr:.2} dB, an empty model {empty:.2} dB"
+    );
+    assert_eq!(&std::fs::read(&model).unwrap()[..8], b"DSNERFLD");
+    let m = diffsvg::volume::field::load(&model).unwrap();
+    assert_eq!(m.shape().kind(), diffsvg::volume::field::FieldKind::Nerf);
+    assert_eq!(m.shape().frequencies, 6);
+    assert_eq!(m.shape().density_layers, 2);
+
+    let views = dir.join("views");
+    let r = diffsvg(&[
+        "view",
+        s(&model),
+        "--scene",
+        s(&scene),
+        "-o",
+        s(&views),
+        "--json",
+    ]);
+    assert!(r.status.success(), "{}", stderr(&r));
+    let v = summary(&r);
+    assert_eq!(v["views"], json!(3));
+    let p = v["psnr"].as_f64().unwrap();
+    assert!((p - test_psnr).abs() < 0.5, "view {p} vs recon {test_psnr}");
+
+    let bytes = std::fs::read(&model).unwrap();
+    let cut = dir.join("cut.nerf");
+    std::fs::write(&cut, &bytes[..bytes.len() - 3]).unwrap();
+    let out = dir.join("cut-views");
+    let r = diffsvg(&["view", s(&cut), "--scene", s(&scene), "-o", s(&out)]);
+    assert_clean_failure(&r, &["cut.nerf", "header implies"], &out);
+}
+
+#[test]
+fn recon_nerf_refuses_bad_flags_before_reading() {
+    let dir = scratch("nerf_bad_flags");
+    let scene = small_scene(&dir, "scene");
+    let out = dir.join("out");
+    for (flag, value, needle) in [
+        ("--frequencies", "0", "--frequencies"),
+        ("--frequencies", "17", "--frequencies"),
+        ("--density-layers", "5", "--density-layers"),
+        ("--color-layers", "0", "--color-layers"),
+        ("--width", "4", "--width"),
+        ("--steps", "2", "--steps"),
+        ("--lr", "nan", "--lr"),
+        ("--levels", "4", "--levels"),
+    ] {
+        let model = out.join("m.nerf");
+        let mut args = vec!["recon", "nerf", "--scene", s(&scene), "-o", s(&model), flag];
+        if !value.is_empty() {
+            args.push(value);
+        }
+        let r = diffsvg(&args);
+        assert_clean_failure(&r, &[needle], &out);
+    }
+    // The model's extension must be the kind's.
+    let r = diffsvg(&[
+        "recon",
+        "nerf",
+        "--scene",
+        s(&scene),
+        "-o",
+        s(&out.join("m.ngp")),
+    ]);
+    assert_clean_failure(&r, &["m.ngp"], &out);
+}
+
+/// `diffsvg ladder` with tiny budgets on the synthetic scene: four rows with finite
+/// scores, the table, the JSON and the chart; bad flags fail with one line, no file.
+#[test]
+fn ladder_trains_every_representation_and_writes_the_table() {
+    let dir = scratch("ladder");
+    let scene = dir.join("scene");
+    write_scene(&scene, 24, 3, 24);
+    let out = dir.join("out");
+    let r = diffsvg(&[
+        "ladder",
+        "--scene",
+        s(&scene),
+        "--seconds",
+        "1.5",
+        "--voxel-res",
+        "32",
+        "--voxel-iters",
+        "100",
+        "--splat-iters",
+        "100",
+        "-o",
+        s(&out),
+        "--json",
+    ]);
+    assert!(r.status.success(), "{}", stderr(&r));
+    let t: serde_json::Value = serde_json::from_slice(&r.stdout).unwrap();
+    let rows = t["rows"].as_array().unwrap();
+    let names: Vec<&str> = rows.iter().map(|r| r["model"].as_str().unwrap()).collect();
+    assert_eq!(names, ["voxel", "splat", "ngp", "nerf"]);
+    for row in rows {
+        let p = row["test_psnr"].as_f64().unwrap();
+        assert!(p.is_finite() && p > 5.0, "{row}");
+        let ssim = row["ssim"].as_f64().unwrap();
+        assert!(ssim > 0.0 && ssim <= 1.0, "{row}");
+        assert!(row["train_seconds"].as_f64().unwrap() < 15.0, "{row}");
+        assert!(row["render_seconds_per_view"].as_f64().unwrap() > 0.0);
+        assert_eq!(row["views"], json!(3));
+        let file = std::path::PathBuf::from(row["file"].as_str().unwrap());
+        assert_eq!(
+            row["model_bytes"].as_u64(),
+            Some(std::fs::metadata(&file).unwrap().len())
+        );
+    }
+    for f in ["ladder.md", "ladder.json", "ladder.png", "ladder.svg"] {
+        assert!(out.join(f).is_file(), "{f}");
+    }
+    let md = std::fs::read_to_string(out.join("ladder.md")).unwrap();
+    assert_eq!(md.lines().filter(|l| l.starts_with("| ")).count(), 5);
+
+    let bad = dir.join("bad");
+    for args in [
+        vec!["--seconds", "0"],
+        vec!["--seconds", "1", "--rungs", "voxel,mesh"],
+        vec!["--seconds", "1", "--downscale", "0"],
+    ] {
+        let mut a = vec!["ladder", "--scene", s(&scene), "-o", s(&bad)];
+        a.extend(args);
+        let r = diffsvg(&a);
+        assert_clean_failure(&r, &[], &bad);
+    }
+}
