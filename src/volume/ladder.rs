@@ -74,6 +74,9 @@ pub struct LadderJob {
     pub ngp: NgpJob,
     /// The NeRF field's job ([`NgpJob::nerf`]).
     pub nerf: NgpJob,
+    /// Score only the first this many test views (`None`: all); rendering the NeRF
+    /// field's views takes minutes.
+    pub test_views: Option<usize>,
 }
 
 impl LadderJob {
@@ -103,6 +106,7 @@ impl LadderJob {
                 iters: crate::limits::MAX_ITERS,
                 ..NgpJob::nerf()
             },
+            test_views: None,
         }
     }
 
@@ -129,6 +133,12 @@ impl LadderJob {
         }
         self.voxel.validate()?;
         self.splat.validate()?;
+        if self.test_views == Some(0) {
+            return Err(Error::Setting {
+                name: "test_views".into(),
+                message: "0 must be at least 1".into(),
+            });
+        }
         self.ngp.validate()?;
         self.nerf.validate()
     }
@@ -225,7 +235,7 @@ pub fn run_ladder(
             }
         };
         let (test_psnr, ssim, render_seconds, views) =
-            score(&path, scene, &job.loading(rung), job.voxel.step)?;
+            score(&path, scene, &job.loading(rung), job.voxel.step, job.test_views)?;
         rows.push(LadderRow {
             rung,
             test_psnr,
@@ -247,13 +257,14 @@ pub fn run_ladder(
     Ok(rows)
 }
 
-/// Mean PSNR, mean SSIM and the median render time of the test views of the model file
-/// `path`, read as `view` reads it.
+/// Mean PSNR, mean SSIM and the median render time of the (first `limit`) test views of
+/// the model file `path`, read as `view` reads it.
 fn score(
     path: &Path,
     scene: &Path,
     loading: &Loading,
     step: f32,
+    limit: Option<usize>,
 ) -> Result<(f64, f64, f64, usize)> {
     let mut model = Model::load(path, step)?;
     let (data, _) = model.load_dataset(scene, loading)?;
@@ -263,15 +274,16 @@ fn score(
             what: "the scene has no test views to score the ladder on".into(),
         });
     }
+    let views = &data.test[..limit.unwrap_or(usize::MAX).min(data.test.len())];
     let (mut p, mut s, mut times) = (0.0, 0.0, Vec::new());
-    for v in &data.test {
+    for v in views {
         let t = Instant::now();
         let img = model.render(&v.camera)?;
         times.push(t.elapsed().as_secs_f64());
         p += psnr(&img, &v.rgb).min(99.0);
         s += ssim(&img, &v.rgb, v.width as usize, v.height as usize);
     }
-    let n = data.test.len();
+    let n = views.len();
     times.sort_by(f64::total_cmp);
     Ok((p / n as f64, s / n as f64, times[n / 2], n))
 }
