@@ -234,8 +234,13 @@ pub fn run_ladder(
                 (r.outcome.seconds, r.outcome.iterations)
             }
         };
-        let (test_psnr, ssim, render_seconds, views) =
-            score(&path, scene, &job.loading(rung), job.voxel.step, job.test_views)?;
+        let (test_psnr, ssim, render_seconds, views) = score(
+            &path,
+            scene,
+            &job.loading(rung),
+            job.voxel.step,
+            job.test_views,
+        )?;
         rows.push(LadderRow {
             rung,
             test_psnr,

@@ -62,13 +62,24 @@ fn recon_ngp_then_view_reproduce_a_synthetic_scene() {
     );
     assert!(dir.join("out/model.log.csv").is_file());
 
-    // `view` reads the kind from the header and scores the same test views.
+    view_agrees_and_a_cut_model_fails(&dir, &scene, &model, test_psnr, "ngp");
+}
+
+/// `view` reads the kind from the header and scores the same test views as `recon`
+/// (`test_psnr`); the model cut short fails with one line naming it, nothing written.
+fn view_agrees_and_a_cut_model_fails(
+    dir: &std::path::Path,
+    scene: &std::path::Path,
+    model: &std::path::Path,
+    test_psnr: f64,
+    ext: &str,
+) {
     let views = dir.join("views");
     let r = diffsvg(&[
         "view",
-        s(&model),
+        s(model),
         "--scene",
-        s(&scene),
+        s(scene),
         "-o",
         s(&views),
         "--json",
@@ -78,14 +89,13 @@ fn recon_ngp_then_view_reproduce_a_synthetic_scene() {
     assert_eq!(v["views"], json!(3));
     let p = v["psnr"].as_f64().unwrap();
     assert!((p - test_psnr).abs() < 0.5, "view {p} vs recon {test_psnr}");
-
-    // A truncated model: one line naming the file, nothing written.
-    let bytes = std::fs::read(&model).unwrap();
-    let cut = dir.join("cut.ngp");
+    let bytes = std::fs::read(model).unwrap();
+    let name = format!("cut.{ext}");
+    let cut = dir.join(&name);
     std::fs::write(&cut, &bytes[..bytes.len() - 3]).unwrap();
     let out = dir.join("cut-views");
-    let r = diffsvg(&["view", s(&cut), "--scene", s(&scene), "-o", s(&out)]);
-    assert_clean_failure(&r, &["cut.ngp", "header implies"], &out);
+    let r = diffsvg(&["view", s(&cut), "--scene", s(scene), "-o", s(&out)]);
+    assert_clean_failure(&r, &[&name, "header implies"], &out);
 }
 
 #[test]
@@ -157,29 +167,7 @@ fn recon_nerf_then_view_reproduce_a_synthetic_scene() {
     assert_eq!(m.shape().kind(), diffsvg::volume::field::FieldKind::Nerf);
     assert_eq!(m.shape().frequencies, 6);
     assert_eq!(m.shape().density_layers, 2);
-
-    let views = dir.join("views");
-    let r = diffsvg(&[
-        "view",
-        s(&model),
-        "--scene",
-        s(&scene),
-        "-o",
-        s(&views),
-        "--json",
-    ]);
-    assert!(r.status.success(), "{}", stderr(&r));
-    let v = summary(&r);
-    assert_eq!(v["views"], json!(3));
-    let p = v["psnr"].as_f64().unwrap();
-    assert!((p - test_psnr).abs() < 0.5, "view {p} vs recon {test_psnr}");
-
-    let bytes = std::fs::read(&model).unwrap();
-    let cut = dir.join("cut.nerf");
-    std::fs::write(&cut, &bytes[..bytes.len() - 3]).unwrap();
-    let out = dir.join("cut-views");
-    let r = diffsvg(&["view", s(&cut), "--scene", s(&scene), "-o", s(&out)]);
-    assert_clean_failure(&r, &["cut.nerf", "header implies"], &out);
+    view_agrees_and_a_cut_model_fails(&dir, &scene, &model, test_psnr, "nerf");
 }
 
 #[test]

@@ -323,19 +323,26 @@ fn a_short_fit_learns_a_ball() {
     );
 }
 
-#[test]
-fn files_round_trip_and_bad_files_are_named() {
-    let m = busy_model();
-    let bytes = io::to_bytes(&m);
+/// `m`'s file image, after checking that it has the size its header implies and loads
+/// back to the same bytes and pixels.
+fn round_trip(m: &Ngp, name: &str) -> Vec<u8> {
+    let bytes = io::to_bytes(m);
     assert_eq!(bytes.len() as u64, io::file_size(&m.shape()));
-    let back = io::from_bytes(&bytes, "m.ngp".as_ref()).unwrap();
+    let back = io::from_bytes(&bytes, name.as_ref()).unwrap();
+    assert_eq!(back.shape(), m.shape());
     assert_eq!(io::to_bytes(&back), bytes);
     let ray = Ray {
         origin: Vec3::new(0.1, 0.2, 3.0),
         dir: Vec3::NEG_Z,
     };
     let s = RenderSettings::default();
-    assert_eq!(render_ray(&m, &ray, &s), render_ray(&back, &ray, &s));
+    assert_eq!(render_ray(m, &ray, &s), render_ray(&back, &ray, &s));
+    bytes
+}
+
+#[test]
+fn files_round_trip_and_bad_files_are_named() {
+    let bytes = round_trip(&busy_model(), "m.ngp");
     let err = |b: &[u8]| io::from_bytes(b, "m.ngp".as_ref()).unwrap_err().to_string();
     assert!(err(&bytes[..bytes.len() - 1]).contains("header implies"));
     assert!(err(b"DSVOXGRD\x01\0\0\0").contains("bad magic"));
@@ -382,19 +389,8 @@ fn a_short_nerf_fit_learns_a_ball() {
 
 #[test]
 fn nerf_files_round_trip_and_bad_files_are_named() {
-    let m = busy_nerf();
-    let bytes = io::to_bytes(&m);
+    let bytes = round_trip(&busy_nerf(), "m.nerf");
     assert_eq!(&bytes[..8], b"DSNERFLD");
-    assert_eq!(bytes.len() as u64, io::file_size(&m.shape()));
-    let back = io::from_bytes(&bytes, "m.nerf".as_ref()).unwrap();
-    assert_eq!(back.shape(), small_nerf_shape());
-    assert_eq!(io::to_bytes(&back), bytes);
-    let ray = Ray {
-        origin: Vec3::new(0.1, 0.2, 3.0),
-        dir: Vec3::NEG_Z,
-    };
-    let s = RenderSettings::default();
-    assert_eq!(render_ray(&m, &ray, &s), render_ray(&back, &ray, &s));
     let err = |b: &[u8]| {
         io::from_bytes(b, "m.nerf".as_ref())
             .unwrap_err()
