@@ -100,26 +100,39 @@ fn view_agrees_and_a_cut_model_fails(
 
 #[test]
 fn recon_ngp_refuses_bad_flags_before_reading() {
-    let dir = scratch("ngp_bad_flags");
+    refuses_bad_flags(
+        "ngp",
+        &[
+            ("--levels", "0", "--levels"),
+            ("--log2-table", "30", "--log2-table"),
+            ("--width", "4", "--width"),
+            ("--batch", "0", "--batch"),
+            ("--steps", "2", "--steps"),
+            ("--lr", "nan", "--lr"),
+            ("--seconds=-1", "", "--seconds"),
+        ],
+    );
+}
+
+/// `recon KIND` with each `(flag, value, needle)`: exit 2, one line containing the
+/// needle, no file written. Returns the scene and the output folder.
+fn refuses_bad_flags(
+    kind: &str,
+    cases: &[(&str, &str, &str)],
+) -> (std::path::PathBuf, std::path::PathBuf) {
+    let dir = scratch(&format!("{kind}_bad_flags"));
     let scene = small_scene(&dir, "scene");
     let out = dir.join("out");
-    for (flag, value, needle) in [
-        ("--levels", "0", "--levels"),
-        ("--log2-table", "30", "--log2-table"),
-        ("--width", "4", "--width"),
-        ("--batch", "0", "--batch"),
-        ("--steps", "2", "--steps"),
-        ("--lr", "nan", "--lr"),
-        ("--seconds=-1", "", "--seconds"),
-    ] {
-        let model = out.join("m.ngp");
-        let mut args = vec!["recon", "ngp", "--scene", s(&scene), "-o", s(&model), flag];
+    let model = out.join(format!("m.{kind}"));
+    for &(flag, value, needle) in cases {
+        let mut args = vec!["recon", kind, "--scene", s(&scene), "-o", s(&model), flag];
         if !value.is_empty() {
             args.push(value);
         }
         let r = diffsvg(&args);
         assert_clean_failure(&r, &[needle], &out);
     }
+    (scene, out)
 }
 
 /// `recon nerf` then `view` on the same scene: a small NeRF field (6 octaves, 32 wide).
@@ -172,27 +185,19 @@ fn recon_nerf_then_view_reproduce_a_synthetic_scene() {
 
 #[test]
 fn recon_nerf_refuses_bad_flags_before_reading() {
-    let dir = scratch("nerf_bad_flags");
-    let scene = small_scene(&dir, "scene");
-    let out = dir.join("out");
-    for (flag, value, needle) in [
-        ("--frequencies", "0", "--frequencies"),
-        ("--frequencies", "17", "--frequencies"),
-        ("--density-layers", "5", "--density-layers"),
-        ("--color-layers", "0", "--color-layers"),
-        ("--width", "4", "--width"),
-        ("--steps", "2", "--steps"),
-        ("--lr", "nan", "--lr"),
-        ("--levels", "4", "--levels"),
-    ] {
-        let model = out.join("m.nerf");
-        let mut args = vec!["recon", "nerf", "--scene", s(&scene), "-o", s(&model), flag];
-        if !value.is_empty() {
-            args.push(value);
-        }
-        let r = diffsvg(&args);
-        assert_clean_failure(&r, &[needle], &out);
-    }
+    let (scene, out) = refuses_bad_flags(
+        "nerf",
+        &[
+            ("--frequencies", "0", "--frequencies"),
+            ("--frequencies", "17", "--frequencies"),
+            ("--density-layers", "5", "--density-layers"),
+            ("--color-layers", "0", "--color-layers"),
+            ("--width", "4", "--width"),
+            ("--steps", "2", "--steps"),
+            ("--lr", "nan", "--lr"),
+            ("--levels", "4", "--levels"),
+        ],
+    );
     // The model's extension must be the kind's.
     let r = diffsvg(&[
         "recon",
