@@ -13,7 +13,7 @@ Conventions (the library's):
   vector; ``Scene.arrays()`` gives the same numbers per shape as DiffVG names them
   (control points ``(n, 2)``, fill/stroke color ``(4,)`` = r, g, b, opacity, stroke width,
   gradient geometry and stops). Gradients come back in the same structures.
-* **3D** (``recon_voxel``, ``recon_splat``): a posed-photo folder (NeRF-synthetic or
+* **3D** (``recon_voxel``, ``recon_splat``, ``recon_ngp``, ``recon_nerf``): a posed-photo folder (NeRF-synthetic or
   instant-ngp) in, a model file out, as ``diffsvg recon``; ``diffsvg view`` renders it.
 * **Errors.** Bad input raises ``DiffsvgError`` (a ``ValueError``), ``FileNotFoundError``
   or ``OSError`` with one line naming the file or argument; nothing panics.
@@ -59,6 +59,8 @@ __all__ = [
     "glyphs",
     "recon_voxel",
     "recon_splat",
+    "recon_ngp",
+    "recon_nerf",
     "view",
 ]
 
@@ -111,12 +113,13 @@ def _whole_or_none(v: Any, name: str, top: int = _U32) -> Optional[int]:
     return None if v is None else _whole(v, name, top)
 
 
-def _pair(p: Any) -> Optional[Tuple[float, float]]:
+def _pair(p: Any, name: str = "perturb_poses",
+          what: str = "(degrees, units)") -> Optional[Tuple[float, float]]:
     if p is None:
         return None
     t = tuple(float(v) for v in p)
     if len(t) != 2:
-        raise DiffsvgError(f"perturb_poses: expected (degrees, units), got {p!r}")
+        raise DiffsvgError(f"{name}: expected {what}, got {p!r}")
     return t
 
 
@@ -963,6 +966,62 @@ def recon_splat(scene, output, *, iters: int = 5000, downscale: int = 1,
         _whole_or_none(test_every, "test_every", _U64),
         bool(antialias), bool(exposure), bool(mcmc), bool(refine_poses), _pair(perturb_poses),
         progress)
+
+
+def recon_ngp(scene, output, *, iters: int = 2000, seconds: float = 0.0, batch: int = 8192,
+              samples: int = 65536, downscale: int = 1, bound: Optional[float] = None,
+              steps: int = 512, levels: int = 16, log2_table: int = 16, min_res: int = 16,
+              max_res: int = 1024, width: int = 64, lr: Tuple[float, float] = (1e-2, 1e-3),
+              seed: int = 0, eval_every: int = 0, test_every: Optional[int] = None,
+              progress: Progress = None) -> ReconInfo:
+    """Fits an Instant-NGP neural field (a multiresolution hash grid and tiny MLPs) to the
+    posed photos in ``scene`` and writes it to ``output`` (``.ngp``), exactly as ``diffsvg
+    recon ngp`` with the same options (same file, bit for bit, for a fixed ``iters`` and
+    ``seconds=0``).
+
+    ``seconds``: a training time budget (0: none; the learning rate ``lr = (start, end)``
+    then decays over it). ``samples``: network evaluations aimed at per iteration (at most
+    ``batch`` rays); ``steps``: samples along the box's diagonal; ``levels``,
+    ``log2_table``, ``min_res``, ``max_res``: the hash grid; ``width``: neurons per hidden
+    layer. ``progress(step)`` runs after every iteration with ``iteration``, ``loss``,
+    ``psnr``, ``samples_per_second``, ``occupied``, ``seconds`` and ``test_psnr`` (as in
+    :func:`recon_voxel`).
+
+    Returns a dict: ``output``, ``iterations``, ``stopped``, ``seconds``,
+    ``load_seconds``, ``test_psnr``, ``samples``, ``samples_per_second``, ``parameters``,
+    ``occupied`` (fraction of occupancy cells kept), ``pose_error`` (``None``) and
+    ``log``: rows of iteration, seconds, samples, samples per second, batch PSNR, test PSNR.
+    """
+    return _native.recon_ngp(
+        os.fspath(scene), os.fspath(output), _whole(iters, "iters", _U64), seconds,
+        _whole(batch, "batch", _U64), _whole(samples, "samples", _U64),
+        _whole(downscale, "downscale"), bound, _whole(steps, "steps"),
+        _whole(levels, "levels"), _whole(log2_table, "log2_table"),
+        _whole(min_res, "min_res"), _whole(max_res, "max_res"), _whole(width, "width"),
+        _pair(lr, "lr", "(start, end)"), _whole(seed, "seed", _U64), _whole(eval_every, "eval_every", _U64),
+        _whole_or_none(test_every, "test_every", _U64), progress)
+
+
+def recon_nerf(scene, output, *, iters: int = 2000, seconds: float = 0.0, batch: int = 8192,
+               samples: int = 16384, downscale: int = 1, bound: Optional[float] = None,
+               steps: int = 256, frequencies: int = 10, width: int = 64,
+               density_layers: int = 4, color_layers: int = 1,
+               lr: Tuple[float, float] = (2e-3, 2e-4), seed: int = 0, eval_every: int = 0,
+               test_every: Optional[int] = None, progress: Progress = None) -> ReconInfo:
+    """Fits a NeRF field (NeRF's positional encoding of ``frequencies`` octaves and an MLP
+    of ``density_layers`` and ``color_layers`` hidden layers of ``width``) to the posed
+    photos in ``scene`` and writes it to ``output`` (``.nerf``), exactly as ``diffsvg
+    recon nerf``. Slow: the ladder's first rung. Options, progress and the returned dict
+    as :func:`recon_ngp`'s.
+    """
+    return _native.recon_nerf(
+        os.fspath(scene), os.fspath(output), _whole(iters, "iters", _U64), seconds,
+        _whole(batch, "batch", _U64), _whole(samples, "samples", _U64),
+        _whole(downscale, "downscale"), bound, _whole(steps, "steps"),
+        _whole(frequencies, "frequencies"), _whole(width, "width"),
+        _whole(density_layers, "density_layers"), _whole(color_layers, "color_layers"),
+        _pair(lr, "lr", "(start, end)"), _whole(seed, "seed", _U64), _whole(eval_every, "eval_every", _U64),
+        _whole_or_none(test_every, "test_every", _U64), progress)
 
 
 def view(model, scene=None, *, split: str = "test", orbit: int = 0, elevation: float = 30.0,

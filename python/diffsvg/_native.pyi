@@ -105,6 +105,20 @@ def recon_splat(scene: str | PathLike[str], output: str | PathLike[str], iters: 
                 refine_poses: bool = False,
                 perturb_poses: Optional[Tuple[float, float]] = None,
                 progress: Progress = None) -> ReconInfo: ...
+def recon_ngp(scene: str | PathLike[str], output: str | PathLike[str], iters: int = 2000,
+              seconds: float = 0.0, batch: int = 8192, samples: int = 65536,
+              downscale: int = 1, bound: Optional[float] = None, steps: int = 512,
+              levels: int = 16, log2_table: int = 16, min_res: int = 16, max_res: int = 1024,
+              width: int = 64, lr: Tuple[float, float] = (1e-2, 1e-3), seed: int = 0,
+              eval_every: int = 0, test_every: Optional[int] = None,
+              progress: Progress = None) -> ReconInfo: ...
+def recon_nerf(scene: str | PathLike[str], output: str | PathLike[str], iters: int = 2000,
+               seconds: float = 0.0, batch: int = 8192, samples: int = 16384,
+               downscale: int = 1, bound: Optional[float] = None, steps: int = 256,
+               frequencies: int = 10, width: int = 64, density_layers: int = 4,
+               color_layers: int = 1, lr: Tuple[float, float] = (2e-3, 2e-4), seed: int = 0,
+               eval_every: int = 0, test_every: Optional[int] = None,
+               progress: Progress = None) -> ReconInfo: ...
 def view(model: str | PathLike[str], scene: Optional[str | PathLike[str]] = None,
          split: str = "test", orbit: int = 0, elevation: float = 30.0, downscale: int = 1,
          step: float = 0.5) -> Views: ...

@@ -142,7 +142,7 @@ class GlyphInfo(TypedDict):
 
 
 class ReconInfo(TypedDict):
-    """What ``recon_voxel`` and ``recon_splat`` return."""
+    """What ``recon_voxel``, ``recon_splat``, ``recon_ngp`` and ``recon_nerf`` return."""
     output: str
     iterations: int
     stopped: bool
@@ -155,6 +155,10 @@ class ReconInfo(TypedDict):
     batch: NotRequired[int]
     gaussians: NotRequired[int]
     undistorted: NotRequired[Optional[float]]
+    samples: NotRequired[int]
+    samples_per_second: NotRequired[float]
+    parameters: NotRequired[int]
+    occupied: NotRequired[float]
     pose_error: Optional[Dict[str, Tuple[float, float]]]
 
 

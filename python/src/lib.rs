@@ -49,6 +49,8 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(jobs::glyph, m)?)?;
     m.add_function(wrap_pyfunction!(recon::recon_voxel, m)?)?;
     m.add_function(wrap_pyfunction!(recon::recon_splat, m)?)?;
+    m.add_function(wrap_pyfunction!(recon::recon_ngp, m)?)?;
+    m.add_function(wrap_pyfunction!(recon::recon_nerf, m)?)?;
     m.add_function(wrap_pyfunction!(recon::view, m)?)?;
     Ok(())
 }

@@ -1,4 +1,5 @@
-//! 3D reconstruction from posed photos: `recon_voxel` and `recon_splat`, the library's
+//! 3D reconstruction from posed photos: `recon_voxel`, `recon_splat`, `recon_ngp` and
+//! `recon_nerf`, the library's
 //! [`diffsvg::volume::recon`] jobs with the GIL released, a progress callback, and the
 //! model written atomically to a file as the command line writes it.
 
@@ -6,9 +7,10 @@ use std::path::{Path, PathBuf};
 
 use diffsvg::fit::Control;
 use diffsvg::volume::recon::{
-    SplatJob, VoxelJob, recon_splat as lib_splat, recon_voxel as lib_voxel,
+    NgpJob, SplatJob, VoxelJob, recon_ngp as lib_ngp, recon_splat as lib_splat,
+    recon_voxel as lib_voxel,
 };
-use diffsvg::volume::{splat, voxel};
+use diffsvg::volume::{field, splat, voxel};
 use numpy::PyArray2;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -229,6 +231,170 @@ pub(crate) fn recon_splat<'py>(
     d.set_item("undistorted", out.undistorted)?;
     set_pose_error(&d, &out.pose_error)?;
     Ok(d)
+}
+
+/// Trains a neural field (`job` of either kind) and writes it to `output` as the command
+/// line does; the dict adds `samples`, `samples_per_second`, `parameters` and
+/// `occupied`, and the log's columns are iteration, seconds, samples, samples per
+/// second, batch PSNR and test PSNR.
+fn run_field<'py>(
+    py: Python<'py>,
+    scene: PathBuf,
+    output: PathBuf,
+    job: NgpJob,
+    progress: Option<Py<PyAny>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    job.validate().map_err(to_py)?;
+    let mut prog = Progress::new(progress);
+    let out = py.detach(|| {
+        lib_ngp(&scene, &job, &mut |s, test| {
+            prog.call(|d| {
+                d.set_item("iteration", s.iteration)?;
+                d.set_item("loss", s.loss)?;
+                d.set_item("psnr", s.psnr)?;
+                d.set_item("samples_per_second", s.samples_per_second)?;
+                d.set_item("occupied", s.occupied)?;
+                d.set_item("seconds", s.elapsed)?;
+                d.set_item("test_psnr", test)
+            }) == Control::Continue
+        })
+    });
+    prog.finish()?;
+    let out = out.map_err(to_py)?;
+    py.detach(|| field::save(&out.model, &output))
+        .map_err(to_py)?;
+    let rows = out.log.iter().map(|(s, t)| {
+        [
+            s.iteration as f64,
+            s.elapsed as f64,
+            s.samples as f64,
+            s.samples_per_second as f64,
+            s.psnr as f64,
+            nan_if_none(*t),
+        ]
+    });
+    let o = &out.outcome;
+    let ended = (o.iterations, o.stopped, o.seconds);
+    let d = summary(py, output, ended, (out.load_seconds, out.test_psnr), rows)?;
+    d.set_item("samples", o.samples)?;
+    d.set_item(
+        "samples_per_second",
+        o.samples as f64 / (o.seconds as f64).max(1e-9),
+    )?;
+    d.set_item("parameters", out.model.param_count())?;
+    d.set_item("occupied", out.model.occupied_fraction())?;
+    d.set_item("pose_error", py.None())?;
+    Ok(d)
+}
+
+/// Fits an Instant-NGP neural field (hash grid and tiny MLPs) to a posed-photo folder
+/// and writes it to `output` (`.ngp`). Options as `diffsvg recon ngp`'s flags
+/// (`lr` is `(start, end)`). Returns a dict.
+#[pyfunction]
+#[pyo3(signature = (scene, output, iters=2000, seconds=0.0, batch=8192, samples=65536,
+    downscale=1, bound=None, steps=512, levels=16, log2_table=16, min_res=16, max_res=1024,
+    width=64, lr=(1e-2, 1e-3), seed=0, eval_every=0, test_every=None, progress=None))]
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn recon_ngp<'py>(
+    py: Python<'py>,
+    scene: PathBuf,
+    output: PathBuf,
+    iters: usize,
+    seconds: f32,
+    batch: usize,
+    samples: usize,
+    downscale: u32,
+    bound: Option<f32>,
+    steps: u32,
+    levels: u32,
+    log2_table: u32,
+    min_res: u32,
+    max_res: u32,
+    width: u32,
+    lr: (f32, f32),
+    seed: u64,
+    eval_every: usize,
+    test_every: Option<usize>,
+    progress: Option<Py<PyAny>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    check_output(&output, "ngp")?;
+    let job = NgpJob {
+        iters,
+        seconds,
+        batch,
+        samples,
+        downscale,
+        bound,
+        steps,
+        levels,
+        log2_table,
+        min_res,
+        max_res,
+        width,
+        lr: [lr.0, lr.1],
+        seed,
+        eval_every,
+        test_every,
+        ..NgpJob::default()
+    };
+    run_field(py, scene, output, job, progress)
+}
+
+/// Fits a NeRF field (NeRF's positional encoding and an MLP sized for a CPU) to a
+/// posed-photo folder and writes it to `output` (`.nerf`). Options as `diffsvg recon
+/// nerf`'s flags (`lr` is `(start, end)`). Returns a dict as `recon_ngp`'s.
+#[pyfunction]
+#[pyo3(signature = (scene, output, iters=2000, seconds=0.0, batch=8192, samples=16384,
+    downscale=1, bound=None, steps=256, frequencies=10, width=64, density_layers=4,
+    color_layers=1, lr=(2e-3, 2e-4), seed=0, eval_every=0, test_every=None, progress=None))]
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn recon_nerf<'py>(
+    py: Python<'py>,
+    scene: PathBuf,
+    output: PathBuf,
+    iters: usize,
+    seconds: f32,
+    batch: usize,
+    samples: usize,
+    downscale: u32,
+    bound: Option<f32>,
+    steps: u32,
+    frequencies: u32,
+    width: u32,
+    density_layers: u32,
+    color_layers: u32,
+    lr: (f32, f32),
+    seed: u64,
+    eval_every: usize,
+    test_every: Option<usize>,
+    progress: Option<Py<PyAny>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    check_output(&output, "nerf")?;
+    if frequencies == 0 {
+        return Err(to_py(diffsvg::Error::Setting {
+            name: "frequencies".into(),
+            message: "0 must be 1 to 16".into(),
+        }));
+    }
+    let job = NgpJob {
+        iters,
+        seconds,
+        batch,
+        samples,
+        downscale,
+        bound,
+        steps,
+        frequencies,
+        width,
+        density_layers,
+        color_layers,
+        lr: [lr.0, lr.1],
+        seed,
+        eval_every,
+        test_every,
+        ..NgpJob::nerf()
+    };
+    run_field(py, scene, output, job, progress)
 }
 
 /// `d["pose_error"]`: `None`, or `{"before": (degrees, units), "after": (…)}` when the

@@ -85,6 +85,38 @@ def test_recon_splat_equals_the_cli_and_stops(tmp_path):
     assert (tmp_path / "stop.ply").exists()
 
 
+@pytest.mark.parametrize("kind", ["ngp", "nerf"])
+def test_recon_fields_equal_the_cli_and_stop(tmp_path, kind):
+    scene = write_scene(tmp_path / "ball")
+    fit = diffsvg.recon_ngp if kind == "ngp" else diffsvg.recon_nerf
+    small = dict(iters=30, steps=64, samples=2048, width=16)
+    flags = ["--iters", "30", "--steps", "64", "--samples", "2048", "--width", "16"]
+    if kind == "ngp":
+        small.update(levels=4, log2_table=10, max_res=32)
+        flags += ["--levels", "4", "--log2-table", "10", "--max-res", "32"]
+    else:
+        small.update(frequencies=4, density_layers=2)
+        flags += ["--frequencies", "4", "--density-layers", "2"]
+    seen = []
+    info = fit(scene, tmp_path / f"py.{kind}", progress=seen.append, **small)
+    cli = cli_summary("recon", kind, "--scene", scene, "-o", tmp_path / f"cli.{kind}", *flags)
+    assert (tmp_path / f"py.{kind}").read_bytes() == (tmp_path / f"cli.{kind}").read_bytes()
+    assert info["test_psnr"] == cli["test_psnr"] and info["samples"] == cli["samples"]
+    assert info["iterations"] == 30 and len(seen) == 30 and info["pose_error"] is None
+    assert info["log"].shape[1] == 6 and info["log"][-1, 0] == 30
+    stopped = fit(scene, tmp_path / f"stop.{kind}", progress=lambda s: s["iteration"] < 5,
+                  **small)
+    assert stopped["stopped"] and stopped["iterations"] == 5
+    views = diffsvg.view(tmp_path / f"py.{kind}", scene)
+    assert len(views["views"]) == 2
+    with pytest.raises(diffsvg.DiffsvgError, match="frequencies 0"):
+        diffsvg.recon_nerf(scene, tmp_path / "m.nerf", frequencies=0)
+    with pytest.raises(diffsvg.DiffsvgError, match=rf"m\.png: output must be a \.{kind}"):
+        fit(scene, tmp_path / "m.png")
+    with pytest.raises(diffsvg.DiffsvgError, match="lr: expected"):
+        fit(scene, tmp_path / f"m.{kind}", lr=(1.0,))
+
+
 def test_recon_refuses_bad_input_by_name(tmp_path):
     scene = write_scene(tmp_path / "ball")
     cases = [

@@ -17,6 +17,7 @@ mod digits;
 mod fit;
 mod glyphs;
 mod grad;
+mod ladder;
 mod mesh;
 mod ngp;
 mod parity;
@@ -71,6 +72,9 @@ enum Command {
     Mesh(mesh::MeshArgs),
     /// Plot several `recon` runs' test PSNR against training time in one chart.
     Compare(compare::Args),
+    /// Train every 3D representation (voxel, splat, ngp, nerf) on one scene with the same
+    /// time budget: a table (test PSNR, SSIM, time, size, render time) and a chart.
+    Ladder(ladder::Args),
 }
 
 /// Exit status when stdout was closed early (`diffsvg bench | head`): what a shell reports
@@ -161,6 +165,7 @@ fn dispatch(command: Command) -> ExitCode {
         Command::Recon(a) => volume::run_recon(a),
         Command::View(a) => volume::run_view(a),
         Command::Compare(a) => compare::run(a),
+        Command::Ladder(a) => ladder::run(a),
         Command::Mesh(a) => mesh::run(a),
     };
     match result {

@@ -1,5 +1,5 @@
-//! `diffsvg recon ngp`: fit an Instant-NGP neural field (hash grid and tiny MLPs) to
-//! posed photos.
+//! `diffsvg recon ngp` and `recon nerf`: fit an Instant-NGP neural field (hash grid and
+//! tiny MLPs) or a NeRF field (positional encoding and an MLP) to posed photos.
 
 use std::path::PathBuf;
 
@@ -12,14 +12,15 @@ use super::util::flag_error;
 use diffsvg::volume::field;
 use diffsvg::volume::recon::{NgpJob, recon_ngp};
 
-/// Arguments of `diffsvg recon ngp`.
+/// Options of `diffsvg recon ngp` and `recon nerf` alike; those left out take the
+/// kind's defaults ([`NgpJob::default`], [`NgpJob::nerf`]).
 #[derive(clap::Args, Debug)]
-pub struct NgpArgs {
+pub struct FieldArgs {
     /// Dataset folder: NeRF-synthetic (transforms_train.json), instant-ngp
     /// (transforms.json) or COLMAP (sparse/0/cameras.bin or .txt, photos in images/).
     #[arg(long)]
     scene: PathBuf,
-    /// Model file to write (.ngp).
+    /// Model file to write (.ngp for `recon ngp`, .nerf for `recon nerf`).
     #[arg(short, long)]
     output: PathBuf,
     /// Optimizer iterations (mini-batches of rays).
@@ -33,18 +34,69 @@ pub struct NgpArgs {
     #[arg(long, default_value_t = NgpJob::default().batch)]
     batch: usize,
     /// Samples (network evaluations) aimed at per iteration: the rays per iteration
-    /// follow the samples per ray (0: always --batch rays).
-    #[arg(long, default_value_t = NgpJob::default().samples)]
-    samples: usize,
+    /// follow the samples per ray (0: always --batch rays) [default: ngp 65536, nerf
+    /// 16384].
+    #[arg(long)]
+    samples: Option<usize>,
     /// Divide image sizes by this integer.
     #[arg(long, default_value_t = 1)]
     downscale: u32,
     /// Half the box's side, world units (default: as `recon voxel`).
     #[arg(long)]
     bound: Option<f32>,
-    /// Samples along the box's diagonal.
-    #[arg(long, default_value_t = NgpJob::default().steps)]
-    steps: u32,
+    /// Samples along the box's diagonal [default: ngp 512, nerf 256].
+    #[arg(long)]
+    steps: Option<u32>,
+    /// Neurons per hidden layer [default: 64].
+    #[arg(long)]
+    width: Option<u32>,
+    /// Learning rate at the start [default: ngp 1e-2, nerf 2e-3].
+    #[arg(long)]
+    lr: Option<f32>,
+    /// Learning rate at the end (exponential decay from --lr) [default: ngp 1e-3, nerf
+    /// 2e-4].
+    #[arg(long)]
+    lr_end: Option<f32>,
+    /// Random seed of the parameters and the ray batches.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Hold out every N-th view as a test view (instant-ngp and COLMAP folders; see
+    /// `recon voxel --help`).
+    #[arg(long, value_name = "N")]
+    test_every: Option<usize>,
+    #[command(flatten)]
+    report: Reporting,
+}
+
+impl FieldArgs {
+    /// `base` with the options given on the command line.
+    fn job(&self, base: NgpJob) -> NgpJob {
+        NgpJob {
+            iters: self.iters,
+            seconds: self.seconds,
+            batch: self.batch,
+            samples: self.samples.unwrap_or(base.samples),
+            downscale: self.downscale,
+            bound: self.bound,
+            steps: self.steps.unwrap_or(base.steps),
+            width: self.width.unwrap_or(base.width),
+            lr: [
+                self.lr.unwrap_or(base.lr[0]),
+                self.lr_end.unwrap_or(base.lr[1]),
+            ],
+            seed: self.seed,
+            eval_every: self.report.eval_every,
+            test_every: self.test_every,
+            ..base
+        }
+    }
+}
+
+/// Arguments of `diffsvg recon ngp`.
+#[derive(clap::Args, Debug)]
+pub struct NgpArgs {
+    #[command(flatten)]
+    common: FieldArgs,
     /// Hash grid levels.
     #[arg(long, default_value_t = NgpJob::default().levels)]
     levels: u32,
@@ -57,50 +109,60 @@ pub struct NgpArgs {
     /// Cells per axis of the finest level.
     #[arg(long, default_value_t = NgpJob::default().max_res)]
     max_res: u32,
-    /// Neurons per hidden layer.
-    #[arg(long, default_value_t = NgpJob::default().width)]
-    width: u32,
-    /// Learning rate at the start.
-    #[arg(long, default_value_t = NgpJob::default().lr[0])]
-    lr: f32,
-    /// Learning rate at the end (exponential decay from --lr).
-    #[arg(long, default_value_t = NgpJob::default().lr[1])]
-    lr_end: f32,
-    /// Random seed of the parameters and the ray batches.
-    #[arg(long, default_value_t = 0)]
-    seed: u64,
-    /// Hold out every N-th view as a test view (instant-ngp and COLMAP folders; see
-    /// `recon voxel --help`).
-    #[arg(long, value_name = "N")]
-    test_every: Option<usize>,
+}
+
+/// Arguments of `diffsvg recon nerf`.
+#[derive(clap::Args, Debug)]
+pub struct NerfArgs {
     #[command(flatten)]
-    report: Reporting,
+    common: FieldArgs,
+    /// Octaves of the positional encoding (NeRF: 10).
+    #[arg(long, default_value_t = NgpJob::nerf().frequencies)]
+    frequencies: u32,
+    /// Hidden layers of the density network.
+    #[arg(long, default_value_t = NgpJob::nerf().density_layers)]
+    density_layers: u32,
+    /// Hidden layers of the color network.
+    #[arg(long, default_value_t = NgpJob::nerf().color_layers)]
+    color_layers: u32,
 }
 
 /// Runs `diffsvg recon ngp`.
 pub fn run(a: NgpArgs) -> Result<()> {
-    super::util::check_output(&a.output, "ngp")?;
     let job = NgpJob {
-        iters: a.iters,
-        seconds: a.seconds,
-        batch: a.batch,
-        samples: a.samples,
-        downscale: a.downscale,
-        bound: a.bound,
-        steps: a.steps,
         levels: a.levels,
         log2_table: a.log2_table,
         min_res: a.min_res,
         max_res: a.max_res,
-        width: a.width,
-        lr: [a.lr, a.lr_end],
-        seed: a.seed,
-        eval_every: a.report.eval_every,
-        test_every: a.test_every,
+        ..a.common.job(NgpJob::default())
     };
+    run_field(&a.common, job, "ngp")
+}
+
+/// Runs `diffsvg recon nerf`.
+pub fn run_nerf(a: NerfArgs) -> Result<()> {
+    let job = NgpJob {
+        frequencies: a.frequencies,
+        density_layers: a.density_layers,
+        color_layers: a.color_layers,
+        ..a.common.job(NgpJob::nerf())
+    };
+    if job.frequencies == 0 {
+        return Err(flag_error(diffsvg::Error::Setting {
+            name: "frequencies".into(),
+            message: "0 must be 1 to 16".into(),
+        }));
+    }
+    run_field(&a.common, job, "nerf")
+}
+
+/// Trains `job` (a field of kind `ext`, also the output's extension) and writes the
+/// model, its log and the summary.
+fn run_field(a: &FieldArgs, job: NgpJob, ext: &str) -> Result<()> {
+    super::util::check_output(&a.output, ext)?;
     job.validate().map_err(flag_error)?;
     install_interrupt_handler();
-    let bar = super::progress::terminal_bar(a.report.json || a.report.quiet, a.iters, "");
+    let bar = super::progress::terminal_bar(a.report.json || a.report.quiet, job.iters, "");
     let out = recon_ngp(&a.scene, &job, &mut |s, test| {
         if let Some(b) = &bar {
             b.set_position(s.iteration as u64);
@@ -183,7 +245,7 @@ pub fn run(a: NgpArgs) -> Result<()> {
         );
     } else {
         println!(
-            "recon ngp: {} iterations in {:.1} s ({:.0}k samples/s), {} parameters, {:.1} MB, \
+            "recon {ext}: {} iterations in {:.1} s ({:.0}k samples/s), {} parameters, {:.1} MB, \
              test PSNR {}; wrote {}",
             o.iterations,
             o.seconds,

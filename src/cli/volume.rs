@@ -37,6 +37,9 @@ enum ReconModel {
     Splat(super::splat::SplatArgs),
     /// An Instant-NGP neural field: a multiresolution hash grid and tiny MLPs (.ngp).
     Ngp(super::ngp::NgpArgs),
+    /// A NeRF neural field: NeRF's positional encoding and an MLP sized for a CPU
+    /// (.nerf); slow, the ladder's first rung.
+    Nerf(super::ngp::NerfArgs),
 }
 
 /// Arguments of `diffsvg recon voxel`.
@@ -102,7 +105,7 @@ pub struct VoxelArgs {
 #[derive(clap::Args, Debug)]
 pub struct ViewArgs {
     /// Model file written by `diffsvg recon voxel` (.vox), `diffsvg recon splat` (a
-    /// Gaussian-splatting PLY or SPZ) or `diffsvg recon ngp` (.ngp); the kind is read
+    /// Gaussian-splatting PLY or SPZ), `diffsvg recon ngp` (.ngp) or `recon nerf` (.nerf); the kind is read
     /// from the file's header.
     model: PathBuf,
     /// Dataset folder whose cameras to render from.
@@ -150,6 +153,7 @@ pub fn run_recon(a: ReconArgs) -> Result<()> {
         ReconModel::Voxel(v) => run_voxel(v),
         ReconModel::Splat(v) => super::splat::run(v),
         ReconModel::Ngp(v) => super::ngp::run(v),
+        ReconModel::Nerf(v) => super::ngp::run_nerf(v),
     }
 }
 

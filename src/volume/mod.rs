@@ -24,6 +24,7 @@ pub mod colmap;
 pub mod dataset;
 pub mod depth;
 pub mod field;
+pub mod ladder;
 pub mod metrics;
 pub mod pose;
 

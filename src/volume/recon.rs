@@ -163,8 +163,9 @@ impl Default for SplatJob {
     }
 }
 
-/// What [`recon_ngp`] fits: an Instant-NGP neural field (hash encoding and tiny MLPs).
-/// The defaults are `diffsvg recon ngp`'s.
+/// What [`recon_ngp`] fits: an Instant-NGP neural field (hash encoding and tiny MLPs),
+/// or with `frequencies` ≥ 1 a NeRF field (positional encoding and a deeper MLP; see
+/// [`NgpJob::nerf`]). The defaults are `diffsvg recon ngp`'s.
 #[derive(Clone, Debug, PartialEq)]
 pub struct NgpJob {
     /// Optimizer iterations (mini-batches of rays), at least 1.
@@ -193,6 +194,13 @@ pub struct NgpJob {
     pub max_res: u32,
     /// Neurons per hidden layer (8 to 256).
     pub width: u32,
+    /// Octaves of NeRF's positional encoding: 0 for a hash field (Instant-NGP), 1 to 16
+    /// for a NeRF field (then the hash options are ignored).
+    pub frequencies: u32,
+    /// Hidden layers of the density network (1 to 4).
+    pub density_layers: u32,
+    /// Hidden layers of the color network (1 to 4).
+    pub color_layers: u32,
     /// Learning rate at the start and the end (exponential decay in between).
     pub lr: [f32; 2],
     /// Random seed of the parameters and the ray batches.
@@ -220,6 +228,9 @@ impl Default for NgpJob {
             min_res: s.hash.n_min,
             max_res: s.hash.n_max,
             width: s.width,
+            frequencies: 0,
+            density_layers: s.density_layers,
+            color_layers: s.color_layers,
             lr: o.lr,
             seed: 0,
             eval_every: 0,
@@ -229,6 +240,29 @@ impl Default for NgpJob {
 }
 
 impl NgpJob {
+    /// `diffsvg recon nerf`'s defaults: the shape of [`NgpShape::nerf`], learning rate
+    /// 2e-3 → 2e-4 (without a hash table, 1e-2 makes the deeper network diverge), 256
+    /// samples along the diagonal and 2¹⁴ samples per iteration (the networks cost about
+    /// twice Instant-NGP's per sample); the rest as [`NgpJob::default`].
+    pub fn nerf() -> NgpJob {
+        let s = NgpShape::nerf();
+        NgpJob {
+            width: s.width,
+            frequencies: s.frequencies,
+            density_layers: s.density_layers,
+            color_layers: s.color_layers,
+            lr: [2e-3, 2e-4],
+            steps: 256,
+            samples: 1 << 14,
+            ..NgpJob::default()
+        }
+    }
+
+    /// Which encoding the job's field uses.
+    pub fn kind(&self) -> field::FieldKind {
+        self.shape().kind()
+    }
+
     /// How the job loads its dataset.
     pub fn loading(&self) -> Loading {
         Loading {
@@ -239,14 +273,22 @@ impl NgpJob {
 
     /// The model's shape.
     pub fn shape(&self) -> NgpShape {
-        NgpShape {
-            hash: HashShape {
+        let hash = if self.frequencies > 0 {
+            HashShape::NONE
+        } else {
+            HashShape {
                 levels: self.levels,
                 log2_table: self.log2_table,
                 n_min: self.min_res,
                 n_max: self.max_res,
-            },
+            }
+        };
+        NgpShape {
+            hash,
+            frequencies: self.frequencies,
             width: self.width,
+            density_layers: self.density_layers,
+            color_layers: self.color_layers,
             ..NgpShape::default()
         }
     }
@@ -280,18 +322,26 @@ impl NgpJob {
             ));
         }
         let s = self.shape();
-        s.hash.validate().map_err(|e| {
-            let (name, prefix) = if e.starts_with("levels") {
-                ("levels", "levels ")
-            } else if e.starts_with("log2") {
-                ("log2_table", "log2 table size ")
-            } else {
-                ("max_res", "")
+        if s.kind() == field::FieldKind::Ngp {
+            s.hash.validate().map_err(|e| {
+                let (name, prefix) = if e.starts_with("levels") {
+                    ("levels", "levels ")
+                } else if e.starts_with("log2") {
+                    ("log2_table", "log2 table size ")
+                } else {
+                    ("max_res", "")
+                };
+                setting(name, e.trim_start_matches(prefix).into())
+            })?;
+        }
+        s.validate().map_err(|e| {
+            let name = e.split(' ').next().unwrap_or("width");
+            let flag = match name {
+                "density_layers" | "color_layers" | "frequencies" | "width" => name,
+                _ => "width",
             };
-            setting(name, e.trim_start_matches(prefix).into())
+            setting(flag, e.trim_start_matches(name).trim_start().into())
         })?;
-        s.validate()
-            .map_err(|e| setting("width", e.trim_start_matches("width ").into()))?;
         Ok(())
     }
 }
@@ -325,6 +375,17 @@ pub struct NgpResult {
 pub fn recon_ngp(
     scene: &Path,
     job: &NgpJob,
+    observe: &mut dyn FnMut(&field::TrainStep, Option<f64>) -> bool,
+) -> Result<NgpResult> {
+    fit_ngp(scene, job, true, observe)
+}
+
+/// [`recon_ngp`], scoring the test views at the end only when `final_test` (the
+/// ladder renders them itself).
+pub(crate) fn fit_ngp(
+    scene: &Path,
+    job: &NgpJob,
+    final_test: bool,
     observe: &mut dyn FnMut(&field::TrainStep, Option<f64>) -> bool,
 ) -> Result<NgpResult> {
     job.validate()?;
@@ -370,8 +431,8 @@ pub fn recon_ngp(
         }
         observe(s, test)
     })?;
-    let test_psnr =
-        (!data.test.is_empty()).then(|| ngp_psnr(&model, &test_rays, &data.test, &render));
+    let test_psnr = (final_test && !data.test.is_empty())
+        .then(|| ngp_psnr(&model, &test_rays, &data.test, &render));
     if let Some(s) = last {
         log.retain(|r| r.0.iteration != s.iteration);
         log.push((s, test_psnr));
@@ -645,6 +706,17 @@ pub fn recon_voxel(
     job: &VoxelJob,
     observe: &mut dyn FnMut(&voxel::TrainStep, Option<f64>) -> bool,
 ) -> Result<VoxelResult> {
+    fit_voxel(scene, job, true, observe)
+}
+
+/// [`recon_voxel`], scoring the test views at the end only when `final_test` (the
+/// ladder renders them itself).
+pub(crate) fn fit_voxel(
+    scene: &Path,
+    job: &VoxelJob,
+    final_test: bool,
+    observe: &mut dyn FnMut(&voxel::TrainStep, Option<f64>) -> bool,
+) -> Result<VoxelResult> {
     job.validate()?;
     let render = job.render()?;
     let t_load = Instant::now();
@@ -712,8 +784,8 @@ pub fn recon_voxel(
     let (outcome, poses) =
         voxel::train_with_poses(&mut grid, &rays, &colors, &view_of_ray, &opts, observe)?;
     let pose_error = loaded.map(|l| pose_error_of(&l, &data.train, &poses));
-    let test_psnr =
-        (!data.test.is_empty()).then(|| voxel_psnr(&grid, &test_rays, &data.test, &render));
+    let test_psnr = (final_test && !data.test.is_empty())
+        .then(|| voxel_psnr(&grid, &test_rays, &data.test, &render));
     if let Some(s) = last {
         // The last row carries the final test PSNR (and the size after the final prune).
         log.retain(|r| r.0.iteration != s.iteration);
@@ -750,6 +822,17 @@ pub fn recon_voxel(
 pub fn recon_splat(
     scene: &Path,
     job: &SplatJob,
+    observe: &mut dyn FnMut(&splat::TrainStep, Option<f64>) -> bool,
+) -> Result<SplatResult> {
+    fit_splat(scene, job, true, observe)
+}
+
+/// [`recon_splat`], scoring the test views at the end only when `final_test` (the
+/// ladder renders them itself).
+pub(crate) fn fit_splat(
+    scene: &Path,
+    job: &SplatJob,
+    final_test: bool,
     observe: &mut dyn FnMut(&splat::TrainStep, Option<f64>) -> bool,
 ) -> Result<SplatResult> {
     job.validate()?;
@@ -823,7 +906,7 @@ pub fn recon_splat(
     if let Some(e) = failed {
         return Err(e);
     }
-    let test_psnr = if data.test.is_empty() {
+    let test_psnr = if data.test.is_empty() || !final_test {
         None
     } else {
         Some(splat_psnr(&model, &data.test, &settings)?)

@@ -58,7 +58,7 @@ pub enum Model {
     Voxel(Grid, voxel::RenderSettings),
     /// 3D Gaussians (`.ply`).
     Splat(Gaussians, splat::RenderSettings),
-    /// An Instant-NGP neural field (`.ngp`).
+    /// A neural field: Instant-NGP (`.ngp`) or NeRF (`.nerf`).
     Ngp(Ngp, field::RenderSettings),
 }
 
@@ -78,7 +78,7 @@ impl Model {
                 splat::load(path)?,
                 splat::RenderSettings::default(),
             ))
-        } else if head.starts_with(&field::io::MAGIC) {
+        } else if head.starts_with(&field::io::MAGIC) || head.starts_with(&field::io::NERF_MAGIC) {
             Ok(Model::Ngp(
                 field::load(path)?,
                 field::RenderSettings::default(),

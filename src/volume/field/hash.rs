@@ -37,6 +37,15 @@ pub struct HashShape {
 }
 
 impl HashShape {
+    /// No hash grid (zero levels): the `hash` of a NeRF field's shape. It fails
+    /// [`validate`](Self::validate), which is for fields that have a grid.
+    pub const NONE: HashShape = HashShape {
+        levels: 0,
+        log2_table: 0,
+        n_min: 0,
+        n_max: 0,
+    };
+
     /// Checks the ranges in the field docs; the message names the bad value.
     pub fn validate(&self) -> Result<(), String> {
         if !(1..=32).contains(&self.levels) {

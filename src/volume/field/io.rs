@@ -14,6 +14,11 @@
 //! | … | … | color network parameters, `f32`, the same way |
 //! | … | ⌈res³ / 8⌉ | occupancy bits, cell `x + res·(y + res·z)` at bit `i % 8` of byte `i / 8` |
 //!
+//! **NeRF fields** ([`FieldKind::Nerf`], `.nerf`) have their own magic `DSNERFLD`,
+//! version 1, the same box, then 6 × `u32` (frequencies, width, density layers, color
+//! layers, geometry features, occupancy resolution) ending the header at byte 60, and
+//! then the same sections without the hash features.
+//!
 //! Loading checks the magic, the version, the header's ranges, then that the file has
 //! exactly the size the header implies (before allocating anything it sizes), and that
 //! every number is finite; each failure is an error naming the file and the problem.
@@ -24,21 +29,37 @@ use glam::Vec3;
 
 use super::hash::{F, HashShape};
 use super::mlp::param_count;
-use super::model::{Ngp, NgpShape};
+use super::model::{FieldKind, Ngp, NgpShape};
 use crate::error::{Error, Result};
 use crate::image_io::write_atomic;
 
-/// The first 8 bytes of a field file.
+/// The first 8 bytes of an Instant-NGP field file.
 pub const MAGIC: [u8; 8] = *b"DSNGPFLD";
-/// The format version written by [`save`] and the only one [`load`] reads.
+/// The first 8 bytes of a NeRF field file.
+pub const NERF_MAGIC: [u8; 8] = *b"DSNERFLD";
+/// The format version written by [`save`] and the only one [`load`] reads (both kinds).
 pub(crate) const VERSION: u32 = 1;
-const HEADER: usize = 72;
+
+/// Bytes of the header of a file of this kind.
+fn header_len(kind: FieldKind) -> usize {
+    match kind {
+        FieldKind::Ngp => 72,
+        FieldKind::Nerf => 60,
+    }
+}
+
+fn magic(kind: FieldKind) -> [u8; 8] {
+    match kind {
+        FieldKind::Ngp => MAGIC,
+        FieldKind::Nerf => NERF_MAGIC,
+    }
+}
 
 /// The file image of `m`.
 pub(crate) fn to_bytes(m: &Ngp) -> Vec<u8> {
     let s = m.shape();
     let mut b = Vec::with_capacity(file_size(&s) as usize);
-    b.extend_from_slice(&MAGIC);
+    b.extend_from_slice(&magic(s.kind()));
     b.extend_from_slice(&VERSION.to_le_bytes());
     for v in [m.min(), m.max()] {
         for c in v.to_array() {
@@ -68,18 +89,19 @@ pub(crate) fn to_bytes(m: &Ngp) -> Vec<u8> {
     b
 }
 
-fn header_u32s(s: &NgpShape) -> [u32; 9] {
-    [
-        s.hash.levels,
-        s.hash.log2_table,
-        s.hash.n_min,
-        s.hash.n_max,
+fn header_u32s(s: &NgpShape) -> Vec<u32> {
+    let net = [
         s.width,
         s.density_layers,
         s.color_layers,
         s.geo_features,
         s.occupancy_res,
-    ]
+    ];
+    let head = match s.kind() {
+        FieldKind::Ngp => vec![s.hash.levels, s.hash.log2_table, s.hash.n_min, s.hash.n_max],
+        FieldKind::Nerf => vec![s.frequencies],
+    };
+    head.into_iter().chain(net).collect()
 }
 
 /// Floats of hash features a file of shape `s` holds.
@@ -95,7 +117,7 @@ pub(crate) fn file_size(s: &NgpShape) -> u64 {
     let floats = hash_floats(&s.hash)
         + param_count(&s.density_dims()) as u64
         + param_count(&s.color_dims()) as u64;
-    HEADER as u64 + 4 * floats + (s.occupancy_res as u64).pow(3).div_ceil(8)
+    header_len(s.kind()) as u64 + 4 * floats + (s.occupancy_res as u64).pow(3).div_ceil(8)
 }
 
 /// Writes `model` to `path` atomically (a temporary file renamed into place, parent
@@ -117,8 +139,15 @@ pub(crate) fn from_bytes(b: &[u8], path: &Path) -> Result<Ngp> {
         path: path.to_path_buf(),
         what,
     };
-    if b.len() < 12 || b[..8] != MAGIC {
+    let kind = if b.len() >= 8 && b[..8] == MAGIC {
+        FieldKind::Ngp
+    } else if b.len() >= 8 && b[..8] == NERF_MAGIC {
+        FieldKind::Nerf
+    } else {
         return Err(bad("not a diffsvg neural field (bad magic)".into()));
+    };
+    if b.len() < 12 {
+        return Err(bad(format!("{} bytes: shorter than the header", b.len())));
     }
     let u32_at = |o: usize| u32::from_le_bytes(b[o..o + 4].try_into().unwrap());
     let f32_at = |o: usize| f32::from_le_bytes(b[o..o + 4].try_into().unwrap());
@@ -128,9 +157,10 @@ pub(crate) fn from_bytes(b: &[u8], path: &Path) -> Result<Ngp> {
             "version {version} is not supported (this build reads {VERSION})"
         )));
     }
-    if b.len() < HEADER {
+    let header = header_len(kind);
+    if b.len() < header {
         return Err(bad(format!(
-            "{} bytes: shorter than the {HEADER}-byte header",
+            "{} bytes: shorter than the {header}-byte header",
             b.len()
         )));
     }
@@ -141,19 +171,32 @@ pub(crate) fn from_bytes(b: &[u8], path: &Path) -> Result<Ngp> {
             "box {min} .. {max} is not a finite, non-empty box"
         )));
     }
-    let h: Vec<u32> = (0..9).map(|i| u32_at(36 + 4 * i)).collect();
+    let h: Vec<u32> = (0..(header - 36) / 4).map(|i| u32_at(36 + 4 * i)).collect();
+    let (hash, frequencies, net) = match kind {
+        FieldKind::Ngp => (
+            HashShape {
+                levels: h[0],
+                log2_table: h[1],
+                n_min: h[2],
+                n_max: h[3],
+            },
+            0,
+            &h[4..],
+        ),
+        // Frequencies 0 would make the shape a hash field's: refuse it here.
+        FieldKind::Nerf if h[0] == 0 => {
+            return Err(bad("header: frequencies 0 must be 1 to 16".into()));
+        }
+        FieldKind::Nerf => (HashShape::NONE, h[0], &h[1..]),
+    };
     let shape = NgpShape {
-        hash: HashShape {
-            levels: h[0],
-            log2_table: h[1],
-            n_min: h[2],
-            n_max: h[3],
-        },
-        width: h[4],
-        density_layers: h[5],
-        color_layers: h[6],
-        geo_features: h[7],
-        occupancy_res: h[8],
+        hash,
+        frequencies,
+        width: net[0],
+        density_layers: net[1],
+        color_layers: net[2],
+        geo_features: net[3],
+        occupancy_res: net[4],
     };
     shape.validate().map_err(|e| bad(format!("header: {e}")))?;
     let want = file_size(&shape);
@@ -164,7 +207,7 @@ pub(crate) fn from_bytes(b: &[u8], path: &Path) -> Result<Ngp> {
         )));
     }
     // Sizes are known to match the file now, so the allocations below are bounded by it.
-    let mut at = HEADER;
+    let mut at = header;
     let mut floats = |n: usize| -> std::result::Result<Vec<f32>, usize> {
         let v: Vec<f32> = b[at..at + 4 * n]
             .chunks_exact(4)

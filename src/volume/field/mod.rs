@@ -2,7 +2,8 @@
 //! (Müller et al. 2022), rendered and trained by the voxel grid's ray-marching and
 //! compositing conventions.
 //!
-//! * [`Ngp`]: the model — a [`HashGrid`] over an axis-aligned box, a density network
+//! * [`Ngp`]: the model — a [`HashGrid`] (or, for the NeRF rung, NeRF's positional
+//!   encoding: [`FieldKind`]) over an axis-aligned box, a density network
 //!   (encoding → ReLU layers of [`NgpShape::width`] → raw density and geometry
 //!   features; `σ = exp(min(raw, 15))`), a color network (geometry features and degree-3
 //!   spherical harmonics of the view direction → ReLU layers → sigmoid RGB) and an
@@ -17,6 +18,7 @@
 //! Units: world units for the box and ray parameters, density in 1 / world units, colors
 //! linear RGB in `[0, 1]`; ray directions are unit vectors pointing away from the camera.
 
+mod freq;
 mod hash;
 pub mod io;
 mod mlp;
@@ -26,7 +28,7 @@ mod train;
 
 pub use hash::{HashGrid, HashShape};
 pub use io::{load, save};
-pub use model::{Ngp, NgpShape};
+pub use model::{FieldKind, Ngp, NgpShape};
 pub use render::{RenderSettings, render_ray, render_rays};
 pub use train::{TrainOptions, TrainOutcome, TrainStep, train};
 

@@ -15,11 +15,25 @@ pub(crate) const MAX_RAW: f32 = 15.0;
 /// (degree 3).
 pub(crate) const DIR_DIM: usize = 16;
 
-/// The shape of an [`Ngp`] model, as stored in its file.
+/// Which encoding of the position a field uses.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FieldKind {
+    /// Instant-NGP: the multiresolution hash encoding ([`NgpShape::hash`]); `.ngp` files.
+    Ngp,
+    /// NeRF: the positional encoding of [`NgpShape::frequencies`] octaves and no
+    /// trainable encoding; `.nerf` files.
+    Nerf,
+}
+
+/// The shape of an [`Ngp`] model, as stored in its file. A field encodes positions
+/// either with the hash grid (`frequencies` 0) or, the NeRF rung, with the positional
+/// encoding (`frequencies` ≥ 1 and `hash` [`HashShape::NONE`]); see [`FieldKind`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct NgpShape {
-    /// The hash encoding.
+    /// The hash encoding ([`HashShape::NONE`] for a NeRF field).
     pub hash: HashShape,
+    /// Octaves `K` of NeRF's positional encoding, 0 (a hash field) or 1 to 16.
+    pub frequencies: u32,
     /// Neurons of every hidden layer, 8 to 256.
     pub width: u32,
     /// Hidden layers of the density network, 1 to 4.
@@ -49,14 +63,62 @@ impl Default for NgpShape {
             color_layers: 2,
             geo_features: 15,
             occupancy_res: 64,
+            frequencies: 0,
         }
     }
 }
 
 impl NgpShape {
+    /// The NeRF rung sized for a CPU: 10 octaves of positional encoding (NeRF's), a
+    /// density network of 4 hidden layers of 64 (NeRF has 8 of 256: 16 times the work
+    /// per layer, and 64 is the widest layer whose accumulator stays in registers), 15
+    /// geometry features, a color network of 1 hidden layer of 64 (NeRF's color branch
+    /// has one), a 64³ occupancy grid.
+    pub fn nerf() -> NgpShape {
+        NgpShape {
+            hash: HashShape::NONE,
+            frequencies: 10,
+            width: 64,
+            density_layers: 4,
+            color_layers: 1,
+            ..NgpShape::default()
+        }
+    }
+
+    /// Which encoding the shape uses.
+    pub fn kind(&self) -> FieldKind {
+        if self.frequencies > 0 {
+            FieldKind::Nerf
+        } else {
+            FieldKind::Ngp
+        }
+    }
+
+    /// Floats of the position's encoding (the density network's input).
+    pub(crate) fn encoding_dim(&self) -> usize {
+        match self.kind() {
+            FieldKind::Ngp => self.hash.levels as usize * super::hash::F,
+            FieldKind::Nerf => super::freq::dim(self.frequencies),
+        }
+    }
+
     /// Checks the ranges in the field docs; the message names the bad value.
     pub fn validate(&self) -> Result<(), String> {
-        self.hash.validate()?;
+        match self.kind() {
+            FieldKind::Ngp => self.hash.validate()?,
+            FieldKind::Nerf => {
+                if self.frequencies > super::freq::MAX_OCTAVES {
+                    return Err(format!(
+                        "frequencies {} must be 1 to {}",
+                        self.frequencies,
+                        super::freq::MAX_OCTAVES
+                    ));
+                }
+                if self.hash != HashShape::NONE {
+                    return Err("a field with frequencies has no hash grid (levels 0)".into());
+                }
+            }
+        }
         let checks = [
             ("width", self.width, 8, 256),
             ("density_layers", self.density_layers, 1, 4),
@@ -73,7 +135,7 @@ impl NgpShape {
     }
 
     pub(crate) fn density_dims(&self) -> Vec<usize> {
-        let mut d = vec![self.hash.levels as usize * super::hash::F];
+        let mut d = vec![self.encoding_dim()];
         d.extend(std::iter::repeat_n(
             self.width as usize,
             self.density_layers as usize,
@@ -239,8 +301,11 @@ impl Ngp {
     /// `(σ, raw)` at `x ∈ [0, 1]³`, with the density network's activations in `acts`.
     #[inline]
     fn raw_density(&self, x: Vec3, acts: &mut [f32]) -> (f32, f32) {
-        let n_in = self.hash.dim();
-        self.hash.encode(x, &mut acts[..n_in]);
+        let n_in = self.shape.encoding_dim();
+        match self.shape.kind() {
+            FieldKind::Ngp => self.hash.encode(x, &mut acts[..n_in]),
+            FieldKind::Nerf => super::freq::encode(self.shape.frequencies, x, &mut acts[..n_in]),
+        }
         self.density.forward(acts);
         let raw = acts[acts.len() - self.density.n_out()];
         (raw.min(MAX_RAW).exp(), raw)

@@ -181,7 +181,8 @@ pub(crate) fn dir_basis(dir: Vec3) -> [f32; DIR_DIM] {
 }
 
 /// Gradient sinks of [`ray_backward`]: the networks' parameter gradients and, per
-/// sample, its position and `∂L/∂encoding` (`3 + L·F` floats) for the hash scatter.
+/// sample, its position and `∂L/∂encoding` (`3 + L·F` floats) for the hash scatter
+/// (the position alone for a NeRF field).
 #[derive(Debug)]
 pub(crate) struct Grads {
     pub(crate) density: Vec<f32>,
@@ -199,7 +200,8 @@ impl Grads {
     }
 }
 
-/// Floats of one sample's record in [`Grads::records`].
+/// Floats of one sample's record in [`Grads::records`] (3 for a NeRF field, which has
+/// no table to scatter into).
 pub(crate) fn record_len(model: &Ngp) -> usize {
     3 + model.hash.dim()
 }
@@ -228,7 +230,8 @@ pub(crate) fn ray_backward(
     if tape.scratch.len() < need {
         tape.scratch.resize(need, 0.0);
     }
-    let ne = model.hash.dim();
+    let ne = model.shape().encoding_dim();
+    let nh = model.hash.dim();
     if tape.d_enc.len() < ne {
         tape.d_enc.resize(ne, 0.0);
     }
@@ -253,7 +256,7 @@ pub(crate) fn ray_backward(
             &mut tape.scratch,
         );
         grads.records.extend_from_slice(&rec[..3]);
-        grads.records.extend_from_slice(&tape.d_enc[..ne]);
+        grads.records.extend_from_slice(&tape.d_enc[..nh]);
     }
 }
 
