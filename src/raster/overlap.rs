@@ -7,7 +7,10 @@
 //! over-covers (two coincident half-covering rectangles in one path give 1.0, not 0.5).
 //!
 //! **Which cells.** Only items that can overlap look ([`Item::can_overlap`]: anything but
-//! simple rings, convex or monotone in y, that share no pixel with each other). While a band is accumulated, each cell an edge crosses keeps the
+//! simple rings, convex or monotone in y, that share no pixel with each other, and but
+//! items whose winding number takes only 0 and one other value anywhere, shown by
+//! [`windings_two_valued`]: no two edges meet and orientations alternate with nesting, as
+//! in a glyph with its counters or most strokes' outlines). While a band is accumulated, each cell an edge crosses keeps the
 //! chain of consecutive edges of one ring that passed through it: a second chain, or a
 //! chain that turns back in both x and y, makes the cell a candidate. (One chain monotone
 //! in x or in y crosses the cell once and splits it into two regions of adjacent winding:
@@ -48,9 +51,10 @@
 //! consecutive runs meeting in their junction's cell alone). Only the edges near those
 //! cells are walked; a band without any walks none.
 //!
-//! **Off by default** ([`RenderOptions::exact_overlaps`](super::RenderOptions)): the search
-//! still costs up to 2.5× on thin strokes and glyphs (docs/performance.md); off, the
-//! clamped winding integral everywhere, as before issue 29.
+//! **Off by default** ([`RenderOptions::exact_overlaps`](super::RenderOptions)): on, the
+//! bundled drawings whose paths do overlap themselves (a self-crossing stroke, a star,
+//! dashes' caps) still take up to 1.6× as long (docs/performance.md); off, the clamped
+//! winding integral everywhere, as before issue 29.
 //!
 //! **Bounds.** A cell with up to [`EXACT_PIECES`] pieces is exact (its pairwise crossings
 //! are `O(k²)`, its strips `O(k²)` sorts of `k`). Up to [`SAMPLED_PIECES`] the cell is
