@@ -8,7 +8,8 @@
 //! once (the `over` of each pixel would give the same bits), and an opaque one at
 //! coverage 1 replaces them with one solid run; anything else makes its columns mixed
 //! first (their color written out) and composites pixel by pixel as [`render_prepared`]
-//! does. A row holds at most [`MAX_RUNS`] runs; past that it becomes one mixed run, so a
+//! does. A solid item's row is collected as such stretches, left to right, and drawn in
+//! one pass over the row's runs ([`RunCanvas::apply_row`]). A row holds at most [`MAX_RUNS`] runs; past that it becomes one mixed run, so a
 //! row crossed by many small shapes costs its pixels, not a search per shape. A solid
 //! paint reads only the chunks of [`CHUNK`] columns its edges can touch
 //! ([`touched_chunks`]); between them its coverage is one value, snapped to an exact 0 or
