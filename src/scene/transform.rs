@@ -16,9 +16,13 @@
 //! then `chain_gradient` carries them into the local frames and onto the transforms,
 //! outermost group first.
 //!
-//! **Which groups.** The reader makes one of a group of two or more shapes (one shape has
-//! parameters of its own, and usvg puts a shape's own `transform` on a group of its own)
-//! whose transform lies in the range a fit keeps it in ([`SCALE_RANGE`], docs/limits.md). Its
+//! **Which groups.** The reader makes one of a group of one or more shapes whose
+//! transform lies in the range a fit keeps it in ([`SCALE_RANGE`], docs/limits.md). A
+//! shape's own `transform` (`<rect transform="…">`) is such a group too: usvg puts it on a
+//! group of its own, with no id, around the shape, and SVG out writes that group's
+//! transform back on the shape. One exception: a circle, ellipse or rectangle turned
+//! about its own center (by a rotation alone) keeps that turn as its angle slot
+//! ([`shape`](super::shape)), which is how SVG out writes a primitive's angle. Its
 //! content must be plain groups (opacity, blend mode, isolation) and paths: no clip path,
 //! mask, filter, image, pattern or text inside, which hold device quantities that are no
 //! parameters (a clip region, a pattern's tiles) and would need a frame of their own. A
@@ -60,7 +64,9 @@
 //! `pivot` (not a parameter) is the center of the content's bounds in the local frame
 //! when the file was read, so that turning or scaling does not also swing the group
 //! across the canvas. SVG out writes either kind as `transform="matrix(…)"` (`f32`, as
-//! it is read), so a written file reads back to the same kinds and slots.
+//! it is read), on the `<g>` or, for a shape's own transform, on the shape's element
+//! (when the shape writes no transform of its own: no turned primitive, no stroke
+//! frame), so a written file reads back to the same kinds and slots.
 
 use super::geom::{add_scaled, scale};
 use super::params::ParamLayout;
