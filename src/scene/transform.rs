@@ -1066,8 +1066,14 @@ mod tests {
         }
         moved.set_params(&w);
         let text = moved.to_svg_string();
-        assert!(text.contains("<rect id=\"r\" transform=\"matrix("), "{text}");
-        assert!(text.contains("<path id=\"k\" transform=\"matrix("), "{text}");
+        assert!(
+            text.contains("<rect id=\"r\" transform=\"matrix("),
+            "{text}"
+        );
+        assert!(
+            text.contains("<path id=\"k\" transform=\"matrix("),
+            "{text}"
+        );
         assert!(text.contains("<g id=\"one\" transform=\"matrix("), "{text}");
         let back = Scene::from_svg_str(&text, "b.svg", Sizing::Natural).unwrap();
         assert_eq!(kinds(&back), want);

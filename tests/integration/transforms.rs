@@ -9,6 +9,7 @@ use diffsvg::raster::{RenderOptions, render};
 use diffsvg::scene::structure::Structure;
 use diffsvg::scene::{ParamGroup, ParamLayout};
 use diffsvg::{Scene, Sizing};
+use std::path::Path;
 
 use crate::gradients::nudged_target;
 
@@ -77,6 +78,14 @@ fn group_transform_slots(scene: &Scene) -> Vec<usize> {
         .collect()
 }
 
+/// The slots of the parameter groups `groups`.
+fn slots_of(scene: &Scene, groups: &[ParamGroup]) -> Vec<usize> {
+    let layout = ParamLayout::new(scene);
+    (0..layout.slots.len())
+        .filter(|&i| groups.contains(&layout.slots[i].group))
+        .collect()
+}
+
 /// `which` against central differences, each group within 1e-2 (relative, absolute
 /// below 1e-2 of the group's largest), and not all zero.
 fn assert_slots_agree(name: &str, scene: &Scene, which: &[usize]) {
@@ -116,15 +125,7 @@ fn gradient_paints_keep_their_groups_transform() {
     let slots = group_transform_slots(&scene);
     assert_eq!(slots.len(), 8);
     // The paints' own parameters too: geometry and stops, in gradient space.
-    let layout = ParamLayout::new(&scene);
-    let paint: Vec<usize> = (0..layout.slots.len())
-        .filter(|&i| {
-            matches!(
-                layout.slots[i].group,
-                ParamGroup::PaintGeometry | ParamGroup::StopOffset
-            )
-        })
-        .collect();
+    let paint = slots_of(&scene, &[ParamGroup::PaintGeometry, ParamGroup::StopOffset]);
     assert!(!paint.is_empty());
     assert_slots_agree("gradient paints: transforms", &scene, &slots);
     assert_slots_agree("gradient paints: paint", &scene, &paint);
@@ -161,15 +162,7 @@ fn skewed_groups_of_fills_are_affine_parameters() {
     assert_eq!(slots.len(), 12);
     assert_slots_agree("affine groups", &scene, &slots);
     // The points in the groups' frames, and the linear gradient's geometry.
-    let layout = ParamLayout::new(&scene);
-    let rest: Vec<usize> = (0..layout.slots.len())
-        .filter(|&i| {
-            matches!(
-                layout.slots[i].group,
-                ParamGroup::Points | ParamGroup::PaintGeometry
-            )
-        })
-        .collect();
+    let rest = slots_of(&scene, &[ParamGroup::Points, ParamGroup::PaintGeometry]);
     assert_slots_agree("affine groups: points and paint", &scene, &rest);
 }
 
@@ -223,7 +216,7 @@ fn affine_transforms_and_gradient_paints_survive_a_round_trip() {
 /// rest is frozen.
 #[test]
 fn freezing_transforms_holds_affine_slots() {
-    use crate::common::{diffsvg, json_summary, s, scratch, write};
+    use crate::common::{scratch, write};
     let dir = scratch("affine-freeze");
     let src = write(&dir, "skewed.svg", SKEWED);
     let scene = Scene::load(&src, Sizing::Natural).unwrap();
@@ -235,22 +228,7 @@ fn freezing_transforms_holds_affine_slots() {
     for (freeze, transforms_move) in [("transforms", false), (rest, true)] {
         let out = dir.join("fit.svg");
         // (A fit writes its best step: enough of them to improve.)
-        let sum = json_summary(&diffsvg(&[
-            "fit",
-            s(&src),
-            s(&png),
-            "-o",
-            s(&out),
-            "--iters",
-            "20",
-            "--freeze",
-            freeze,
-            "--json",
-        ]));
-        let (initial, psnr) = (
-            sum["initial_psnr"].as_f64().unwrap(),
-            sum["psnr"].as_f64().unwrap(),
-        );
+        let (initial, psnr) = fit(&src, &png, &out, &["--iters", "20", "--freeze", freeze]);
         assert!(
             psnr > initial + 3.0,
             "{freeze}: {initial:.2} → {psnr:.2} dB"
@@ -281,12 +259,23 @@ fn freezing_transforms_holds_affine_slots() {
 fn outlines(scene: &Scene) -> Vec<[f64; 2]> {
     let mut out = Vec::new();
     scene.for_each_path(|p| match &p.primitive {
-        Some(q) if matches!(q.shape, diffsvg::scene::Shape::Circle { .. }) => {
-            out.push(q.center())
-        }
+        Some(q) if matches!(q.shape, diffsvg::scene::Shape::Circle { .. }) => out.push(q.center()),
         _ => out.extend(p.points.iter().copied()),
     });
     out
+}
+
+/// `diffsvg fit SRC PNG -o OUT ARGS --json`: its initial and final PSNR, dB.
+fn fit(src: &Path, png: &Path, out: &Path, args: &[&str]) -> (f64, f64) {
+    use crate::common::{diffsvg, json_summary, s};
+    let mut all = vec!["fit", s(src), s(png), "-o", s(out)];
+    all.extend_from_slice(args);
+    all.push("--json");
+    let sum = json_summary(&diffsvg(&all));
+    (
+        sum["initial_psnr"].as_f64().unwrap(),
+        sum["psnr"].as_f64().unwrap(),
+    )
 }
 
 /// Every group transform's matrix, in walk order.
@@ -347,26 +336,28 @@ fn single_shapes_keep_their_own_transforms() {
     let slots = group_transform_slots(&scene);
     assert_eq!(slots.len(), 18);
     assert_slots_agree("single shapes: transforms", &scene, &slots);
-    let layout = ParamLayout::new(&scene);
-    let rest: Vec<usize> = (0..layout.slots.len())
-        .filter(|&i| {
-            matches!(
-                layout.slots[i].group,
-                ParamGroup::Points | ParamGroup::StrokeWidth
-            )
-        })
-        .collect();
+    let rest = slots_of(&scene, &[ParamGroup::Points, ParamGroup::StrokeWidth]);
     assert_slots_agree("single shapes: local values", &scene, &rest);
     // Written back: the transforms on the elements, read back to the same slots.
     let text = scene.to_svg_string();
-    for tag in ["<rect id=\"bar\" ", "<circle id=\"dot\" ", "<path id=\"kite\" "] {
+    for tag in [
+        "<rect id=\"bar\" ",
+        "<circle id=\"dot\" ",
+        "<path id=\"kite\" ",
+    ] {
         assert!(
             text.contains(&format!("{tag}transform=\"matrix(")),
             "{tag}: {text}"
         );
     }
-    assert!(text.contains("<g id=\"leaf\" transform=\"matrix("), "{text}");
-    assert!(text.contains("<rect id=\"tile\" transform=\"rotate("), "{text}");
+    assert!(
+        text.contains("<g id=\"leaf\" transform=\"matrix("),
+        "{text}"
+    );
+    assert!(
+        text.contains("<rect id=\"tile\" transform=\"rotate("),
+        "{text}"
+    );
     let back = Scene::from_svg_str(&text, "back.svg", Sizing::Natural).unwrap();
     let (a, b) = (scene.params(), back.params());
     assert_eq!(a.len(), b.len(), "{text}");
@@ -390,7 +381,7 @@ fn single_shapes_keep_their_own_transforms() {
 /// leaves the maps where they are.
 #[test]
 fn single_shape_transforms_are_fitted_back() {
-    use crate::common::{diffsvg, json_summary, s, scratch, write};
+    use crate::common::{scratch, write};
     let dir = scratch("single-transforms-fit");
     let target = Scene::from_svg_str(SINGLES, "singles.svg", Sizing::Natural).unwrap();
     let png = dir.join("target.png");
@@ -411,25 +402,16 @@ fn single_shape_transforms_are_fitted_back() {
     let src = write(&dir, "start.svg", &start.to_svg_string());
     let rest = "points,colors,opacities,widths,paint,stops";
     let out = dir.join("fit.svg");
-    let sum = json_summary(&diffsvg(&[
-        "fit",
-        s(&src),
-        s(&png),
-        "-o",
-        s(&out),
-        "--iters",
-        "400",
-        "--until-psnr",
-        "50",
-        "--freeze",
-        rest,
-        "--json",
-    ]));
-    let (initial, psnr) = (
-        sum["initial_psnr"].as_f64().unwrap(),
-        sum["psnr"].as_f64().unwrap(),
+    let (initial, psnr) = fit(
+        &src,
+        &png,
+        &out,
+        &["--iters", "400", "--until-psnr", "50", "--freeze", rest],
     );
-    assert!(initial < 25.0, "the perturbation should hurt: {initial:.2} dB");
+    assert!(
+        initial < 25.0,
+        "the perturbation should hurt: {initial:.2} dB"
+    );
     assert!(psnr >= 45.0, "{initial:.2} → {psnr:.2} dB");
     let fitted = Scene::load(&out, Sizing::Natural).unwrap();
     assert_eq!(maps(&fitted).len(), 4);
@@ -440,23 +422,22 @@ fn single_shape_transforms_are_fitted_back() {
         .zip(&got)
         .map(|(p, q)| (p[0] - q[0]).hypot(p[1] - q[1]))
         .fold(0.0, f64::max);
-    assert!(worst <= 0.1, "{initial:.2} → {psnr:.2} dB, off by {worst} px");
+    assert!(
+        worst <= 0.1,
+        "{initial:.2} → {psnr:.2} dB, off by {worst} px"
+    );
     // Frozen, the maps stay as they start.
-    let sum = json_summary(&diffsvg(&[
-        "fit",
-        s(&src),
-        s(&png),
-        "-o",
-        s(&out),
-        "--iters",
-        "10",
-        "--freeze",
-        "transforms",
-        "--json",
-    ]));
-    assert!(sum["psnr"].as_f64().is_some());
+    fit(
+        &src,
+        &png,
+        &out,
+        &["--iters", "10", "--freeze", "transforms"],
+    );
     let held = maps(&Scene::load(&out, Sizing::Natural).unwrap());
     for (a, b) in maps(&start).iter().zip(&held) {
-        assert!(a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-4), "{a:?} vs {b:?}");
+        assert!(
+            a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-4),
+            "{a:?} vs {b:?}"
+        );
     }
 }
