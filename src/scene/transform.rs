@@ -22,7 +22,10 @@
 //! group of its own, with no id, around the shape, and SVG out writes that group's
 //! transform back on the shape. One exception: a circle, ellipse or rectangle turned
 //! about its own center (by a rotation alone) keeps that turn as its angle slot
-//! ([`shape`](super::shape)), which is how SVG out writes a primitive's angle. Its
+//! ([`shape`](super::shape)), which is how SVG out writes a primitive's angle. A single
+//! shape's transform repeats motions its own parameters can make (its points; a
+//! primitive's center, sizes and angle), so a fit moves both (README: the effect on
+//! `svg-samples/09-transforms.svg`). Its
 //! content must be plain groups (opacity, blend mode, isolation) and paths: no clip path,
 //! mask, filter, image, pattern or text inside, which hold device quantities that are no
 //! parameters (a clip region, a pattern's tiles) and would need a frame of their own. A
