@@ -25,8 +25,8 @@
 //! ([`shape`](super::shape)), which is how SVG out writes a primitive's angle. A single
 //! shape's transform repeats motions its own parameters can make (its points; a
 //! primitive's center, sizes and angle), so a fit moves both (README: the effect on
-//! `svg-samples/09-transforms.svg`). Its
-//! content must be plain groups (opacity, blend mode, isolation) and paths: no clip path,
+//! `svg-samples/09-transforms.svg`). The group's content must be plain groups (opacity,
+//! blend mode, isolation) and paths: no clip path,
 //! mask, filter, image, pattern or text inside, which hold device quantities that are no
 //! parameters (a clip region, a pattern's tiles) and would need a frame of their own. A
 //! group that does not qualify keeps its transform baked into the points, as every group
