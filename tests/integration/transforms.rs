@@ -331,8 +331,13 @@ fn single_shapes_keep_their_own_transforms() {
         .iter()
         .map(|t| t.len)
         .collect();
-    // bar, dot, kite, leaf; the tile's turn about its center is its own angle.
+    // The tile's turn about its center is its own angle; a shape's own transform goes by
+    // the shape's id.
     assert_eq!(lens, [4, 4, 6, 4]);
+    assert_eq!(
+        kept_transforms(&scene),
+        ["bar:4", "dot:4", "kite:6", "leaf:4"]
+    );
     let slots = group_transform_slots(&scene);
     assert_eq!(slots.len(), 18);
     assert_slots_agree("single shapes: transforms", &scene, &slots);
