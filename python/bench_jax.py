@@ -1,6 +1,6 @@
 """diffsvg.jax against the numpy calls: compile time and step time per path count.
 
-    python -P python/bench_jax.py [--paths 256,1096] [--steps 30] [--dict]
+    python -P python/bench_jax.py [--paths 256,1096] [--steps 30] [--dict] [--profile]
 
 Scenes are DiffVG's painterly blobs (``random_blobs``, 256x256, seed 0) fitted toward
 another set of blobs (seed 1). One step is the MSE and its gradient with respect to every
@@ -15,6 +15,12 @@ Compile time is ``lower`` plus ``compile`` of the jitted step; step times are me
 ``--steps`` steps after one warm-up, ``block_until_ready`` included, the numpy and the jax
 step alternating; "eager" is the same step without ``jit``. ``vmap`` renders a batch of 4
 vectors in one call against 4 jitted calls one after the other.
+
+``--profile`` prints where the steps' time goes instead (medians over ``--steps``, the
+two steps alternating): per step of numpy, ``render``, ``loss`` and ``render_backward``;
+per jitted jax step, the time inside its forward and backward callbacks, inside the
+native calls they make, and the rest (JAX: dispatch, the fused loss, the callbacks'
+entry and exit).
 """
 import argparse
 import statistics
@@ -57,12 +63,68 @@ def jitted(loss, x):
     return time.perf_counter() - t, c
 
 
+def profile(n, steps):
+    """The breakdown of one numpy and one jitted jax step at ``n`` paths (``--profile``)."""
+    from diffsvg import _native
+    times = {}
+
+    def timed(name, f):
+        def g(*a, **k):
+            t = time.perf_counter()
+            try:
+                return f(*a, **k)
+            finally:
+                times.setdefault(name, []).append(time.perf_counter() - t)
+        return g
+
+    saved = (_native.render_batch, _native.render_backward_batch, djax._forward_cb,
+             djax._backward_cb)
+    _native.render_batch = timed("native forward", saved[0])
+    _native.render_backward_batch = timed("native backward", saved[1])
+    djax._forward_cb = timed("forward callback", saved[2])
+    djax._backward_cb = timed("backward callback", saved[3])
+    try:
+        scene = diffsvg.random_blobs(n, 256, 256, seed=0)
+        target = diffsvg.render(diffsvg.random_blobs(n, 256, 256, seed=1))
+        x64 = scene.params()
+        jt = jnp.asarray(target)
+        render, loss_np = timed("render", diffsvg.render), timed("loss", diffsvg.loss)
+        backward = timed("render_backward", diffsvg.render_backward)
+
+        def numpy_step():
+            scene.set_params(x64)
+            _, d = loss_np(render(scene), target, grad=True)
+            return backward(scene, d, structured=False)
+
+        x = jnp.asarray(x64, jnp.float32)
+        step = jax.jit(jax.value_and_grad(
+            lambda v: jnp.mean((djax.render(scene, v) - jt) ** 2)))
+        jax_step = timed("jax step", lambda: jax.block_until_ready(step(x)))
+        numpy_step = timed("numpy step", numpy_step)
+        jax_step(), numpy_step()
+        times.clear()
+        for _ in range(steps):
+            numpy_step()
+            jax_step()
+    finally:
+        (_native.render_batch, _native.render_backward_batch, djax._forward_cb,
+         djax._backward_cb) = saved
+    ms = {k: 1e3 * statistics.median(v) for k, v in times.items()}
+    ms["jax rest"] = ms["jax step"] - ms["forward callback"] - ms["backward callback"]
+    print(f"{n} paths: " + ", ".join(f"{k} {v:.2f} ms" for k, v in ms.items()), flush=True)
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--paths", default="256,1096")
     ap.add_argument("--steps", type=int, default=30)
     ap.add_argument("--dict", action="store_true")
+    ap.add_argument("--profile", action="store_true")
     a = ap.parse_args()
+    if a.profile:
+        for n in map(int, a.paths.split(",")):
+            profile(n, a.steps)
+        return
     print("| paths | params | compile flat s | compile Params s"
           + (" | compile dict s" if a.dict else "")
           + " | numpy step ms | jax step ms | ratio | eager ms | vmap 4 ms | 4 calls ms |")

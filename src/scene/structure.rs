@@ -131,7 +131,15 @@ fn group_ids(nodes: &[Node], keep: fn(&super::Group) -> bool, out: &mut Vec<Stri
     for n in nodes {
         if let Node::Group(g) = n {
             if keep(g) {
-                out.push(g.id.clone());
+                // A shape's own transform (a group with no id, no layer, around the shape)
+                // goes by the shape's id.
+                let id = match g.children.as_slice() {
+                    [Node::Path(p)] if g.id.is_empty() && !g.layer && g.transform.is_some() => {
+                        p.id.clone()
+                    }
+                    _ => g.id.clone(),
+                };
+                out.push(id);
             }
             group_ids(&g.children, keep, out);
         }

@@ -921,13 +921,12 @@ fn convert_group_children(g: &usvg::Group, ctx: &Ctx, t: &Affine, role: Role) ->
                     Role::Clip => Vec::new(),
                 };
                 // A transform that can be a parameter: the group's frame is the one its
-                // children's parameters are in.
-                // One shape carries its own parameters (and usvg puts a shape's own
-                // `transform` on a group of its own): two or more make a parameter worth it.
+                // children's parameters are in. usvg puts a shape's own `transform` on a
+                // group of its own (no id; the shape keeps it): one shape is enough.
                 let movable = role == Role::Paint
                     && !ctx.in_pattern.get()
                     && !g.transform().is_identity()
-                    && shapes_in(g, 2) >= 2;
+                    && shapes_in(g, 1) >= 1;
                 let relative = invert(&ctx.frame.get()).map(|f| concat(&f, &gt));
                 // Within the range a fit keeps it in, so that the first step does not
                 // jump (a scale of 1e-6 stays baked).
@@ -962,6 +961,12 @@ fn convert_group_children(g: &usvg::Group, ctx: &Ctx, t: &Affine, role: Role) ->
                 ctx.frame.set(outer);
                 let mut children = converted?;
                 let transform = match own {
+                    // A circle, ellipse or rectangle turned about its own center: that is
+                    // its angle (as the writer writes it), not a transform of its own.
+                    Some((r, false)) if turned_about_center(&r, &gt, &children) => {
+                        bake(&mut children);
+                        None
+                    }
                     Some((r, general)) if super::transform::movable(&children, general) => {
                         // Rotate and scale about the content's center in the local frame
                         // (which a change of the transform leaves where it is, so a file
@@ -1111,6 +1116,24 @@ fn is_uniform(t: &Affine) -> bool {
     let [a, b, c, d, _, _] = *t;
     let (sx, sy) = (a.hypot(b), c.hypot(d));
     sx > 0.0 && (sx - sy).abs() <= 1e-9 * sx && (a * c + b * d).abs() <= 1e-9 * sx * sy
+}
+
+/// Whether `nodes` is one circle, ellipse or rectangle and `r` (its group's transform
+/// relative to the parent frame; `gt` the group's frame to device pixels) a rotation (no
+/// scale, to `f32`'s precision) that keeps the shape's center where it is (within
+/// `1e-4` px per pixel of distance from the origin): the shape's own angle.
+fn turned_about_center(r: &Affine, gt: &Affine, nodes: &[Node]) -> bool {
+    let [Node::Path(p)] = nodes else {
+        return false;
+    };
+    let (Some(q), Some(to_local)) = (&p.primitive, invert(gt)) else {
+        return false;
+    };
+    let [a, b, ..] = *r;
+    let c = apply(&to_local, q.center());
+    let moved = apply(r, c);
+    let tol = 1e-4 * (1.0 + c[0].abs().max(c[1].abs()));
+    (a.hypot(b) - 1.0).abs() <= 1e-6 && (moved[0] - c[0]).hypot(moved[1] - c[1]) <= tol
 }
 
 /// The center of the bounds of every control point under `nodes` (device pixels) mapped

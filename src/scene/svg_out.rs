@@ -55,6 +55,16 @@ struct Writer {
     /// The pattern the next shape written is painted with (its fill, or its stroke when it
     /// has no fill): the tiling and tile 0's content, written in device pixels.
     pattern: Option<(String, super::Tiling, String)>,
+    /// The `transform` attribute of a shape whose own transform is a parameter
+    /// ([`Writer::shape_transform`]), for the next shape written.
+    element_transform: Option<String>,
+}
+
+/// A group transform as a `transform` attribute: `matrix(…)` in `f32`, the precision it
+/// is read with, in full.
+fn matrix_attr(t: &super::transform::GroupTransform) -> String {
+    let m = t.affine().map(|v| format!("{}", v as f32));
+    format!(" transform=\"matrix({})\"", m.join(" "))
 }
 
 /// The device-space rectangle `[x0, y0, x1, y1]` a clip content is, when it is one
@@ -199,6 +209,13 @@ impl Writer {
                     self.clip_ref = outer;
                 }
                 Node::Group(g) if self.pattern_layer(g, indent) => {}
+                Node::Group(g) if Self::shape_transform(g) => {
+                    // A shape's own transform, written on the shape: it reads back as
+                    // the same group around it.
+                    self.element_transform = g.transform.as_ref().map(matrix_attr);
+                    self.nodes(&g.children, indent);
+                    self.element_transform = None;
+                }
                 Node::Group(g) => {
                     let pad = "  ".repeat(indent);
                     let mut attrs = String::new();
@@ -206,9 +223,7 @@ impl Writer {
                         let _ = write!(attrs, " id=\"{}\"", escape(&g.id));
                     }
                     if let Some(t) = &g.transform {
-                        // `f32`, the precision it is read with, in full.
-                        let m = t.affine().map(|v| format!("{}", v as f32));
-                        let _ = write!(attrs, " transform=\"matrix({})\"", m.join(" "));
+                        attrs.push_str(&matrix_attr(t));
                     }
                     if !self.in_clip && g.layer {
                         let _ = write!(attrs, " opacity=\"{}\"", num(g.opacity.clamp(0.0, 1.0)));
@@ -228,6 +243,29 @@ impl Writer {
                 },
             }
         }
+    }
+
+    /// Whether `g` is a shape's own transform parameter, which is written on the shape: a
+    /// group with no id, no layer and a transform around one shape that writes no
+    /// `transform` of its own (no rotated primitive, no stroke frame, no image). (usvg
+    /// reads `<rect transform="…">` as such a group around the rectangle.)
+    fn shape_transform(g: &Group) -> bool {
+        let [Node::Path(p)] = g.children.as_slice() else {
+            return false;
+        };
+        let own = p.stroke.as_ref().is_some_and(|s| s.frame != FRAME_IDENTITY)
+            || p.primitive.as_ref().is_some_and(|q| q.angle != 0.0)
+            || matches!(p.fill.as_ref().map(|f| &f.paint), Some(Paint::Image(_)));
+        g.transform.is_some()
+            && g.id.is_empty()
+            && !g.layer
+            && g.clip.is_none()
+            && g.mask.is_none()
+            && g.blend == BlendMode::Normal
+            && !g.isolate
+            && g.filters.is_empty()
+            && g.tiling.is_none()
+            && !own
     }
 
     /// Writes a tiled group ([`Tiling`](super::Tiling)) back as its shape painted with a
@@ -541,6 +579,9 @@ impl Writer {
         if !id.is_empty() {
             let _ = write!(attrs, " id=\"{}\"", escape(&id));
         }
+        if let Some(t) = self.element_transform.take() {
+            attrs.push_str(&t);
+        }
         attrs.push_str(&transform_attr);
         match primitive {
             Some(q) => attrs.push_str(&primitive_attrs(q)),
@@ -764,6 +805,7 @@ impl Scene {
             in_clip: false,
             clip_ref: None,
             pattern: None,
+            element_transform: None,
         };
         // Reserve path and group ids so that gradient ids do not collide with them.
         fn reserve(nodes: &[Node], ids: &mut HashSet<String>) {

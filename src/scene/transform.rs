@@ -16,10 +16,17 @@
 //! then `chain_gradient` carries them into the local frames and onto the transforms,
 //! outermost group first.
 //!
-//! **Which groups.** The reader makes one of a group of two or more shapes (one shape has
-//! parameters of its own, and usvg puts a shape's own `transform` on a group of its own)
-//! whose transform lies in the range a fit keeps it in ([`SCALE_RANGE`], docs/limits.md). Its
-//! content must be plain groups (opacity, blend mode, isolation) and paths: no clip path,
+//! **Which groups.** The reader makes one of a group of one or more shapes whose
+//! transform lies in the range a fit keeps it in ([`SCALE_RANGE`], docs/limits.md). A
+//! shape's own `transform` (`<rect transform="…">`) is such a group too: usvg puts it on a
+//! group of its own, with no id, around the shape, and SVG out writes that group's
+//! transform back on the shape. One exception: a circle, ellipse or rectangle turned
+//! about its own center (by a rotation alone) keeps that turn as its angle slot
+//! ([`shape`](super::shape)), which is how SVG out writes a primitive's angle. A single
+//! shape's transform repeats motions its own parameters can make (its points; a
+//! primitive's center, sizes and angle), so a fit moves both (README: the effect on
+//! `svg-samples/09-transforms.svg`). The group's content must be plain groups (opacity,
+//! blend mode, isolation) and paths: no clip path,
 //! mask, filter, image, pattern or text inside, which hold device quantities that are no
 //! parameters (a clip region, a pattern's tiles) and would need a frame of their own. A
 //! group that does not qualify keeps its transform baked into the points, as every group
@@ -60,7 +67,9 @@
 //! `pivot` (not a parameter) is the center of the content's bounds in the local frame
 //! when the file was read, so that turning or scaling does not also swing the group
 //! across the canvas. SVG out writes either kind as `transform="matrix(…)"` (`f32`, as
-//! it is read), so a written file reads back to the same kinds and slots.
+//! it is read), on the `<g>` or, for a shape's own transform, on the shape's element
+//! (when the shape writes no transform of its own: no turned primitive, no stroke
+//! frame), so a written file reads back to the same kinds and slots.
 
 use super::geom::{add_scaled, scale};
 use super::params::ParamLayout;
@@ -783,7 +792,7 @@ mod tests {
     use crate::scene::{ParamGroup, Scene, Sizing};
 
     /// Nested transformed groups (a path, a stroke, a rounded rectangle, an ellipse, a
-    /// stroked circle) and a skewed group, which stays baked.
+    /// stroked circle) and a skewed stroke, which stays baked.
     pub(crate) const NESTED: &str = r##"<svg xmlns="http://www.w3.org/2000/svg" width="80" height="60">
       <g id="outer" transform="translate(6 4) rotate(12 40 30)">
         <path id="blob" d="M10 10 C30 0 40 20 30 30 Q20 40 10 30 Z" fill="#3366aa"
@@ -795,7 +804,8 @@ mod tests {
                   stroke-width="1.5"/>
         </g>
       </g>
-      <g id="kept" transform="skewX(20)"><path d="M5 50 L20 50 L15 58 Z" fill="#777"/></g>
+      <g id="kept" transform="skewX(20)"><path d="M5 50 L20 50 L15 58 Z" fill="#777"
+        stroke="#000"/></g>
     </svg>"##;
 
     /// Every outline point but a circle's, whose outline starts at the same place however
@@ -1003,6 +1013,86 @@ mod tests {
         // A stroke keeps such a group baked.
         let stroked = svg.replace("fill=\"#a33\"", "fill=\"#a33\" stroke=\"#000\"");
         let s = Scene::from_svg_str(&stroked, "k.svg", Sizing::Natural).unwrap();
+        assert!(ParamLayout::new(&s).transforms.is_empty());
+    }
+
+    /// A shape's own transform (usvg's group around it): the group's slots, the shape's
+    /// parameters as written, and the file written back carries it on the shape itself
+    /// and reads back with the same slots and the same `f32` values.
+    #[test]
+    fn a_shapes_own_transform_is_a_parameter() {
+        let svg = r##"<svg xmlns="http://www.w3.org/2000/svg" width="60" height="40">
+          <rect id="r" x="10" y="8" width="20" height="10" fill="#c42"
+                transform="rotate(30 10 8)"/>
+          <rect id="a" x="2" y="2" width="6" height="4" transform="rotate(20 5 4)"/>
+          <path id="k" d="M30 20 L50 22 L40 34 Z" fill="#249" transform="skewX(15) scale(1 0.9)"/>
+          <circle id="c" cx="12" cy="30" r="4" fill="#4a4" stroke="#000"
+                  transform="translate(2 1) scale(1.5)"/>
+          <g id="one" transform="rotate(-10 40 10)"><ellipse cx="45" cy="8" rx="6" ry="3"/></g>
+        </svg>"##;
+        let s = Scene::from_svg_str(svg, "one.svg", Sizing::Natural).unwrap();
+        let layout = ParamLayout::new(&s);
+        let kinds = |s: &Scene| -> Vec<(String, usize)> {
+            let mut out = Vec::new();
+            for n in &s.nodes {
+                let Node::Group(g) = n else { continue };
+                let Some(t) = g.transform else { continue };
+                assert!(!g.layer && g.children.len() == 1, "{g:?}");
+                let Node::Path(p) = &g.children[0] else {
+                    panic!()
+                };
+                out.push((p.id.clone(), t.slot_count()));
+            }
+            out
+        };
+        let want = [("r", 4), ("k", 6), ("c", 4), ("", 4)].map(|(a, b)| (a.to_string(), b));
+        assert_eq!(kinds(&s), want);
+        assert_eq!(layout.transforms.len(), 4);
+        // The rectangle in its own frame: as written, unturned (its angle slot 0); the one
+        // turned about its center has that angle instead, and no transform.
+        let v = s.params();
+        let at = layout.paths[0].points;
+        for (got, want) in v[at..at + 5].iter().zip([10.0, 8.0, 20.0, 10.0, 0.0]) {
+            assert!((got - want).abs() < 1e-5, "{:?}", &v[at..at + 5]);
+        }
+        let Node::Path(a) = &s.nodes[1] else {
+            panic!("{:?}", s.nodes[1])
+        };
+        let angle = a.primitive.as_ref().unwrap().angle;
+        assert!((angle - 20f64.to_radians()).abs() < 1e-6, "{angle}");
+        // Moved, written, read back: the transform on the element, the same slots.
+        let mut moved = s.clone();
+        let mut w = v.clone();
+        for &t in &layout.transforms {
+            w[t] += 0.5;
+            w[t + 2] += 0.05;
+        }
+        moved.set_params(&w);
+        let text = moved.to_svg_string();
+        assert!(
+            text.contains("<rect id=\"r\" transform=\"matrix("),
+            "{text}"
+        );
+        assert!(
+            text.contains("<path id=\"k\" transform=\"matrix("),
+            "{text}"
+        );
+        assert!(text.contains("<g id=\"one\" transform=\"matrix("), "{text}");
+        let back = Scene::from_svg_str(&text, "b.svg", Sizing::Natural).unwrap();
+        assert_eq!(kinds(&back), want);
+        let (a, b) = (moved.params(), back.params());
+        assert_eq!(a.len(), b.len());
+        for (i, (x, y)) in a.iter().zip(&b).enumerate() {
+            assert!(
+                (*x as f32 - *y as f32).abs() <= 2e-6 * x.abs().max(1.0) as f32,
+                "slot {i}: {x} vs {y}\n{text}"
+            );
+        }
+        // Inside a pattern, or with an image, it stays baked.
+        let img = r##"<svg xmlns="http://www.w3.org/2000/svg" width="8" height="8">
+          <image width="4" height="4" transform="rotate(10)" href="data:image/png;base64,iVBORw0KGgoAAAANSUhEUgAAAAEAAAABCAYAAAAfFcSJAAAADUlEQVR42mP8z8BQDwAEhQGAhKmMIQAAAABJRU5ErkJggg=="/>
+        </svg>"##;
+        let s = Scene::from_svg_str(img, "i.svg", Sizing::Natural).unwrap();
         assert!(ParamLayout::new(&s).transforms.is_empty());
     }
 

@@ -77,7 +77,8 @@ fn single_circle_recovers_center_and_radius() {
 }
 
 /// Rectangles, circles, an ellipse, a turned group of two shapes, a scaled group of one
-/// (baked) and a skewed group of two filled paths (a general affine transform).
+/// (the circle's own transform) and a skewed group of two filled paths (a general affine
+/// transform).
 const DRAWING: &str = include_str!("../../svg-samples/shapes/drawing.svg");
 
 /// Every primitive parameter (positions, sizes, corner radii, rotations) and its paints
@@ -211,9 +212,11 @@ fn primitives_drawing_is_fitted_back_as_itself() {
         (3, 2, 1, 2),
         "{text}"
     );
-    // The turned group of two shapes and the skewed one of two paths keep their
-    // transforms (parameters); the scaled group of one circle is baked into it.
-    assert_eq!(text.matches("transform=\"matrix(").count(), 2, "{text}");
+    // The turned group of two shapes, the skewed one of two paths and the scaled circle
+    // keep their transforms (parameters); the circle's is written on a `<g>` around it
+    // when the circle writes a `rotate` of its own (where its outline starts), else on
+    // the `<circle>`.
+    assert_eq!(text.matches("transform=\"matrix(").count(), 3, "{text}");
 }
 
 /// `fit --free-shapes`: the same drawing fitted with its shapes' outlines as free paths,

@@ -1,7 +1,7 @@
 //! Group transforms as parameters beyond primitives.rs's similarities over solid paints:
 //! gradient paints inside transformed groups, and general affine maps (skews, non-uniform
-//! scales) over filled paths; every transform slot against central differences, and
-//! through a written file.
+//! scales) over filled paths, a single shape's own transform; every transform slot
+//! against central differences, and through a written file.
 
 use diffsvg::gradcheck::check;
 use diffsvg::loss::Loss;
@@ -9,6 +9,7 @@ use diffsvg::raster::{RenderOptions, render};
 use diffsvg::scene::structure::Structure;
 use diffsvg::scene::{ParamGroup, ParamLayout};
 use diffsvg::{Scene, Sizing};
+use std::path::Path;
 
 use crate::gradients::nudged_target;
 
@@ -77,6 +78,14 @@ fn group_transform_slots(scene: &Scene) -> Vec<usize> {
         .collect()
 }
 
+/// The slots of the parameter groups `groups`.
+fn slots_of(scene: &Scene, groups: &[ParamGroup]) -> Vec<usize> {
+    let layout = ParamLayout::new(scene);
+    (0..layout.slots.len())
+        .filter(|&i| groups.contains(&layout.slots[i].group))
+        .collect()
+}
+
 /// `which` against central differences, each group within 1e-2 (relative, absolute
 /// below 1e-2 of the group's largest), and not all zero.
 fn assert_slots_agree(name: &str, scene: &Scene, which: &[usize]) {
@@ -116,15 +125,7 @@ fn gradient_paints_keep_their_groups_transform() {
     let slots = group_transform_slots(&scene);
     assert_eq!(slots.len(), 8);
     // The paints' own parameters too: geometry and stops, in gradient space.
-    let layout = ParamLayout::new(&scene);
-    let paint: Vec<usize> = (0..layout.slots.len())
-        .filter(|&i| {
-            matches!(
-                layout.slots[i].group,
-                ParamGroup::PaintGeometry | ParamGroup::StopOffset
-            )
-        })
-        .collect();
+    let paint = slots_of(&scene, &[ParamGroup::PaintGeometry, ParamGroup::StopOffset]);
     assert!(!paint.is_empty());
     assert_slots_agree("gradient paints: transforms", &scene, &slots);
     assert_slots_agree("gradient paints: paint", &scene, &paint);
@@ -161,15 +162,7 @@ fn skewed_groups_of_fills_are_affine_parameters() {
     assert_eq!(slots.len(), 12);
     assert_slots_agree("affine groups", &scene, &slots);
     // The points in the groups' frames, and the linear gradient's geometry.
-    let layout = ParamLayout::new(&scene);
-    let rest: Vec<usize> = (0..layout.slots.len())
-        .filter(|&i| {
-            matches!(
-                layout.slots[i].group,
-                ParamGroup::Points | ParamGroup::PaintGeometry
-            )
-        })
-        .collect();
+    let rest = slots_of(&scene, &[ParamGroup::Points, ParamGroup::PaintGeometry]);
     assert_slots_agree("affine groups: points and paint", &scene, &rest);
 }
 
@@ -223,7 +216,7 @@ fn affine_transforms_and_gradient_paints_survive_a_round_trip() {
 /// rest is frozen.
 #[test]
 fn freezing_transforms_holds_affine_slots() {
-    use crate::common::{diffsvg, json_summary, s, scratch, write};
+    use crate::common::{scratch, write};
     let dir = scratch("affine-freeze");
     let src = write(&dir, "skewed.svg", SKEWED);
     let scene = Scene::load(&src, Sizing::Natural).unwrap();
@@ -235,22 +228,7 @@ fn freezing_transforms_holds_affine_slots() {
     for (freeze, transforms_move) in [("transforms", false), (rest, true)] {
         let out = dir.join("fit.svg");
         // (A fit writes its best step: enough of them to improve.)
-        let sum = json_summary(&diffsvg(&[
-            "fit",
-            s(&src),
-            s(&png),
-            "-o",
-            s(&out),
-            "--iters",
-            "20",
-            "--freeze",
-            freeze,
-            "--json",
-        ]));
-        let (initial, psnr) = (
-            sum["initial_psnr"].as_f64().unwrap(),
-            sum["psnr"].as_f64().unwrap(),
-        );
+        let (initial, psnr) = fit(&src, &png, &out, &["--iters", "20", "--freeze", freeze]);
         assert!(
             psnr > initial + 3.0,
             "{freeze}: {initial:.2} → {psnr:.2} dB"
@@ -274,6 +252,30 @@ fn freezing_transforms_holds_affine_slots() {
             .collect();
         assert_eq!(!others.is_empty(), !transforms_move, "{freeze}: {others:?}");
     }
+}
+
+/// Every outline point in device pixels, a circle's center instead of its outline (whose
+/// start its angle places).
+fn outlines(scene: &Scene) -> Vec<[f64; 2]> {
+    let mut out = Vec::new();
+    scene.for_each_path(|p| match &p.primitive {
+        Some(q) if matches!(q.shape, diffsvg::scene::Shape::Circle { .. }) => out.push(q.center()),
+        _ => out.extend(p.points.iter().copied()),
+    });
+    out
+}
+
+/// `diffsvg fit SRC PNG -o OUT ARGS --json`: its initial and final PSNR, dB.
+fn fit(src: &Path, png: &Path, out: &Path, args: &[&str]) -> (f64, f64) {
+    use crate::common::{diffsvg, json_summary, s};
+    let mut all = vec!["fit", s(src), s(png), "-o", s(out)];
+    all.extend_from_slice(args);
+    all.push("--json");
+    let sum = json_summary(&diffsvg(&all));
+    (
+        sum["initial_psnr"].as_f64().unwrap(),
+        sum["psnr"].as_f64().unwrap(),
+    )
 }
 
 /// Every group transform's matrix, in walk order.
@@ -302,4 +304,145 @@ fn nudged_target_scene(scene: &Scene) -> Scene {
     }
     t.set_params(&v);
     t
+}
+
+/// Single shapes with transforms of their own (usvg's group around each): a rectangle
+/// turned about its corner and stroked, a circle scaled and moved, a path skewed and
+/// squeezed, an ellipse in a `<g>` of its own; and one rectangle turned about its center,
+/// which is its angle.
+const SINGLES: &str = r##"<svg xmlns="http://www.w3.org/2000/svg" width="64" height="48">
+  <rect width="64" height="48" fill="#efe9dc"/>
+  <rect id="bar" x="8" y="6" width="24" height="10" rx="2" fill="#c0392b" stroke="#2c3e50"
+        stroke-width="2" transform="rotate(20 8 6)"/>
+  <circle id="dot" cx="14" cy="30" r="5" fill="#27ae60" transform="translate(3 2) scale(1.3)"/>
+  <path id="kite" d="M36 22 L54 24 L48 40 L34 34 Z" fill="#2980b9"
+        transform="matrix(1 0.1 -0.3 0.9 6 1)"/>
+  <g id="leaf" transform="rotate(-15 50 10) scale(1.1)">
+    <ellipse cx="44" cy="9" rx="9" ry="4" fill="#8e44ad"/>
+  </g>
+  <rect id="tile" x="24" y="36" width="10" height="6" fill="#f39c12" transform="rotate(10 29 39)"/>
+</svg>"##;
+
+#[test]
+fn single_shapes_keep_their_own_transforms() {
+    let scene = Scene::from_svg_str(SINGLES, "singles.svg", Sizing::Natural).unwrap();
+    let lens: Vec<usize> = Structure::of(&scene)
+        .transforms
+        .iter()
+        .map(|t| t.len)
+        .collect();
+    // The tile's turn about its center is its own angle; a shape's own transform goes by
+    // the shape's id.
+    assert_eq!(lens, [4, 4, 6, 4]);
+    assert_eq!(
+        kept_transforms(&scene),
+        ["bar:4", "dot:4", "kite:6", "leaf:4"]
+    );
+    let slots = group_transform_slots(&scene);
+    assert_eq!(slots.len(), 18);
+    assert_slots_agree("single shapes: transforms", &scene, &slots);
+    let rest = slots_of(&scene, &[ParamGroup::Points, ParamGroup::StrokeWidth]);
+    assert_slots_agree("single shapes: local values", &scene, &rest);
+    // Written back: the transforms on the elements, read back to the same slots.
+    let text = scene.to_svg_string();
+    for tag in [
+        "<rect id=\"bar\" ",
+        "<circle id=\"dot\" ",
+        "<path id=\"kite\" ",
+    ] {
+        assert!(
+            text.contains(&format!("{tag}transform=\"matrix(")),
+            "{tag}: {text}"
+        );
+    }
+    assert!(
+        text.contains("<g id=\"leaf\" transform=\"matrix("),
+        "{text}"
+    );
+    assert!(
+        text.contains("<rect id=\"tile\" transform=\"rotate("),
+        "{text}"
+    );
+    let back = Scene::from_svg_str(&text, "back.svg", Sizing::Natural).unwrap();
+    let (a, b) = (scene.params(), back.params());
+    assert_eq!(a.len(), b.len(), "{text}");
+    assert_eq!(
+        group_transform_slots(&back),
+        slots,
+        "the same slots: {text}"
+    );
+    for (i, (x, y)) in a.iter().zip(&b).enumerate() {
+        assert!(
+            (x - y).abs() <= 1e-5 * x.abs().max(1.0),
+            "slot {i}: {x} vs {y}"
+        );
+    }
+}
+
+/// The single shapes' transforms perturbed and fitted back with everything else frozen:
+/// the picture to ≥ 45 dB and each shape's outline (a circle's center) to within 0.1 px
+/// (a rectangle's own angle turns it about the same pivot as its transform's, so the
+/// two share the turn: the maps themselves need not come back); `--freeze transforms`
+/// leaves the maps where they are.
+#[test]
+fn single_shape_transforms_are_fitted_back() {
+    use crate::common::{scratch, write};
+    let dir = scratch("single-transforms-fit");
+    let target = Scene::from_svg_str(SINGLES, "singles.svg", Sizing::Natural).unwrap();
+    let png = dir.join("target.png");
+    render(&target, &RenderOptions::default())
+        .save_png(&png)
+        .unwrap();
+    // Each map moved: a shift, a turn, a scale or a shear.
+    let mut start = target.clone();
+    let mut v = start.params();
+    for t in Structure::of(&target).transforms {
+        let at = t.offset;
+        v[at] += 1.2;
+        v[at + 1] -= 0.8;
+        v[at + 2] += if t.len == 4 { 0.06 } else { 0.05 };
+        v[at + 3] *= 1.04;
+    }
+    start.set_params(&v);
+    let src = write(&dir, "start.svg", &start.to_svg_string());
+    let rest = "points,colors,opacities,widths,paint,stops";
+    let out = dir.join("fit.svg");
+    let (initial, psnr) = fit(
+        &src,
+        &png,
+        &out,
+        &["--iters", "400", "--until-psnr", "50", "--freeze", rest],
+    );
+    assert!(
+        initial < 25.0,
+        "the perturbation should hurt: {initial:.2} dB"
+    );
+    assert!(psnr >= 45.0, "{initial:.2} → {psnr:.2} dB");
+    let fitted = Scene::load(&out, Sizing::Natural).unwrap();
+    assert_eq!(maps(&fitted).len(), 4);
+    let (want, got) = (outlines(&target), outlines(&fitted));
+    assert_eq!(want.len(), got.len());
+    let worst = want
+        .iter()
+        .zip(&got)
+        .map(|(p, q)| (p[0] - q[0]).hypot(p[1] - q[1]))
+        .fold(0.0, f64::max);
+    assert!(
+        worst <= 0.1,
+        "{initial:.2} → {psnr:.2} dB, off by {worst} px"
+    );
+    // Frozen, the maps stay as they start.
+    fit(
+        &src,
+        &png,
+        &out,
+        &["--iters", "10", "--freeze", "transforms"],
+    );
+    let held = maps(&Scene::load(&out, Sizing::Natural).unwrap());
+    for (a, b) in maps(&start).iter().zip(&held) {
+        assert!(
+            a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-4),
+            "{a:?} vs {b:?}"
+        );
+    }
 }
