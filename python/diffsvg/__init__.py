@@ -1025,7 +1025,7 @@ def recon_nerf(scene, output, *, iters: int = 2000, seconds: float = 0.0, batch:
 
 
 def view(model, scene=None, *, split: str = "test", orbit: int = 0, elevation: float = 30.0,
-         downscale: int = 1, step: float = 0.5) -> Views:
+         downscale: int = 1, step: float = 0.5, depth: bool = False) -> Views:
     """Renders a trained model (``.vox`` or Gaussian ``.ply``, told apart by its header)
     as ``diffsvg view`` does, into arrays: from the cameras of the dataset ``scene``'s
     ``split`` views ("test" or "train"), and from ``orbit`` new cameras around the model
@@ -1034,7 +1034,13 @@ def view(model, scene=None, *, split: str = "test", orbit: int = 0, elevation: f
 
     Returns a dict: ``views``, a list of ``(name, rendering, photo)``, and ``orbit``, a
     list of renderings; each an ``(h, w, 3)`` ``float32`` array of linear RGB, unclamped.
+    With ``depth=True`` (Gaussian and voxel models), also ``depth`` and ``orbit_depth``:
+    per view and per orbit camera, in the same order, a dict of ``expected`` and ``median``
+    ``(h, w)`` ``float32`` depth images in world units along the viewing axis (0 where
+    nothing was hit), the values ``diffsvg view --depth`` writes as ``.npy``.
     """
+    if not isinstance(depth, bool):
+        raise TypeError(f"depth must be True or False, got {depth!r}")
     return _native.view(os.fspath(model), None if scene is None else os.fspath(scene),
                         split, _whole(orbit, "orbit", _U64), elevation,
-                        _whole(downscale, "downscale"), step)
+                        _whole(downscale, "downscale"), step, depth)

@@ -162,10 +162,19 @@ class ReconInfo(TypedDict):
     pose_error: Optional[Dict[str, Tuple[float, float]]]
 
 
-class Views(TypedDict):
-    """What ``view`` returns: ``(name, rendering, photo)`` per view and the orbit."""
+class Depth(TypedDict):
+    """A view's depth images: ``(h, w)`` ``float32``, world units along the viewing axis."""
+    expected: F32
+    median: F32
+
+
+class Views(TypedDict, total=False):
+    """What ``view`` returns: ``(name, rendering, photo)`` per view and the orbit; with
+    ``depth=True`` also their depth images, in the same order."""
     views: List[Tuple[str, F32, F32]]
     orbit: List[F32]
+    depth: List[Depth]
+    orbit_depth: List[Depth]
 
 
 Step = dict

@@ -419,10 +419,13 @@ fn set_pose_error(
 /// dataset `scene` (when given), and from `orbit` new cameras around the model raised by
 /// `elevation` degrees. Returns a dict: `views`, a list of `(name, rendering, photo)`
 /// with `(h, w, 3)` `float32` linear RGB arrays (unclamped), and `orbit`, a list of
-/// `(h, w, 3)` renderings. The GIL is released while it renders.
+/// `(h, w, 3)` renderings. With `depth`, also `depth` and `orbit_depth`: per view (and per
+/// orbit camera) a dict of `expected` and `median` `(h, w)` `float32` depth images (world
+/// units along the viewing axis, as `diffsvg view --depth` writes them; Gaussian and voxel
+/// models only). The GIL is released while it renders.
 #[pyfunction]
 #[pyo3(signature = (model, scene=None, split="test", orbit=0, elevation=30.0, downscale=1,
-    step=0.5))]
+    step=0.5, depth=false))]
 #[allow(clippy::too_many_arguments, clippy::type_complexity)]
 pub(crate) fn view<'py>(
     py: Python<'py>,
@@ -433,6 +436,7 @@ pub(crate) fn view<'py>(
     elevation: f32,
     downscale: u32,
     step: f32,
+    depth: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
     use diffsvg::volume::view::{Model, Split, check_downscale, orbit_cameras};
     use numpy::PyArrayMethods as _;
@@ -442,6 +446,12 @@ pub(crate) fn view<'py>(
         return Err(bad("nothing to render: give scene and/or orbit"));
     }
     type Rgb = (u32, u32, Vec<[f32; 3]>);
+    // The depth images of a camera, when asked for.
+    let depth_of = |m: &Model, c: &diffsvg::volume::camera::Camera| {
+        depth.then(|| m.render_depth(c)).transpose()
+    };
+    let mut depths = Vec::new();
+    let mut orbit_depths = Vec::new();
     let (views, orbits) = py
         .detach(|| -> diffsvg::Result<(Vec<(String, Rgb, Rgb)>, Vec<Rgb>)> {
             crate::on_pool(|| {
@@ -459,6 +469,7 @@ pub(crate) fn view<'py>(
                 let mut views = Vec::new();
                 if let Some(d) = &data {
                     for v in split.views(d) {
+                        depths.extend(depth_of(&m, &v.camera)?);
                         let out = m.render(&v.camera)?;
                         views.push((
                             v.name.clone(),
@@ -474,6 +485,7 @@ pub(crate) fn view<'py>(
                 };
                 let mut orbits = Vec::new();
                 for c in &cams {
+                    orbit_depths.extend(depth_of(&m, c)?);
                     orbits.push((c.width, c.height, m.render(c)?));
                 }
                 Ok((views, orbits))
@@ -497,5 +509,22 @@ pub(crate) fn view<'py>(
         list.append(array(o)?)?;
     }
     out.set_item("orbit", list)?;
+    if depth {
+        let image = |w: u32, h: u32, v: Vec<f32>| {
+            numpy::PyArray1::from_vec(py, v)
+                .reshape([h as usize, w as usize])
+                .map_err(|e| bad(e.to_string()))
+        };
+        for (key, ds) in [("depth", depths), ("orbit_depth", orbit_depths)] {
+            let list = pyo3::types::PyList::empty(py);
+            for d in ds {
+                let entry = PyDict::new(py);
+                entry.set_item("expected", image(d.width, d.height, d.expected)?)?;
+                entry.set_item("median", image(d.width, d.height, d.median)?)?;
+                list.append(entry)?;
+            }
+            out.set_item(key, list)?;
+        }
+    }
     Ok(out)
 }

@@ -188,3 +188,37 @@ def test_view_renders_the_pixels_of_the_cli(tmp_path, kind):
     assert len(diffsvg.view(model, orbit=2)["orbit"]) == 2
     with pytest.raises(diffsvg.DiffsvgError, match="split"):
         diffsvg.view(model, scene, split="val")
+
+
+@pytest.mark.parametrize("kind", ["vox", "ply"])
+def test_view_depth_is_the_cli_s(tmp_path, kind):
+    """diffsvg.view(depth=True) gives each view's and orbit camera's expected and median
+    depth, the float32 values `diffsvg view --depth` writes as .npy."""
+    scene = write_scene(tmp_path / "scene")
+    model = tmp_path / f"m.{kind}"
+    if kind == "vox":
+        diffsvg.recon_voxel(scene, model, res=16, iters=30, batch=256)
+    else:
+        diffsvg.recon_splat(scene, model, iters=20, initial=200, seed=3)
+    out = diffsvg.view(model, scene, orbit=2, elevation=20.0, depth=True)
+    run_cli("view", model, "--scene", scene, "--orbit", 2, "--elevation", 20, "--depth",
+            "-o", tmp_path / "cli")
+    assert len(out["depth"]) == len(out["views"]) == 2
+    assert len(out["orbit_depth"]) == len(out["orbit"]) == 2
+    stems = [name.split("/")[-1] for name, _, _ in out["views"]]
+    stems += [f"orbit-{i:03}" for i in range(2)]
+    hit = 0
+    for stem, d, (_, rgb, _) in zip(stems, out["depth"] + out["orbit_depth"],
+                                    out["views"] + [(None, o, None) for o in out["orbit"]]):
+        for key in ("expected", "median"):
+            got = d[key]
+            assert got.dtype == np.float32 and got.shape == rgb.shape[:2]
+            want = np.load(tmp_path / "cli" / f"{stem}.depth-{key}.npy")
+            assert np.array_equal(got, want), (stem, key)
+            assert np.isfinite(got).all() and (got >= 0).all()
+            hit += int((got > 0).sum())
+    assert hit > 0, "every depth is 0: nothing was seen"
+    assert "depth" not in diffsvg.view(model, scene)
+    with pytest.raises(TypeError, match="depth"):
+        diffsvg.view(model, scene, depth=1)
+
