@@ -157,16 +157,23 @@ def test_recon_progress_exception_is_raised(tmp_path):
     assert not (tmp_path / "m.vox").exists()
 
 
-@pytest.mark.parametrize("kind", ["vox", "ply"])
-def test_view_renders_the_pixels_of_the_cli(tmp_path, kind):
-    """diffsvg.view renders a trained voxel grid and Gaussians from the dataset's cameras
-    and from orbit cameras: the pixels `diffsvg view` writes (its PNGs are 8-bit)."""
+def trained(tmp_path, kind):
+    """A small scene written under tmp_path and a voxel grid ("vox") or Gaussians ("ply")
+    briefly trained on it: (scene folder, model file)."""
     scene = write_scene(tmp_path / "scene")
     model = tmp_path / f"m.{kind}"
     if kind == "vox":
         diffsvg.recon_voxel(scene, model, res=16, iters=30, batch=256)
     else:
         diffsvg.recon_splat(scene, model, iters=20, initial=200, seed=3)
+    return scene, model
+
+
+@pytest.mark.parametrize("kind", ["vox", "ply"])
+def test_view_renders_the_pixels_of_the_cli(tmp_path, kind):
+    """diffsvg.view renders a trained voxel grid and Gaussians from the dataset's cameras
+    and from orbit cameras: the pixels `diffsvg view` writes (its PNGs are 8-bit)."""
+    scene, model = trained(tmp_path, kind)
     out = diffsvg.view(model, scene, orbit=4, elevation=20.0)
     run_cli("view", model, "--scene", scene, "--orbit", 4, "--elevation", 20, "-o",
             tmp_path / "cli")
@@ -194,12 +201,7 @@ def test_view_renders_the_pixels_of_the_cli(tmp_path, kind):
 def test_view_depth_is_the_cli_s(tmp_path, kind):
     """diffsvg.view(depth=True) gives each view's and orbit camera's expected and median
     depth, the float32 values `diffsvg view --depth` writes as .npy."""
-    scene = write_scene(tmp_path / "scene")
-    model = tmp_path / f"m.{kind}"
-    if kind == "vox":
-        diffsvg.recon_voxel(scene, model, res=16, iters=30, batch=256)
-    else:
-        diffsvg.recon_splat(scene, model, iters=20, initial=200, seed=3)
+    scene, model = trained(tmp_path, kind)
     out = diffsvg.view(model, scene, orbit=2, elevation=20.0, depth=True)
     run_cli("view", model, "--scene", scene, "--orbit", 2, "--elevation", 20, "--depth",
             "-o", tmp_path / "cli")
