@@ -41,6 +41,7 @@ pub(crate) mod pixmap;
 pub(crate) mod prepare;
 pub(crate) mod render;
 pub(crate) mod stroke;
+pub(crate) mod sweep;
 
 pub(crate) use backward::backward_prepared;
 pub use backward::{

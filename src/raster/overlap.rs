@@ -67,6 +67,7 @@
 
 use super::coverage::{clip_to_box, floor_f64};
 use super::prepare::Item;
+use super::sweep;
 use crate::scene::Point;
 
 /// Pieces in one cell up to which its coverage is exact.
@@ -218,9 +219,11 @@ pub(crate) struct Overlaps {
     /// Per row of the box, the columns (device pixels, inclusive; empty when `lo > hi`)
     /// where a candidate can be ([`flag_rows`](Self::flag_rows)).
     rows: Vec<(f64, f64)>,
-    /// Cell boxes of the runs near the band, with their run's index and their ring's
-    /// first run and run count.
-    boxes: Vec<([f64; 4], u32, [u32; 2])>,
+    /// Cell boxes of the runs near the band.
+    boxes: Vec<[f64; 4]>,
+    /// Each box's run index, and its ring's first run and run count.
+    box_runs: Vec<(u32, [u32; 2])>,
+    sweep: sweep::Scratch,
 }
 
 impl Overlaps {
@@ -450,8 +453,9 @@ impl Overlaps {
                 }
             }
         };
-        let boxes = &mut self.boxes;
+        let (boxes, box_runs) = (&mut self.boxes, &mut self.box_runs);
         boxes.clear();
+        box_runs.clear();
         let mut run = 0usize;
         for &(_, n) in &item.rings {
             let count = n.div_ceil(BOX_EDGES);
@@ -465,44 +469,36 @@ impl Overlaps {
                 if !rb.simple() {
                     flag(c);
                 }
-                boxes.push((c, k as u32, ring));
+                boxes.push(c);
+                box_runs.push((k as u32, ring));
             }
             run += count;
         }
-        boxes.sort_unstable_by(|a, b| a.0[0].total_cmp(&b.0[0]));
-        let mut pairs = 0usize;
-        for i in 0..boxes.len() {
-            let (a, ka, ring) = boxes[i];
-            for &(b, kb, ring_b) in &boxes[i + 1..] {
-                if b[0] > a[2] {
-                    break;
+        let end = sweep::overlapping_pairs(boxes, MAX_PAIRS, &mut self.sweep, |i, j| {
+            let (a, b) = (boxes[i], boxes[j]);
+            let ((ka, ring), (kb, ring_b)) = (box_runs[i], box_runs[j]);
+            let (r0, r1) = (a[1].max(b[1]), a[3].min(b[3]));
+            let (c0, c1) = (a[0].max(b[0]), a[2].min(b[2]));
+            let (ra, rb) = (&item.run_boxes[ka as usize], &item.run_boxes[kb as usize]);
+            if r0 == r1
+                && c0 == c1
+                && !ra.on_line
+                && !rb.on_line
+                && (ra.dirs | rb.dirs) != 0b1111
+                && ring == ring_b
+                && {
+                    let (lo, hi) = (ka.min(kb), ka.max(kb));
+                    hi == lo + 1 || (lo == ring[0] && hi == ring[0] + ring[1] - 1)
                 }
-                pairs += 1;
-                if pairs > MAX_PAIRS {
-                    flag([f64::NEG_INFINITY, rlo, f64::INFINITY, rhi]);
-                    return true;
-                }
-                let (r0, r1) = (a[1].max(b[1]), a[3].min(b[3]));
-                if r0 > r1 {
-                    continue;
-                }
-                let (c0, c1) = (a[0].max(b[0]), a[2].min(b[2]));
-                let (ra, rb) = (&item.run_boxes[ka as usize], &item.run_boxes[kb as usize]);
-                if r0 == r1
-                    && c0 == c1
-                    && !ra.on_line
-                    && !rb.on_line
-                    && (ra.dirs | rb.dirs) != 0b1111
-                    && ring == ring_b
-                    && {
-                        let (lo, hi) = (ka.min(kb), ka.max(kb));
-                        hi == lo + 1 || (lo == ring[0] && hi == ring[0] + ring[1] - 1)
-                    }
-                {
-                    continue;
-                }
-                flag([c0, r0, c1, r1]);
+            {
+                return true;
             }
+            flag([c0, r0, c1, r1]);
+            true
+        });
+        if end == sweep::Pairs::Unsure {
+            flag([f64::NEG_INFINITY, rlo, f64::INFINITY, rhi]);
+            return true;
         }
         any
     }
@@ -1087,11 +1083,12 @@ pub(crate) fn windings_two_valued(pts: &[Point], rings: &[(usize, usize)]) -> bo
     }
     let (pts, rings) = (&clean[..], &clean_rings[..]);
     let total: usize = rings.iter().map(|r| r.1).sum();
-    if rings.iter().any(|r| r.1 < 3) || rings.len().saturating_mul(total) > BUDGET * 4 {
+    if rings.iter().any(|r| r.1 < 3) {
         return false;
     }
-    // 1. Edges as (least x, greatest x, least y, greatest y, ring, index in the ring).
-    let mut edges: Vec<([f64; 4], u32, u32)> = Vec::with_capacity(total);
+    // 1. Edges' boxes, and each edge's ring and index in the ring.
+    let mut boxes: Vec<[f64; 4]> = Vec::with_capacity(total);
+    let mut ids: Vec<(u32, u32)> = Vec::with_capacity(total);
     for (r, &(s, n)) in rings.iter().enumerate() {
         for k in 0..n {
             let (a, b) = (pts[s + k], pts[s + (k + 1) % n]);
@@ -1106,61 +1103,50 @@ pub(crate) fn windings_two_valued(pts: &[Point], rings: &[(usize, usize)]) -> bo
             {
                 return false;
             }
-            let bx = [
+            boxes.push([
                 a[0].min(b[0]),
-                a[0].max(b[0]),
                 a[1].min(b[1]),
+                a[0].max(b[0]),
                 a[1].max(b[1]),
-            ];
-            edges.push((bx, r as u32, k as u32));
+            ]);
+            ids.push((r as u32, k as u32));
         }
     }
-    edges.sort_unstable_by(|a, b| a.0[0].total_cmp(&b.0[0]));
-    let ends = |e: &([f64; 4], u32, u32)| {
-        let (s, n) = rings[e.1 as usize];
-        let k = e.2 as usize;
-        (pts[s + k], pts[s + (k + 1) % n])
+    let ends = |e: usize| {
+        let (r, k) = ids[e];
+        let (s, n) = rings[r as usize];
+        let k = k as usize;
+        (pts[s + k], pts[s + if k + 1 == n { 0 } else { k + 1 }])
     };
-    let mut tests = 0usize;
-    for i in 0..edges.len() {
-        let (bi, ri, ki) = edges[i];
-        for &(bj, rj, kj) in &edges[i + 1..] {
-            if bj[0] > bi[1] {
-                break;
-            }
-            if bj[2] > bi[3] || bi[2] > bj[3] {
-                continue;
-            }
-            tests += 1;
-            if tests > BUDGET {
-                return false;
-            }
-            let n = rings[ri as usize].1 as u32;
-            if ri == rj && ((ki + 1) % n == kj || (kj + 1) % n == ki) {
-                // Consecutive: they share a vertex, and do not fold back (checked above).
-                continue;
-            }
-            let ((p, q), (u, v)) = (ends(&edges[i]), ends(&(bj, rj, kj)));
-            let (o1, o2) = (orient(p, q, u), orient(p, q, v));
-            let (o3, o4) = (orient(u, v, p), orient(u, v, q));
-            if o1 == 0 && o2 == 0 {
-                // Collinear: apart only when their extents along the line are apart
-                // (their boxes overlap, so compare along the longer axis).
-                let ax = if (q[0] - p[0]).abs() >= (q[1] - p[1]).abs() {
-                    0
-                } else {
-                    1
-                };
-                let (lo, hi) = (p[ax].min(q[ax]), p[ax].max(q[ax]));
-                if u[ax].max(v[ax]) < lo || u[ax].min(v[ax]) > hi {
-                    continue;
-                }
-                return false;
-            }
-            if o1 * o2 <= 0 && o3 * o4 <= 0 {
-                return false;
-            }
+    // Does edge `i` meet edge `j` (other than consecutive ones at their shared vertex)?
+    let meet = |i: usize, j: usize| {
+        let ((ri, ki), (rj, kj)) = (ids[i], ids[j]);
+        let n = rings[ri as usize].1 as u32;
+        if ri == rj && ((ki + 1) % n == kj || (kj + 1) % n == ki) {
+            // Consecutive: they share a vertex, and do not fold back (checked above).
+            return false;
         }
+        let ((p, q), (u, v)) = (ends(i), ends(j));
+        let (o1, o2) = (orient(p, q, u), orient(p, q, v));
+        let (o3, o4) = (orient(u, v, p), orient(u, v, q));
+        if o1 == 0 && o2 == 0 {
+            // Collinear: apart only when their extents along the line are apart
+            // (their boxes overlap, so compare along the longer axis).
+            let ax = if (q[0] - p[0]).abs() >= (q[1] - p[1]).abs() {
+                0
+            } else {
+                1
+            };
+            let (lo, hi) = (p[ax].min(q[ax]), p[ax].max(q[ax]));
+            return !(u[ax].max(v[ax]) < lo || u[ax].min(v[ax]) > hi);
+        }
+        o1 * o2 <= 0 && o3 * o4 <= 0
+    };
+    let mut scratch = sweep::Scratch::default();
+    if sweep::overlapping_pairs(&boxes, BUDGET, &mut scratch, |i, j| !meet(i, j))
+        != sweep::Pairs::All
+    {
+        return false;
     }
     // 2. Each ring's orientation and the others' winding number at its first vertex.
     let winding = |s: usize, n: usize, x: Point| {
@@ -1177,6 +1163,47 @@ pub(crate) fn windings_two_valued(pts: &[Point], rings: &[(usize, usize)]) -> bo
         }
         w
     };
+    // The others' winding number at each ring's first vertex: a ring winds 0 outside its
+    // box, so only rings whose boxes overlap count (no vertex lies on another ring).
+    let ring_boxes: Vec<[f64; 4]> = rings
+        .iter()
+        .map(|&(s, n)| {
+            pts[s..s + n].iter().fold(
+                [
+                    f64::INFINITY,
+                    f64::INFINITY,
+                    f64::NEG_INFINITY,
+                    f64::NEG_INFINITY,
+                ],
+                |b, q| {
+                    [
+                        b[0].min(q[0]),
+                        b[1].min(q[1]),
+                        b[2].max(q[0]),
+                        b[3].max(q[1]),
+                    ]
+                },
+            )
+        })
+        .collect();
+    let inside =
+        |b: [f64; 4], x: Point| b[0] <= x[0] && x[0] <= b[2] && b[1] <= x[1] && x[1] <= b[3];
+    let mut others = vec![0i64; rings.len()];
+    let mut work = 0usize;
+    let end = sweep::overlapping_pairs(&ring_boxes, BUDGET, &mut scratch, |r, q| {
+        for (at, by) in [(r, q), (q, r)] {
+            let (s, _) = rings[at];
+            if inside(ring_boxes[by], pts[s]) {
+                let (s2, n2) = rings[by];
+                work += n2;
+                others[at] += winding(s2, n2, pts[s]);
+            }
+        }
+        work <= BUDGET * 4
+    });
+    if end != sweep::Pairs::All {
+        return false;
+    }
     let mut other: Option<i64> = None;
     for (r, &(s, n)) in rings.iter().enumerate() {
         let twice_area: f64 = (0..n)
@@ -1192,13 +1219,7 @@ pub(crate) fn windings_two_valued(pts: &[Point], rings: &[(usize, usize)]) -> bo
         } else {
             return false;
         };
-        let v = pts[s];
-        let w: i64 = rings
-            .iter()
-            .enumerate()
-            .filter(|&(q, _)| q != r)
-            .map(|(_, &(s2, n2))| winding(s2, n2, v))
-            .sum();
+        let w = others[r];
         // The two windings beside this ring, `w` and `w + o`: one is 0, the other the
         // drawing's one other value.
         let value = match (w, w + o) {
@@ -1228,7 +1249,7 @@ pub(crate) fn rings_cannot_overlap(pts: &[Point], rings: &[(usize, usize)]) -> b
         return true;
     }
     // The cells each ring's box touches, `[x0, y0, x1, y1]` inclusive.
-    let mut boxes: Vec<[f64; 4]> = rings
+    let boxes: Vec<[f64; 4]> = rings
         .iter()
         .map(|&(s, n)| {
             let mut b = [
@@ -1248,23 +1269,9 @@ pub(crate) fn rings_cannot_overlap(pts: &[Point], rings: &[(usize, usize)]) -> b
             b.map(floor_f64)
         })
         .collect();
-    boxes.sort_by(|a, b| a[0].total_cmp(&b[0]));
-    let mut pairs = 0;
-    for i in 0..boxes.len() {
-        for j in i + 1..boxes.len() {
-            if boxes[j][0] > boxes[i][2] {
-                break;
-            }
-            pairs += 1;
-            if pairs > MAX_PAIRS {
-                return false;
-            }
-            if boxes[j][1] <= boxes[i][3] && boxes[i][1] <= boxes[j][3] {
-                return false;
-            }
-        }
-    }
-    true
+    // Any two sharing a cell, or too many to tell.
+    let mut scratch = sweep::Scratch::default();
+    sweep::overlapping_pairs(&boxes, MAX_PAIRS, &mut scratch, |_, _| false) == sweep::Pairs::All
 }
 
 /// Whether a ring is monotone in y (its direction's y component changes sign twice, with
