@@ -15,6 +15,10 @@ Conventions (the library's):
   gradient geometry and stops). Gradients come back in the same structures.
 * **3D** (``recon_voxel``, ``recon_splat``, ``recon_ngp``, ``recon_nerf``): a posed-photo folder (NeRF-synthetic or
   instant-ngp) in, a model file out, as ``diffsvg recon``; ``diffsvg view`` renders it.
+* **Meshes** (``Mesh``, ``Camera``): triangles rendered with the exact visible area of each
+  triangle in each pixel and differentiated exactly (``Mesh.render``,
+  ``Mesh.render_backward``, ``Mesh.fit``); world units, OpenGL camera axes (see
+  ``docs/mesh.md``).
 * **Errors.** Bad input raises ``DiffsvgError`` (a ``ValueError``), ``FileNotFoundError``
   or ``OSError`` with one line naming the file or argument; nothing panics.
 """
@@ -29,7 +33,7 @@ from typing import Any, List, Optional, Sequence, Tuple, Union
 import numpy as np
 
 from . import _native
-from ._native import DiffsvgError
+from ._native import Camera, DiffsvgError, Mesh
 from ._types import (Arrays, DigitInfo, FitInfo, GlyphInfo, GradientPaint, GradJson, Layout,
                      Progress, ReconInfo, Structure, VectorizeInfo, Views)
 
@@ -40,6 +44,8 @@ __all__ = [
     "__version__",
     "DiffsvgError",
     "Scene",
+    "Mesh",
+    "Camera",
     "render",
     "render_backward",
     "background_backward",

@@ -241,3 +241,22 @@ class GradJson(TypedDict):
     groups: List[dict]
     transforms: NotRequired[List[dict]]
     filters: NotRequired[List[dict]]
+
+
+class MeshGrad(TypedDict):
+    """``Mesh.render_backward``: the loss's gradient per vertex position ``(n, 3)``, and
+    per vertex color ``(n, 3)`` and texel ``(h, w, 3)`` when the mesh has them."""
+    positions: npt.NDArray[np.float64]
+    colors: NotRequired[npt.NDArray[np.float64]]
+    texture: NotRequired[npt.NDArray[np.float64]]
+
+
+class MeshStep(TypedDict):
+    """What ``Mesh.fit``'s progress callback gets each step: the step (from 0) and the
+    training views' mean squared error before it."""
+    iter: int
+    mse: float
+
+
+#: ``Mesh.fit``'s callback; returning ``False`` stops the fit.
+MeshProgress = Callable[[MeshStep], object]

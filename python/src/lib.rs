@@ -12,6 +12,7 @@ mod batch;
 mod build;
 mod error;
 mod jobs;
+mod mesh;
 mod output;
 mod recon;
 mod render;
@@ -52,5 +53,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(recon::recon_ngp, m)?)?;
     m.add_function(wrap_pyfunction!(recon::recon_nerf, m)?)?;
     m.add_function(wrap_pyfunction!(recon::view, m)?)?;
+    m.add_class::<mesh::PyMesh>()?;
+    m.add_class::<mesh::PyCamera>()?;
     Ok(())
 }

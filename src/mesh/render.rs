@@ -159,6 +159,17 @@ impl<'a> View<'a> {
         camera
             .validate()
             .map_err(|e| setting("camera", e.to_string()))?;
+        let (w, h) = (camera.width, camera.height);
+        if w.max(h) > crate::limits::MAX_SIDE || w as u64 * h as u64 > crate::limits::MAX_PIXELS {
+            return Err(setting(
+                "camera",
+                format!(
+                    "{w}×{h} pixels is above the limit ({} a side, {} in all)",
+                    crate::limits::MAX_SIDE,
+                    crate::limits::MAX_PIXELS
+                ),
+            ));
+        }
         if !(opts.near > 0.0 && opts.near.is_finite()) {
             return Err(setting(
                 "near",
@@ -1149,6 +1160,18 @@ mod tests {
 
     fn camera(w: u32, h: u32) -> Camera {
         Camera::look_at(Vec3::new(0.3, 0.2, 3.0), Vec3::ZERO, Vec3::Y, 0.5, w, h).unwrap()
+    }
+
+    #[test]
+    fn refuses_cameras_above_the_pixel_limit() {
+        let m = crate::mesh::icosphere(1, 1.0);
+        let big = camera(20_000, 20_000);
+        let e = View::new(&m, &big, RenderOptions::default())
+            .err()
+            .expect("refused")
+            .to_string();
+        assert!(e.contains("20000×20000") && e.contains("limit"), "{e}");
+        assert!(View::new(&m, &camera(64, 64), RenderOptions::default()).is_ok());
     }
 
     /// Triangles with their own (unshared) vertices and a flat color each.

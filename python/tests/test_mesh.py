@@ -1,0 +1,148 @@
+"""diffsvg.Mesh and diffsvg.Camera: the exact mesh renderer from Python."""
+
+import numpy as np
+import pytest
+
+import diffsvg
+from conftest import run_cli, shared_data
+
+
+def colored_sphere(subdivisions=2):
+    m = diffsvg.Mesh.icosphere(subdivisions, 1.0)
+    p = m.positions
+    m.colors = 0.5 + 0.4 * p  # a smooth color per vertex, in [0.1, 0.9]
+    return m
+
+
+def camera(size=48):
+    return diffsvg.Camera.look_at((0.4, 0.3, 3.2), (0.0, 0.0, 0.0), size, size, fov_x=0.8)
+
+
+def test_render_covers_the_sphere_s_projected_area():
+    m = colored_sphere(3)
+    cam = camera(64)
+    img = m.render(cam)
+    assert img.shape == (64, 64, 4) and img.dtype == np.float32
+    a = img[..., 3]
+    assert a.min() >= 0 and a.max() <= 1 + 1e-6
+    # The unit sphere at distance d seen with focal f covers about π (f / √(d² − 1))² px.
+    fx, fy, cx, cy = cam.intrinsics
+    d = float(np.linalg.norm([0.4, 0.3, 3.2]))
+    disc = np.pi * (fx / np.sqrt(d * d - 1)) ** 2
+    assert 0.93 * disc < a.sum() < disc, (a.sum(), disc)
+    # Over a background every pixel is opaque; premultiplied colors never exceed alpha.
+    white = m.render(cam, background=(1.0, 1.0, 1.0))
+    assert np.allclose(white[..., 3], 1.0)
+    assert np.all(img[..., :3] <= img[..., 3:] + 1e-6)
+
+
+def test_gradients_match_central_differences():
+    m = colored_sphere(2)
+    cam = camera(32)
+    rng = np.random.default_rng(1)
+    w = rng.standard_normal((32, 32, 4)).astype(np.float32)
+    g = m.render_backward(cam, w)
+    assert g["positions"].shape == m.positions.shape
+    assert g["colors"].shape == m.colors.shape
+
+    def loss(mesh):
+        return float((mesh.render(cam).astype(np.float64) * w).sum())
+
+    # Vertices with the largest gradients: silhouette ones among them. The image is
+    # continuous in the positions but has kinks (a vertex crossing a pixel center's ray,
+    # a face turning at the silhouette), so a difference quotient may straddle one:
+    # two small steps, one of them must agree.
+    big = np.argsort(-np.abs(g["positions"]).sum(axis=1))[:6]
+
+    def fd(v, k, h):
+        p = m.positions
+        p0 = p.copy()
+        p[v, k] += h
+        m.positions = p
+        up = loss(m)
+        p[v, k] -= 2 * h
+        m.positions = p
+        down = loss(m)
+        m.positions = p0
+        return (up - down) / (2 * h)
+
+    for v in big:
+        for k in range(3):
+            an = g["positions"][v, k]
+            fds = [fd(v, k, h) for h in (1e-5, 3e-6)]
+            assert min(abs(f - an) for f in fds) <= 2e-3 * max(1.0, abs(an)), (v, k, an, fds)
+    c = m.colors
+    for v in big[:3]:
+        c2 = c.copy()
+        c2[v, 0] += 1e-3
+        m.colors = c2
+        fd = (loss(m) - loss(colored_sphere(2))) / 1e-3
+        m.colors = c
+        assert abs(fd - g["colors"][v, 0]) <= 1e-3 * max(1.0, abs(fd))
+
+
+def test_fit_recovers_colors_and_stops_on_request():
+    target_mesh = colored_sphere(2)
+    cams = diffsvg.Camera.orbit(target_mesh, 4, 32)
+    views = [(c, target_mesh.render(c, background=(1.0, 1.0, 1.0))) for c in cams]
+    m = colored_sphere(2)
+    m.colors = np.full_like(m.colors, 0.5)
+    seen = []
+    first = m.fit(views, iters=1, lr_positions=0.0)
+    final = m.fit(views, iters=60, lr_positions=0.0, lr_colors=0.05,
+                  progress=lambda s: seen.append(s["mse"]))
+    assert len(seen) == 60 and final < 0.1 * first, (first, final)
+    calls = []
+    m.fit(views, iters=50, progress=lambda s: calls.append(s["iter"]) or s["iter"] < 4)
+    assert calls == [0, 1, 2, 3, 4]
+
+
+def test_render_equals_the_cli(tmp_path):
+    m = colored_sphere(2)
+    path = tmp_path / "sphere.obj"
+    m.save(path)
+    back = diffsvg.Mesh.load(path)
+    # The reader numbers vertices in the order faces use them.
+    def rows(a):
+        r = np.round(a, 5) + 0.0  # no -0.0
+        return r[np.lexsort(r.T[::-1])]
+    assert np.allclose(rows(back.positions), rows(m.positions), atol=2e-5)
+    assert back.triangles.shape == m.triangles.shape
+    out = tmp_path / "cli.png"
+    run_cli("mesh", "render", path, "--size", 40, "-o", out)
+    cli = diffsvg.load_image(str(out))
+    cam = diffsvg.Camera.orbit(back, 1, 40)[0]
+    img = back.render(cam, background=(1.0, 1.0, 1.0))
+    assert np.abs(np.round(img * 255) - np.round(cli * 255)).max() <= 1
+
+
+def test_bad_input_is_one_line_naming_it(tmp_path):
+    m = colored_sphere(1)
+    with pytest.raises(diffsvg.DiffsvgError, match="positions"):
+        m.positions = np.zeros((3, 3))
+    with pytest.raises(diffsvg.DiffsvgError, match="not finite"):
+        p = m.positions
+        p[0, 0] = np.nan
+        m.positions = p
+    with pytest.raises(diffsvg.DiffsvgError, match="colors"):
+        m.colors = np.full_like(m.positions, 2.0)
+    with pytest.raises(diffsvg.DiffsvgError, match="d_image"):
+        m.render_backward(camera(16), np.zeros((8, 8, 4), np.float32))
+    with pytest.raises(diffsvg.DiffsvgError, match="limit"):
+        m.render(diffsvg.Camera.look_at((0, 0, 3), (0, 0, 0), 100000, 100000))
+    with pytest.raises(diffsvg.DiffsvgError, match="coincide"):
+        diffsvg.Camera.look_at((0, 0, 0), (0, 0, 0), 8, 8)
+    with pytest.raises(FileNotFoundError, match="nothing.obj"):
+        diffsvg.Mesh.load(tmp_path / "nothing.obj")
+    with pytest.raises(diffsvg.DiffsvgError, match="texture"):
+        m.texture = np.zeros((4, 4, 3))
+
+
+def test_spot_loads_with_its_texture():
+    data = shared_data("test_spot_loads_with_its_texture")
+    spot = diffsvg.Mesh.load(data / "meshes" / "spot" / "spot.obj")
+    assert spot.texture.shape == (1024, 1024, 3) and spot.uvs is not None
+    cam = diffsvg.Camera.orbit(spot, 1, 48)[0]
+    g = spot.render_backward(cam, np.ones((48, 48, 4), np.float32))
+    assert g["texture"].shape == (1024, 1024, 3) and np.isfinite(g["texture"]).all()
+    assert np.abs(g["texture"]).sum() > 0
