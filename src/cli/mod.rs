@@ -29,6 +29,7 @@ mod render;
 mod splat;
 mod util;
 mod vectorize;
+mod viewed;
 mod volume;
 
 /// Differentiable vector rendering: render, compare and fit SVGs.

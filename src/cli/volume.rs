@@ -19,7 +19,7 @@ use diffsvg::image_io::{Image, contact_sheet, write_atomic};
 use diffsvg::volume::depth::save_depth;
 use diffsvg::volume::metrics::{psnr, ssim};
 use diffsvg::volume::recon::{VoxelJob, recon_voxel};
-use diffsvg::volume::view::{Model, Split, check_downscale, orbit_cameras};
+use diffsvg::volume::view::{Split, check_downscale, orbit_cameras};
 use diffsvg::volume::voxel::{self, TrainStep};
 
 /// Arguments of `diffsvg recon`.
@@ -106,7 +106,8 @@ pub struct VoxelArgs {
 pub struct ViewArgs {
     /// Model file written by `diffsvg recon voxel` (.vox), `diffsvg recon splat` (a
     /// Gaussian-splatting PLY or SPZ), `diffsvg recon ngp` (.ngp) or `recon nerf` (.nerf); the kind is read
-    /// from the file's header.
+    /// from the file's header. A triangle mesh (`.obj` with its MTL and texture, `.gltf`,
+    /// `.glb`; `mesh fit` writes OBJ) renders with the exact mesh renderer.
     model: PathBuf,
     /// Dataset folder whose cameras to render from.
     #[arg(long)]
@@ -317,11 +318,11 @@ fn to_image(rgb: &[[f32; 3]], w: u32, h: u32) -> Image {
 
 /// Runs `diffsvg view`.
 pub fn run_view(a: ViewArgs) -> Result<()> {
-    let mut model = Model::load(&a.model, a.step).map_err(flag_error)?;
+    let mut model = super::viewed::Viewed::load(&a.model, a.step).map_err(flag_error)?;
     if a.scene.is_none() && a.orbit == 0 {
         bail!("nothing to render: give --scene DIR and/or --orbit N");
     }
-    if a.depth && matches!(model, Model::Ngp(..)) {
+    if a.depth && !model.has_depth() {
         bail!(
             "--depth: depth images are drawn for Gaussian (.ply, .spz) and voxel (.vox) models only"
         );

@@ -255,3 +255,113 @@ fn mesh_render_reads_gltf_like_obj() {
     let r = diffsvg(&["mesh", "render", s(&bad), "-o", s(&out)]);
     assert_fails(&r, "bad.gltf", "", &out);
 }
+
+/// Writes a NeRF-synthetic folder whose photos are `mesh`'s own renders over white
+/// (`n_train` and `n_test` views of `size²`, cameras around the origin, +Z up).
+fn mesh_scene(dir: &std::path::Path, mesh: &diffsvg::mesh::Mesh, n_train: usize, n_test: usize) {
+    use diffsvg::volume::camera::Camera;
+    use glam::Vec3;
+    const FOV: f32 = 0.7;
+    let opts = diffsvg::mesh::RenderOptions {
+        background: Some([1.0; 3]),
+        ..Default::default()
+    };
+    for (split, n, phase) in [("train", n_train, 0.0f32), ("test", n_test, 0.9)] {
+        std::fs::create_dir_all(dir.join(split)).unwrap();
+        let frames: Vec<String> = (0..n)
+            .map(|i| {
+                let a = phase + i as f32 * std::f32::consts::TAU / n as f32;
+                let eye = Vec3::new(3.5 * a.cos(), 3.5 * a.sin(), 1.2);
+                let cam = Camera::look_at(eye, Vec3::ZERO, Vec3::Z, FOV, 40, 40).unwrap();
+                diffsvg::mesh::render(mesh, &cam, &opts)
+                    .unwrap()
+                    .save_png(dir.join(format!("{split}/r_{i}.png")))
+                    .unwrap();
+                let (m, t) = (cam.c2w.matrix3, cam.c2w.translation);
+                let row =
+                    |r: usize| format!("[{}, {}, {}, {}]", m.x_axis[r], m.y_axis[r], m.z_axis[r], t[r]);
+                format!(
+                    "{{\"file_path\": \"./{split}/r_{i}\", \"transform_matrix\": [{}, {}, {}, [0, 0, 0, 1]]}}",
+                    row(0),
+                    row(1),
+                    row(2)
+                )
+            })
+            .collect();
+        std::fs::write(
+            dir.join(format!("transforms_{split}.json")),
+            format!(
+                "{{\"camera_angle_x\": {FOV}, \"frames\": [{}]}}",
+                frames.join(", ")
+            ),
+        )
+        .unwrap();
+    }
+}
+
+#[test]
+fn view_renders_a_mesh_from_a_dataset_s_cameras_and_an_orbit() {
+    let d = scratch("mesh_view");
+    let mut m = diffsvg::mesh::icosphere(2, 1.0);
+    m.colors = Some(
+        m.positions
+            .iter()
+            .map(|p| p.map(|v| 0.5 + 0.4 * v))
+            .collect(),
+    );
+    let scene = d.join("scene");
+    mesh_scene(&scene, &m, 3, 2);
+    let obj = d.join("sphere.obj");
+    diffsvg::mesh::write_obj(&m, &obj).unwrap();
+    let view = |mesh: &std::path::Path, out: &str, extra: &[&str]| {
+        let out = d.join(out);
+        let mut args = vec![
+            "view",
+            s(mesh),
+            "--scene",
+            s(&scene),
+            "-o",
+            s(&out),
+            "--json",
+        ];
+        args.extend_from_slice(extra);
+        (diffsvg(&args), out)
+    };
+    // Its own renders: only the photos' 8-bit rounding differs.
+    let (r, out) = view(&obj, "same", &["--orbit", "2"]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let last = String::from_utf8_lossy(&r.stdout)
+        .trim()
+        .lines()
+        .last()
+        .unwrap()
+        .to_string();
+    let v: serde_json::Value = serde_json::from_str(&last).unwrap();
+    assert_eq!(v["views"], 2);
+    assert!(v["psnr"].as_f64().unwrap() > 45.0, "{v}");
+    for f in [
+        "r_0.png",
+        "r_1.png",
+        "metrics.csv",
+        "orbit-001.png",
+        "orbit.gif",
+    ] {
+        assert!(out.join(f).is_file(), "{f}");
+    }
+    // The same sphere moved by a tenth of its radius: clearly worse.
+    m.positions.iter_mut().for_each(|p| p[0] += 0.1);
+    let moved = d.join("moved.obj");
+    diffsvg::mesh::write_obj(&m, &moved).unwrap();
+    let (r, _) = view(&moved, "moved", &[]);
+    let last = String::from_utf8_lossy(&r.stdout)
+        .trim()
+        .lines()
+        .last()
+        .unwrap()
+        .to_string();
+    let v: serde_json::Value = serde_json::from_str(&last).unwrap();
+    assert!(v["psnr"].as_f64().unwrap() < 30.0, "{v}");
+    // Depth images are not drawn for meshes: one line, nothing written.
+    let (r, out) = view(&obj, "depth", &["--depth"]);
+    assert_fails(&r, "--depth", "voxel", &out);
+}
