@@ -11,7 +11,7 @@ use std::path::PathBuf;
 
 use diffsvg::Image;
 use diffsvg::mesh::fit::{FitOptions, Step, fit, orbit_cameras};
-use diffsvg::mesh::{Mesh, RenderOptions, Texture, View, icosphere, read_mesh, write_obj};
+use diffsvg::mesh::{Mesh, RenderOptions, Texture, View, icosphere, read_mesh, write_mesh};
 use diffsvg::volume::camera::Camera;
 use glam::{Affine3A, Mat3A, Vec3, Vec3A};
 use numpy::ndarray::{Array2, Array3};
@@ -219,10 +219,11 @@ impl PyMesh {
         })
     }
 
-    /// Writes OBJ with its MTL (and the texture as PNG beside it, when it has one).
+    /// Writes glTF 2.0 (`.glb`, `.gltf`: one file, the texture inside) or else OBJ with
+    /// its MTL (and the texture as PNG beside it, when it has one).
     fn save(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
         let m = &self.inner;
-        py.detach(|| write_obj(m, &path)).map_err(to_py)
+        py.detach(|| write_mesh(m, &path)).map_err(to_py)
     }
 
     /// Vertex positions, `(n, 3)` `float64` (a copy; assign to change them).

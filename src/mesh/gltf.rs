@@ -385,6 +385,172 @@ fn read_image(path: &Path, img: &::gltf::Image, buffers: &[Vec<u8>]) -> Result<I
     Ok(Image::from_rgba8(w, h, &rgba))
 }
 
+/// The linear value of an sRGB-encoded one in `[0, 1]` (the inverse of [`srgb`]).
+fn linear(v: f64) -> f64 {
+    let v = v.clamp(0.0, 1.0);
+    if v <= 0.040_45 {
+        v / 12.92
+    } else {
+        ((v + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+/// Writes `mesh` as glTF 2.0: binary `.glb`, or `.gltf` with its buffer in a `data:` URI
+/// (chosen by the extension). One mesh, one node: `POSITION` (`f32`), `TEXCOORD_0` (v
+/// flipped to glTF's v down), `COLOR_0` (converted from the mesh's sRGB values to glTF's
+/// linear ones), `u32` indices, and with a texture a material whose base color texture
+/// is the texture as PNG (inside the buffer), sampled bilinearly and repeated, as
+/// [`render`](super::render) samples it. [`read_gltf`] reads the file back to the same
+/// mesh (positions and UVs rounded to `f32`, colors within 1e-6). Refused, before
+/// anything is written, when the file would pass [`MAX_MESH_FILE_BYTES`] (which the
+/// reader refuses); written to a temporary file and renamed.
+pub fn write_gltf(mesh: &Mesh, path: &Path) -> Result<()> {
+    use serde_json::json;
+    let glb = match path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase)
+        .as_deref()
+    {
+        Some("glb") => true,
+        Some("gltf") => false,
+        _ => return Err(invalid(path, "a glTF file ends in .gltf or .glb")),
+    };
+    mesh.validate(path)?;
+    let n = mesh.positions.len();
+    let mut bin: Vec<u8> = Vec::new();
+    let mut views = Vec::new();
+    let mut accessors = Vec::new();
+    // Appends `bytes` as a buffer view (4-byte aligned) and returns its index.
+    let mut view = |bin: &mut Vec<u8>, bytes: &[u8], target: Option<u32>| {
+        while bin.len() % 4 != 0 {
+            bin.push(0);
+        }
+        let mut v = json!({"buffer": 0, "byteOffset": bin.len(), "byteLength": bytes.len()});
+        if let Some(t) = target {
+            v["target"] = json!(t);
+        }
+        bin.extend_from_slice(bytes);
+        views.push(v);
+        views.len() - 1
+    };
+    let floats = |rows: &mut dyn Iterator<Item = f32>| -> Vec<u8> {
+        rows.flat_map(f32::to_le_bytes).collect()
+    };
+    const ARRAY_BUFFER: u32 = 34962;
+    const ELEMENT_ARRAY_BUFFER: u32 = 34963;
+    const FLOAT: u32 = 5126;
+    let pos: Vec<[f32; 3]> = mesh.positions.iter().map(|p| p.map(|v| v as f32)).collect();
+    let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+    for p in &pos {
+        for k in 0..3 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
+    }
+    if n == 0 {
+        (lo, hi) = ([0.0; 3], [0.0; 3]);
+    }
+    let v = view(
+        &mut bin,
+        &floats(&mut pos.iter().flatten().copied()),
+        Some(ARRAY_BUFFER),
+    );
+    accessors.push(json!({"bufferView": v, "componentType": FLOAT, "count": n,
+        "type": "VEC3", "min": lo, "max": hi}));
+    let mut attributes = json!({"POSITION": accessors.len() - 1});
+    if let Some(uv) = &mesh.uvs {
+        let mut it = uv.iter().flat_map(|t| [t[0] as f32, (1.0 - t[1]) as f32]);
+        let v = view(&mut bin, &floats(&mut it), Some(ARRAY_BUFFER));
+        accessors
+            .push(json!({"bufferView": v, "componentType": FLOAT, "count": n, "type": "VEC2"}));
+        attributes["TEXCOORD_0"] = json!(accessors.len() - 1);
+    }
+    if let Some(c) = &mesh.colors {
+        let mut it = c.iter().flat_map(|c| c.map(|v| linear(v) as f32));
+        let v = view(&mut bin, &floats(&mut it), Some(ARRAY_BUFFER));
+        accessors
+            .push(json!({"bufferView": v, "componentType": FLOAT, "count": n, "type": "VEC3"}));
+        attributes["COLOR_0"] = json!(accessors.len() - 1);
+    }
+    let idx: Vec<u8> = mesh
+        .triangles
+        .iter()
+        .flatten()
+        .flat_map(|i| i.to_le_bytes())
+        .collect();
+    let v = view(&mut bin, &idx, Some(ELEMENT_ARRAY_BUFFER));
+    accessors.push(json!({"bufferView": v, "componentType": 5125,
+        "count": mesh.triangles.len() * 3, "type": "SCALAR"}));
+    let mut primitive =
+        json!({"attributes": attributes, "indices": accessors.len() - 1, "mode": 4});
+    let mut doc = json!({
+        "asset": {"version": "2.0", "generator": "diffsvg"},
+        "scene": 0,
+        "scenes": [{"nodes": [0]}],
+        "nodes": [{"mesh": 0}],
+    });
+    if let Some(t) = &mesh.texture {
+        let img = t.to_image();
+        let png = crate::image_io::encode_png_rgba8(img.width, img.height, &img.to_rgba8());
+        let v = view(&mut bin, &png, None);
+        primitive["material"] = json!(0);
+        doc["materials"] = json!([{"pbrMetallicRoughness": {
+            "baseColorTexture": {"index": 0}, "metallicFactor": 0.0, "roughnessFactor": 1.0}}]);
+        // Bilinear (LINEAR = 9729) and repeated (REPEAT = 10497), as the renderer samples.
+        doc["samplers"] =
+            json!([{"magFilter": 9729, "minFilter": 9729, "wrapS": 10497, "wrapT": 10497}]);
+        doc["textures"] = json!([{"source": 0, "sampler": 0}]);
+        doc["images"] = json!([{"bufferView": v, "mimeType": "image/png"}]);
+    }
+    while bin.len() % 4 != 0 {
+        bin.push(0);
+    }
+    doc["meshes"] = json!([{"primitives": [primitive]}]);
+    doc["accessors"] = json!(accessors);
+    doc["bufferViews"] = json!(views);
+    doc["buffers"] = if glb {
+        json!([{"byteLength": bin.len()}])
+    } else {
+        let uri = format!(
+            "data:application/octet-stream;base64,{}",
+            base64::engine::general_purpose::STANDARD.encode(&bin)
+        );
+        json!([{"byteLength": bin.len(), "uri": uri}])
+    };
+    let mut text = serde_json::to_vec(&doc).expect("a JSON value serializes");
+    let bytes = if glb {
+        while text.len() % 4 != 0 {
+            text.push(b' ');
+        }
+        let total = 12 + 8 + text.len() + 8 + bin.len();
+        let mut out = Vec::with_capacity(total);
+        out.extend_from_slice(b"glTF");
+        out.extend_from_slice(&2u32.to_le_bytes());
+        out.extend_from_slice(&(total.min(u32::MAX as usize) as u32).to_le_bytes());
+        out.extend_from_slice(&(text.len() as u32).to_le_bytes());
+        out.extend_from_slice(b"JSON");
+        out.extend_from_slice(&text);
+        out.extend_from_slice(&(bin.len() as u32).to_le_bytes());
+        out.extend_from_slice(b"BIN\0");
+        out.extend_from_slice(&bin);
+        out
+    } else {
+        text
+    };
+    if bytes.len() as u64 > MAX_MESH_FILE_BYTES {
+        return Err(invalid(
+            path,
+            format!(
+                "the glTF would take {} bytes, above the {MAX_MESH_FILE_BYTES} a mesh file may \
+                 (diffsvg would refuse to read it); write OBJ instead",
+                bytes.len()
+            ),
+        ));
+    }
+    crate::image_io::write_atomic(path, &bytes)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -519,5 +685,72 @@ mod tests {
             let e = read_gltf(&scratch("cut.glb", &glb[..cut])).unwrap_err();
             assert!(e.to_string().contains("cut.glb"), "{e}");
         }
+    }
+
+    /// A mesh with everything glTF carries here: UVs, colors and a texture.
+    fn textured() -> Mesh {
+        let mut m = crate::mesh::icosphere(1, 1.5);
+        let n = m.positions.len();
+        m.uvs = Some(
+            (0..n)
+                .map(|i| [i as f64 / n as f64, 1.0 - 0.5 * i as f64 / n as f64])
+                .collect(),
+        );
+        m.colors = Some((0..n).map(|i| [0.1, i as f64 / n as f64, 0.9]).collect());
+        let data = (0..12)
+            .map(|k| [k as f64 / 11.0, 0.5, 1.0 - k as f64 / 11.0])
+            .collect();
+        m.texture = Some(Texture {
+            width: 4,
+            height: 3,
+            data,
+        });
+        m
+    }
+
+    #[test]
+    fn written_gltf_and_glb_read_back_to_the_same_mesh() {
+        let m = textured();
+        for name in ["back.glb", "back.gltf"] {
+            let path = scratch(name, b"");
+            crate::mesh::write_mesh(&m, &path).unwrap();
+            let r = read_gltf(&path).unwrap();
+            assert_eq!(r.triangles, m.triangles, "{name}");
+            let close =
+                |a: &[f64], b: &[f64], tol: f64| a.iter().zip(b).all(|(x, y)| (x - y).abs() <= tol);
+            for (a, b) in r.positions.iter().zip(&m.positions) {
+                assert!(close(a, b, 1e-6), "{name}: {a:?} {b:?}");
+            }
+            for (a, b) in r.uvs.as_ref().unwrap().iter().zip(m.uvs.as_ref().unwrap()) {
+                assert!(close(a, b, 1e-6), "{name}: {a:?} {b:?}");
+            }
+            for (a, b) in r
+                .colors
+                .as_ref()
+                .unwrap()
+                .iter()
+                .zip(m.colors.as_ref().unwrap())
+            {
+                assert!(close(a, b, 1e-5), "{name}: {a:?} {b:?}");
+            }
+            let (t, u) = (r.texture.as_ref().unwrap(), m.texture.as_ref().unwrap());
+            assert_eq!((t.width, t.height), (u.width, u.height));
+            for (a, b) in t.data.iter().zip(&u.data) {
+                assert!(close(a, b, 0.5 / 255.0 + 1e-6), "{name}: {a:?} {b:?}");
+            }
+        }
+        // Without colors, UVs or texture: positions and triangles only.
+        let plain = crate::mesh::icosphere(0, 1.0);
+        let path = scratch("plain.glb", b"");
+        write_gltf(&plain, &path).unwrap();
+        let r = read_gltf(&path).unwrap();
+        assert_eq!(r.triangles, plain.triangles);
+        assert!(r.texture.is_none() && r.uvs.is_none());
+        // Not a glTF name: refused, nothing written.
+        let bad = scratch("x.txt", b"");
+        std::fs::remove_file(&bad).unwrap();
+        let e = write_gltf(&plain, &bad).unwrap_err().to_string();
+        assert!(e.contains("x.txt") && e.contains(".glb"), "{e}");
+        assert!(!bad.exists());
     }
 }

@@ -203,6 +203,19 @@ fn resolve(obj: &Path, tex: &str) -> PathBuf {
     }
 }
 
+/// Writes a mesh by its file's extension: glTF (`.gltf`, `.glb`,
+/// [`write_gltf`](super::write_gltf)) or otherwise OBJ ([`write_obj`]).
+pub fn write_mesh(mesh: &Mesh, path: &Path) -> Result<()> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    match ext.as_deref() {
+        Some("gltf" | "glb") => super::write_gltf(mesh, path),
+        _ => write_obj(mesh, path),
+    }
+}
+
 /// Writes `mesh` as OBJ (positions, UVs, triangles) with, when it has colors or a
 /// texture, an MTL beside it (`NAME.mtl`) and the texture as `NAME.png`. Vertex colors
 /// are written as the common `v x y z r g b` extension. Each file is written to a

@@ -34,8 +34,8 @@ mod io;
 pub mod render;
 mod shapes;
 
-pub use gltf::read_gltf;
-pub use io::{read_mesh, read_obj, write_obj};
+pub use gltf::{read_gltf, write_gltf};
+pub use io::{read_mesh, read_obj, write_mesh, write_obj};
 pub use render::{MeshGrad, RenderOptions, View, render, render_backward};
 pub use shapes::{icosphere, torus_knot};
 
