@@ -403,7 +403,7 @@ impl PyMesh {
         let mut vs = Vec::with_capacity(views.len());
         for (k, (c, t)) in views.iter().enumerate() {
             let img = image_in(t, &format!("views[{k}] target"))?;
-            let c = c.inner.clone();
+            let c = c.inner;
             if (img.width, img.height) != (c.width, c.height) {
                 return Err(bad(format!(
                     "views[{k}]: the target is {}x{} but the camera {}x{}",

@@ -400,7 +400,7 @@ fn linear(v: f64) -> f64 {
 /// flipped to glTF's v down), `COLOR_0` (converted from the mesh's sRGB values to glTF's
 /// linear ones), `u32` indices, and with a texture a material whose base color texture
 /// is the texture as PNG (inside the buffer), sampled bilinearly and repeated, as
-/// [`render`](super::render) samples it. [`read_gltf`] reads the file back to the same
+/// [`render`](super::render::render) samples it. [`read_gltf`] reads the file back to the same
 /// mesh (positions and UVs rounded to `f32`, colors within 1e-6). Refused, before
 /// anything is written, when the file would pass [`MAX_MESH_FILE_BYTES`] (which the
 /// reader refuses); written to a temporary file and renamed.
@@ -423,7 +423,7 @@ pub fn write_gltf(mesh: &Mesh, path: &Path) -> Result<()> {
     let mut accessors = Vec::new();
     // Appends `bytes` as a buffer view (4-byte aligned) and returns its index.
     let mut view = |bin: &mut Vec<u8>, bytes: &[u8], target: Option<u32>| {
-        while bin.len() % 4 != 0 {
+        while !bin.len().is_multiple_of(4) {
             bin.push(0);
         }
         let mut v = json!({"buffer": 0, "byteOffset": bin.len(), "byteLength": bytes.len()});
@@ -503,7 +503,7 @@ pub fn write_gltf(mesh: &Mesh, path: &Path) -> Result<()> {
         doc["textures"] = json!([{"source": 0, "sampler": 0}]);
         doc["images"] = json!([{"bufferView": v, "mimeType": "image/png"}]);
     }
-    while bin.len() % 4 != 0 {
+    while !bin.len().is_multiple_of(4) {
         bin.push(0);
     }
     doc["meshes"] = json!([{"primitives": [primitive]}]);
@@ -520,7 +520,7 @@ pub fn write_gltf(mesh: &Mesh, path: &Path) -> Result<()> {
     };
     let mut text = serde_json::to_vec(&doc).expect("a JSON value serializes");
     let bytes = if glb {
-        while text.len() % 4 != 0 {
+        while !text.len().is_multiple_of(4) {
             text.push(b' ');
         }
         let total = 12 + 8 + text.len() + 8 + bin.len();
