@@ -37,12 +37,17 @@
 //!   device space (under a similarity a stroke of the mapped path is the mapped stroke),
 //!   circles, ellipses and rectangles included: four slots;
 //! * any other invertible map (a skew, a non-uniform scale, a mirror) as a **general
-//!   affine** one, over paths that only fill, with solid or linear-gradient paints: six
-//!   slots. A stroke under a non-uniform map is not the stroke of the mapped path (its
-//!   pen would be an ellipse), the affine image of a rectangle is no rectangle, and a
-//!   radial gradient's circles become ellipses, so content with a stroke, a primitive or
-//!   a radial gradient keeps such a transform baked (an unstroked rectangle under an
-//!   axis-aligned scale still keeps its own parameters then, [`shape`](super::shape)).
+//!   affine** one, over paths with solid or linear-gradient paints, filled or stroked
+//!   (dashed too): six slots. A stroke under such a map is drawn as SVG draws it: built
+//!   in the local frame, where its pen is round, and mapped, so its pen is an ellipse on
+//!   the canvas. Its [`frame`](super::Stroke::frame) takes the map's linear part (its
+//!   width and dashes stay, in the frame's units), and the backward pass reports the
+//!   gradient of every stroke frame, which [`chain_gradient`] carries onto the slots
+//!   (`∂L/∂L = ∂L/∂F · Fₗᵀ` for the device frame `F = L·Fₗ`) and into the frame of a
+//!   nested map. The affine image of a rectangle is no rectangle, and a radial
+//!   gradient's circles become ellipses, so content with a primitive or a radial
+//!   gradient keeps such a transform baked (an unstroked rectangle under an axis-aligned
+//!   scale still keeps its own parameters then, [`shape`](super::shape)).
 //!
 //! **Gradient paints** inside either kind: the paint's transform (gradient space →
 //! device) is held in the local frame and mapped forward with the content, as points are;
@@ -66,7 +71,9 @@
 //!
 //! `pivot` (not a parameter) is the center of the content's bounds in the local frame
 //! when the file was read, so that turning or scaling does not also swing the group
-//! across the canvas. SVG out writes either kind as `transform="matrix(…)"` (`f32`, as
+//! across the canvas. A stroke drawn in its group's frame has the identity frame there
+//! (snapped to it when `f32` leaves it off by less than 1e-6), so it is written plainly
+//! inside the group. SVG out writes either kind as `transform="matrix(…)"` (`f32`, as
 //! it is read), on the `<g>` or, for a shape's own transform, on the shape's element
 //! (when the shape writes no transform of its own: no turned primitive, no stroke
 //! frame), so a written file reads back to the same kinds and slots.
