@@ -42,7 +42,7 @@
 //!   in the local frame, where its pen is round, and mapped, so its pen is an ellipse on
 //!   the canvas. Its [`frame`](super::Stroke::frame) takes the map's linear part (its
 //!   width and dashes stay, in the frame's units), and the backward pass reports the
-//!   gradient of every stroke frame, which [`chain_gradient`] carries onto the slots
+//!   gradient of every stroke frame, which `chain_gradient` carries onto the slots
 //!   (`∂L/∂L = ∂L/∂F · Fₗᵀ` for the device frame `F = L·Fₗ`) and into the frame of a
 //!   nested map. The affine image of a rectangle is no rectangle, and a radial
 //!   gradient's circles become ellipses, so content with a primitive or a radial

@@ -202,14 +202,7 @@ fn affine_transforms_and_gradient_paints_survive_a_round_trip() {
                 "{name} slot {i}: {x} vs {y}"
             );
         }
-        let opts = RenderOptions::default();
-        let (p, q) = (render(&moved, &opts), render(&back, &opts));
-        let worst = p
-            .data
-            .iter()
-            .zip(&q.data)
-            .flat_map(|(a, b)| a.iter().zip(b).map(|(x, y)| (x - y).abs()))
-            .fold(0.0f32, f32::max);
+        let worst = worst_pixel(&moved, &back);
         assert!(worst < 2e-3, "{name}: pixels differ by {worst}");
         assert!(text.contains("transform=\"matrix("), "{text}");
     }
