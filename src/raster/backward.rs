@@ -348,14 +348,19 @@ pub fn render_and_backward_fused(scene: &Scene, p: &Prepared, loss: &dyn BandLos
     }
 }
 
+/// Gradients beside the parameter vector's, by slot, for `chain_gradient`: a stroke
+/// frame's `∂L/∂[a, b, c, d]` (then two zeros) at its width slot, and a radial gradient
+/// paint's transform terms (`PaintEval::transform_len`) at its first slot.
+pub(crate) type SideGrads = Vec<(usize, [f64; 6])>;
+
 /// The result of [`backward_bands`].
 struct BandsOut {
     grad: Vec<f64>,
     stats: BackwardStats,
     sums: [f64; 2],
-    /// The gradients of stroke frames (`∂L/∂[a, b, c, d]`), by width slot, where the
-    /// scene has transform parameters (`chain_gradient`).
-    frames: Vec<(usize, [f64; 4])>,
+    /// The gradients of stroke frames and radial paints' transforms, where the scene has
+    /// transform parameters ([`SideGrads`]).
+    frames: SideGrads,
 }
 
 /// `∂L/∂pixel` of one band from its rendering: `(y0, rows, rendered) → (d_out, sums)`.
@@ -489,9 +494,10 @@ fn backward_bands(
     // The stroke frames' gradients, by width slot, for the transforms' chain
     // (`chain_gradient`): only where a transform can carry them.
     let want_frames = crate::scene::transform::any(&scene.nodes);
-    let frames = jobs.into_par_iter().filter_map(|(pi, mut block)| {
+    let sides = jobs.into_par_iter().map(|(pi, mut block)| {
         let (path, off) = (paths[pi], &layout.paths[pi]);
         let mut frame_g = [0.0; 4];
+        let mut maps = Vec::new();
         // A primitive's outline points are no slots: their gradient is chained to the
         // primitive's parameters once the path's items are summed.
         let mut outline_g = path
@@ -509,16 +515,23 @@ fn backward_bands(
                 &mut block,
                 outline_g.as_deref_mut(),
                 &mut frame_g,
+                &mut maps,
             );
         }
         match (&path.primitive, outline_g) {
             (Some(prim), Some(g)) => prim.chain(&g, &mut block.g[off.points - block.base..]),
             _ => join_closing_gradients(path, off.points - block.base, block.g),
         }
-        (want_frames && off.stroke.is_some() && frame_g != [0.0; 4])
-            .then_some((off.stroke_width, frame_g))
+        if want_frames && off.stroke.is_some() && frame_g != [0.0; 4] {
+            let [a, b, c, d] = frame_g;
+            maps.push((off.stroke_width, [a, b, c, d, 0.0, 0.0]));
+        }
+        if !want_frames {
+            maps.clear();
+        }
+        maps
     });
-    let mut frames: Vec<(usize, [f64; 4])> = frames.collect();
+    let mut frames: SideGrads = sides.flatten().collect();
     for (g, v) in group_g.iter().enumerate() {
         grad[layout.groups[g]] += v;
     }
@@ -545,7 +558,7 @@ fn filter_backward(
     g: Vec<[f32; 4]>,
     layout: &ParamLayout,
     grad: &mut [f64],
-    frames: &mut Vec<(usize, [f64; 4])>,
+    frames: &mut SideGrads,
 ) {
     let (w, h) = (p.width as usize, p.height as usize);
     let opts = RenderOptions {
@@ -644,6 +657,7 @@ fn scatter_item(
     grad: &mut Block<'_>,
     mut outline_g: Option<&mut [f64]>,
     frame_g: &mut [f64; 4],
+    maps: &mut Vec<(usize, [f64; 6])>,
 ) {
     let item = &p.items[ii];
     let geom = &p.geoms[item.path];
@@ -656,7 +670,14 @@ fn scatter_item(
                 flat_g[k][1] += g[1];
             }
             if let Some(po) = off.fill {
-                scatter_paint(grad, po, off.fill_opacity, &paint_g[ii]);
+                let m = scatter_paint(
+                    grad,
+                    po,
+                    off.fill_opacity,
+                    &paint_g[ii],
+                    item.paint.transform_len(),
+                );
+                maps.extend(m.map(|m| (po.base, m)));
             }
         }
         ItemKind::Stroke => {
@@ -739,7 +760,14 @@ fn scatter_item(
             // A clip shape's stroke has no width or paint parameters.
             if let Some(po) = off.stroke {
                 grad[off.stroke_width] += 0.5 * gh;
-                scatter_paint(grad, po, off.stroke_opacity, &paint_g[ii]);
+                let m = scatter_paint(
+                    grad,
+                    po,
+                    off.stroke_opacity,
+                    &paint_g[ii],
+                    item.paint.transform_len(),
+                );
+                maps.extend(m.map(|m| (po.base, m)));
             }
         }
     }
@@ -810,13 +838,18 @@ fn scatter_paint(
     po: crate::scene::params::PaintOffsets,
     opacity: usize,
     pg: &[f64],
-) {
-    let n = pg.len();
-    // Paint slots are contiguous from `base` (geometry, then stops); the item opacity last.
-    for (k, v) in pg[..n - 1].iter().enumerate() {
+    tail: usize,
+) -> Option<[f64; 6]> {
+    // Paint slots are contiguous from `base` (geometry, then stops); the item opacity
+    // next, and a radial gradient's `tail` transform terms last
+    // (`PaintEval::transform_len`).
+    let (main, rest) = pg.split_at(pg.len() - tail);
+    let n = main.len();
+    for (k, v) in main[..n - 1].iter().enumerate() {
         grad[po.base + k] += v;
     }
-    grad[opacity] += pg[n - 1];
+    grad[opacity] += main[n - 1];
+    (tail == 6).then(|| std::array::from_fn(|k| rest[k]))
 }
 
 /// Draws one row of `item` onto `dst` from its winding integrals `wrow` (first pixel at

@@ -588,8 +588,9 @@ impl Scene {
 /// the gradient of the parameter vector: each pattern tile's copy is added to its tile 0
 /// ([`tiling`](super::tiling)), then the content of transformed groups is carried into
 /// their frames ([`chain_gradient`](super::transform::chain_gradient)), with the
-/// gradients of stroke frames (`frames`, by width slot) that the backward pass computes.
-pub(crate) fn parameter_gradient(scene: &Scene, grad: &mut [f64], frames: &[(usize, [f64; 4])]) {
+/// gradients of stroke frames and radial paints' transforms (`frames`, by slot) that the
+/// backward pass computes.
+pub(crate) fn parameter_gradient(scene: &Scene, grad: &mut [f64], frames: &[(usize, [f64; 6])]) {
     if super::tiling::any(&scene.nodes) {
         let mut s = scene.clone();
         let tiles = walk(&mut s, &mut |_, _, _, _| {});

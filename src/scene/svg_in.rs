@@ -1080,8 +1080,9 @@ fn movable_group(g: &usvg::Group, general: bool) -> bool {
             }
             usvg::Node::Path(p) => {
                 let paint_ok = |paint: &usvg::Paint| match paint {
-                    usvg::Paint::Color(_) | usvg::Paint::LinearGradient(_) => true,
-                    usvg::Paint::RadialGradient(_) => !general,
+                    usvg::Paint::Color(_)
+                    | usvg::Paint::LinearGradient(_)
+                    | usvg::Paint::RadialGradient(_) => true,
                     usvg::Paint::Pattern(_) => false,
                 };
                 p.fill().is_none_or(|f| paint_ok(f.paint()))

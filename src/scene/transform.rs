@@ -326,12 +326,9 @@ pub(crate) fn movable(nodes: &[Node], general: bool) -> bool {
         Node::Path(p) => {
             let paint_ok = |paint: &Paint| match paint {
                 Paint::Solid(_) => true,
-                Paint::Gradient(gr) => match gr.kind {
-                    GradientKind::Linear { .. } => true,
-                    // A radial gradient's circles stay circles only under maps that
-                    // are similarities in its own space.
-                    GradientKind::Radial { .. } => !general && conformal(&gr.transform),
-                },
+                // A radial gradient's transform gets its gradient from the backward pass
+                // (`chain_gradient`), whatever the map.
+                Paint::Gradient(_) => true,
                 Paint::Image(_) => false,
             };
             p.fill.as_ref().is_none_or(|f| paint_ok(&f.paint))
@@ -347,13 +344,6 @@ pub(crate) fn movable(nodes: &[Node], general: bool) -> bool {
                 }
         }
     })
-}
-
-/// Whether `t`'s linear part is a rotation and uniform scale, possibly mirrored.
-fn conformal(t: &Affine) -> bool {
-    let [a, b, c, d, _, _] = *t;
-    let (sx, sy) = (a.hypot(b), c.hypot(d));
-    sx > 0.0 && (sx - sy).abs() <= 1e-9 * sx && (a * c + b * d).abs() <= 1e-9 * sx * sy
 }
 
 /// Applies `m` to every geometric quantity under `nodes` (points, primitives, stroke
@@ -566,12 +556,14 @@ pub(crate) fn any(nodes: &[Node]) -> bool {
 
 /// Carries a gradient of the device values (in [`Scene::params`](super::Scene::params)
 /// order, as the raster backward pass computes it, the transform slots 0) into the local
-/// frames and onto the transforms, outermost group first. `frames` holds the gradient of
-/// stroke frames (`∂L/∂[a, b, c, d]` of [`Stroke::frame`](super::Stroke::frame), device
-/// frame), keyed by the stroke's width slot, as the backward pass computes them: a
-/// general map's strokes carry it onto its slots. Nothing for a scene without transform
+/// frames and onto the transforms, outermost group first. `frames` holds what the
+/// backward pass computes beside: the gradient of stroke frames (`∂L/∂[a, b, c, d]` of
+/// [`Stroke::frame`](super::Stroke::frame), device frame, then two zeros) keyed by the
+/// stroke's width slot, which a general map's strokes carry onto its slots; and a radial
+/// gradient paint's `Σ ∂L/∂q ⊗ (q, 1)` (`q` in gradient space) keyed by its first slot,
+/// which gives the gradient of its transform. Nothing for a scene without transform
 /// parameters.
-pub(crate) fn chain_gradient(scene: &super::Scene, grad: &mut [f64], frames: &[(usize, [f64; 4])]) {
+pub(crate) fn chain_gradient(scene: &super::Scene, grad: &mut [f64], frames: &[(usize, [f64; 6])]) {
     if !any(&scene.nodes) {
         return;
     }
@@ -579,7 +571,7 @@ pub(crate) fn chain_gradient(scene: &super::Scene, grad: &mut [f64], frames: &[(
     let mut nodes = scene.nodes.clone();
     let mut by_slot = std::collections::HashMap::new();
     for &(k, g) in frames {
-        let e: &mut [f64; 4] = by_slot.entry(k).or_default();
+        let e: &mut [f64; 6] = by_slot.entry(k).or_default();
         for (a, b) in e.iter_mut().zip(g) {
             *a += b;
         }
@@ -599,7 +591,7 @@ struct Chain<'a> {
     grad: &'a mut [f64],
     /// Stroke frames' gradients by width slot, carried into each group's frame as the
     /// walk descends.
-    frames: std::collections::HashMap<usize, [f64; 4]>,
+    frames: std::collections::HashMap<usize, [f64; 6]>,
     path_ix: usize,
     transform_ix: usize,
 }
@@ -631,11 +623,13 @@ impl Chain<'_> {
             super::paths_of(&g.children, Role::Paint, &mut |p, _| {
                 let off = &self.layout.paths[k];
                 chain_path(p, off, &t, self.grad, &mut acc);
-                chain_paints(p, off, &gens, self.grad, &mut acc);
-                if let (Some(s), Some(l), Some(gf)) =
+                chain_paints(p, off, &gens, self.grad, &self.frames, &mut acc);
+                if let (Some(s), Some(l), Some(g)) =
                     (&p.stroke, t.linear, self.frames.get_mut(&off.stroke_width))
                 {
-                    chain_frame(s.frame, l, &d_lin, gf, &mut acc);
+                    let mut gf = [g[0], g[1], g[2], g[3]];
+                    chain_frame(s.frame, l, &d_lin, &mut gf, &mut acc);
+                    g[..4].copy_from_slice(&gf);
                 }
                 k += 1;
             });
@@ -687,10 +681,10 @@ fn generators(t: &GroupTransform) -> Vec<Affine> {
         .collect()
 }
 
-/// The change of a gradient's geometry (in its own space, slot order) that draws as the
-/// change `M → M·(1 + h·E)` of its transform does, to first order in `h`: `None` where
-/// no change of geometry does (a radial gradient under a map that is no similarity in
-/// its space) or the geometry is degenerate.
+/// The change of a linear gradient's geometry (in its own space, slot order) that draws
+/// as the change `M → M·(1 + h·E)` of its transform does, to first order in `h`: `None`
+/// for a radial gradient (whose transform's gradient the backward pass reports) or a
+/// degenerate geometry.
 fn geometry_change(kind: &GradientKind, e: &Affine) -> Option<Vec<f64>> {
     let l = [e[0], e[1], e[2], e[3]];
     let map = |v: Point| add_scaled(lin(l, v), [e[4], e[5]], 1.0);
@@ -710,17 +704,8 @@ fn geometry_change(kind: &GradientKind, e: &Affine) -> Option<Vec<f64>> {
             let dd_ = [w * d[0] - lt_d[0], w * d[1] - lt_d[1]];
             Some(vec![dp1[0], dp1[1], dp1[0] + dd_[0], dp1[1] + dd_[1]])
         }
-        GradientKind::Radial { c, r, f, fr } => {
-            // A similarity's generator: `σ·I + ω·J`.
-            let sigma = 0.5 * (l[0] + l[3]);
-            let omega = 0.5 * (l[1] - l[2]);
-            let tol = 1e-6 * (sigma.abs() + omega.abs());
-            if (l[0] - l[3]).abs() > tol || (l[1] + l[2]).abs() > tol {
-                return None;
-            }
-            let (dc, df) = (map(c), map(f));
-            Some(vec![dc[0], dc[1], sigma * r, df[0], df[1], sigma * fr])
-        }
+        // A radial gradient's transform has a gradient of its own (`chain_paints`).
+        GradientKind::Radial { .. } => None,
     }
 }
 
@@ -751,6 +736,7 @@ fn chain_paints(
     off: &super::params::PathOffsets,
     gens: &[Affine],
     grad: &[f64],
+    maps: &std::collections::HashMap<usize, [f64; 6]>,
     acc: &mut [f64; 6],
 ) {
     let paints = [
@@ -776,7 +762,12 @@ fn chain_paints(
                 add_scaled(lin(gl, [m[4], m[5]]), [generator[4], generator[5]], 1.0),
             );
             let e = [l[0], l[1], l[2], l[3], e[0], e[1]];
-            if let Some(dg) = geometry_change(&g.kind, &e) {
+            if let GradientKind::Radial { .. } = g.kind {
+                // `q` moves by `−h·E·q` (`chain_gradient`'s `frames`).
+                if let Some(m) = maps.get(&at.base) {
+                    acc[j] -= m.iter().zip(&e).map(|(a, b)| a * b).sum::<f64>();
+                }
+            } else if let Some(dg) = geometry_change(&g.kind, &e) {
                 acc[j] += g_geo.iter().zip(&dg).map(|(a, b)| a * b).sum::<f64>();
             }
         }

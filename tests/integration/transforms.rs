@@ -131,20 +131,64 @@ fn gradient_paints_keep_their_groups_transform() {
     assert_slots_agree("gradient paints: paint", &scene, &paint);
 }
 
+/// Radial gradients whose circles are ellipses on the canvas (one in
+/// `objectBoundingBox` units of a wide path under a turn, one under a skew, one under a
+/// non-uniform scale): their groups keep their maps, drawn as baked, the maps' slots and
+/// the paints' own against central differences, and through a written file the same
+/// slots and pixels.
 #[test]
-fn radial_gradients_under_non_uniform_maps_stay_baked() {
-    // A radial gradient in `objectBoundingBox` units of a wide path: its circles are
-    // ellipses on the canvas, which a turn of the group would not keep.
-    let svg = r##"<svg xmlns="http://www.w3.org/2000/svg" width="40" height="20">
-      <defs><radialGradient id="r"><stop offset="0" stop-color="#fff"/>
-        <stop offset="1" stop-color="#000"/></radialGradient></defs>
-      <g transform="rotate(10 20 10)"><path d="M2 2 L38 2 L38 18 L2 18 Z" fill="url(#r)"/>
+fn radial_gradients_under_non_uniform_maps_are_parameters() {
+    let svg = r##"<svg xmlns="http://www.w3.org/2000/svg" width="56" height="44">
+      <defs><radialGradient id="r" fx="0.35" fy="0.4"><stop offset="0" stop-color="#fff"/>
+        <stop offset="1" stop-color="#225"/></radialGradient>
+        <radialGradient id="u" gradientUnits="userSpaceOnUse" cx="10" cy="8" r="9" fx="7"
+          fy="6"><stop offset="0" stop-color="#fe8"/><stop offset="1" stop-color="#a32"/>
+        </radialGradient></defs>
+      <rect width="56" height="44" fill="#eee"/>
+      <g id="turned" transform="rotate(10 20 10)"><path d="M2 2 L38 2 L38 18 L2 18 Z" fill="url(#r)"/>
         <path d="M5 5 L9 5 L9 9 Z" fill="#f00"/></g>
-      <g transform="skewX(10)"><path d="M2 2 L18 2 L18 18 Z" fill="url(#r)"/>
-        <path d="M5 5 L9 5 L9 9 Z" fill="#f00"/></g>
+      <g id="skewed" transform="translate(4 20) skewX(15)"><path d="M2 2 L22 2 L22 20 Z" fill="url(#u)"
+        stroke="url(#u)" stroke-width="2"/></g>
+      <g id="squeezed" transform="translate(30 22) scale(1.3 0.8)"><path d="M0 0 L20 0 L18 24 L2 20 Z"
+        fill="url(#u)"/></g>
     </svg>"##;
     let scene = Scene::from_svg_str(svg, "radial.svg", Sizing::Natural).unwrap();
-    assert!(ParamLayout::new(&scene).transforms.is_empty());
+    assert_eq!(
+        kept_transforms(&scene),
+        ["turned:4", "skewed:6", "squeezed:6"]
+    );
+    let clip = "<clipPath id=\"all\"><rect x=\"-100\" y=\"-100\" width=\"300\" height=\"300\"/></clipPath>";
+    let flat_svg = svg
+        .replace("<defs>", &format!("<defs>{clip}"))
+        .replace("<g id=", "<g clip-path=\"url(#all)\" id=");
+    let flat = Scene::from_svg_str(&flat_svg, "baked.svg", Sizing::Natural).unwrap();
+    assert!(ParamLayout::new(&flat).transforms.is_empty());
+    let worst = worst_pixel(&scene, &flat);
+    assert!(worst <= 1e-5, "as baked: {worst}");
+    let slots = group_transform_slots(&scene);
+    assert_eq!(slots.len(), 16);
+    assert_slots_agree("radial under affine maps: transforms", &scene, &slots);
+    let paint = slots_of(&scene, &[ParamGroup::PaintGeometry, ParamGroup::StopOffset]);
+    assert_slots_agree("radial under affine maps: paint", &scene, &paint);
+    let mut moved = scene.clone();
+    let mut w = scene.params();
+    for &i in &slots {
+        w[i] += 0.03;
+    }
+    moved.set_params(&w);
+    let text = moved.to_svg_string();
+    let back = Scene::from_svg_str(&text, "back.svg", Sizing::Natural).unwrap();
+    assert_eq!(kept_transforms(&back), kept_transforms(&scene), "{text}");
+    let (a, b) = (moved.params(), back.params());
+    assert_eq!(a.len(), b.len());
+    for (i, (x, y)) in a.iter().zip(&b).enumerate() {
+        assert!(
+            (x - y).abs() <= 2e-3 * x.abs().max(1.0),
+            "slot {i}: {x} vs {y}\n{text}"
+        );
+    }
+    let worst = worst_pixel(&moved, &back);
+    assert!(worst < 2e-3, "pixels differ by {worst}");
 }
 
 #[test]
@@ -463,13 +507,13 @@ const STROKED: &str = r##"<svg xmlns="http://www.w3.org/2000/svg" width="56" hei
         transform="matrix(1 0 0.5 0.8 2 6)"/>
 </svg>"##;
 
-/// The same groups baked: a clip path over the whole canvas keeps a transform in the
-/// points (`movable_group`) and changes no pixel.
+/// The same groups baked: a clip path far around the content (in the group's frame)
+/// keeps a transform in the points (`movable_group`) and changes no pixel.
 fn baked(svg: &str) -> String {
     svg.replace(
         "<g id=\"slanted\" ",
-        "<clipPath id=\"all\"><rect width=\"56\" height=\"44\"/></clipPath>\
-         <g id=\"slanted\" clip-path=\"url(#all)\" ",
+        "<clipPath id=\"all\"><rect x=\"-100\" y=\"-100\" width=\"300\" height=\"300\"/>\
+         </clipPath><g id=\"slanted\" clip-path=\"url(#all)\" ",
     )
     .replace(
         "<path id=\"tick\" ",
