@@ -37,27 +37,28 @@
 //!   device space (under a similarity a stroke of the mapped path is the mapped stroke),
 //!   circles, ellipses and rectangles included: four slots;
 //! * any other invertible map (a skew, a non-uniform scale, a mirror) as a **general
-//!   affine** one, over paths with solid or linear-gradient paints, filled or stroked
-//!   (dashed too): six slots. A stroke under such a map is drawn as SVG draws it: built
+//!   affine** one, over paths with solid or gradient paints, filled or stroked (dashed
+//!   too): six slots. A stroke under such a map is drawn as SVG draws it: built
 //!   in the local frame, where its pen is round, and mapped, so its pen is an ellipse on
 //!   the canvas. Its [`frame`](super::Stroke::frame) takes the map's linear part (its
 //!   width and dashes stay, in the frame's units), and the backward pass reports the
 //!   gradient of every stroke frame, which `chain_gradient` carries onto the slots
 //!   (`∂L/∂L = ∂L/∂F · Fₗᵀ` for the device frame `F = L·Fₗ`) and into the frame of a
-//!   nested map. The affine image of a rectangle is no rectangle, and a radial
-//!   gradient's circles become ellipses, so content with a primitive or a radial
-//!   gradient keeps such a transform baked (an unstroked rectangle under an axis-aligned
+//!   nested map. The affine image of a rectangle is no rectangle, so content with a
+//!   primitive keeps such a transform baked (an unstroked rectangle under an axis-aligned
 //!   scale still keeps its own parameters then, [`shape`](super::shape)).
 //!
 //! **Gradient paints** inside either kind: the paint's transform (gradient space →
 //! device) is held in the local frame and mapped forward with the content, as points are;
-//! its geometry and stops, in gradient space, are parameters as anywhere else. The
-//! backward pass carries the geometry's gradient onto the group's slots: a change
+//! its geometry and stops, in gradient space, are parameters as anywhere else. A change
 //! `T → T·(1 + h·G)` of the group's map is the change `M → M·(1 + h·E)`, `E = M⁻¹·G·M`,
-//! of the paint's, which draws as a change of the geometry (a linear gradient's `t` is an
-//! affine function of the point, which its end points can follow exactly; a radial one's
-//! circles follow a similarity `E`, which is why a radial gradient needs a similarity
-//! group and a transform `M` that scales uniformly, else its group stays baked).
+//! of the paint's. A linear gradient's `t` is an affine function of the point, which its
+//! end points can follow exactly: the geometry's gradient is carried onto the group's
+//! slots. A radial one's circles follow no change of geometry unless `E` is a similarity,
+//! so the backward pass reports `Σ ∂L/∂q ⊗ (q, 1)` over the paint's pixels (`q` the
+//! point in gradient space, which the change moves by `−h·E·q`), and its slots get
+//! `−⟨Σ, E⟩`: under either kind of map, whatever `M` (an `objectBoundingBox` gradient's
+//! ellipses included).
 //!
 //! **Slots**, after the group's opacity, in the group
 //! [`ParamGroup::Transform`](super::ParamGroup::Transform):
