@@ -938,7 +938,7 @@ fn convert_group_children(g: &usvg::Group, ctx: &Ctx, t: &Affine, role: Role) ->
                     })
                 };
                 // A similarity where strokes stay round; else a general affine map over
-                // content with no primitive and no radial gradient (`transform::movable`);
+                // content with no primitive (`transform::movable`);
                 // `true` for the latter.
                 let own = relative.filter(|_| movable).and_then(|r| {
                     if movable_group(g, false)
@@ -1067,9 +1067,8 @@ fn convert_group_children(g: &usvg::Group, ctx: &Ctx, t: &Affine, role: Role) ->
 /// Whether a usvg group's content can live in a frame of its own
 /// ([`transform`](super::transform)): plain groups whose transforms keep strokes round,
 /// paths with solid or gradient paints and undashed strokes; no text, image, pattern,
-/// clip path, mask or filter. Under a general affine map (`general`): no radial gradient,
-/// strokes dashed or not (drawn in a frame that takes the map), and nested transforms of
-/// any kind.
+/// clip path, mask or filter. Under a general affine map (`general`): strokes dashed or
+/// not (drawn in a frame that takes the map), and nested transforms of any kind.
 fn movable_group(g: &usvg::Group, general: bool) -> bool {
     g.clip_path().is_none()
         && g.mask().is_none()
