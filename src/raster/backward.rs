@@ -285,21 +285,20 @@ pub fn backward_with_stats(
         (p.width, p.height),
         "gradient image size must match the canvas"
     );
-    let (mut grad, stats) = device_backward(scene, p, d_image);
-    crate::scene::params::parameter_gradient(scene, &mut grad);
-    (grad, stats)
+    let mut out = device_backward(scene, p, d_image);
+    crate::scene::params::parameter_gradient(scene, &mut out.grad, &out.frames);
+    (out.grad, out.stats)
 }
 
 /// [`backward_with_stats`] before the gradient is carried into the frames of transformed
 /// groups ([`chain_gradient`](crate::scene::transform::chain_gradient)): every slot's
 /// gradient is that of its device value. A filtered layer's content is differentiated so,
 /// its slots being part of the whole scene's, which is chained once.
-fn device_backward(scene: &Scene, p: &Prepared, d_image: &Image) -> (Vec<f64>, BackwardStats) {
+fn device_backward(scene: &Scene, p: &Prepared, d_image: &Image) -> BandsOut {
     let w = p.width as usize;
-    let out = backward_bands(scene, p, None, &|y0, rows, _| {
+    backward_bands(scene, p, None, &|y0, rows, _| {
         (d_image.data[y0 * w..(y0 + rows) * w].to_vec(), [0.0; 2])
-    });
-    (out.grad, out.stats)
+    })
 }
 
 /// A loss that is a sum of per-pixel terms, so that it can be evaluated one row band at a
@@ -340,7 +339,7 @@ pub fn render_and_backward_fused(scene: &Scene, p: &Prepared, loss: &dyn BandLos
         (d, sums)
     });
     let mut grad = out.grad;
-    crate::scene::params::parameter_gradient(scene, &mut grad);
+    crate::scene::params::parameter_gradient(scene, &mut grad, &out.frames);
     Fused {
         image,
         sums: out.sums,
@@ -349,11 +348,19 @@ pub fn render_and_backward_fused(scene: &Scene, p: &Prepared, loss: &dyn BandLos
     }
 }
 
+/// Gradients beside the parameter vector's, by slot, for `chain_gradient`: a stroke
+/// frame's `∂L/∂[a, b, c, d]` (then two zeros) at its width slot, and a radial gradient
+/// paint's transform terms (`PaintEval::transform_len`) at its first slot.
+pub(crate) type SideGrads = Vec<(usize, [f64; 6])>;
+
 /// The result of [`backward_bands`].
 struct BandsOut {
     grad: Vec<f64>,
     stats: BackwardStats,
     sums: [f64; 2],
+    /// The gradients of stroke frames and radial paints' transforms, where the scene has
+    /// transform parameters ([`SideGrads`]).
+    frames: SideGrads,
 }
 
 /// `∂L/∂pixel` of one band from its rendering: `(y0, rows, rendered) → (d_out, sums)`.
@@ -377,7 +384,12 @@ fn backward_bands(
     let mut stats = BackwardStats::default();
     let mut sums = [0.0f64; 2];
     if w == 0 || h == 0 {
-        return BandsOut { grad, stats, sums };
+        return BandsOut {
+            grad,
+            stats,
+            sums,
+            frames: Vec::new(),
+        };
     }
     let mut image = image.map(|img| img.data.as_mut_slice());
     let mut vert_g: Vec<Vec<Point>> = p
@@ -479,8 +491,13 @@ fn backward_bands(
         rest = tail;
         at = block.end;
     }
-    jobs.into_par_iter().for_each(|(pi, mut block)| {
+    // The stroke frames' gradients, by width slot, for the transforms' chain
+    // (`chain_gradient`): only where a transform can carry them.
+    let want_frames = crate::scene::transform::any(&scene.nodes);
+    let sides = jobs.into_par_iter().map(|(pi, mut block)| {
         let (path, off) = (paths[pi], &layout.paths[pi]);
+        let mut frame_g = [0.0; 4];
+        let mut maps = Vec::new();
         // A primitive's outline points are no slots: their gradient is chained to the
         // primitive's parameters once the path's items are summed.
         let mut outline_g = path
@@ -497,22 +514,38 @@ fn backward_bands(
                 &paint_g,
                 &mut block,
                 outline_g.as_deref_mut(),
+                &mut frame_g,
+                &mut maps,
             );
         }
         match (&path.primitive, outline_g) {
             (Some(prim), Some(g)) => prim.chain(&g, &mut block.g[off.points - block.base..]),
             _ => join_closing_gradients(path, off.points - block.base, block.g),
         }
+        if want_frames && off.stroke.is_some() && frame_g != [0.0; 4] {
+            let [a, b, c, d] = frame_g;
+            maps.push((off.stroke_width, [a, b, c, d, 0.0, 0.0]));
+        }
+        if !want_frames {
+            maps.clear();
+        }
+        maps
     });
+    let mut frames: SideGrads = sides.flatten().collect();
     for (g, v) in group_g.iter().enumerate() {
         grad[layout.groups[g]] += v;
     }
     for (fl, g) in p.filters.iter().zip(filter_g) {
         if let Some(g) = g {
-            filter_backward(p, fl, g, &layout, &mut grad);
+            filter_backward(p, fl, g, &layout, &mut grad, &mut frames);
         }
     }
-    BandsOut { grad, stats, sums }
+    BandsOut {
+        grad,
+        stats,
+        sums,
+        frames,
+    }
 }
 
 /// Adds to `grad` the gradient of a filtered layer's filters and children, given
@@ -525,6 +558,7 @@ fn filter_backward(
     g: Vec<[f32; 4]>,
     layout: &ParamLayout,
     grad: &mut [f64],
+    frames: &mut SideGrads,
 ) {
     let (w, h) = (p.width as usize, p.height as usize);
     let opts = RenderOptions {
@@ -540,16 +574,17 @@ fn filter_backward(
     for (row, y) in (fl.rect[1]..fl.rect[3]).enumerate() {
         d.data[y * w + fl.rect[0]..y * w + fl.rect[2]].copy_from_slice(&g_src[row * rw..][..rw]);
     }
-    let sub = device_backward(&fl.content, &Prepared::new(&fl.content, &opts), &d).0;
+    let sub = device_backward(&fl.content, &Prepared::new(&fl.content, &opts), &d);
     // The filters' slots follow the group's opacity, and the children's follow them.
     let filters = layout.groups[fl.param_group] + 1;
     for (k, v) in g_params.iter().enumerate() {
         grad[filters + k] += v;
     }
     let base = filters + g_params.len();
-    for (k, v) in sub.iter().enumerate() {
+    for (k, v) in sub.grad.iter().enumerate() {
         grad[base + k] += v;
     }
+    frames.extend(sub.frames.iter().map(|&(k, g)| (base + k, g)));
 }
 
 /// The slots of path `k` (paint order) in `layout`: one run each, in walk order.
@@ -621,6 +656,8 @@ fn scatter_item(
     paint_g: &[Vec<f64>],
     grad: &mut Block<'_>,
     mut outline_g: Option<&mut [f64]>,
+    frame_g: &mut [f64; 4],
+    maps: &mut Vec<(usize, [f64; 6])>,
 ) {
     let item = &p.items[ii];
     let geom = &p.geoms[item.path];
@@ -633,7 +670,14 @@ fn scatter_item(
                 flat_g[k][1] += g[1];
             }
             if let Some(po) = off.fill {
-                scatter_paint(grad, po, off.fill_opacity, &paint_g[ii]);
+                let m = scatter_paint(
+                    grad,
+                    po,
+                    off.fill_opacity,
+                    &paint_g[ii],
+                    item.paint.transform_len(),
+                );
+                maps.extend(m.map(|m| (po.base, m)));
             }
         }
         ItemKind::Stroke => {
@@ -663,6 +707,13 @@ fn scatter_item(
                 }
                 // Device = F · frame point.
                 let gf = [fa * g[0] + fb * g[1], fc * g[0] + fd * g[1]];
+                // … and `∂/∂F = g ⊗ frame point`.
+                let q = item.pts[j];
+                let o = [inv[0] * q[0] + inv[2] * q[1], inv[1] * q[0] + inv[3] * q[1]];
+                frame_g[0] += g[0] * o[0];
+                frame_g[1] += g[1] * o[0];
+                frame_g[2] += g[0] * o[1];
+                frame_g[3] += g[1] * o[1];
                 let r = ol.recipes[j];
                 let ins = r.inputs();
                 let at = |k: u32| {
@@ -694,15 +745,29 @@ fn scatter_item(
                 }
                 None => cg,
             };
-            // Frame point = inv · device point.
+            // Frame point = inv · device point, and `∂/∂F = −(invᵀ·g) ⊗ frame point`
+            // (`∂ inv = −inv · ∂F · inv`).
             for (k, g) in fg.iter().enumerate() {
-                flat_g[k][0] += inv[0] * g[0] + inv[1] * g[1];
-                flat_g[k][1] += inv[2] * g[0] + inv[3] * g[1];
+                let gd = [inv[0] * g[0] + inv[1] * g[1], inv[2] * g[0] + inv[3] * g[1]];
+                flat_g[k][0] += gd[0];
+                flat_g[k][1] += gd[1];
+                let o = fpts[k];
+                frame_g[0] -= gd[0] * o[0];
+                frame_g[1] -= gd[1] * o[0];
+                frame_g[2] -= gd[0] * o[1];
+                frame_g[3] -= gd[1] * o[1];
             }
             // A clip shape's stroke has no width or paint parameters.
             if let Some(po) = off.stroke {
                 grad[off.stroke_width] += 0.5 * gh;
-                scatter_paint(grad, po, off.stroke_opacity, &paint_g[ii]);
+                let m = scatter_paint(
+                    grad,
+                    po,
+                    off.stroke_opacity,
+                    &paint_g[ii],
+                    item.paint.transform_len(),
+                );
+                maps.extend(m.map(|m| (po.base, m)));
             }
         }
     }
@@ -773,13 +838,18 @@ fn scatter_paint(
     po: crate::scene::params::PaintOffsets,
     opacity: usize,
     pg: &[f64],
-) {
-    let n = pg.len();
-    // Paint slots are contiguous from `base` (geometry, then stops); the item opacity last.
-    for (k, v) in pg[..n - 1].iter().enumerate() {
+    tail: usize,
+) -> Option<[f64; 6]> {
+    // Paint slots are contiguous from `base` (geometry, then stops); the item opacity
+    // next, and a radial gradient's `tail` transform terms last
+    // (`PaintEval::transform_len`).
+    let (main, rest) = pg.split_at(pg.len() - tail);
+    let n = main.len();
+    for (k, v) in main[..n - 1].iter().enumerate() {
         grad[po.base + k] += v;
     }
-    grad[opacity] += pg[n - 1];
+    grad[opacity] += main[n - 1];
+    (tail == 6).then(|| std::array::from_fn(|k| rest[k]))
 }
 
 /// Draws one row of `item` onto `dst` from its winding integrals `wrow` (first pixel at

@@ -207,13 +207,26 @@ impl PaintEval {
 
     /// Length of this paint's gradient vector in [`PaintEval::backward`]: a solid paint has
     /// `r, g, b, opacity`; a gradient its geometry (4 or 6), `offset, r, g, b, opacity`
-    /// per stop, then the item opacity; an image only the item opacity (its pixels are
-    /// fixed).
+    /// per stop, then the item opacity, and a radial one [`transform_len`](Self::transform_len)
+    /// more; an image only the item opacity (its pixels are fixed).
     pub(crate) fn grad_len(&self) -> usize {
         match self {
             PaintEval::Solid(_) => 4,
             PaintEval::Image(_) => 1,
-            PaintEval::Gradient(g) => geometry(&g.kind).len() + 5 * g.stops.len() + 1,
+            PaintEval::Gradient(g) => g.opacity_slot() + 1 + self.transform_len(),
+        }
+    }
+
+    /// The entries after the item opacity in the gradient vector: for a radial gradient,
+    /// `Σ ∂L/∂q ⊗ (q, 1)` over the pixels (`q` the gradient-space point, SVG's matrix
+    /// order `qx·gx, qx·gy, qy·gx, qy·gy, gx, gy`), from which the gradient of its
+    /// transform follows (`transform::chain_gradient`: a change `M → M·(1 + h·E)` moves
+    /// `q` by `−h·E·q`); none for other paints, whose transforms' changes their geometry
+    /// can follow.
+    pub(crate) fn transform_len(&self) -> usize {
+        match self {
+            PaintEval::Gradient(g) if matches!(g.kind, GradientKind::Radial { .. }) => 6,
+            _ => 0,
         }
     }
 
@@ -425,6 +438,11 @@ impl GradientEval {
 }
 
 impl GradientEval {
+    /// Where the item opacity is in the gradient vector (after the geometry and stops).
+    fn opacity_slot(&self) -> usize {
+        geometry(&self.kind).len() + 5 * self.stops.len()
+    }
+
     /// See [`PaintEval::backward`].
     fn backward(&self, p: Point, gs: [f64; 4], out: &mut [f64]) {
         if self.degenerate {
@@ -447,8 +465,8 @@ impl GradientEval {
             gc[k] = gs[k] * c[3] * op;
         }
         gc[3] = (gs[0] * c[0] + gs[1] * c[1] + gs[2] * c[2] + gs[3]) * op;
-        let n = out.len();
-        out[n - 1] += (gs[0] * c[0] + gs[1] * c[1] + gs[2] * c[2] + gs[3]) * c[3];
+        let o = self.opacity_slot();
+        out[o] += (gs[0] * c[0] + gs[1] * c[1] + gs[2] * c[2] + gs[3]) * c[3];
         // C = (1 − u)·stop_i + u·stop_j, per channel (stop opacity as alpha).
         let stop_slot = |s: usize| ng + 5 * s;
         let weights: &[(usize, f64)] = if i == j {
@@ -481,6 +499,17 @@ impl GradientEval {
             for k in 0..ng {
                 out[k] += gt * t.d[k];
             }
+            if let Geometry::Radial(_) = geo {
+                // `t` depends on `q − f` and `c − f`: `∂t/∂q = −(∂t/∂c + ∂t/∂f)`.
+                let gq = [-gt * (t.d[0] + t.d[3]), -gt * (t.d[1] + t.d[4])];
+                let m = &mut out[o + 1..o + 7];
+                m[0] += gq[0] * q[0];
+                m[1] += gq[1] * q[0];
+                m[2] += gq[0] * q[1];
+                m[3] += gq[1] * q[1];
+                m[4] += gq[0];
+                m[5] += gq[1];
+            }
         }
     }
 
@@ -491,8 +520,7 @@ impl GradientEval {
         let op = self.opacity;
         let g_rgb = |k: usize| gs[k] * c[3] * op;
         let g_alpha = (gs[0] * c[0] + gs[1] * c[1] + gs[2] * c[2] + gs[3]) * op;
-        let n = out.len();
-        out[n - 1] += (gs[0] * c[0] + gs[1] * c[1] + gs[2] * c[2] + gs[3]) * c[3];
+        out[self.opacity_slot()] += (gs[0] * c[0] + gs[1] * c[1] + gs[2] * c[2] + gs[3]) * c[3];
         let ng = geometry(&self.kind).len();
         let slot = |s: usize| ng + 5 * s;
         for (s, &ws) in w.iter().enumerate() {

@@ -587,14 +587,16 @@ impl Scene {
 /// Turns the gradient of every slot's device value (what the backward pass computes) into
 /// the gradient of the parameter vector: each pattern tile's copy is added to its tile 0
 /// ([`tiling`](super::tiling)), then the content of transformed groups is carried into
-/// their frames ([`chain_gradient`](super::transform::chain_gradient)).
-pub(crate) fn parameter_gradient(scene: &Scene, grad: &mut [f64]) {
+/// their frames ([`chain_gradient`](super::transform::chain_gradient)), with the
+/// gradients of stroke frames and radial paints' transforms (`frames`, by slot) that the
+/// backward pass computes.
+pub(crate) fn parameter_gradient(scene: &Scene, grad: &mut [f64], frames: &[(usize, [f64; 6])]) {
     if super::tiling::any(&scene.nodes) {
         let mut s = scene.clone();
         let tiles = walk(&mut s, &mut |_, _, _, _| {});
         super::tiling::tie_gradients(&tiles, grad);
     }
-    super::transform::chain_gradient(scene, grad);
+    super::transform::chain_gradient(scene, grad, frames);
 }
 
 /// Moves the gradient of each closing point that is its subpath's start

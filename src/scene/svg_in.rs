@@ -938,7 +938,8 @@ fn convert_group_children(g: &usvg::Group, ctx: &Ctx, t: &Affine, role: Role) ->
                     })
                 };
                 // A similarity where strokes stay round; else a general affine map over
-                // content that only fills (`transform::movable`); `true` for the latter.
+                // content with no primitive (`transform::movable`);
+                // `true` for the latter.
                 let own = relative.filter(|_| movable).and_then(|r| {
                     if movable_group(g, false)
                         && is_uniform(&gt)
@@ -1066,8 +1067,8 @@ fn convert_group_children(g: &usvg::Group, ctx: &Ctx, t: &Affine, role: Role) ->
 /// Whether a usvg group's content can live in a frame of its own
 /// ([`transform`](super::transform)): plain groups whose transforms keep strokes round,
 /// paths with solid or gradient paints and undashed strokes; no text, image, pattern,
-/// clip path, mask or filter. Under a general affine map (`general`): no stroke and no
-/// radial gradient either, and nested transforms of any kind.
+/// clip path, mask or filter. Under a general affine map (`general`): strokes dashed or
+/// not (drawn in a frame that takes the map), and nested transforms of any kind.
 fn movable_group(g: &usvg::Group, general: bool) -> bool {
     g.clip_path().is_none()
         && g.mask().is_none()
@@ -1078,13 +1079,15 @@ fn movable_group(g: &usvg::Group, general: bool) -> bool {
             }
             usvg::Node::Path(p) => {
                 let paint_ok = |paint: &usvg::Paint| match paint {
-                    usvg::Paint::Color(_) | usvg::Paint::LinearGradient(_) => true,
-                    usvg::Paint::RadialGradient(_) => !general,
+                    usvg::Paint::Color(_)
+                    | usvg::Paint::LinearGradient(_)
+                    | usvg::Paint::RadialGradient(_) => true,
                     usvg::Paint::Pattern(_) => false,
                 };
                 p.fill().is_none_or(|f| paint_ok(f.paint()))
                     && if general {
-                        p.stroke().is_none()
+                        // A stroke's frame takes the map (dashes included).
+                        p.stroke().is_none_or(|s| paint_ok(s.paint()))
                     } else {
                         p.stroke()
                             .is_none_or(|s| paint_ok(s.paint()) && s.dasharray().is_none())

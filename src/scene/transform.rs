@@ -37,22 +37,28 @@
 //!   device space (under a similarity a stroke of the mapped path is the mapped stroke),
 //!   circles, ellipses and rectangles included: four slots;
 //! * any other invertible map (a skew, a non-uniform scale, a mirror) as a **general
-//!   affine** one, over paths that only fill, with solid or linear-gradient paints: six
-//!   slots. A stroke under a non-uniform map is not the stroke of the mapped path (its
-//!   pen would be an ellipse), the affine image of a rectangle is no rectangle, and a
-//!   radial gradient's circles become ellipses, so content with a stroke, a primitive or
-//!   a radial gradient keeps such a transform baked (an unstroked rectangle under an
-//!   axis-aligned scale still keeps its own parameters then, [`shape`](super::shape)).
+//!   affine** one, over paths with solid or gradient paints, filled or stroked (dashed
+//!   too): six slots. A stroke under such a map is drawn as SVG draws it: built
+//!   in the local frame, where its pen is round, and mapped, so its pen is an ellipse on
+//!   the canvas. Its [`frame`](super::Stroke::frame) takes the map's linear part (its
+//!   width and dashes stay, in the frame's units), and the backward pass reports the
+//!   gradient of every stroke frame, which `chain_gradient` carries onto the slots
+//!   (`∂L/∂L = ∂L/∂F · Fₗᵀ` for the device frame `F = L·Fₗ`) and into the frame of a
+//!   nested map. The affine image of a rectangle is no rectangle, so content with a
+//!   primitive keeps such a transform baked (an unstroked rectangle under an axis-aligned
+//!   scale still keeps its own parameters then, [`shape`](super::shape)).
 //!
 //! **Gradient paints** inside either kind: the paint's transform (gradient space →
 //! device) is held in the local frame and mapped forward with the content, as points are;
-//! its geometry and stops, in gradient space, are parameters as anywhere else. The
-//! backward pass carries the geometry's gradient onto the group's slots: a change
+//! its geometry and stops, in gradient space, are parameters as anywhere else. A change
 //! `T → T·(1 + h·G)` of the group's map is the change `M → M·(1 + h·E)`, `E = M⁻¹·G·M`,
-//! of the paint's, which draws as a change of the geometry (a linear gradient's `t` is an
-//! affine function of the point, which its end points can follow exactly; a radial one's
-//! circles follow a similarity `E`, which is why a radial gradient needs a similarity
-//! group and a transform `M` that scales uniformly, else its group stays baked).
+//! of the paint's. A linear gradient's `t` is an affine function of the point, which its
+//! end points can follow exactly: the geometry's gradient is carried onto the group's
+//! slots. A radial one's circles follow no change of geometry unless `E` is a similarity,
+//! so the backward pass reports `Σ ∂L/∂q ⊗ (q, 1)` over the paint's pixels (`q` the
+//! point in gradient space, which the change moves by `−h·E·q`), and its slots get
+//! `−⟨Σ, E⟩`: under either kind of map, whatever `M` (an `objectBoundingBox` gradient's
+//! ellipses included).
 //!
 //! **Slots**, after the group's opacity, in the group
 //! [`ParamGroup::Transform`](super::ParamGroup::Transform):
@@ -66,7 +72,9 @@
 //!
 //! `pivot` (not a parameter) is the center of the content's bounds in the local frame
 //! when the file was read, so that turning or scaling does not also swing the group
-//! across the canvas. SVG out writes either kind as `transform="matrix(…)"` (`f32`, as
+//! across the canvas. A stroke drawn in its group's frame has the identity frame there
+//! (snapped to it when `f32` leaves it off by less than 1e-6), so it is written plainly
+//! inside the group. SVG out writes either kind as `transform="matrix(…)"` (`f32`, as
 //! it is read), on the `<g>` or, for a shape's own transform, on the shape's element
 //! (when the shape writes no transform of its own: no turned primitive, no stroke
 //! frame), so a written file reads back to the same kinds and slots.
@@ -96,12 +104,14 @@ pub struct GroupTransform {
     pub linear: Option<[f64; 4]>,
 }
 
-/// A similarity as it is applied: its matrix, scale and angle.
+/// A map as it is applied: its matrix, scale and angle (a similarity's), and whether it
+/// is a general affine one, which maps stroke frames rather than widths.
 #[derive(Clone, Copy, Debug)]
 struct Map {
     affine: Affine,
     scale: f64,
     angle: f64,
+    general: bool,
 }
 
 impl GroupTransform {
@@ -217,12 +227,13 @@ impl GroupTransform {
     }
 
     /// (A general map's `scale` and `angle` are those of no similarity: its content holds
-    /// no primitive and no stroke, which are all that read them.)
+    /// no primitive, and its strokes' frames take its linear part instead.)
     fn forward(&self) -> Map {
         Map {
             affine: self.affine(),
             scale: self.mean_scale(),
             angle: self.angle,
+            general: self.linear.is_some(),
         }
     }
 
@@ -231,7 +242,30 @@ impl GroupTransform {
             affine: invert(&self.affine()).unwrap_or(super::IDENTITY),
             scale: 1.0 / self.mean_scale(),
             angle: -self.angle,
+            general: self.linear.is_some(),
         }
+    }
+
+    /// Per slot, the derivative of the linear part `[a, b, c, d]` (SVG order) in it: 0 for
+    /// the translation's two.
+    fn linear_derivatives(&self) -> Vec<[f64; 4]> {
+        let mut d_a: Vec<[f64; 4]> = vec![[0.0; 4]; 2];
+        match self.linear {
+            Some(_) => {
+                for i in 0..4 {
+                    let mut u = [0.0; 4];
+                    u[i] = 1.0;
+                    d_a.push(u);
+                }
+            }
+            None => {
+                let [c, s] = self.rotation();
+                let k = self.scale;
+                d_a.push([-k * s, k * c, -k * c, -k * s]);
+                d_a.push([c, s, -s, c]);
+            }
+        }
+        d_a
     }
 
     /// The slots' values in order: `tx, ty, angle, scale`, or `tx, ty, a, b, c, d`.
@@ -293,19 +327,17 @@ pub(crate) fn movable(nodes: &[Node], general: bool) -> bool {
         Node::Path(p) => {
             let paint_ok = |paint: &Paint| match paint {
                 Paint::Solid(_) => true,
-                Paint::Gradient(gr) => match gr.kind {
-                    GradientKind::Linear { .. } => true,
-                    // A radial gradient's circles stay circles only under maps that
-                    // are similarities in its own space.
-                    GradientKind::Radial { .. } => !general && conformal(&gr.transform),
-                },
+                // A radial gradient's transform gets its gradient from the backward pass
+                // (`chain_gradient`), whatever the map.
+                Paint::Gradient(_) => true,
                 Paint::Image(_) => false,
             };
             p.fill.as_ref().is_none_or(|f| paint_ok(&f.paint))
                 && if general {
-                    // The stroke of a skewed path is not the skewed stroke, and a primitive
-                    // under a skew is no longer one.
-                    p.stroke.is_none() && p.primitive.is_none()
+                    // A stroke's frame takes the map (its pen, round in the local frame,
+                    // an ellipse on the canvas), dashes included; a primitive under a skew
+                    // is no longer one.
+                    p.stroke.as_ref().is_none_or(|s| paint_ok(&s.paint)) && p.primitive.is_none()
                 } else {
                     p.stroke.as_ref().is_none_or(|s| {
                         paint_ok(&s.paint) && s.dash.is_none() && s.frame == super::FRAME_IDENTITY
@@ -313,13 +345,6 @@ pub(crate) fn movable(nodes: &[Node], general: bool) -> bool {
                 }
         }
     })
-}
-
-/// Whether `t`'s linear part is a rotation and uniform scale, possibly mirrored.
-fn conformal(t: &Affine) -> bool {
-    let [a, b, c, d, _, _] = *t;
-    let (sx, sy) = (a.hypot(b), c.hypot(d));
-    sx > 0.0 && (sx - sy).abs() <= 1e-9 * sx && (a * c + b * d).abs() <= 1e-9 * sx * sy
 }
 
 /// Applies `m` to every geometric quantity under `nodes` (points, primitives, stroke
@@ -350,7 +375,14 @@ fn map_path(p: &mut Path, m: &Map) {
         }
     }
     if let Some(s) = &mut p.stroke {
-        s.width *= m.scale;
+        if m.general {
+            // The pen is round in the stroke's frame, which rides with the content (its
+            // width and dashes are in that frame's units).
+            let l = [m.affine[0], m.affine[1], m.affine[2], m.affine[3]];
+            s.frame = lin_mul(l, s.frame);
+        } else {
+            s.width *= m.scale;
+        }
     }
     // A gradient's own space rides with the content: its geometry (in that space) stays.
     let paints = [
@@ -372,10 +404,29 @@ pub(crate) fn localize(nodes: &mut [Node]) {
         if let Node::Group(g) = n {
             if let Some(t) = &g.transform {
                 map_nodes(&mut g.children, &t.inverse());
+                snap_frames(&mut g.children);
             }
             localize_layer(g);
         }
     }
+}
+
+/// Sets every stroke frame under `nodes` that is the identity to `f32`'s precision (a
+/// stroke drawn in its group's frame, the group's map read in `f32` as the frame was) to
+/// exactly the identity, so that the local stroke is written as it was read.
+fn snap_frames(nodes: &mut [Node]) {
+    super::paths_of_mut(nodes, &mut |p| {
+        if let Some(s) = &mut p.stroke {
+            let near = s
+                .frame
+                .iter()
+                .zip(super::FRAME_IDENTITY)
+                .all(|(a, b)| (a - b).abs() <= 1e-6);
+            if near {
+                s.frame = super::FRAME_IDENTITY;
+            }
+        }
+    });
 }
 
 fn localize_layer(g: &mut Group) {
@@ -506,17 +557,30 @@ pub(crate) fn any(nodes: &[Node]) -> bool {
 
 /// Carries a gradient of the device values (in [`Scene::params`](super::Scene::params)
 /// order, as the raster backward pass computes it, the transform slots 0) into the local
-/// frames and onto the transforms, outermost group first. Nothing for a scene without
-/// transform parameters.
-pub(crate) fn chain_gradient(scene: &super::Scene, grad: &mut [f64]) {
+/// frames and onto the transforms, outermost group first. `frames` holds what the
+/// backward pass computes beside: the gradient of stroke frames (`∂L/∂[a, b, c, d]` of
+/// [`Stroke::frame`](super::Stroke::frame), device frame, then two zeros) keyed by the
+/// stroke's width slot, which a general map's strokes carry onto its slots; and a radial
+/// gradient paint's `Σ ∂L/∂q ⊗ (q, 1)` (`q` in gradient space) keyed by its first slot,
+/// which gives the gradient of its transform. Nothing for a scene without transform
+/// parameters.
+pub(crate) fn chain_gradient(scene: &super::Scene, grad: &mut [f64], frames: &[(usize, [f64; 6])]) {
     if !any(&scene.nodes) {
         return;
     }
     let layout = ParamLayout::new(scene);
     let mut nodes = scene.nodes.clone();
+    let mut by_slot = std::collections::HashMap::new();
+    for &(k, g) in frames {
+        let e: &mut [f64; 6] = by_slot.entry(k).or_default();
+        for (a, b) in e.iter_mut().zip(g) {
+            *a += b;
+        }
+    }
     let mut c = Chain {
         layout: &layout,
         grad,
+        frames: by_slot,
         path_ix: 0,
         transform_ix: 0,
     };
@@ -526,6 +590,9 @@ pub(crate) fn chain_gradient(scene: &super::Scene, grad: &mut [f64]) {
 struct Chain<'a> {
     layout: &'a ParamLayout,
     grad: &'a mut [f64],
+    /// Stroke frames' gradients by width slot, carried into each group's frame as the
+    /// walk descends.
+    frames: std::collections::HashMap<usize, [f64; 6]>,
     path_ix: usize,
     transform_ix: usize,
 }
@@ -549,13 +616,22 @@ impl Chain<'_> {
             // The content in this group's frame (its ancestors' frames are already
             // undone): the values the local gradient is taken at.
             map_nodes(&mut g.children, &t.inverse());
+            snap_frames(&mut g.children);
             let mut acc = [0.0; 6];
             let gens = generators(&t);
+            let d_lin = t.linear_derivatives();
             let mut k = self.path_ix;
             super::paths_of(&g.children, Role::Paint, &mut |p, _| {
                 let off = &self.layout.paths[k];
                 chain_path(p, off, &t, self.grad, &mut acc);
-                chain_paints(p, off, &gens, self.grad, &mut acc);
+                chain_paints(p, off, &gens, self.grad, &self.frames, &mut acc);
+                if let (Some(s), Some(l), Some(g)) =
+                    (&p.stroke, t.linear, self.frames.get_mut(&off.stroke_width))
+                {
+                    let mut gf = [g[0], g[1], g[2], g[3]];
+                    chain_frame(s.frame, l, &d_lin, &mut gf, &mut acc);
+                    g[..4].copy_from_slice(&gf);
+                }
                 k += 1;
             });
             for (i, v) in acc.iter().take(t.slot_count()).enumerate() {
@@ -590,23 +666,8 @@ fn generators(t: &GroupTransform) -> Vec<Affine> {
     let inv = invert(&t.affine()).unwrap_or(super::IDENTITY);
     let li = [inv[0], inv[1], inv[2], inv[3]];
     // `T(x) = A·(x − p) + p + t`: `∂T = [∂A | ∂t − ∂A·p]`.
-    let mut d_a: Vec<[f64; 4]> = vec![[0.0; 4]; 2];
-    match t.linear {
-        Some(_) => {
-            for i in 0..4 {
-                let mut u = [0.0; 4];
-                u[i] = 1.0;
-                d_a.push(u);
-            }
-        }
-        None => {
-            let [c, s] = t.rotation();
-            let k = t.scale;
-            d_a.push([-k * s, k * c, -k * c, -k * s]);
-            d_a.push([c, s, -s, c]);
-        }
-    }
-    d_a.iter()
+    t.linear_derivatives()
+        .iter()
         .enumerate()
         .map(|(j, &da)| {
             let ap = lin(da, t.pivot);
@@ -621,10 +682,10 @@ fn generators(t: &GroupTransform) -> Vec<Affine> {
         .collect()
 }
 
-/// The change of a gradient's geometry (in its own space, slot order) that draws as the
-/// change `M → M·(1 + h·E)` of its transform does, to first order in `h`: `None` where
-/// no change of geometry does (a radial gradient under a map that is no similarity in
-/// its space) or the geometry is degenerate.
+/// The change of a linear gradient's geometry (in its own space, slot order) that draws
+/// as the change `M → M·(1 + h·E)` of its transform does, to first order in `h`: `None`
+/// for a radial gradient (whose transform's gradient the backward pass reports) or a
+/// degenerate geometry.
 fn geometry_change(kind: &GradientKind, e: &Affine) -> Option<Vec<f64>> {
     let l = [e[0], e[1], e[2], e[3]];
     let map = |v: Point| add_scaled(lin(l, v), [e[4], e[5]], 1.0);
@@ -644,18 +705,28 @@ fn geometry_change(kind: &GradientKind, e: &Affine) -> Option<Vec<f64>> {
             let dd_ = [w * d[0] - lt_d[0], w * d[1] - lt_d[1]];
             Some(vec![dp1[0], dp1[1], dp1[0] + dd_[0], dp1[1] + dd_[1]])
         }
-        GradientKind::Radial { c, r, f, fr } => {
-            // A similarity's generator: `σ·I + ω·J`.
-            let sigma = 0.5 * (l[0] + l[3]);
-            let omega = 0.5 * (l[1] - l[2]);
-            let tol = 1e-6 * (sigma.abs() + omega.abs());
-            if (l[0] - l[3]).abs() > tol || (l[1] + l[2]).abs() > tol {
-                return None;
-            }
-            let (dc, df) = (map(c), map(f));
-            Some(vec![dc[0], dc[1], sigma * r, df[0], df[1], sigma * fr])
-        }
+        // A radial gradient's transform has a gradient of its own (`chain_paints`).
+        GradientKind::Radial { .. } => None,
     }
+}
+
+/// A stroke frame's share of `acc` under a general map with linear part `l` (`d_lin`
+/// its derivative per slot), the device frame being `l · local` (`local` the frame in
+/// the group's own frame): `gf`, the gradient of the frame the map takes it to, becomes
+/// that of `local`.
+fn chain_frame(
+    local: [f64; 4],
+    l: [f64; 4],
+    d_lin: &[[f64; 4]],
+    gf: &mut [f64; 4],
+    acc: &mut [f64; 6],
+) {
+    let frob = |a: [f64; 4], b: [f64; 4]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+    for (j, d) in d_lin.iter().enumerate() {
+        acc[j] += frob(*gf, lin_mul(*d, local));
+    }
+    // `∂L/∂local = lᵀ · ∂L/∂frame`.
+    *gf = lin_mul([l[0], l[2], l[1], l[3]], *gf);
 }
 
 /// A path's gradient paints' share of `acc`: their geometry's gradient (which stays
@@ -666,6 +737,7 @@ fn chain_paints(
     off: &super::params::PathOffsets,
     gens: &[Affine],
     grad: &[f64],
+    maps: &std::collections::HashMap<usize, [f64; 6]>,
     acc: &mut [f64; 6],
 ) {
     let paints = [
@@ -691,7 +763,12 @@ fn chain_paints(
                 add_scaled(lin(gl, [m[4], m[5]]), [generator[4], generator[5]], 1.0),
             );
             let e = [l[0], l[1], l[2], l[3], e[0], e[1]];
-            if let Some(dg) = geometry_change(&g.kind, &e) {
+            if let GradientKind::Radial { .. } = g.kind {
+                // `q` moves by `−h·E·q` (`chain_gradient`'s `frames`).
+                if let Some(m) = maps.get(&at.base) {
+                    acc[j] -= m.iter().zip(&e).map(|(a, b)| a * b).sum::<f64>();
+                }
+            } else if let Some(dg) = geometry_change(&g.kind, &e) {
                 acc[j] += g_geo.iter().zip(&dg).map(|(a, b)| a * b).sum::<f64>();
             }
         }
@@ -709,7 +786,8 @@ fn chain_path(
     acc: &mut [f64; 6],
 ) {
     if let Some(l) = t.linear {
-        // Points only (`movable`): `x = L·(v − p) + p + t`.
+        // Points (no primitive: `movable`): `x = L·(v − p) + p + t`. A stroke's width
+        // stays (its frame takes the map: `chain_frame`).
         for (i, q) in p.points.iter().enumerate() {
             let at = off.points + 2 * i;
             let g = [grad[at], grad[at + 1]];
@@ -792,7 +870,7 @@ mod tests {
     use crate::scene::{ParamGroup, Scene, Sizing};
 
     /// Nested transformed groups (a path, a stroke, a rounded rectangle, an ellipse, a
-    /// stroked circle) and a skewed stroke, which stays baked.
+    /// stroked circle) and a skewed stroke, a general map.
     pub(crate) const NESTED: &str = r##"<svg xmlns="http://www.w3.org/2000/svg" width="80" height="60">
       <g id="outer" transform="translate(6 4) rotate(12 40 30)">
         <path id="blob" d="M10 10 C30 0 40 20 30 30 Q20 40 10 30 Z" fill="#3366aa"
@@ -842,10 +920,13 @@ mod tests {
         let t = inner.transform.unwrap();
         assert!((t.angle + 20f64.to_radians()).abs() < 1e-6, "{t:?}");
         assert!((t.scale - 0.8).abs() < 1e-6, "{t:?}");
-        // The skewed group is baked: its path sits at the top level.
-        assert!(matches!(s.nodes[1], Node::Path(_)), "{:?}", s.nodes[1]);
+        // The skewed group of a stroked path: a general map.
+        let Node::Group(kept) = &s.nodes[1] else {
+            panic!("{:?}", s.nodes[1])
+        };
+        assert_eq!(kept.transform.map(|t| t.slot_count()), Some(6));
         let layout = ParamLayout::new(&s);
-        assert_eq!(layout.transforms.len(), 2);
+        assert_eq!(layout.transforms.len(), 3);
         // No opacity slots: neither group is a layer.
         assert!(layout.groups.is_empty());
         for &at in &layout.transforms {
@@ -880,8 +961,11 @@ mod tests {
             ..GroupTransform::identity(pivot)
         };
         let (before, after) = (device_points(&s), device_points(&moved));
-        // The baked triangle, last, does not move.
-        let Node::Path(tri) = &s.nodes[1] else {
+        // The skewed triangle, last, does not move.
+        let Node::Group(kept) = &s.nodes[1] else {
+            panic!()
+        };
+        let Node::Path(tri) = &kept.children[0] else {
             panic!()
         };
         let n = before.len() - tri.points.len();
@@ -893,7 +977,7 @@ mod tests {
         assert!(close(&after[n..], &before[n..], 0.0));
         // Written and read back: the same device geometry and the same transforms.
         let back = Scene::from_svg_str(&moved.to_svg_string(), "b.svg", Sizing::Natural).unwrap();
-        assert_eq!(ParamLayout::new(&back).transforms.len(), 2);
+        assert_eq!(ParamLayout::new(&back).transforms.len(), 3);
         assert!(close(&device_points(&back), &after, 2e-3));
         let (a, b) = (moved.params(), back.params());
         assert!(
@@ -1010,10 +1094,21 @@ mod tests {
         assert!(a[0].iter().zip(&b[0]).all(|(x, y)| (x - y).abs() < 1e-9));
         // The device paint transform is the group's map of the local one.
         assert!((a[0][2] - 1.5 * k).abs() < 1e-6, "{:?}", a[0]);
-        // A stroke keeps such a group baked.
+        // A stroke keeps the map too: its frame, in the group's frame, is the identity,
+        // and takes the map on the canvas.
         let stroked = svg.replace("fill=\"#a33\"", "fill=\"#a33\" stroke=\"#000\"");
         let s = Scene::from_svg_str(&stroked, "k.svg", Sizing::Natural).unwrap();
-        assert!(ParamLayout::new(&s).transforms.is_empty());
+        assert_eq!(ParamLayout::new(&s).transforms.len(), 1);
+        let mut local = s.nodes.clone();
+        localize(&mut local);
+        let mut frames = Vec::new();
+        super::super::paths_of(&local, Role::Paint, &mut |p, _| {
+            frames.extend(p.stroke.as_ref().map(|s| s.frame));
+        });
+        assert_eq!(frames, [super::super::FRAME_IDENTITY]);
+        let mut device = Vec::new();
+        s.for_each_path(|p| device.extend(p.stroke.as_ref().map(|s| s.frame)));
+        assert!((device[0][2] - 1.5 * k).abs() < 1e-6, "{device:?}");
     }
 
     /// A shape's own transform (usvg's group around it): the group's slots, the shape's

@@ -45,7 +45,7 @@ const GRADIENTS: &str = r##"<svg xmlns="http://www.w3.org/2000/svg" width="48" h
 </svg>"##;
 
 /// A skewed, non-uniformly scaled group of filled paths (one with a linear gradient), a
-/// mirrored one inside it, and a stroked group under a skew that stays baked.
+/// mirrored one inside it, and a stroked group under a skew.
 const SKEWED: &str = r##"<svg xmlns="http://www.w3.org/2000/svg" width="56" height="44">
   <defs>
     <linearGradient id="lin" gradientUnits="userSpaceOnUse" x1="8" y1="6" x2="40" y2="36">
@@ -131,35 +131,82 @@ fn gradient_paints_keep_their_groups_transform() {
     assert_slots_agree("gradient paints: paint", &scene, &paint);
 }
 
+/// Radial gradients whose circles are ellipses on the canvas (one in
+/// `objectBoundingBox` units of a wide path under a turn, one under a skew, one under a
+/// non-uniform scale): their groups keep their maps, drawn as baked, the maps' slots and
+/// the paints' own against central differences, and through a written file the same
+/// slots and pixels.
 #[test]
-fn radial_gradients_under_non_uniform_maps_stay_baked() {
-    // A radial gradient in `objectBoundingBox` units of a wide path: its circles are
-    // ellipses on the canvas, which a turn of the group would not keep.
-    let svg = r##"<svg xmlns="http://www.w3.org/2000/svg" width="40" height="20">
-      <defs><radialGradient id="r"><stop offset="0" stop-color="#fff"/>
-        <stop offset="1" stop-color="#000"/></radialGradient></defs>
-      <g transform="rotate(10 20 10)"><path d="M2 2 L38 2 L38 18 L2 18 Z" fill="url(#r)"/>
+fn radial_gradients_under_non_uniform_maps_are_parameters() {
+    let svg = r##"<svg xmlns="http://www.w3.org/2000/svg" width="56" height="44">
+      <defs><radialGradient id="r" fx="0.35" fy="0.4"><stop offset="0" stop-color="#fff"/>
+        <stop offset="1" stop-color="#225"/></radialGradient>
+        <radialGradient id="u" gradientUnits="userSpaceOnUse" cx="10" cy="8" r="9" fx="7"
+          fy="6"><stop offset="0" stop-color="#fe8"/><stop offset="1" stop-color="#a32"/>
+        </radialGradient></defs>
+      <rect width="56" height="44" fill="#eee"/>
+      <g id="turned" transform="rotate(10 20 10)"><path d="M2 2 L38 2 L38 18 L2 18 Z" fill="url(#r)"/>
         <path d="M5 5 L9 5 L9 9 Z" fill="#f00"/></g>
-      <g transform="skewX(10)"><path d="M2 2 L18 2 L18 18 Z" fill="url(#r)"/>
-        <path d="M5 5 L9 5 L9 9 Z" fill="#f00"/></g>
+      <g id="skewed" transform="translate(4 20) skewX(15)"><path d="M2 2 L22 2 L22 20 Z" fill="url(#u)"
+        stroke="url(#u)" stroke-width="2"/></g>
+      <g id="squeezed" transform="translate(30 22) scale(1.3 0.8)"><path d="M0 0 L20 0 L18 24 L2 20 Z"
+        fill="url(#u)"/></g>
     </svg>"##;
     let scene = Scene::from_svg_str(svg, "radial.svg", Sizing::Natural).unwrap();
-    assert!(ParamLayout::new(&scene).transforms.is_empty());
+    assert_eq!(
+        kept_transforms(&scene),
+        ["turned:4", "skewed:6", "squeezed:6"]
+    );
+    let clip = "<clipPath id=\"all\"><rect x=\"-100\" y=\"-100\" width=\"300\" height=\"300\"/></clipPath>";
+    let flat_svg = svg
+        .replace("<defs>", &format!("<defs>{clip}"))
+        .replace("<g id=", "<g clip-path=\"url(#all)\" id=");
+    let flat = Scene::from_svg_str(&flat_svg, "baked.svg", Sizing::Natural).unwrap();
+    assert!(ParamLayout::new(&flat).transforms.is_empty());
+    let worst = worst_pixel(&scene, &flat);
+    assert!(worst <= 1e-5, "as baked: {worst}");
+    let slots = group_transform_slots(&scene);
+    assert_eq!(slots.len(), 16);
+    assert_slots_agree("radial under affine maps: transforms", &scene, &slots);
+    let paint = slots_of(&scene, &[ParamGroup::PaintGeometry, ParamGroup::StopOffset]);
+    assert_slots_agree("radial under affine maps: paint", &scene, &paint);
+    let mut moved = scene.clone();
+    let mut w = scene.params();
+    for &i in &slots {
+        w[i] += 0.03;
+    }
+    moved.set_params(&w);
+    let text = moved.to_svg_string();
+    let back = Scene::from_svg_str(&text, "back.svg", Sizing::Natural).unwrap();
+    assert_eq!(kept_transforms(&back), kept_transforms(&scene), "{text}");
+    let (a, b) = (moved.params(), back.params());
+    assert_eq!(a.len(), b.len());
+    for (i, (x, y)) in a.iter().zip(&b).enumerate() {
+        assert!(
+            (x - y).abs() <= 2e-3 * x.abs().max(1.0),
+            "slot {i}: {x} vs {y}\n{text}"
+        );
+    }
+    let worst = worst_pixel(&moved, &back);
+    assert!(worst < 2e-3, "pixels differ by {worst}");
 }
 
 #[test]
 fn skewed_groups_of_fills_are_affine_parameters() {
     let scene = Scene::from_svg_str(SKEWED, "skewed.svg", Sizing::Natural).unwrap();
     let st = Structure::of(&scene);
-    // The stroked group under a skew is baked.
-    assert_eq!(kept_transforms(&scene), ["leaning:6", "flipped:6"]);
+    // The stroked group under a skew too (its stroke's frame takes the map).
+    assert_eq!(
+        kept_transforms(&scene),
+        ["leaning:6", "flipped:6", "stroked:6"]
+    );
     let v = scene.params();
     let at = st.transforms[0].offset + 2;
     for (got, want) in v[at..at + 4].iter().zip([1.1, 0.17, 0.35, 0.8]) {
         assert!((got - want).abs() < 1e-6, "{:?}", &v[at..at + 4]);
     }
     let slots = group_transform_slots(&scene);
-    assert_eq!(slots.len(), 12);
+    assert_eq!(slots.len(), 18);
     assert_slots_agree("affine groups", &scene, &slots);
     // The points in the groups' frames, and the linear gradient's geometry.
     let rest = slots_of(&scene, &[ParamGroup::Points, ParamGroup::PaintGeometry]);
@@ -199,14 +246,7 @@ fn affine_transforms_and_gradient_paints_survive_a_round_trip() {
                 "{name} slot {i}: {x} vs {y}"
             );
         }
-        let opts = RenderOptions::default();
-        let (p, q) = (render(&moved, &opts), render(&back, &opts));
-        let worst = p
-            .data
-            .iter()
-            .zip(&q.data)
-            .flat_map(|(a, b)| a.iter().zip(b).map(|(x, y)| (x - y).abs()))
-            .fold(0.0f32, f32::max);
+        let worst = worst_pixel(&moved, &back);
         assert!(worst < 2e-3, "{name}: pixels differ by {worst}");
         assert!(text.contains("transform=\"matrix("), "{text}");
     }
@@ -445,4 +485,144 @@ fn single_shape_transforms_are_fitted_back() {
             "{a:?} vs {b:?}"
         );
     }
+}
+
+/// A skewed, non-uniformly scaled group of strokes (round join, a linear-gradient
+/// stroke over a fill, no fill at all) and a stroked path with a skew of its own: the pen
+/// round in the group's frame, an ellipse on the canvas.
+const STROKED: &str = r##"<svg xmlns="http://www.w3.org/2000/svg" width="56" height="44">
+  <defs>
+    <linearGradient id="lin" gradientUnits="userSpaceOnUse" x1="20" y1="4" x2="40" y2="18">
+      <stop offset="0" stop-color="#113366"/><stop offset="1" stop-color="#dd5522"/>
+    </linearGradient>
+  </defs>
+  <rect width="56" height="44" fill="#f3efe6"/>
+  <g id="slanted" transform="matrix(1.1 0.15 0.4 0.75 -3 5)">
+    <path id="hook" d="M6 8 C18 2 30 10 30 20 L14 30" fill="none" stroke="#224488"
+          stroke-width="3" stroke-linejoin="round"/>
+    <path id="box" d="M24 4 L40 6 L36 18 Z" fill="#cc7733" stroke="url(#lin)"
+          stroke-width="2"/>
+  </g>
+  <path id="tick" d="M8 36 L20 40 L30 32" fill="none" stroke="#338855" stroke-width="2.5"
+        transform="matrix(1 0 0.5 0.8 2 6)"/>
+</svg>"##;
+
+/// The same groups baked: a clip path far around the content (in the group's frame)
+/// keeps a transform in the points (`movable_group`) and changes no pixel.
+fn baked(svg: &str) -> String {
+    svg.replace(
+        "<g id=\"slanted\" ",
+        "<clipPath id=\"all\"><rect x=\"-100\" y=\"-100\" width=\"300\" height=\"300\"/>\
+         </clipPath><g id=\"slanted\" clip-path=\"url(#all)\" ",
+    )
+    .replace(
+        "<path id=\"tick\" ",
+        "<path id=\"tick\" clip-path=\"url(#all)\" ",
+    )
+}
+
+/// The largest channel difference of two renderings.
+fn worst_pixel(a: &Scene, b: &Scene) -> f32 {
+    let opts = RenderOptions::default();
+    let (p, q) = (render(a, &opts), render(b, &opts));
+    p.data
+        .iter()
+        .zip(&q.data)
+        .flat_map(|(a, b)| a.iter().zip(b).map(|(x, y)| (x - y).abs()))
+        .fold(0.0f32, f32::max)
+}
+
+/// Strokes under a general affine map keep it as six slots: drawn as the baked file
+/// draws them, every slot (the map's, the local points and widths, the paint) against
+/// central differences, and through a written file the same slots and pixels.
+#[test]
+fn strokes_under_affine_maps_are_parameters() {
+    let scene = Scene::from_svg_str(STROKED, "stroked.svg", Sizing::Natural).unwrap();
+    assert_eq!(kept_transforms(&scene), ["slanted:6", "tick:6"]);
+    let flat = Scene::from_svg_str(&baked(STROKED), "baked.svg", Sizing::Natural).unwrap();
+    assert!(ParamLayout::new(&flat).transforms.is_empty());
+    let worst = worst_pixel(&scene, &flat);
+    assert!(worst <= 1e-5, "as baked: {worst}");
+    // Through the local frame and back: the same pixels.
+    let mut again = scene.clone();
+    again.set_params(&scene.params());
+    let worst = worst_pixel(&scene, &again);
+    assert!(worst <= 1e-5, "set_params: {worst}");
+    // The local values as written: the hook's width and its first point.
+    let st = Structure::of(&scene);
+    let layout = ParamLayout::new(&scene);
+    let v = scene.params();
+    let hook = layout.paths[1];
+    assert!((v[hook.stroke_width] - 3.0).abs() < 1e-6);
+    assert!((v[hook.points] - 6.0).abs() < 1e-5 && (v[hook.points + 1] - 8.0).abs() < 1e-5);
+    let at = st.transforms[0].offset + 2;
+    for (got, want) in v[at..at + 4].iter().zip([1.1, 0.15, 0.4, 0.75]) {
+        assert!((got - want).abs() < 1e-6, "{:?}", &v[at..at + 4]);
+    }
+    let slots = group_transform_slots(&scene);
+    assert_eq!(slots.len(), 12);
+    assert_slots_agree("affine strokes: transforms", &scene, &slots);
+    let rest = slots_of(
+        &scene,
+        &[
+            ParamGroup::Points,
+            ParamGroup::StrokeWidth,
+            ParamGroup::PaintGeometry,
+        ],
+    );
+    assert_slots_agree("affine strokes: local values", &scene, &rest);
+    // Moved, written, read back.
+    let mut moved = scene.clone();
+    let mut w = v.clone();
+    for &i in &slots {
+        w[i] += 0.03;
+    }
+    moved.set_params(&w);
+    let text = moved.to_svg_string();
+    assert!(
+        text.contains("<g id=\"slanted\" transform=\"matrix("),
+        "{text}"
+    );
+    assert!(
+        text.contains("<path id=\"tick\" transform=\"matrix("),
+        "{text}"
+    );
+    let back = Scene::from_svg_str(&text, "back.svg", Sizing::Natural).unwrap();
+    assert_eq!(kept_transforms(&back), ["slanted:6", "tick:6"], "{text}");
+    let (a, b) = (moved.params(), back.params());
+    assert_eq!(a.len(), b.len());
+    for (i, (x, y)) in a.iter().zip(&b).enumerate() {
+        assert!(
+            (x - y).abs() <= 2e-3 * x.abs().max(1.0),
+            "slot {i}: {x} vs {y}\n{text}"
+        );
+    }
+    let worst = worst_pixel(&moved, &back);
+    assert!(worst < 2e-3, "pixels differ by {worst}");
+}
+
+/// A dashed stroke under a skew keeps the map too (its dashes in the group's frame):
+/// drawn as baked, and its map's slots against central differences (the dashes' cuts
+/// held where they are, as for any dashed stroke: `raster::dash`).
+#[test]
+fn dashed_strokes_under_affine_maps_are_parameters() {
+    let svg = STROKED.replace(
+        "stroke-width=\"3\" stroke-linejoin=\"round\"",
+        "stroke-width=\"3\" stroke-dasharray=\"6 3\" stroke-dashoffset=\"1\"",
+    );
+    let scene = Scene::from_svg_str(&svg, "dashed.svg", Sizing::Natural).unwrap();
+    assert_eq!(kept_transforms(&scene), ["slanted:6", "tick:6"]);
+    let flat = Scene::from_svg_str(&baked(&svg), "baked.svg", Sizing::Natural).unwrap();
+    let worst = worst_pixel(&scene, &flat);
+    assert!(worst <= 1e-5, "as baked: {worst}");
+    let text = scene.to_svg_string();
+    assert!(text.contains("stroke-dasharray=\"6 3\""), "{text}");
+    let back = Scene::from_svg_str(&text, "back.svg", Sizing::Natural).unwrap();
+    assert_eq!(kept_transforms(&back), ["slanted:6", "tick:6"], "{text}");
+    assert!(worst_pixel(&scene, &back) < 2e-3);
+    assert_slots_agree(
+        "dashed affine strokes",
+        &scene,
+        &group_transform_slots(&scene),
+    );
 }
