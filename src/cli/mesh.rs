@@ -12,8 +12,9 @@ use diffsvg::image_io::{check_output, side_by_side};
 use diffsvg::mesh::fit::{FitOptions, fit, mse, orbit_cameras, sphere_around, sphere_cameras};
 use diffsvg::mesh::refine::{Displacement, refine};
 use diffsvg::mesh::simplify::{reproject_texture, simplify};
-use diffsvg::mesh::{RenderOptions, View, read_mesh, torus_knot, write_obj};
+use diffsvg::mesh::{Mesh, RenderOptions, View, read_mesh, torus_knot, write_obj};
 use diffsvg::metrics::{median, psnr_from_mse};
+use diffsvg::volume::camera::Camera;
 
 /// Mesh commands.
 #[derive(clap::Subcommand, Debug)]
@@ -262,43 +263,15 @@ fn run_fit(a: FitArgs) -> Result<()> {
         smoothness: a.smoothness,
         ..FitOptions::default()
     };
-    let render_all = |cams: &[diffsvg::volume::camera::Camera]| -> diffsvg::Result<Vec<_>> {
-        cams.iter()
-            .map(|c| Ok((*c, View::new(&reference, c, opts.render)?.render())))
-            .collect()
-    };
+    let render_all = |cams: &[Camera]| render_views(&reference, cams, &opts);
     let train = render_all(&orbit_cameras(&reference, a.views, a.size, 0.0)?)?;
     let test = render_all(&orbit_cameras(&reference, a.test_views, a.size, 0.5)?)?;
     let mut model = sphere_around(&reference, a.subdivisions);
-    let held_out = |m: &diffsvg::mesh::Mesh| -> diffsvg::Result<f64> {
-        let mut e = 0.0;
-        for (c, t) in &test {
-            e += mse(&View::new(m, c, opts.render)?.render(), t);
-        }
-        Ok(psnr_from_mse(e / test.len() as f64))
-    };
-    let start_psnr = held_out(&model)?;
-    install_interrupt_handler();
-    let bar = terminal_bar(a.quiet, a.iters, "steps");
+    let start_psnr = held_out_psnr(&model, &test, &opts)?;
     let t = Instant::now();
-    let train_mse = fit(&mut model, &train, &opts, |s| {
-        if let Some(b) = &bar {
-            b.set_position(s.iter as u64);
-            b.set_message(format!("train PSNR {:.2} dB", psnr_from_mse(s.mse)));
-        } else if !a.quiet && (s.iter % 25 == 0) {
-            println!(
-                "step {:4}  train PSNR {:.2} dB",
-                s.iter,
-                psnr_from_mse(s.mse)
-            );
-        }
-        !interrupted()
-    })?;
+    let train_mse = fit_with_progress(&mut model, &train, &opts, a.quiet)?;
     let secs = t.elapsed().as_secs_f64();
-    if let Some(b) = bar {
-        b.finish_and_clear();
-    }
-    let end_psnr = held_out(&model)?;
+    let end_psnr = held_out_psnr(&model, &test, &opts)?;
     write_obj(&model, &a.output)?;
     println!(
         "fitted {} triangles to {} views at {}² in {secs:.1} s ({} steps): train PSNR {:.2} dB, \
@@ -314,7 +287,70 @@ fn run_fit(a: FitArgs) -> Result<()> {
     Ok(())
 }
 
+/// `mesh`'s renders from `cams`, paired with them.
+fn render_views(
+    mesh: &Mesh,
+    cams: &[Camera],
+    opts: &FitOptions,
+) -> diffsvg::Result<Vec<(Camera, Image)>> {
+    cams.iter()
+        .map(|c| Ok((*c, View::new(mesh, c, opts.render)?.render())))
+        .collect()
+}
+
+/// Mean PSNR (dB, of the mean MSE) of `m`'s renders against held-out `(camera, image)`s.
+fn held_out_psnr(m: &Mesh, test: &[(Camera, Image)], opts: &FitOptions) -> diffsvg::Result<f64> {
+    let mut e = 0.0;
+    for (c, t) in test {
+        e += mse(&View::new(m, c, opts.render)?.render(), t);
+    }
+    Ok(psnr_from_mse(e / test.len().max(1) as f64))
+}
+
+/// [`fit`] with a progress bar (or a line every 25 steps without a terminal, nothing when
+/// `quiet`), stopped by Ctrl-C; the final training MSE.
+fn fit_with_progress(
+    model: &mut Mesh,
+    train: &[(Camera, Image)],
+    opts: &FitOptions,
+    quiet: bool,
+) -> diffsvg::Result<f64> {
+    install_interrupt_handler();
+    let bar = terminal_bar(quiet, opts.iters, "steps");
+    let train_mse = fit(model, train, opts, |s| {
+        if let Some(b) = &bar {
+            b.set_position(s.iter as u64);
+            b.set_message(format!("train PSNR {:.2} dB", psnr_from_mse(s.mse)));
+        } else if !quiet && (s.iter % 25 == 0) {
+            println!(
+                "step {:4}  train PSNR {:.2} dB",
+                s.iter,
+                psnr_from_mse(s.mse)
+            );
+        }
+        !interrupted()
+    })?;
+    if let Some(b) = bar {
+        b.finish_and_clear();
+    }
+    Ok(train_mse)
+}
+
 fn run_refine(a: RefineArgs) -> Result<()> {
+    for (flag, v) in [("--displace", a.displace), ("--frequency", a.frequency)] {
+        if !(v.is_finite() && v >= 0.0) {
+            bail!("{flag} {v} must be finite and not negative");
+        }
+    }
+    if !(1..=8).contains(&a.octaves) {
+        bail!("--octaves {} must be between 1 and 8", a.octaves);
+    }
+    if a.levels > 8 {
+        bail!(
+            "--levels {} must be at most 8 (4⁸ = 65,536 times the triangles)",
+            a.levels
+        );
+    }
     check_output(&a.output, "obj")?;
     let mesh = read_mesh(&a.mesh)?;
     let d = Displacement {
@@ -345,7 +381,10 @@ fn run_simplify(a: SimplifyArgs) -> Result<()> {
     check_size(a.size, a.views)?;
     check_size(a.size, a.test_views)?;
     if a.texture_size == 0 || a.texture_size > 8192 {
-        bail!("--texture-size {} must be between 1 and 8192", a.texture_size);
+        bail!(
+            "--texture-size {} must be between 1 and 8192",
+            a.texture_size
+        );
     }
     if a.triangles == 0 || a.triangles > diffsvg::limits::MAX_MESH_TRIANGLES {
         bail!(
@@ -383,11 +422,7 @@ fn run_simplify(a: SimplifyArgs) -> Result<()> {
         a.reference.display(),
         reference.triangles.len()
     ));
-    let render_all = |cams: &[diffsvg::volume::camera::Camera]| -> diffsvg::Result<Vec<_>> {
-        cams.iter()
-            .map(|c| Ok((*c, View::new(&reference, c, opts.render)?.render())))
-            .collect()
-    };
+    let render_all = |cams: &[Camera]| render_views(&reference, cams, &opts);
     let t = Instant::now();
     let train = render_all(&sphere_cameras(&reference, a.views, a.size, 0.0)?)?;
     let test = render_all(&sphere_cameras(&reference, a.test_views, a.size, 0.5)?)?;
@@ -413,39 +448,15 @@ fn run_simplify(a: SimplifyArgs) -> Result<()> {
         a.texture_size,
         t.elapsed().as_secs_f64()
     ));
-    let held_out = |m: &diffsvg::mesh::Mesh| -> diffsvg::Result<f64> {
-        let mut e = 0.0;
-        for (c, t) in &test {
-            e += mse(&View::new(m, c, opts.render)?.render(), t);
-        }
-        Ok(psnr_from_mse(e / test.len() as f64))
-    };
-    let classic_psnr = held_out(&model)?;
+    let classic_psnr = held_out_psnr(&model, &test, &opts)?;
     say(format!("classic: held-out PSNR {classic_psnr:.2} dB"));
     if let Some(c) = &a.classic {
         write_obj(&model, c)?;
     }
-    install_interrupt_handler();
-    let bar = terminal_bar(a.quiet, a.iters, "steps");
     let t = Instant::now();
-    let train_mse = fit(&mut model, &train, &opts, |s| {
-        if let Some(b) = &bar {
-            b.set_position(s.iter as u64);
-            b.set_message(format!("train PSNR {:.2} dB", psnr_from_mse(s.mse)));
-        } else if !a.quiet && (s.iter % 25 == 0) {
-            println!(
-                "step {:4}  train PSNR {:.2} dB",
-                s.iter,
-                psnr_from_mse(s.mse)
-            );
-        }
-        !interrupted()
-    })?;
+    let train_mse = fit_with_progress(&mut model, &train, &opts, a.quiet)?;
     let fit_secs = t.elapsed().as_secs_f64();
-    if let Some(b) = bar {
-        b.finish_and_clear();
-    }
-    let end_psnr = held_out(&model)?;
+    let end_psnr = held_out_psnr(&model, &test, &opts)?;
     write_obj(&model, &a.output)?;
     println!(
         "simplified {} → {} triangles in {:.1} s (fit {fit_secs:.1} s, {} steps, {} views at {}², \

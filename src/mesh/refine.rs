@@ -61,7 +61,11 @@ pub fn subdivide(mesh: &Mesh, levels: u32) -> Result<Mesh> {
     let verts = (mesh.positions.len() as u128)
         .saturating_add((mesh.triangles.len() as u128).saturating_mul(grow - 1));
     if verts > crate::limits::MAX_MESH_VERTICES as u128 {
-        return Err(too_many("vertices", verts, crate::limits::MAX_MESH_VERTICES));
+        return Err(too_many(
+            "vertices",
+            verts,
+            crate::limits::MAX_MESH_VERTICES,
+        ));
     }
     mesh.validate(std::path::Path::new("<mesh>"))?;
     let mut m = mesh.clone();
@@ -87,8 +91,7 @@ fn split_once(m: &Mesh) -> Result<Mesh> {
         }
         let (a, b) = (key.0 as usize, key.1 as usize);
         let avg3 = |p: [f64; 3], q: [f64; 3]| [0, 1, 2].map(|k| 0.5 * (p[k] + q[k]));
-        out.positions
-            .push(avg3(out.positions[a], out.positions[b]));
+        out.positions.push(avg3(out.positions[a], out.positions[b]));
         if let Some(uv) = &mut out.uvs {
             let (p, q) = (uv[a], uv[b]);
             uv.push([0.5 * (p[0] + q[0]), 0.5 * (p[1] + q[1])]);
@@ -298,7 +301,11 @@ mod tests {
         let mut m = octahedron();
         // A seam: vertex 0 split into two copies with different UVs.
         m.positions.push(m.positions[0]);
-        m.uvs = Some((0..m.positions.len()).map(|i| [i as f64 * 0.1, 0.5]).collect());
+        m.uvs = Some(
+            (0..m.positions.len())
+                .map(|i| [i as f64 * 0.1, 0.5])
+                .collect(),
+        );
         for t in &mut m.triangles[..2] {
             for v in t.iter_mut() {
                 if *v == 0 {

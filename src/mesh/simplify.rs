@@ -149,8 +149,7 @@ impl<'a> Nearest<'a> {
     fn query(&self, p: [f64; 3]) -> Option<(u32, [f64; 3])> {
         let m = self.mesh;
         let ci = [0, 1, 2].map(|k| {
-            (((p[k] - self.lo[k]) / self.cell).floor()).clamp(0.0, (self.dims[k] - 1) as f64)
-                as i64
+            (((p[k] - self.lo[k]) / self.cell).floor()).clamp(0.0, (self.dims[k] - 1) as f64) as i64
         });
         let mut best: Option<(f64, u32)> = None;
         // Rings of cells around p's cell until the ring is farther than the best vertex.
@@ -175,8 +174,8 @@ impl<'a> Nearest<'a> {
                         if !on_ring || !inside {
                             continue;
                         }
-                        let c = (z as usize * self.dims[1] + y as usize) * self.dims[0]
-                            + x as usize;
+                        let c =
+                            (z as usize * self.dims[1] + y as usize) * self.dims[0] + x as usize;
                         let verts = &self.cell_verts
                             [self.cell_start[c] as usize..self.cell_start[c + 1] as usize];
                         for &v in verts {
@@ -232,7 +231,12 @@ fn closest_on_triangle(p: [f64; 3], t: [[f64; 3]; 3]) -> ([f64; 3], [f64; 3]) {
     let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
     let [a, b, c] = t;
     let (ab, ac, ap) = (sub(b, a), sub(c, a), sub(p, a));
-    let at = |w: [f64; 3]| ([0, 1, 2].map(|k| w[0] * a[k] + w[1] * b[k] + w[2] * c[k]), w);
+    let at = |w: [f64; 3]| {
+        (
+            [0, 1, 2].map(|k| w[0] * a[k] + w[1] * b[k] + w[2] * c[k]),
+            w,
+        )
+    };
     let (d1, d2) = (dot(ab, ap), dot(ac, ap));
     if d1 <= 0.0 && d2 <= 0.0 {
         return at([1.0, 0.0, 0.0]);
@@ -300,7 +304,10 @@ pub fn reproject_texture(low: &Mesh, reference: &Mesh, size: u32) -> Result<Text
         let range = |k: usize| {
             let lo = px.iter().map(|p| p[k]).fold(f64::INFINITY, f64::min);
             let hi = px.iter().map(|p| p[k]).fold(f64::NEG_INFINITY, f64::max);
-            (lo.ceil().max(0.0) as usize, (hi.floor().min(n as f64 - 1.0)).max(-1.0))
+            (
+                lo.ceil().max(0.0) as usize,
+                (hi.floor().min(n as f64 - 1.0)).max(-1.0),
+            )
         };
         let ((x0, x1), (y0, y1)) = (range(0), range(1));
         if x1 < 0.0 || y1 < 0.0 {
@@ -328,7 +335,11 @@ pub fn reproject_texture(low: &Mesh, reference: &Mesh, size: u32) -> Result<Text
         .map(|o| {
             let (t, b) = (*o)?;
             let tri = low.triangles[t as usize];
-            let p = [0, 1, 2].map(|k| (0..3).map(|j| b[j] * low.positions[tri[j] as usize][k]).sum());
+            let p = [0, 1, 2].map(|k| {
+                (0..3)
+                    .map(|j| b[j] * low.positions[tri[j] as usize][k])
+                    .sum()
+            });
             let (rt, rb) = near.query(p)?;
             Some(color_at(reference, reference.triangles[rt as usize], rb))
         })
@@ -418,9 +429,8 @@ mod tests {
         let mut tris = Vec::new();
         for t in &m.triangles {
             let l = t.map(|i| lon(m.positions[i as usize]));
-            let wraps = l.iter().cloned().fold(0.0, f64::max)
-                - l.iter().cloned().fold(1.0, f64::min)
-                > 0.5;
+            let wraps =
+                l.iter().cloned().fold(0.0, f64::max) - l.iter().cloned().fold(1.0, f64::min) > 0.5;
             let mut nt = [0u32; 3];
             for k in 0..3 {
                 let p = m.positions[t[k] as usize];
@@ -429,7 +439,10 @@ mod tests {
                     u += 1.0;
                 }
                 let uv = [u, 0.5 + 0.5 * p[1]];
-                let found = positions.iter().zip(&uvs).position(|(q, w)| *q == p && *w == uv);
+                let found = positions
+                    .iter()
+                    .zip(&uvs)
+                    .position(|(q, w)| *q == p && *w == uv);
                 nt[k] = match found {
                     Some(i) => i as u32,
                     None => {
@@ -481,8 +494,11 @@ mod tests {
         for (t, tri) in low.triangles.iter().enumerate() {
             let _ = t;
             let b = [1.0 / 3.0; 3];
-            let p: [f64; 3] =
-                [0, 1, 2].map(|k| (0..3).map(|j| b[j] * low.positions[tri[j] as usize][k]).sum());
+            let p: [f64; 3] = [0, 1, 2].map(|k| {
+                (0..3)
+                    .map(|j| b[j] * low.positions[tri[j] as usize][k])
+                    .sum()
+            });
             let uv = uv_at(low.uvs.as_ref().unwrap(), *tri, b);
             let got = sample_value(&tex, uv);
             let want = color(p.map(|v| v / 0.98));
