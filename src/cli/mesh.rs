@@ -137,7 +137,7 @@ pub struct SimplifyArgs {
     #[arg(long, default_value_t = 6500)]
     triangles: usize,
     /// Training views, from all around (a Fibonacci sphere).
-    #[arg(long, default_value_t = 24)]
+    #[arg(long, default_value_t = 40)]
     views: usize,
     /// Held-out views (another Fibonacci sphere, turned: none is a training view).
     #[arg(long, default_value_t = 50)]
@@ -146,7 +146,7 @@ pub struct SimplifyArgs {
     #[arg(long, default_value_t = 256)]
     size: u32,
     /// Optimizer steps (each renders every training view).
-    #[arg(long, default_value_t = 100)]
+    #[arg(long, default_value_t = 60)]
     iters: usize,
     /// Side of the low-poly mesh's texture, texels.
     #[arg(long, default_value_t = 512)]
