@@ -459,14 +459,25 @@ mod tests {
         m.uvs = Some(uvs);
         let s = simplify(&m, 200).unwrap();
         assert!(s.triangles.len() <= 200);
-        // No triangle's UVs span the wrap (a stretched seam would span about 1 in u).
-        let suv = s.uvs.as_ref().unwrap();
-        for t in &s.triangles {
-            let u = t.map(|i| suv[i as usize][0]);
-            let span = u.iter().cloned().fold(f64::MIN, f64::max)
-                - u.iter().cloned().fold(f64::MAX, f64::min);
-            assert!(span < 0.5, "a triangle spans {span} in u");
-        }
+        // The UV charts stay sane: no triangle joins the two sides of the seam (it would
+        // span about 1 in u, flipped), so the chart's total signed UV area and its total
+        // unsigned area stay those of the original (no flips, no overlaps).
+        let areas = |m: &Mesh| -> (f64, f64) {
+            let uv = m.uvs.as_ref().unwrap();
+            m.triangles
+                .iter()
+                .map(|t| {
+                    let [a, b, c] = t.map(|i| uv[i as usize]);
+                    0.5 * ((b[0] - a[0]) * (c[1] - a[1]) - (c[0] - a[0]) * (b[1] - a[1]))
+                })
+                .fold((0.0, 0.0), |(s, u), a| (s + a, u + a.abs()))
+        };
+        let ((s0, u0), (s1, u1)) = (areas(&m), areas(&s));
+        assert!(
+            (s1 - s0).abs() < 0.05 * s0.abs(),
+            "signed UV area {s0} → {s1}"
+        );
+        assert!(u1 < 1.05 * u0, "unsigned UV area {u0} → {u1}");
     }
 
     #[test]
