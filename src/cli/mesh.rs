@@ -380,7 +380,7 @@ fn run_refine(a: RefineArgs) -> Result<()> {
 fn run_simplify(a: SimplifyArgs) -> Result<()> {
     check_size(a.size, a.views)?;
     check_size(a.size, a.test_views)?;
-    if a.texture_size == 0 || a.texture_size > 8192 {
+    if a.texture_size == 0 || a.texture_size > 4096 {
         bail!(
             "--texture-size {} must be between 1 and 8192",
             a.texture_size

@@ -339,7 +339,7 @@ fn mesh_simplify_improves_on_the_classic_simplification() {
         "--triangles",
         "60",
         "--views",
-        "8",
+        "16",
         "--test-views",
         "6",
         "--size",
@@ -347,7 +347,7 @@ fn mesh_simplify_improves_on_the_classic_simplification() {
         "--iters",
         "40",
         "--texture-size",
-        "64",
+        "32",
         "--lr-positions",
         "0.005",
         "--lr-colors",
@@ -367,7 +367,8 @@ fn mesh_simplify_improves_on_the_classic_simplification() {
             .unwrap()
     };
     let (before, after) = (psnr("classic "), psnr("optimized "));
-    assert!(after > before + 0.3, "{stdout}");
+    // 32.19 → 38.30 dB when written; 8 views instead of 16 overfit (+0.4 dB).
+    assert!(after > before + 2.0, "{stdout}");
     for path in [&out, &classic] {
         let m = diffsvg::mesh::read_obj(path).unwrap();
         assert!(
