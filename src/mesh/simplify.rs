@@ -275,13 +275,13 @@ fn closest_on_triangle(p: [f64; 3], t: [[f64; 3]; 3]) -> ([f64; 3], [f64; 3]) {
 }
 
 /// A `size × size` texture (`size` 1 to 4096) for `low` (which must have UVs) reprojected
-/// from `reference`:
-/// every texel whose center lies in a triangle of `low`'s UV chart gets the color of
-/// `reference` (vertex colors times texture, as rendered) at the point of its surface
-/// nearest to the texel's 3D point on `low` (the nearest point of the triangles around
-/// the nearest reference vertex). Texels outside the chart take the mean of their
-/// covered neighbours, grown outwards 8 texels (so bilinear samples at chart borders do
-/// not bleed the background), the rest the mean color. Deterministic, parallel over rows.
+/// from `reference`: every texel whose center lies in a triangle of `low`'s UV chart gets
+/// the color of `reference` (vertex colors times texture, as rendered) at the point of
+/// its surface nearest to the texel's 3D point on `low` (the nearest point of the
+/// triangles around the nearest reference vertex). Texels outside the chart take the mean
+/// of their covered neighbours, grown outwards 8 texels (so bilinear samples at chart
+/// borders do not bleed the background), the rest the mean color. Deterministic,
+/// parallel over texels.
 pub fn reproject_texture(low: &Mesh, reference: &Mesh, size: u32) -> Result<Texture> {
     crate::limits::check_count("texture size", size as usize, 1..=4096)?;
     let uvs = low.uvs.as_ref().ok_or_else(|| Error::Setting {
