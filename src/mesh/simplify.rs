@@ -503,8 +503,7 @@ mod tests {
         // At texel centers inside the chart the reprojected color matches the reference's
         // color at the corresponding point (colors linear in x, the surfaces 2 % apart).
         let mut checked = 0;
-        for (t, tri) in low.triangles.iter().enumerate() {
-            let _ = t;
+        for tri in &low.triangles {
             let b = [1.0 / 3.0; 3];
             let p: [f64; 3] = [0, 1, 2].map(|k| {
                 (0..3)
