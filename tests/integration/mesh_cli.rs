@@ -380,44 +380,23 @@ fn mesh_simplify_improves_on_the_classic_simplification() {
 
     // Bad files and flags: one line naming the file or flag, exit 2, no output.
     let bad_out = d.join("bad.obj");
-    let r = diffsvg(&[
-        "mesh",
-        "simplify",
-        s(&d.join("absent.obj")),
-        "-o",
-        s(&bad_out),
-    ]);
-    assert_fails(&r, "absent.obj", "no such file", &bad_out);
     let plain = octahedron(&d);
-    let r = diffsvg(&["mesh", "simplify", s(&plain), "-o", s(&bad_out)]);
-    assert_fails(&r, "octa.obj", "no uvs", &bad_out);
-    let r = diffsvg(&[
-        "mesh",
-        "simplify",
-        s(&reference),
-        "--triangles",
-        "0",
-        "-o",
-        s(&bad_out),
-    ]);
-    assert_fails(&r, "--triangles", "between", &bad_out);
-    let r = diffsvg(&[
-        "mesh",
-        "refine",
-        s(&obj),
-        "--levels",
-        "20",
-        "-o",
-        s(&bad_out),
-    ]);
-    assert_fails(&r, "--levels", "at most", &bad_out);
-    let r = diffsvg(&[
-        "mesh",
-        "refine",
-        s(&obj),
-        "--displace=-1",
-        "-o",
-        s(&bad_out),
-    ]);
-    assert_fails(&r, "--displace", "negative", &bad_out);
+    let absent = d.join("absent.obj");
+    let (r, p, o) = (s(&reference), s(&plain), s(&obj));
+    for (args, needle, what) in [
+        (vec!["simplify", s(&absent)], "absent.obj", "no such file"),
+        (vec!["simplify", p], "octa.obj", "no uvs"),
+        (
+            vec!["simplify", r, "--triangles", "0"],
+            "--triangles",
+            "between",
+        ),
+        (vec!["refine", o, "--levels", "20"], "--levels", "at most"),
+        (vec!["refine", o, "--displace=-1"], "--displace", "negative"),
+    ] {
+        let mut all = vec!["mesh"];
+        all.extend(args);
+        all.extend(["-o", s(&bad_out)]);
+        assert_fails(&diffsvg(&all), needle, what, &bad_out);
+    }
 }
