@@ -9,9 +9,12 @@ use anyhow::{Result, bail};
 use super::progress::{install_interrupt_handler, interrupted, terminal_bar};
 use diffsvg::Image;
 use diffsvg::image_io::{check_output, side_by_side};
-use diffsvg::mesh::fit::{FitOptions, fit, mse, orbit_cameras, sphere_around};
-use diffsvg::mesh::{RenderOptions, View, read_mesh, torus_knot, write_obj};
+use diffsvg::mesh::fit::{FitOptions, fit, mse, orbit_cameras, sphere_around, sphere_cameras};
+use diffsvg::mesh::refine::{Displacement, refine};
+use diffsvg::mesh::simplify::{reproject_texture, simplify};
+use diffsvg::mesh::{Mesh, RenderOptions, View, read_mesh, torus_knot, write_obj};
 use diffsvg::metrics::{median, psnr_from_mse};
+use diffsvg::volume::camera::Camera;
 
 /// Mesh commands.
 #[derive(clap::Subcommand, Debug)]
@@ -22,6 +25,15 @@ pub enum MeshCommand {
     /// Fit an icosphere's vertex positions and vertex colors to renders of a reference
     /// mesh from orbit views; prints held-out PSNR and writes the fitted OBJ.
     Fit(FitArgs),
+    /// Build a high-poly reference reproducibly: split every triangle in four `--levels`
+    /// times (UVs interpolated) and displace the surface along its normal by smooth
+    /// noise (deterministic by `--seed`).
+    Refine(RefineArgs),
+    /// Simplify a high-poly reference to `--triangles` (quadric-error edge collapse, its
+    /// texture reprojected from the reference: the classic baseline), then optimize the
+    /// low-poly mesh's vertex positions and texture so that it looks like the reference
+    /// from all around; prints both meshes' held-out PSNR and writes OBJ + MTL + PNG.
+    Simplify(SimplifyArgs),
 }
 
 /// Arguments of `diffsvg mesh`.
@@ -91,6 +103,74 @@ pub struct FitArgs {
     quiet: bool,
 }
 
+/// Arguments of `diffsvg mesh refine`.
+#[derive(clap::Args, Debug)]
+pub struct RefineArgs {
+    /// Mesh to refine (OBJ or glTF).
+    mesh: PathBuf,
+    /// Times every triangle is split in four (4ⁿ times the triangles).
+    #[arg(long, default_value_t = 4)]
+    levels: u32,
+    /// Largest displacement along the normal, fraction of the bounding radius (0: none).
+    #[arg(long, default_value_t = 0.03)]
+    displace: f64,
+    /// Noise frequency of the first octave, cycles per bounding radius.
+    #[arg(long, default_value_t = 16.0)]
+    frequency: f64,
+    /// Octaves of noise (1 to 8).
+    #[arg(long, default_value_t = 3)]
+    octaves: u32,
+    /// Seed of the noise.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Output OBJ (with MTL and PNG when textured).
+    #[arg(short, long)]
+    output: PathBuf,
+}
+
+/// Arguments of `diffsvg mesh simplify`.
+#[derive(clap::Args, Debug)]
+pub struct SimplifyArgs {
+    /// High-poly reference mesh (OBJ or glTF).
+    reference: PathBuf,
+    /// Target triangle count.
+    #[arg(long, default_value_t = 6500)]
+    triangles: usize,
+    /// Training views, from all around (a Fibonacci sphere).
+    #[arg(long, default_value_t = 40)]
+    views: usize,
+    /// Held-out views (another Fibonacci sphere, turned: none is a training view).
+    #[arg(long, default_value_t = 50)]
+    test_views: usize,
+    /// Image side of every view, pixels.
+    #[arg(long, default_value_t = 256)]
+    size: u32,
+    /// Optimizer steps (each renders every training view).
+    #[arg(long, default_value_t = 60)]
+    iters: usize,
+    /// Side of the low-poly mesh's texture, texels.
+    #[arg(long, default_value_t = 512)]
+    texture_size: u32,
+    /// Learning rate of vertex positions, world units per step.
+    #[arg(long, default_value_t = 2e-3)]
+    lr_positions: f64,
+    /// Learning rate of texels.
+    #[arg(long, default_value_t = 1e-2)]
+    lr_colors: f64,
+    /// Weight of the edge-length smoothness term.
+    #[arg(long, default_value_t = 0.0)]
+    smoothness: f64,
+    /// Also write the classic simplification (with its reprojected texture) here.
+    #[arg(long)]
+    classic: Option<PathBuf>,
+    /// Output OBJ of the optimized low-poly mesh (with MTL and PNG).
+    #[arg(short, long)]
+    output: PathBuf,
+    /// No progress bar.
+    #[arg(long)]
+    quiet: bool,
+}
+
 /// Arguments of `diffsvg bench mesh`.
 #[derive(clap::Args, Debug)]
 pub struct MeshBenchArgs {
@@ -119,6 +199,8 @@ pub fn run(a: MeshArgs) -> Result<()> {
     match a.command {
         MeshCommand::Render(r) => run_render(r),
         MeshCommand::Fit(f) => run_fit(f),
+        MeshCommand::Refine(r) => run_refine(r),
+        MeshCommand::Simplify(s) => run_simplify(s),
     }
 }
 
@@ -181,43 +263,15 @@ fn run_fit(a: FitArgs) -> Result<()> {
         smoothness: a.smoothness,
         ..FitOptions::default()
     };
-    let render_all = |cams: &[diffsvg::volume::camera::Camera]| -> diffsvg::Result<Vec<_>> {
-        cams.iter()
-            .map(|c| Ok((*c, View::new(&reference, c, opts.render)?.render())))
-            .collect()
-    };
+    let render_all = |cams: &[Camera]| render_views(&reference, cams, &opts);
     let train = render_all(&orbit_cameras(&reference, a.views, a.size, 0.0)?)?;
     let test = render_all(&orbit_cameras(&reference, a.test_views, a.size, 0.5)?)?;
     let mut model = sphere_around(&reference, a.subdivisions);
-    let held_out = |m: &diffsvg::mesh::Mesh| -> diffsvg::Result<f64> {
-        let mut e = 0.0;
-        for (c, t) in &test {
-            e += mse(&View::new(m, c, opts.render)?.render(), t);
-        }
-        Ok(psnr_from_mse(e / test.len() as f64))
-    };
-    let start_psnr = held_out(&model)?;
-    install_interrupt_handler();
-    let bar = terminal_bar(a.quiet, a.iters, "steps");
+    let start_psnr = held_out_psnr(&model, &test, &opts)?;
     let t = Instant::now();
-    let train_mse = fit(&mut model, &train, &opts, |s| {
-        if let Some(b) = &bar {
-            b.set_position(s.iter as u64);
-            b.set_message(format!("train PSNR {:.2} dB", psnr_from_mse(s.mse)));
-        } else if !a.quiet && (s.iter % 25 == 0) {
-            println!(
-                "step {:4}  train PSNR {:.2} dB",
-                s.iter,
-                psnr_from_mse(s.mse)
-            );
-        }
-        !interrupted()
-    })?;
+    let train_mse = fit_with_progress(&mut model, &train, &opts, a.quiet)?;
     let secs = t.elapsed().as_secs_f64();
-    if let Some(b) = bar {
-        b.finish_and_clear();
-    }
-    let end_psnr = held_out(&model)?;
+    let end_psnr = held_out_psnr(&model, &test, &opts)?;
     write_obj(&model, &a.output)?;
     println!(
         "fitted {} triangles to {} views at {}² in {secs:.1} s ({} steps): train PSNR {:.2} dB, \
@@ -228,6 +282,195 @@ fn run_fit(a: FitArgs) -> Result<()> {
         a.iters,
         psnr_from_mse(train_mse),
         a.test_views,
+        a.output.display()
+    );
+    Ok(())
+}
+
+/// `mesh`'s renders from `cams`, paired with them.
+fn render_views(
+    mesh: &Mesh,
+    cams: &[Camera],
+    opts: &FitOptions,
+) -> diffsvg::Result<Vec<(Camera, Image)>> {
+    cams.iter()
+        .map(|c| Ok((*c, View::new(mesh, c, opts.render)?.render())))
+        .collect()
+}
+
+/// Mean PSNR (dB, of the mean MSE) of `m`'s renders against held-out `(camera, image)`s.
+fn held_out_psnr(m: &Mesh, test: &[(Camera, Image)], opts: &FitOptions) -> diffsvg::Result<f64> {
+    let mut e = 0.0;
+    for (c, t) in test {
+        e += mse(&View::new(m, c, opts.render)?.render(), t);
+    }
+    Ok(psnr_from_mse(e / test.len().max(1) as f64))
+}
+
+/// [`fit`] with a progress bar (or a line every 25 steps without a terminal, nothing when
+/// `quiet`), stopped by Ctrl-C; the final training MSE.
+fn fit_with_progress(
+    model: &mut Mesh,
+    train: &[(Camera, Image)],
+    opts: &FitOptions,
+    quiet: bool,
+) -> diffsvg::Result<f64> {
+    install_interrupt_handler();
+    let bar = terminal_bar(quiet, opts.iters, "steps");
+    let train_mse = fit(model, train, opts, |s| {
+        if let Some(b) = &bar {
+            b.set_position(s.iter as u64);
+            b.set_message(format!("train PSNR {:.2} dB", psnr_from_mse(s.mse)));
+        } else if !quiet && (s.iter % 25 == 0) {
+            println!(
+                "step {:4}  train PSNR {:.2} dB",
+                s.iter,
+                psnr_from_mse(s.mse)
+            );
+        }
+        !interrupted()
+    })?;
+    if let Some(b) = bar {
+        b.finish_and_clear();
+    }
+    Ok(train_mse)
+}
+
+fn run_refine(a: RefineArgs) -> Result<()> {
+    for (flag, v) in [("--displace", a.displace), ("--frequency", a.frequency)] {
+        if !(v.is_finite() && v >= 0.0) {
+            bail!("{flag} {v} must be finite and not negative");
+        }
+    }
+    if !(1..=8).contains(&a.octaves) {
+        bail!("--octaves {} must be between 1 and 8", a.octaves);
+    }
+    if a.levels > 8 {
+        bail!(
+            "--levels {} must be at most 8 (4⁸ = 65,536 times the triangles)",
+            a.levels
+        );
+    }
+    check_output(&a.output, "obj")?;
+    let mesh = read_mesh(&a.mesh)?;
+    let d = Displacement {
+        amplitude: a.displace,
+        frequency: a.frequency,
+        octaves: a.octaves,
+        seed: a.seed,
+    };
+    let t = Instant::now();
+    let out = refine(&mesh, a.levels, &d)?;
+    let secs = t.elapsed().as_secs_f64();
+    write_obj(&out, &a.output)?;
+    println!(
+        "{}: {} → {} triangles ({} levels, displacement {} of the bounding radius, seed {}) \
+         in {secs:.1} s → {}",
+        a.mesh.display(),
+        mesh.triangles.len(),
+        out.triangles.len(),
+        a.levels,
+        a.displace,
+        a.seed,
+        a.output.display()
+    );
+    Ok(())
+}
+
+fn run_simplify(a: SimplifyArgs) -> Result<()> {
+    check_size(a.size, a.views)?;
+    check_size(a.size, a.test_views)?;
+    if a.texture_size == 0 || a.texture_size > 4096 {
+        bail!(
+            "--texture-size {} must be between 1 and 8192",
+            a.texture_size
+        );
+    }
+    if a.triangles == 0 || a.triangles > diffsvg::limits::MAX_MESH_TRIANGLES {
+        bail!(
+            "--triangles {} must be between 1 and {}",
+            a.triangles,
+            diffsvg::limits::MAX_MESH_TRIANGLES
+        );
+    }
+    check_output(&a.output, "obj")?;
+    if let Some(c) = &a.classic {
+        check_output(c, "obj")?;
+    }
+    let start = Instant::now();
+    let reference = read_mesh(&a.reference)?;
+    if reference.uvs.is_none() {
+        bail!(
+            "{}: the reference has no UVs (the low-poly texture lives in its UV chart)",
+            a.reference.display()
+        );
+    }
+    let opts = FitOptions {
+        iters: a.iters,
+        lr_positions: a.lr_positions,
+        lr_colors: a.lr_colors,
+        smoothness: a.smoothness,
+        ..FitOptions::default()
+    };
+    let say = |what: String| {
+        if !a.quiet {
+            println!("[{:6.1} s] {what}", start.elapsed().as_secs_f64());
+        }
+    };
+    say(format!(
+        "read {}: {} triangles",
+        a.reference.display(),
+        reference.triangles.len()
+    ));
+    let render_all = |cams: &[Camera]| render_views(&reference, cams, &opts);
+    let t = Instant::now();
+    let train = render_all(&sphere_cameras(&reference, a.views, a.size, 0.0)?)?;
+    let test = render_all(&sphere_cameras(&reference, a.test_views, a.size, 0.5)?)?;
+    say(format!(
+        "rendered the reference from {} training and {} held-out views at {}² ({:.0} ms a view)",
+        a.views,
+        a.test_views,
+        a.size,
+        t.elapsed().as_secs_f64() * 1e3 / (a.views + a.test_views) as f64
+    ));
+    let t = Instant::now();
+    let mut model = simplify(&reference, a.triangles)?;
+    say(format!(
+        "simplified to {} triangles in {:.1} s",
+        model.triangles.len(),
+        t.elapsed().as_secs_f64()
+    ));
+    let t = Instant::now();
+    model.texture = Some(reproject_texture(&model, &reference, a.texture_size)?);
+    model.colors = None;
+    say(format!(
+        "reprojected a {0}×{0} texture in {1:.1} s",
+        a.texture_size,
+        t.elapsed().as_secs_f64()
+    ));
+    let classic_psnr = held_out_psnr(&model, &test, &opts)?;
+    say(format!("classic: held-out PSNR {classic_psnr:.2} dB"));
+    if let Some(c) = &a.classic {
+        write_obj(&model, c)?;
+    }
+    let t = Instant::now();
+    let train_mse = fit_with_progress(&mut model, &train, &opts, a.quiet)?;
+    let fit_secs = t.elapsed().as_secs_f64();
+    let end_psnr = held_out_psnr(&model, &test, &opts)?;
+    write_obj(&model, &a.output)?;
+    println!(
+        "simplified {} → {} triangles in {:.1} s (fit {fit_secs:.1} s, {} steps, {} views at {}², \
+         train PSNR {:.2} dB): held-out PSNR over {} views: classic {classic_psnr:.2} dB, \
+         optimized {end_psnr:.2} dB ({:+.2} dB) → {}",
+        reference.triangles.len(),
+        model.triangles.len(),
+        start.elapsed().as_secs_f64(),
+        a.iters,
+        a.views,
+        a.size,
+        psnr_from_mse(train_mse),
+        a.test_views,
+        end_psnr - classic_psnr,
         a.output.display()
     );
     Ok(())

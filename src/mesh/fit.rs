@@ -101,6 +101,45 @@ pub fn orbit_cameras(mesh: &Mesh, n: usize, size: u32, phase: f64) -> Result<Vec
         .collect()
 }
 
+/// `n` cameras looking at `mesh`'s bounding-box center from all around: directions on a
+/// Fibonacci sphere (evenly spread, poles included), at 2.6 times the bounding radius with
+/// a 40° field of view (world +Y up; world +Z up for a view within 8° of a pole),
+/// `size × size`; `phase` turns the spiral about +Y by that fraction of a turn (another
+/// phase or count gives views between these: held-out views).
+pub fn sphere_cameras(mesh: &Mesh, n: usize, size: u32, phase: f64) -> Result<Vec<Camera>> {
+    let (lo, hi) = mesh.bounds();
+    let c = [0, 1, 2].map(|k| 0.5 * (lo[k] + hi[k]));
+    let r = (0..3).map(|k| (hi[k] - lo[k]).powi(2)).sum::<f64>().sqrt() * 0.5;
+    let r = if r > 0.0 { r } else { 1.0 };
+    let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+    (0..n)
+        .map(|i| {
+            let y = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
+            let ring = (1.0 - y * y).max(0.0).sqrt();
+            let az = golden * i as f64 + std::f64::consts::TAU * phase;
+            let dir = [ring * az.cos(), y, ring * az.sin()];
+            let eye = [0, 1, 2].map(|k| (c[k] + 2.6 * r * dir[k]) as f32);
+            let up = if y.abs() > 8f64.to_radians().cos() {
+                glam::Vec3::Z
+            } else {
+                glam::Vec3::Y
+            };
+            Camera::look_at(
+                glam::Vec3::from(eye),
+                glam::Vec3::new(c[0] as f32, c[1] as f32, c[2] as f32),
+                up,
+                40f32.to_radians(),
+                size,
+                size,
+            )
+            .map_err(|e| Error::Setting {
+                name: "cameras".into(),
+                message: e.to_string(),
+            })
+        })
+        .collect()
+}
+
 /// An icosphere (`subdivisions`) around `reference`'s bounds, with gray vertex colors:
 /// the usual start of a fit.
 pub fn sphere_around(reference: &Mesh, subdivisions: u32) -> Mesh {
@@ -127,9 +166,11 @@ pub struct Step {
 }
 
 /// Fits `mesh`'s positions and colors (vertex colors, or texels when it has a texture)
-/// to `views` (camera, target image) in place. `progress` sees every step and stops the
-/// fit by returning `false`. Returns the final training MSE. Deterministic: views are
-/// rendered one after another and their gradients added in order.
+/// to `views` (camera, target image) in place. Vertices at bit-identical positions
+/// (UV-seam copies) share their summed position gradient and so move together.
+/// `progress` sees every step and stops the fit by returning `false`. Returns the final
+/// training MSE. Deterministic: views are rendered one after another and their gradients
+/// added in order.
 pub fn fit(
     mesh: &mut Mesh,
     views: &[(Camera, Image)],
@@ -172,6 +213,10 @@ pub fn fit(
         * 3;
     let mut col_m = Moments::new(adam, ncol);
     let edges = edges(mesh);
+    // Vertices at one position (UV-seam copies) share their summed gradient, so they
+    // move together and the surface does not crack.
+    let (group, n_groups) = super::refine::position_groups(&mesh.positions);
+    let welded = n_groups < mesh.positions.len();
     let pixels: f64 = views
         .iter()
         .map(|(c, _)| c.width as f64 * c.height as f64)
@@ -226,6 +271,17 @@ pub fn fit(
                 let d = opts.smoothness * (pa[k] - pb[k]);
                 gpos[3 * a as usize + k] += d;
                 gpos[3 * b as usize + k] -= d;
+            }
+        }
+        if welded {
+            let mut sum = vec![[0.0f64; 3]; n_groups];
+            for (i, &g) in group.iter().enumerate() {
+                for k in 0..3 {
+                    sum[g as usize][k] += gpos[3 * i + k];
+                }
+            }
+            for (i, &g) in group.iter().enumerate() {
+                gpos[3 * i..3 * i + 3].copy_from_slice(&sum[g as usize]);
             }
         }
         let mut flat: Vec<f64> = mesh.positions.iter().flatten().copied().collect();
@@ -309,5 +365,43 @@ mod tests {
         .unwrap();
         let first = first.unwrap();
         assert!(last < 0.5 * first, "mse {first} → {last}");
+    }
+
+    #[test]
+    fn seam_copies_move_together() {
+        // An octahedron whose vertex 0 is split in two copies (a UV seam) used by
+        // different triangles, fitted to a smaller octahedron: the copies stay together.
+        let reference = crate::mesh::octahedron();
+        let cams = orbit_cameras(&reference, 3, 16, 0.0).unwrap();
+        let opts = FitOptions {
+            iters: 10,
+            lr_positions: 1e-2,
+            ..FitOptions::default()
+        };
+        let views: Vec<(Camera, Image)> = cams
+            .iter()
+            .map(|c| {
+                (
+                    *c,
+                    super::super::render(&reference, c, &opts.render).unwrap(),
+                )
+            })
+            .collect();
+        let mut model = crate::mesh::octahedron();
+        for p in &mut model.positions {
+            *p = p.map(|v| 1.2 * v);
+        }
+        model.positions.push(model.positions[0]);
+        for t in &mut model.triangles[..2] {
+            for v in t.iter_mut() {
+                if *v == 0 {
+                    *v = 6;
+                }
+            }
+        }
+        let start = model.positions[0];
+        fit(&mut model, &views, &opts, |_| true).unwrap();
+        assert_ne!(model.positions[0], start, "the vertex moved");
+        assert_eq!(model.positions[0], model.positions[6]);
     }
 }

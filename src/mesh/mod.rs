@@ -31,13 +31,15 @@ pub mod fit;
 mod geom;
 mod gltf;
 mod io;
+pub mod refine;
 pub mod render;
 mod shapes;
+pub mod simplify;
 
 pub use gltf::{read_gltf, write_gltf};
 pub use io::{read_mesh, read_obj, write_mesh, write_obj};
 pub use render::{MeshGrad, RenderOptions, View, render, render_backward};
-pub use shapes::{icosphere, torus_knot};
+pub use shapes::{icosphere, octahedron, torus_knot};
 
 use crate::Image;
 

@@ -1062,7 +1062,7 @@ fn background_px(bg: Option<[f64; 3]>) -> [f64; 4] {
     }
 }
 
-fn uv_at(uvs: &[[f64; 2]], tri: [u32; 3], b: [f64; 3]) -> [f64; 2] {
+pub(crate) fn uv_at(uvs: &[[f64; 2]], tri: [u32; 3], b: [f64; 3]) -> [f64; 2] {
     let mut uv = [0.0; 2];
     for k in 0..3 {
         let t = uvs[tri[k] as usize];
@@ -1105,7 +1105,7 @@ fn taps(tex: &Texture, uv: [f64; 2]) -> ([(u32, f64); 4], f64, f64) {
 
 /// The bilinear sample of `tex` at `uv` (what [`sample`] gives first).
 #[inline]
-fn sample_value(tex: &Texture, uv: [f64; 2]) -> [f64; 3] {
+pub(crate) fn sample_value(tex: &Texture, uv: [f64; 2]) -> [f64; 3] {
     let (taps, _, _) = taps(tex, uv);
     let mut v = [0.0; 3];
     for c in 0..3 {

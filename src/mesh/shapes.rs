@@ -138,6 +138,34 @@ fn normalize(p: [f64; 3]) -> [f64; 3] {
     p.map(|v| v / n)
 }
 
+/// The regular octahedron with vertices at `±1` on each axis: 6 vertices, 8 triangles,
+/// counter-clockwise seen from outside, no attributes.
+pub fn octahedron() -> Mesh {
+    Mesh {
+        positions: vec![
+            [1.0, 0.0, 0.0],
+            [-1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.0, -1.0, 0.0],
+            [0.0, 0.0, 1.0],
+            [0.0, 0.0, -1.0],
+        ],
+        triangles: vec![
+            [0, 2, 4],
+            [2, 1, 4],
+            [1, 3, 4],
+            [3, 0, 4],
+            [2, 0, 5],
+            [1, 2, 5],
+            [3, 1, 5],
+            [0, 3, 5],
+        ],
+        uvs: None,
+        colors: None,
+        texture: None,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -170,10 +198,10 @@ mod tests {
     }
 
     #[test]
-    fn icosphere_is_closed_and_faces_outwards() {
-        for s in 0..3 {
-            let m = icosphere(s, 2.0);
-            assert_eq!(m.triangles.len(), 20 * 4usize.pow(s));
+    fn icosphere_and_octahedron_are_closed_and_face_outwards() {
+        let meshes = (0..3).map(|s| (icosphere(s, 2.0), 20 * 4usize.pow(s)));
+        for (m, n) in meshes.chain([(octahedron(), 8)]) {
+            assert_eq!(m.triangles.len(), n);
             // Euler: V − E + F = 2 with E = 3F/2.
             assert_eq!(
                 m.positions.len() as i64 - 3 * m.triangles.len() as i64 / 2
