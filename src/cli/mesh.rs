@@ -1,7 +1,7 @@
 //! `diffsvg mesh render`, `diffsvg mesh fit` and `diffsvg bench mesh`: thin over
 //! [`diffsvg::mesh`].
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Result, bail};
@@ -12,7 +12,7 @@ use diffsvg::image_io::{check_output, side_by_side};
 use diffsvg::mesh::fit::{FitOptions, fit, mse, orbit_cameras, sphere_around, sphere_cameras};
 use diffsvg::mesh::refine::{Displacement, refine};
 use diffsvg::mesh::simplify::{reproject_texture, simplify};
-use diffsvg::mesh::{Mesh, RenderOptions, View, read_mesh, torus_knot, write_obj};
+use diffsvg::mesh::{Mesh, RenderOptions, View, read_mesh, torus_knot, write_mesh};
 use diffsvg::metrics::{median, psnr_from_mse};
 use diffsvg::volume::camera::Camera;
 
@@ -95,7 +95,7 @@ pub struct FitArgs {
     /// Weight of the edge-length smoothness term.
     #[arg(long, default_value_t = 1e-3)]
     smoothness: f64,
-    /// Output OBJ of the fitted mesh.
+    /// Output mesh: OBJ (with MTL), or glTF (`.glb`, `.gltf`), by the extension.
     #[arg(short, long)]
     output: PathBuf,
     /// No progress bar.
@@ -123,7 +123,8 @@ pub struct RefineArgs {
     /// Seed of the noise.
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Output OBJ (with MTL and PNG when textured).
+    /// Output mesh: OBJ (with MTL and PNG when textured), or glTF (`.glb`, `.gltf`: the
+    /// texture inside), by the extension.
     #[arg(short, long)]
     output: PathBuf,
 }
@@ -163,7 +164,8 @@ pub struct SimplifyArgs {
     /// Also write the classic simplification (with its reprojected texture) here.
     #[arg(long)]
     classic: Option<PathBuf>,
-    /// Output OBJ of the optimized low-poly mesh (with MTL and PNG).
+    /// Output mesh of the optimized low-poly mesh: OBJ (with MTL and PNG), or glTF (`.glb`,
+    /// `.gltf`), by the extension.
     #[arg(short, long)]
     output: PathBuf,
     /// No progress bar.
@@ -248,13 +250,30 @@ fn run_render(a: RenderArgs) -> Result<()> {
     Ok(())
 }
 
+/// Checks a mesh output path: OBJ (with its MTL and PNG beside it), or glTF (`.gltf`,
+/// `.glb`: one file), chosen by the extension.
+fn check_mesh_output(path: &Path) -> Result<()> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase)
+        .filter(|e| ["obj", "gltf", "glb"].contains(&e.as_str()));
+    match ext {
+        Some(e) => Ok(check_output(path, &e)?),
+        None => bail!(
+            "{}: output must be a .obj, .gltf or .glb file",
+            path.display()
+        ),
+    }
+}
+
 fn run_fit(a: FitArgs) -> Result<()> {
     check_size(a.size, a.views)?;
     check_size(a.size, a.test_views)?;
     if a.subdivisions > 6 {
         bail!("--subdivisions {} must be at most 6", a.subdivisions);
     }
-    check_output(&a.output, "obj")?;
+    check_mesh_output(&a.output)?;
     let reference = read_mesh(&a.reference)?;
     let opts = FitOptions {
         iters: a.iters,
@@ -272,7 +291,7 @@ fn run_fit(a: FitArgs) -> Result<()> {
     let train_mse = fit_with_progress(&mut model, &train, &opts, a.quiet)?;
     let secs = t.elapsed().as_secs_f64();
     let end_psnr = held_out_psnr(&model, &test, &opts)?;
-    write_obj(&model, &a.output)?;
+    write_mesh(&model, &a.output)?;
     println!(
         "fitted {} triangles to {} views at {}² in {secs:.1} s ({} steps): train PSNR {:.2} dB, \
          held-out PSNR {start_psnr:.2} → {end_psnr:.2} dB over {} views → {}",
@@ -351,7 +370,7 @@ fn run_refine(a: RefineArgs) -> Result<()> {
             a.levels
         );
     }
-    check_output(&a.output, "obj")?;
+    check_mesh_output(&a.output)?;
     let mesh = read_mesh(&a.mesh)?;
     let d = Displacement {
         amplitude: a.displace,
@@ -362,7 +381,7 @@ fn run_refine(a: RefineArgs) -> Result<()> {
     let t = Instant::now();
     let out = refine(&mesh, a.levels, &d)?;
     let secs = t.elapsed().as_secs_f64();
-    write_obj(&out, &a.output)?;
+    write_mesh(&out, &a.output)?;
     println!(
         "{}: {} → {} triangles ({} levels, displacement {} of the bounding radius, seed {}) \
          in {secs:.1} s → {}",
@@ -393,9 +412,9 @@ fn run_simplify(a: SimplifyArgs) -> Result<()> {
             diffsvg::limits::MAX_MESH_TRIANGLES
         );
     }
-    check_output(&a.output, "obj")?;
+    check_mesh_output(&a.output)?;
     if let Some(c) = &a.classic {
-        check_output(c, "obj")?;
+        check_mesh_output(c)?;
     }
     let start = Instant::now();
     let reference = read_mesh(&a.reference)?;
@@ -451,13 +470,13 @@ fn run_simplify(a: SimplifyArgs) -> Result<()> {
     let classic_psnr = held_out_psnr(&model, &test, &opts)?;
     say(format!("classic: held-out PSNR {classic_psnr:.2} dB"));
     if let Some(c) = &a.classic {
-        write_obj(&model, c)?;
+        write_mesh(&model, c)?;
     }
     let t = Instant::now();
     let train_mse = fit_with_progress(&mut model, &train, &opts, a.quiet)?;
     let fit_secs = t.elapsed().as_secs_f64();
     let end_psnr = held_out_psnr(&model, &test, &opts)?;
-    write_obj(&model, &a.output)?;
+    write_mesh(&model, &a.output)?;
     println!(
         "simplified {} → {} triangles in {:.1} s (fit {fit_secs:.1} s, {} steps, {} views at {}², \
          train PSNR {:.2} dB): held-out PSNR over {} views: classic {classic_psnr:.2} dB, \

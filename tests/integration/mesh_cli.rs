@@ -102,6 +102,59 @@ fn mesh_fit_moves_a_sphere_towards_a_generated_mesh_and_writes_an_obj() {
     let fitted = diffsvg::mesh::read_obj(&out).unwrap();
     assert_eq!(fitted.triangles.len(), 80);
     assert!(fitted.colors.is_some(), "vertex colors written");
+    // The same fit written as glTF: the same mesh (the fit is deterministic).
+    let glb = d.join("fit.glb");
+    let args = |out: &std::path::Path| -> Vec<String> {
+        let mut v: Vec<String> = ["mesh", "fit", s(&obj), "--views", "3", "--test-views", "2"]
+            .iter()
+            .map(|a| a.to_string())
+            .collect();
+        v.extend(
+            [
+                "--size",
+                "24",
+                "--iters",
+                "30",
+                "--subdivisions",
+                "1",
+                "--lr-positions",
+                "0.02",
+                "--lr-colors",
+                "0.05",
+                "--quiet",
+                "-o",
+                s(out),
+            ]
+            .map(String::from),
+        );
+        v
+    };
+    let run = |out: &std::path::Path| {
+        let a = args(out);
+        diffsvg(&a.iter().map(String::as_str).collect::<Vec<_>>())
+    };
+    let r = run(&glb);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let back = diffsvg::mesh::read_gltf(&glb).unwrap();
+    assert_eq!(back.triangles.len(), 80);
+    let near = |a: &[[f64; 3]], b: &[[f64; 3]]| {
+        let mut a: Vec<_> = a
+            .iter()
+            .map(|p| p.map(|v| (v * 1e4).round() as i64))
+            .collect();
+        let mut b: Vec<_> = b
+            .iter()
+            .map(|p| p.map(|v| (v * 1e4).round() as i64))
+            .collect();
+        a.sort_unstable();
+        b.sort_unstable();
+        a.iter()
+            .zip(&b)
+            .all(|(p, q)| (0..3).all(|k| (p[k] - q[k]).abs() <= 1))
+    };
+    assert!(near(&back.positions, &fitted.positions));
+    let txt = d.join("fit.txt");
+    assert_fails(&run(&txt), "fit.txt", ".glb", &txt);
 }
 
 #[test]
