@@ -70,11 +70,25 @@ pub struct RenderArgs {
 #[derive(clap::Args, Debug)]
 pub struct FitArgs {
     /// Reference mesh (OBJ, `.gltf` or `.glb`), rendered from the training and held-out views.
-    reference: PathBuf,
-    /// Training views on an orbit.
+    #[arg(required_unless_present = "scene", conflicts_with = "scene")]
+    reference: Option<PathBuf>,
+    /// Fit to a dataset's photos instead (NeRF-synthetic, instant-ngp or COLMAP folder,
+    /// pinhole cameras): its training views, and up to `--test-views` of its test views
+    /// held out; photos on white are fitted over white, others over black.
+    #[arg(long)]
+    scene: Option<PathBuf>,
+    /// Divide the dataset's image sizes by this integer (with `--scene`).
+    #[arg(long, default_value_t = 1)]
+    downscale: u32,
+    /// Start from this mesh instead of an icosphere (around the reference's bounds, or
+    /// with `--scene` at the point the cameras look at, 0.3 times their distance across).
+    #[arg(long)]
+    start: Option<PathBuf>,
+    /// Training views on an orbit (with a reference mesh).
     #[arg(long, default_value_t = 20)]
     views: usize,
-    /// Held-out views, between the training ones.
+    /// Held-out views, between the training ones (with `--scene`: at most this many of
+    /// its test views, evenly spaced).
     #[arg(long, default_value_t = 5)]
     test_views: usize,
     /// Image side, pixels.
@@ -274,18 +288,36 @@ fn run_fit(a: FitArgs) -> Result<()> {
         bail!("--subdivisions {} must be at most 6", a.subdivisions);
     }
     check_mesh_output(&a.output)?;
-    let reference = read_mesh(&a.reference)?;
-    let opts = FitOptions {
+    let mut opts = FitOptions {
         iters: a.iters,
         lr_positions: a.lr_positions,
         lr_colors: a.lr_colors,
         smoothness: a.smoothness,
         ..FitOptions::default()
     };
-    let render_all = |cams: &[Camera]| render_views(&reference, cams, &opts);
-    let train = render_all(&orbit_cameras(&reference, a.views, a.size, 0.0)?)?;
-    let test = render_all(&orbit_cameras(&reference, a.test_views, a.size, 0.5)?)?;
-    let mut model = sphere_around(&reference, a.subdivisions);
+    let (train, test, sphere) = match (&a.reference, &a.scene) {
+        (Some(r), _) => {
+            let reference = read_mesh(r)?;
+            let render_all = |cams: &[Camera]| render_views(&reference, cams, &opts);
+            let train = render_all(&orbit_cameras(&reference, a.views, a.size, 0.0)?)?;
+            let test = render_all(&orbit_cameras(&reference, a.test_views, a.size, 0.5)?)?;
+            (train, test, sphere_around(&reference, a.subdivisions))
+        }
+        (None, Some(dir)) => {
+            dataset_views(dir, a.downscale, a.test_views, a.subdivisions, &mut opts)?
+        }
+        (None, None) => bail!("give a reference mesh or --scene DIR"),
+    };
+    let mut model = match &a.start {
+        Some(p) => {
+            let mut m = read_mesh(p)?;
+            if m.colors.is_none() && m.texture.is_none() {
+                m.colors = Some(vec![[0.5; 3]; m.positions.len()]);
+            }
+            m
+        }
+        None => sphere,
+    };
     let start_psnr = held_out_psnr(&model, &test, &opts)?;
     let t = Instant::now();
     let train_mse = fit_with_progress(&mut model, &train, &opts, a.quiet)?;
@@ -296,14 +328,62 @@ fn run_fit(a: FitArgs) -> Result<()> {
         "fitted {} triangles to {} views at {}² in {secs:.1} s ({} steps): train PSNR {:.2} dB, \
          held-out PSNR {start_psnr:.2} → {end_psnr:.2} dB over {} views → {}",
         model.triangles.len(),
-        a.views,
-        a.size,
+        train.len(),
+        train[0].0.width,
         a.iters,
         psnr_from_mse(train_mse),
-        a.test_views,
+        test.len(),
         a.output.display()
     );
     Ok(())
+}
+
+/// A dataset's training views and up to `max_test` of its test views (evenly spaced) as
+/// `(camera, photo)` pairs, and an icosphere at the point the training cameras look at
+/// (0.3 times their median distance in radius, gray). Sets the fit's background to the
+/// dataset's: white for objects on white, else black.
+fn dataset_views(
+    dir: &Path,
+    downscale: u32,
+    max_test: usize,
+    subdivisions: u32,
+    opts: &mut FitOptions,
+) -> Result<(Vec<(Camera, Image)>, Vec<(Camera, Image)>, Mesh)> {
+    use diffsvg::volume::dataset::{Dataset, Loading};
+    diffsvg::volume::view::check_downscale(downscale)?;
+    let data = Dataset::load_with(
+        dir,
+        &Loading {
+            downscale,
+            test_every: None,
+        },
+    )?;
+    if data.train.is_empty() {
+        bail!("{}: no training views", dir.display());
+    }
+    let bg = if data.white_background { 1.0 } else { 0.0 };
+    opts.render.background = Some([bg; 3]);
+    let pair = |v: &diffsvg::volume::dataset::View| {
+        let img = Image {
+            width: v.width,
+            height: v.height,
+            data: v.rgb.iter().map(|c| [c[0], c[1], c[2], 1.0]).collect(),
+        };
+        (v.camera, img)
+    };
+    let train: Vec<_> = data.train.iter().map(pair).collect();
+    let n = data.test.len();
+    let k = max_test.min(n);
+    let test: Vec<_> = (0..k).map(|i| pair(&data.test[i * n / k])).collect();
+    let (center, dist) = data.focus();
+    let mut sphere = diffsvg::mesh::icosphere(subdivisions, 0.3 * dist as f64);
+    for p in &mut sphere.positions {
+        for (q, c) in p.iter_mut().zip(center.to_array()) {
+            *q += c as f64;
+        }
+    }
+    sphere.colors = Some(vec![[0.5; 3]; sphere.positions.len()]);
+    Ok((train, test, sphere))
 }
 
 /// `mesh`'s renders from `cams`, paired with them.

@@ -563,3 +563,67 @@ fn mesh_simplify_improves_on_the_classic_simplification() {
         assert_fails(&diffsvg(&all), needle, what, &bad_out);
     }
 }
+
+#[test]
+fn mesh_fit_fits_a_dataset_s_photos() {
+    let d = scratch("mesh_fit_scene");
+    let mut m = diffsvg::mesh::icosphere(2, 1.0);
+    m.colors = Some(
+        m.positions
+            .iter()
+            .map(|p| p.map(|v| 0.5 + 0.4 * v))
+            .collect(),
+    );
+    let scene = d.join("scene");
+    mesh_scene(&scene, &m, 4, 2);
+    let out = d.join("fit.obj");
+    let args = [
+        "mesh",
+        "fit",
+        "--scene",
+        s(&scene),
+        "--iters",
+        "40",
+        "--subdivisions",
+        "2",
+        "--lr-positions",
+        "0.01",
+        "--lr-colors",
+        "0.05",
+        "--quiet",
+        "-o",
+        s(&out),
+    ];
+    let r = diffsvg(&args);
+    let stdout = String::from_utf8_lossy(&r.stdout);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let tail = stdout
+        .split("held-out PSNR ")
+        .nth(1)
+        .expect("held-out PSNR printed");
+    let nums: Vec<f64> = tail
+        .split(|c: char| !(c.is_ascii_digit() || c == '.'))
+        .filter_map(|t| t.parse().ok())
+        .take(2)
+        .collect();
+    assert!(nums[1] > nums[0] + 3.0, "{stdout}");
+    assert!(
+        stdout.contains("to 4 views at 40²") && stdout.contains("over 2 views"),
+        "{stdout}"
+    );
+    // Neither a reference nor a scene, or both: refused before anything is written.
+    let r = diffsvg(&["mesh", "fit", "-o", s(&out)]);
+    assert_eq!(r.status.code(), Some(2));
+    let obj = octahedron(&d);
+    let r = diffsvg(&[
+        "mesh",
+        "fit",
+        s(&obj),
+        "--scene",
+        s(&scene),
+        "-o",
+        s(&d.join("b.obj")),
+    ]);
+    assert_eq!(r.status.code(), Some(2));
+    assert!(!d.join("b.obj").exists());
+}
