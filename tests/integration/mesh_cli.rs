@@ -89,16 +89,8 @@ fn mesh_fit_moves_a_sphere_towards_a_generated_mesh_and_writes_an_obj() {
     let stdout = String::from_utf8_lossy(&r.stdout);
     assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
     // "held-out PSNR A → B dB": the fit improves the held-out views.
-    let tail = stdout
-        .split("held-out PSNR ")
-        .nth(1)
-        .expect("held-out PSNR printed");
-    let nums: Vec<f64> = tail
-        .split(|c: char| !(c.is_ascii_digit() || c == '.'))
-        .filter_map(|t| t.parse().ok())
-        .take(2)
-        .collect();
-    assert!(nums[1] > nums[0] + 1.0, "{stdout}");
+    let (before, after) = held_out_psnr(&stdout);
+    assert!(after > before + 1.0, "{stdout}");
     let fitted = diffsvg::mesh::read_obj(&out).unwrap();
     assert_eq!(fitted.triangles.len(), 80);
     assert!(fitted.colors.is_some(), "vertex colors written");
@@ -353,9 +345,8 @@ fn mesh_scene(dir: &std::path::Path, mesh: &diffsvg::mesh::Mesh, n_train: usize,
     }
 }
 
-#[test]
-fn view_renders_a_mesh_from_a_dataset_s_cameras_and_an_orbit() {
-    let d = scratch("mesh_view");
+/// A unit icosphere (2 subdivisions) with a smooth color per vertex, in [0.1, 0.9].
+fn colored_sphere() -> diffsvg::mesh::Mesh {
     let mut m = diffsvg::mesh::icosphere(2, 1.0);
     m.colors = Some(
         m.positions
@@ -363,6 +354,27 @@ fn view_renders_a_mesh_from_a_dataset_s_cameras_and_an_orbit() {
             .map(|p| p.map(|v| 0.5 + 0.4 * v))
             .collect(),
     );
+    m
+}
+
+/// The two numbers of "held-out PSNR A → B dB" in a `mesh fit` or `mesh simplify` report.
+fn held_out_psnr(stdout: &str) -> (f64, f64) {
+    let tail = stdout
+        .split("held-out PSNR ")
+        .nth(1)
+        .expect("held-out PSNR printed");
+    let nums: Vec<f64> = tail
+        .split(|c: char| !(c.is_ascii_digit() || c == '.'))
+        .filter_map(|t| t.parse().ok())
+        .take(2)
+        .collect();
+    (nums[0], nums[1])
+}
+
+#[test]
+fn view_renders_a_mesh_from_a_dataset_s_cameras_and_an_orbit() {
+    let d = scratch("mesh_view");
+    let mut m = colored_sphere();
     let scene = d.join("scene");
     mesh_scene(&scene, &m, 3, 2);
     let obj = d.join("sphere.obj");
@@ -567,13 +579,7 @@ fn mesh_simplify_improves_on_the_classic_simplification() {
 #[test]
 fn mesh_fit_fits_a_dataset_s_photos() {
     let d = scratch("mesh_fit_scene");
-    let mut m = diffsvg::mesh::icosphere(2, 1.0);
-    m.colors = Some(
-        m.positions
-            .iter()
-            .map(|p| p.map(|v| 0.5 + 0.4 * v))
-            .collect(),
-    );
+    let mut m = colored_sphere();
     let scene = d.join("scene");
     mesh_scene(&scene, &m, 4, 2);
     let out = d.join("fit.obj");
@@ -597,16 +603,8 @@ fn mesh_fit_fits_a_dataset_s_photos() {
     let r = diffsvg(&args);
     let stdout = String::from_utf8_lossy(&r.stdout);
     assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
-    let tail = stdout
-        .split("held-out PSNR ")
-        .nth(1)
-        .expect("held-out PSNR printed");
-    let nums: Vec<f64> = tail
-        .split(|c: char| !(c.is_ascii_digit() || c == '.'))
-        .filter_map(|t| t.parse().ok())
-        .take(2)
-        .collect();
-    assert!(nums[1] > nums[0] + 3.0, "{stdout}");
+    let (before, after) = held_out_psnr(&stdout);
+    assert!(after > before + 3.0, "{stdout}");
     assert!(
         stdout.contains("to 4 views at 40²") && stdout.contains("over 2 views"),
         "{stdout}"
