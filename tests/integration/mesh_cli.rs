@@ -579,7 +579,7 @@ fn mesh_simplify_improves_on_the_classic_simplification() {
 #[test]
 fn mesh_fit_fits_a_dataset_s_photos() {
     let d = scratch("mesh_fit_scene");
-    let mut m = colored_sphere();
+    let m = colored_sphere();
     let scene = d.join("scene");
     mesh_scene(&scene, &m, 4, 2);
     let out = d.join("fit.obj");
