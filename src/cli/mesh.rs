@@ -338,6 +338,9 @@ fn run_fit(a: FitArgs) -> Result<()> {
     Ok(())
 }
 
+/// Images with the cameras they are seen from.
+type Posed = Vec<(Camera, Image)>;
+
 /// A dataset's training views and up to `max_test` of its test views (evenly spaced) as
 /// `(camera, photo)` pairs, and an icosphere at the point the training cameras look at
 /// (0.3 times their median distance in radius, gray). Sets the fit's background to the
@@ -348,7 +351,7 @@ fn dataset_views(
     max_test: usize,
     subdivisions: u32,
     opts: &mut FitOptions,
-) -> Result<(Vec<(Camera, Image)>, Vec<(Camera, Image)>, Mesh)> {
+) -> Result<(Posed, Posed, Mesh)> {
     use diffsvg::volume::dataset::{Dataset, Loading};
     diffsvg::volume::view::check_downscale(downscale)?;
     let data = Dataset::load_with(
