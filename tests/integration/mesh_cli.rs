@@ -64,28 +64,32 @@ fn mesh_fit_moves_a_sphere_towards_a_generated_mesh_and_writes_an_obj() {
     let d = scratch("mesh_fit");
     let obj = octahedron(&d);
     let out = d.join("fit.obj");
-    let r = diffsvg(&[
-        "mesh",
-        "fit",
-        s(&obj),
-        "--views",
-        "3",
-        "--test-views",
-        "2",
-        "--size",
-        "24",
-        "--iters",
-        "30",
-        "--subdivisions",
-        "1",
-        "--lr-positions",
-        "0.02",
-        "--lr-colors",
-        "0.05",
-        "--quiet",
-        "-o",
-        s(&out),
-    ]);
+    // One fit, written to `out` (OBJ or glTF by its extension).
+    let run = |out: &std::path::Path| {
+        diffsvg(&[
+            "mesh",
+            "fit",
+            s(&obj),
+            "--views",
+            "3",
+            "--test-views",
+            "2",
+            "--size",
+            "24",
+            "--iters",
+            "30",
+            "--subdivisions",
+            "1",
+            "--lr-positions",
+            "0.02",
+            "--lr-colors",
+            "0.05",
+            "--quiet",
+            "-o",
+            s(out),
+        ])
+    };
+    let r = run(&out);
     let stdout = String::from_utf8_lossy(&r.stdout);
     assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
     // "held-out PSNR A → B dB": the fit improves the held-out views.
@@ -96,35 +100,6 @@ fn mesh_fit_moves_a_sphere_towards_a_generated_mesh_and_writes_an_obj() {
     assert!(fitted.colors.is_some(), "vertex colors written");
     // The same fit written as glTF: the same mesh (the fit is deterministic).
     let glb = d.join("fit.glb");
-    let args = |out: &std::path::Path| -> Vec<String> {
-        let mut v: Vec<String> = ["mesh", "fit", s(&obj), "--views", "3", "--test-views", "2"]
-            .iter()
-            .map(|a| a.to_string())
-            .collect();
-        v.extend(
-            [
-                "--size",
-                "24",
-                "--iters",
-                "30",
-                "--subdivisions",
-                "1",
-                "--lr-positions",
-                "0.02",
-                "--lr-colors",
-                "0.05",
-                "--quiet",
-                "-o",
-                s(out),
-            ]
-            .map(String::from),
-        );
-        v
-    };
-    let run = |out: &std::path::Path| {
-        let a = args(out);
-        diffsvg(&a.iter().map(String::as_str).collect::<Vec<_>>())
-    };
     let r = run(&glb);
     assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
     let back = diffsvg::mesh::read_gltf(&glb).unwrap();
