@@ -37,7 +37,7 @@ mod shapes;
 pub mod simplify;
 
 pub use gltf::{read_gltf, write_gltf};
-pub use io::{read_mesh, read_obj, write_mesh, write_obj};
+pub use io::{MeshFormat, read_mesh, read_obj, write_mesh, write_obj};
 pub use render::{MeshGrad, RenderOptions, View, render, render_backward};
 pub use shapes::{icosphere, octahedron, torus_knot};
 
