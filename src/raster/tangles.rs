@@ -112,7 +112,7 @@ pub(crate) fn danger_boxes(pts: &[Point], rings: &[(usize, usize)]) -> Vec<[f64;
         let (c, d) = (rs.cells[ea], rs.cells[eb]);
         if (!clean[ea] || !clean[eb])
             && overlap(c, d)
-            && !(rs.consecutive(ea, eb) && !rs.on_line[ea] && !rs.on_line[eb])
+            && (!rs.consecutive(ea, eb) || rs.on_line[ea] || rs.on_line[eb])
         {
             out.push([c[0].max(d[0]), c[1].max(d[1]), c[2].min(d[2]), c[3].min(d[3])]);
         }
