@@ -190,6 +190,7 @@ fn options(background: Option<(f64, f64, f64)>, cull: bool, near: f64) -> PyResu
         background: background.map(|b| [b.0, b.1, b.2]),
         cull_back_faces: cull,
         near,
+        lighting: None,
     })
 }
 

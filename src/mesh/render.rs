@@ -30,6 +30,105 @@ pub struct RenderOptions {
     pub cull_back_faces: bool,
     /// Near-plane distance in front of the camera, world units (> 0).
     pub near: f64,
+    /// Lambert shading; `None` (the default) renders unlit: the albedo as it is.
+    pub lighting: Option<Lighting>,
+}
+
+/// Most directional lights a [`Lighting`] holds.
+pub const MAX_LIGHTS: usize = 4;
+
+/// A directional light: parallel rays, no falloff.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct DirLight {
+    /// World-space direction from the surface **towards** the light (any nonzero
+    /// length: it is normalized when rendering).
+    pub direction: [f64; 3],
+    /// Linear RGB intensity (1 = the albedo at normal incidence).
+    pub intensity: [f64; 3],
+}
+
+/// Lambert shading with fixed lights: a triangle's color at a pixel is its albedo (vertex
+/// colors times texture, what the unlit renderer shows) times `ambient + Σ_j max(0, n·l_j)
+/// · intensity_j`, where `l_j` is light `j`'s normalized direction and `n` the **smooth
+/// normal**: the perspective-correct interpolation, at the pixel center, of unit vertex
+/// normals, normalized. A vertex normal is the area-weighted sum of the face normals
+/// `(p1 − p0) × (p2 − p0)` of every triangle around it, normalized; vertices at one
+/// position (UV-seam copies) share one normal. Normals follow the triangles' winding (the
+/// front side), also for back faces drawn without culling.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Lighting {
+    /// Linear RGB ambient term.
+    pub ambient: [f64; 3],
+    /// The lights; only the first `count` are used.
+    pub lights: [DirLight; MAX_LIGHTS],
+    /// Number of lights in use (at most [`MAX_LIGHTS`]).
+    pub count: usize,
+}
+
+impl Lighting {
+    /// Ambient light plus up to [`MAX_LIGHTS`] directional lights; refuses more lights,
+    /// non-finite values and zero directions.
+    pub fn new(ambient: [f64; 3], lights: &[DirLight]) -> Result<Lighting> {
+        let l = Lighting {
+            ambient,
+            lights: [DirLight::default(); MAX_LIGHTS],
+            count: lights.len(),
+        };
+        if lights.len() > MAX_LIGHTS {
+            return Err(Error::Setting {
+                name: "lights".into(),
+                message: format!("{} lights: at most {MAX_LIGHTS}", lights.len()),
+            });
+        }
+        let mut l = l;
+        l.lights[..lights.len()].copy_from_slice(lights);
+        l.validate()?;
+        Ok(l)
+    }
+
+    /// The lights in use.
+    pub fn lights(&self) -> &[DirLight] {
+        &self.lights[..self.count.min(MAX_LIGHTS)]
+    }
+
+    fn validate(&self) -> Result<()> {
+        let bad = |message: String| Error::Setting {
+            name: "lights".into(),
+            message,
+        };
+        if self.count > MAX_LIGHTS {
+            return Err(bad(format!("{} lights: at most {MAX_LIGHTS}", self.count)));
+        }
+        if !self.ambient.iter().all(|v| v.is_finite()) {
+            return Err(bad(format!("ambient {:?} is not finite", self.ambient)));
+        }
+        for l in self.lights() {
+            if !l
+                .direction
+                .iter()
+                .chain(&l.intensity)
+                .all(|v| v.is_finite())
+            {
+                return Err(bad(format!("{l:?} is not finite")));
+            }
+            if dot(l.direction, l.direction) == 0.0 {
+                return Err(bad("a light's direction is zero".into()));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Gradients with respect to a [`Lighting`].
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct LightingGrad {
+    /// `∂L/∂ambient`.
+    pub ambient: [f64; 3],
+    /// `∂L/∂direction` per light in use (of the direction as given, before
+    /// normalization: orthogonal to it).
+    pub directions: Vec<[f64; 3]>,
+    /// `∂L/∂intensity` per light in use.
+    pub intensities: Vec<[f64; 3]>,
 }
 
 impl Default for RenderOptions {
@@ -38,6 +137,7 @@ impl Default for RenderOptions {
             background: None,
             cull_back_faces: true,
             near: 1e-3,
+            lighting: None,
         }
     }
 }
@@ -49,8 +149,19 @@ pub struct MeshGrad {
     pub positions: Vec<[f64; 3]>,
     /// Per vertex color, when the mesh has colors.
     pub colors: Option<Vec<[f64; 3]>>,
-    /// Per texel, when the mesh has a texture.
+    /// Per texel, when the mesh has a texture and texel gradients were asked for.
     pub texture: Option<Vec<[f64; 3]>>,
+    /// Per vertex `(u, v)`, when the mesh has a texture (through the bilinear lookup;
+    /// zero where the texture is flat).
+    pub uvs: Option<Vec<[f64; 2]>>,
+    /// The lighting's, when it renders lit.
+    pub lighting: Option<LightingGrad>,
+    /// `∂L/∂[ε, u]` of a pose correction applied on top of the camera (the convention of
+    /// [`crate::volume::pose`]: the camera turns by `exp([ε]×)` about its center, in
+    /// world axes, then moves by `u`, world units), at `ε = u = 0`. For a stored
+    /// correction `δ` (the camera rendered being `pose::apply(camera, δ)`), the gradient
+    /// with respect to `δ` is `pose::delta_gradient(δ, pose)`.
+    pub pose: [f64; 6],
 }
 
 /// Where a screen vertex comes from.
@@ -112,6 +223,152 @@ pub struct View<'a> {
     row_prims: Vec<u32>,
     /// The first render's visible fragments per row, reused by the backward pass.
     cache: std::sync::OnceLock<Vec<RowVis>>,
+    /// Camera center, world units.
+    eye: [f64; 3],
+    /// The lighting, prepared (`None`: unlit).
+    lit: Option<Lit>,
+}
+
+/// A [`Lighting`] prepared for one mesh: unit light directions and the smooth normals.
+struct Lit {
+    ambient: [f64; 3],
+    /// Unit directions towards the lights, and the given directions' lengths.
+    dirs: Vec<[f64; 3]>,
+    dir_len: Vec<f64>,
+    intensity: Vec<[f64; 3]>,
+    /// Each vertex's group of vertices at one position.
+    group: Vec<u32>,
+    /// Per group: the area-weighted normal sum `N` and its unit vector (zero where `N`
+    /// is zero).
+    sum: Vec<[f64; 3]>,
+    normal: Vec<[f64; 3]>,
+}
+
+impl Lit {
+    fn new(mesh: &Mesh, l: &Lighting) -> Lit {
+        let (group, n_groups) = super::refine::position_groups(&mesh.positions);
+        let mut sum = vec![[0.0f64; 3]; n_groups];
+        for t in &mesh.triangles {
+            let p = t.map(|i| mesh.positions[i as usize]);
+            let fnrm = cross(sub(p[1], p[0]), sub(p[2], p[0]));
+            for &i in t {
+                axpy(&mut sum[group[i as usize] as usize], 1.0, fnrm);
+            }
+        }
+        let normal = sum
+            .iter()
+            .map(|n| {
+                let len = dot(*n, *n).sqrt();
+                if len > 0.0 && len.is_finite() {
+                    n.map(|v| v / len)
+                } else {
+                    [0.0; 3]
+                }
+            })
+            .collect();
+        let dir_len: Vec<f64> = l
+            .lights()
+            .iter()
+            .map(|d| dot(d.direction, d.direction).sqrt())
+            .collect();
+        Lit {
+            ambient: l.ambient,
+            dirs: l
+                .lights()
+                .iter()
+                .zip(&dir_len)
+                .map(|(d, len)| d.direction.map(|v| v / len))
+                .collect(),
+            dir_len,
+            intensity: l.lights().iter().map(|d| d.intensity).collect(),
+            group,
+            sum,
+            normal,
+        }
+    }
+
+    /// Adds the position gradient through the smooth normals, given `gnormal` (per vertex,
+    /// `∂L/∂` its unit normal), and returns the lighting's gradient from `glight` (see
+    /// `Acc::light`).
+    fn backward(
+        &self,
+        mesh: &Mesh,
+        gnormal: &[[f64; 3]],
+        glight: &[[f64; 3]],
+        positions: &mut [[f64; 3]],
+    ) -> LightingGrad {
+        // Per group: ∂L/∂n̂ summed, then through n̂ = N/|N| to ∂L/∂N.
+        let mut gsum = vec![[0.0f64; 3]; self.sum.len()];
+        for (i, g) in gnormal.iter().enumerate() {
+            axpy(&mut gsum[self.group[i] as usize], 1.0, *g);
+        }
+        for ((g, n), nh) in gsum.iter_mut().zip(&self.sum).zip(&self.normal) {
+            let len = dot(*n, *n).sqrt();
+            if !(len > 0.0 && len.is_finite()) {
+                *g = [0.0; 3];
+                continue;
+            }
+            let r = dot(*g, *nh);
+            *g = [0, 1, 2].map(|c| (g[c] - r * nh[c]) / len);
+        }
+        // N = Σ (p1 − p0) × (p2 − p0) over the triangles around the group.
+        for t in &mesh.triangles {
+            let mut gf = [0.0; 3];
+            for &i in t {
+                axpy(&mut gf, 1.0, gsum[self.group[i as usize] as usize]);
+            }
+            if gf == [0.0; 3] {
+                continue;
+            }
+            let p = t.map(|i| mesh.positions[i as usize]);
+            let (e1, e2) = (sub(p[1], p[0]), sub(p[2], p[0]));
+            let g1 = cross(e2, gf);
+            let g2 = cross(gf, e1);
+            axpy(&mut positions[t[1] as usize], 1.0, g1);
+            axpy(&mut positions[t[2] as usize], 1.0, g2);
+            axpy(&mut positions[t[0] as usize], -1.0, g1);
+            axpy(&mut positions[t[0] as usize], -1.0, g2);
+        }
+        let mut out = LightingGrad {
+            ambient: glight.first().copied().unwrap_or([0.0; 3]),
+            ..LightingGrad::default()
+        };
+        for (j, (d, len)) in self.dirs.iter().zip(&self.dir_len).enumerate() {
+            let g = glight[1 + 2 * j];
+            let r = dot(g, *d);
+            out.directions
+                .push([0, 1, 2].map(|c| (g[c] - r * d[c]) / len));
+            out.intensities.push(glight[2 + 2 * j]);
+        }
+        out
+    }
+
+    /// The unit normal of vertex `i`.
+    #[inline]
+    fn vertex_normal(&self, i: u32) -> [f64; 3] {
+        self.normal[self.group[i as usize] as usize]
+    }
+
+    /// The interpolated normal `n = Σ b_k n_k` of `tri` at barycentrics `b`, its length,
+    /// and the light factor `ambient + Σ_j max(0, n̂·l_j) I_j`.
+    fn factor(&self, tri: [u32; 3], b: [f64; 3]) -> ([f64; 3], f64, [f64; 3]) {
+        let mut n = [0.0; 3];
+        for k in 0..3 {
+            axpy(&mut n, b[k], self.vertex_normal(tri[k]));
+        }
+        let len = dot(n, n).sqrt();
+        let mut f = self.ambient;
+        if len > 0.0 {
+            let nh = n.map(|v| v / len);
+            for (d, i) in self.dirs.iter().zip(&self.intensity) {
+                let s = dot(nh, *d);
+                if s > 0.0 {
+                    axpy(&mut f, s, *i);
+                }
+            }
+        }
+        (n, len, f)
+    }
 }
 
 #[inline]
@@ -181,6 +438,9 @@ impl<'a> View<'a> {
         {
             return Err(setting("background", format!("{bg:?} is not finite")));
         }
+        if let Some(l) = &opts.lighting {
+            l.validate()?;
+        }
         let m = camera.c2w.matrix3;
         let rot = [m.x_axis, m.y_axis, m.z_axis].map(|a| [a.x as f64, a.y as f64, a.z as f64]);
         let t = camera.c2w.translation;
@@ -202,6 +462,8 @@ impl<'a> View<'a> {
             row_start: Vec::new(),
             row_prims: Vec::new(),
             cache: std::sync::OnceLock::new(),
+            eye,
+            lit: opts.lighting.as_ref().map(|l| Lit::new(mesh, l)),
         };
         view.pc = mesh
             .positions
@@ -626,6 +888,12 @@ impl<'a> View<'a> {
                 col[c] *= t[c];
             }
         }
+        if let Some(lit) = &self.lit {
+            let (_, _, f) = lit.factor(tri, b);
+            for c in 0..3 {
+                col[c] *= f[c];
+            }
+        }
         (col, bary)
     }
 
@@ -731,6 +999,13 @@ impl<'a> View<'a> {
         let mesh = self.mesh;
         let bary = self.bary(tri, q);
         let b = bary.b;
+        // Lit: color = albedo ⊙ f; the albedo's gradient is gcol ⊙ f.
+        let light = self.lit.as_ref().map(|lit| lit.factor(tri, b));
+        let glit = gcol;
+        let gcol = match light {
+            Some((_, _, f)) => [gcol[0] * f[0], gcol[1] * f[1], gcol[2] * f[2]],
+            None => gcol,
+        };
         let mut base = [1.0; 3];
         if let Some(vc) = &mesh.colors {
             base = [0.0; 3];
@@ -759,9 +1034,39 @@ impl<'a> View<'a> {
             for k in 0..3 {
                 let uvk = uvs[tri[k] as usize];
                 gb[k] += guv[0] * uvk[0] + guv[1] * uvk[1];
+                let d = &mut sink.uv[tri[k] as usize];
+                d[0] += b[k] * guv[0];
+                d[1] += b[k] * guv[1];
             }
         }
-        let col = [base[0] * t[0], base[1] * t[1], base[2] * t[2]];
+        let mut col = [base[0] * t[0], base[1] * t[1], base[2] * t[2]];
+        if let (Some(lit), Some((n, len, f))) = (&self.lit, light) {
+            // ∂L/∂f = glit ⊙ albedo: the ambient directly, each lit light through
+            // s_j = n̂·l_j, then n̂ = n/|n| and n = Σ b_k n_k.
+            let ga = [glit[0] * col[0], glit[1] * col[1], glit[2] * col[2]];
+            axpy(&mut sink.light[0], 1.0, ga);
+            if len > 0.0 {
+                let nh = n.map(|v| v / len);
+                let mut gnh = [0.0; 3];
+                for (j, (d, i)) in lit.dirs.iter().zip(&lit.intensity).enumerate() {
+                    let s = dot(nh, *d);
+                    if s > 0.0 {
+                        axpy(&mut sink.light[2 + 2 * j], s, ga);
+                        let gs = dot(ga, *i);
+                        axpy(&mut gnh, gs, *d);
+                        axpy(&mut sink.light[1 + 2 * j], gs, nh);
+                    }
+                }
+                let r = dot(gnh, nh);
+                let gn = [0, 1, 2].map(|c| (gnh[c] - r * nh[c]) / len);
+                for k in 0..3 {
+                    let nk = lit.vertex_normal(tri[k]);
+                    axpy(&mut sink.normal[tri[k] as usize], b[k], gn);
+                    gb[k] += dot(gn, nk);
+                }
+            }
+            col = [col[0] * f[0], col[1] * f[1], col[2] * f[2]];
+        }
         let gbase = [gcol[0] * t[0], gcol[1] * t[1], gcol[2] * t[2]];
         if let Some(vc) = &mesh.colors {
             for k in 0..3 {
@@ -866,6 +1171,8 @@ impl<'a> View<'a> {
         let h = self.height as usize;
         let mesh = self.mesh;
         let cache = self.cache.get();
+        let has_uv_grad = mesh.texture.is_some() && mesh.uvs.is_some();
+        let n_light = self.lit.as_ref().map_or(0, |l| 1 + 2 * l.dirs.len());
         // Fixed chunks of rows (whatever the number of threads), each summed densely in
         // row order, then the chunks summed in order: the same bits on any thread count.
         let chunks: Vec<Acc> = (0..h.div_ceil(CHUNK_ROWS))
@@ -877,6 +1184,9 @@ impl<'a> View<'a> {
                     cam: vec![[0.0; 3]; self.pc.len()],
                     color: vec![[0.0; 3]; mesh.colors.as_ref().map_or(0, |c| c.len())],
                     texel: Vec::new(),
+                    uv: vec![[0.0; 2]; if has_uv_grad { self.pc.len() } else { 0 }],
+                    normal: vec![[0.0; 3]; if self.lit.is_some() { self.pc.len() } else { 0 }],
+                    light: vec![[0.0; 3]; n_light],
                 };
                 let mut s = Scratch::default();
                 let mut own = RowVis::default();
@@ -900,7 +1210,22 @@ impl<'a> View<'a> {
             (Some(t), true) => Some(vec![[0.0f64; 3]; t.data.len()]),
             _ => None,
         };
+        let mut guv = has_uv_grad.then(|| vec![[0.0f64; 2]; self.pc.len()]);
+        let mut gnormal = vec![[0.0f64; 3]; if self.lit.is_some() { self.pc.len() } else { 0 }];
+        let mut glight = vec![[0.0f64; 3]; n_light];
         for a in &chunks {
+            if let Some(gu) = &mut guv {
+                for (d, g) in gu.iter_mut().zip(&a.uv) {
+                    d[0] += g[0];
+                    d[1] += g[1];
+                }
+            }
+            for (d, g) in gnormal.iter_mut().zip(&a.normal) {
+                axpy(d, 1.0, *g);
+            }
+            for (d, g) in glight.iter_mut().zip(&a.light) {
+                axpy(d, 1.0, *g);
+            }
             for (d, g) in gsv.iter_mut().zip(&a.sv) {
                 d[0] += g[0];
                 d[1] += g[1];
@@ -950,7 +1275,7 @@ impl<'a> View<'a> {
         }
         // Camera space P = R (p − eye): ∂L/∂p = Rᵀ ∂L/∂P.
         let rot = self.rot;
-        let positions = gcam
+        let mut positions: Vec<[f64; 3]> = gcam
             .iter()
             .map(|g| {
                 let mut o = [0.0; 3];
@@ -960,10 +1285,27 @@ impl<'a> View<'a> {
                 o
             })
             .collect();
+        // A pose correction [ε, u] moves camera-space points as if every vertex moved by
+        // −ε × (p − eye) − u in world space (see `MeshGrad::pose`).
+        let mut pose = [0.0f64; 6];
+        for (g, p) in positions.iter().zip(&mesh.positions) {
+            let t = cross(*g, sub(*p, self.eye));
+            for k in 0..3 {
+                pose[k] += t[k];
+                pose[3 + k] -= g[k];
+            }
+        }
+        let lighting = self
+            .lit
+            .as_ref()
+            .map(|lit| lit.backward(mesh, &gnormal, &glight, &mut positions));
         Ok(MeshGrad {
             positions,
             colors: gcol,
             texture: gtex,
+            uvs: guv,
+            lighting,
+            pose,
         })
     }
 
@@ -1009,6 +1351,12 @@ struct Acc {
     cam: Vec<[f64; 3]>,
     color: Vec<[f64; 3]>,
     texel: Vec<(u32, [f64; 3])>,
+    /// Per vertex `∂L/∂uv` (empty without a texture).
+    uv: Vec<[f64; 2]>,
+    /// Per vertex `∂L/∂(unit vertex normal)` (empty unlit).
+    normal: Vec<[f64; 3]>,
+    /// Lit: `∂L/∂ambient`, then per light `∂L/∂(unit direction)` and `∂L/∂intensity`.
+    light: Vec<[f64; 3]>,
 }
 
 impl GradSink for Acc {
@@ -1268,6 +1616,346 @@ mod tests {
             background: Some([0.2, 0.3, 0.4]),
             cull_back_faces: false,
             near: 1e-3,
+            lighting: None,
+        }
+    }
+
+    /// Ambient light and two directional lights, one from behind-left.
+    fn lights() -> Lighting {
+        Lighting::new(
+            [0.15, 0.2, 0.1],
+            &[
+                DirLight {
+                    direction: [0.4, 0.5, 1.0],
+                    intensity: [0.9, 0.8, 0.7],
+                },
+                DirLight {
+                    direction: [-1.0, 0.2, -0.3],
+                    intensity: [0.3, 0.5, 0.6],
+                },
+            ],
+        )
+        .unwrap()
+    }
+
+    fn lit_opts() -> RenderOptions {
+        RenderOptions {
+            lighting: Some(lights()),
+            ..opts()
+        }
+    }
+
+    /// A closed octahedron (shared vertices: smooth normals) turned off the axes, with
+    /// vertex colors.
+    fn lit_octahedron() -> Mesh {
+        let mut m = crate::mesh::octahedron();
+        for p in &mut m.positions {
+            *p = [
+                0.8 * p[0] + 0.3 * p[1],
+                -0.2 * p[0] + 0.7 * p[1] + 0.25 * p[2],
+                0.1 * p[0] - 0.2 * p[1] + 0.75 * p[2],
+            ];
+        }
+        let n = m.positions.len();
+        m.colors = Some(
+            (0..n)
+                .map(|i| [0.3 + 0.1 * i as f64, 0.9 - 0.1 * i as f64, 0.5])
+                .collect(),
+        );
+        m
+    }
+
+    #[test]
+    fn unlit_is_the_default_and_a_white_ambient_gives_the_same_bits() {
+        assert_eq!(RenderOptions::default().lighting, None);
+        let m = lit_octahedron();
+        let cam = camera(12, 10);
+        let unlit = View::new(&m, &cam, opts()).unwrap().render_f64();
+        let white = RenderOptions {
+            lighting: Some(Lighting::new([1.0; 3], &[]).unwrap()),
+            ..opts()
+        };
+        assert_eq!(View::new(&m, &cam, white).unwrap().render_f64(), unlit);
+        let lit = View::new(&m, &cam, lit_opts()).unwrap().render_f64();
+        assert_ne!(lit, unlit);
+        // Refused: too many lights, zero directions, non-finite values.
+        let l = DirLight {
+            direction: [0.0, 0.0, 1.0],
+            intensity: [1.0; 3],
+        };
+        assert!(Lighting::new([0.0; 3], &[l; MAX_LIGHTS + 1]).is_err());
+        let zero = DirLight {
+            direction: [0.0; 3],
+            ..l
+        };
+        assert!(Lighting::new([0.0; 3], &[zero]).is_err());
+        assert!(Lighting::new([f64::NAN, 0.0, 0.0], &[l]).is_err());
+    }
+
+    #[test]
+    fn lambert_shading_is_the_albedo_times_the_light() {
+        // A flat triangle facing the camera, one light along its normal: every covered
+        // pixel's color is albedo × (ambient + intensity) times its coverage.
+        let m = soup(
+            &[[[-0.9, -0.6, 0.0], [0.8, -0.5, 0.0], [0.1, 0.7, 0.0]]],
+            &[[0.5, 0.4, 0.8]],
+        );
+        let cam =
+            Camera::look_at(Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO, Vec3::Y, 0.5, 12, 10).unwrap();
+        let o = RenderOptions {
+            background: None,
+            lighting: Some(
+                Lighting::new(
+                    [0.1, 0.2, 0.3],
+                    &[DirLight {
+                        direction: [0.0, 0.0, 2.0],
+                        intensity: [0.5, 0.6, 0.7],
+                    }],
+                )
+                .unwrap(),
+            ),
+            ..opts()
+        };
+        let img = View::new(&m, &cam, o).unwrap().render_f64();
+        let f = [0.6, 0.8, 1.0];
+        let mut covered = 0;
+        for p in &img {
+            for c in 0..3 {
+                let want = [0.5, 0.4, 0.8][c] * f[c] * p[3];
+                assert!((p[c] - want).abs() < 1e-12, "{p:?}");
+            }
+            covered += (p[3] > 0.99) as usize;
+        }
+        assert!(covered > 5);
+        // Turned away from the light: ambient only.
+        let away = RenderOptions {
+            lighting: Some(
+                Lighting::new(
+                    [0.1, 0.2, 0.3],
+                    &[DirLight {
+                        direction: [0.0, 0.0, -1.0],
+                        intensity: [0.5, 0.6, 0.7],
+                    }],
+                )
+                .unwrap(),
+            ),
+            ..o
+        };
+        for p in View::new(&m, &cam, away).unwrap().render_f64() {
+            assert!((p[0] - 0.05 * p[3]).abs() < 1e-12);
+        }
+    }
+
+    /// Checks the lighting's gradient (ambient, directions, intensities) against central
+    /// differences.
+    fn check_lighting(name: &str, mesh: &Mesh, opts: RenderOptions) {
+        let cam = camera(12, 10);
+        let wts = weights(12, 10);
+        let g = View::new(mesh, &cam, opts)
+            .unwrap()
+            .backward(&wts, true)
+            .unwrap();
+        let gl = g.lighting.unwrap();
+        let base = opts.lighting.unwrap();
+        let h = 1e-6;
+        let fd = |f: &dyn Fn(&mut Lighting, f64)| {
+            let (mut p, mut m) = (base, base);
+            f(&mut p, h);
+            f(&mut m, -h);
+            let lo = |l: Lighting| {
+                let o = RenderOptions {
+                    lighting: Some(l),
+                    ..opts
+                };
+                loss(mesh, &cam, o, &wts)
+            };
+            (lo(p) - lo(m)) / (2.0 * h)
+        };
+        let mut nonzero = 0;
+        for c in 0..3 {
+            let mut cases: Vec<(String, f64, f64)> = vec![(
+                format!("ambient.{c}"),
+                gl.ambient[c],
+                fd(&|l, d| l.ambient[c] += d),
+            )];
+            for j in 0..base.count {
+                cases.push((
+                    format!("light {j} direction.{c}"),
+                    gl.directions[j][c],
+                    fd(&|l, d| l.lights[j].direction[c] += d),
+                ));
+                cases.push((
+                    format!("light {j} intensity.{c}"),
+                    gl.intensities[j][c],
+                    fd(&|l, d| l.lights[j].intensity[c] += d),
+                ));
+            }
+            for (what, an, fd) in cases {
+                assert!(
+                    (an - fd).abs() < 1e-6 * an.abs().max(1.0),
+                    "{name}: {what}: analytic {an} vs fd {fd}"
+                );
+                nonzero += (an.abs() > 1e-3) as usize;
+            }
+        }
+        assert!(nonzero >= 6, "{name}: {nonzero} nonzero lighting gradients");
+    }
+
+    #[test]
+    fn lit_gradients_match_differences() {
+        // Positions through the smooth normals, coverage and barycentrics; colors; the
+        // lights: a closed mesh over a background, culled and not.
+        let m = lit_octahedron();
+        check("lit octahedron", &m, lit_opts());
+        check_lighting("lit octahedron", &m, lit_opts());
+        let culled = RenderOptions {
+            cull_back_faces: true,
+            background: None,
+            ..lit_opts()
+        };
+        check("lit octahedron, culled, transparent", &m, culled);
+        check_lighting("lit octahedron, culled, transparent", &m, culled);
+    }
+
+    #[test]
+    fn lit_texture_and_uv_gradients_match_differences() {
+        let mut m = lit_octahedron();
+        m.colors = None;
+        let n = m.positions.len();
+        m.uvs = Some(
+            (0..n)
+                .map(|i| [0.1 + 0.13 * i as f64, 0.8 - 0.11 * i as f64])
+                .collect(),
+        );
+        m.texture = Some(Texture {
+            width: 3,
+            height: 2,
+            data: (0..6)
+                .map(|i| [0.1 * i as f64, 1.0 - 0.15 * i as f64, 0.5])
+                .collect(),
+        });
+        check("lit textured", &m, lit_opts());
+        check_lighting("lit textured", &m, lit_opts());
+        check_texels_and_uvs("lit textured", &m, lit_opts());
+    }
+
+    /// Checks texel and UV gradients against central differences.
+    fn check_texels_and_uvs(name: &str, m: &Mesh, o: RenderOptions) {
+        let cam = camera(12, 10);
+        let wts = weights(12, 10);
+        let g = View::new(m, &cam, o).unwrap().backward(&wts, true).unwrap();
+        let gt = g.texture.unwrap();
+        let h = 1e-6;
+        for i in 0..m.texture.as_ref().unwrap().data.len() {
+            for c in 0..3 {
+                let (mut p, mut q) = (m.clone(), m.clone());
+                p.texture.as_mut().unwrap().data[i][c] += h;
+                q.texture.as_mut().unwrap().data[i][c] -= h;
+                let fd = (loss(&p, &cam, o, &wts) - loss(&q, &cam, o, &wts)) / (2.0 * h);
+                assert!(
+                    (fd - gt[i][c]).abs() < 1e-6,
+                    "{name}: texel {i}.{c}: {} vs {fd}",
+                    gt[i][c]
+                );
+            }
+        }
+        let gu = g.uvs.unwrap();
+        let h = 1e-7;
+        let mut nonzero = 0;
+        for v in 0..m.positions.len() {
+            for k in 0..2 {
+                let (mut p, mut q) = (m.clone(), m.clone());
+                p.uvs.as_mut().unwrap()[v][k] += h;
+                q.uvs.as_mut().unwrap()[v][k] -= h;
+                let fd = (loss(&p, &cam, o, &wts) - loss(&q, &cam, o, &wts)) / (2.0 * h);
+                let an = gu[v][k];
+                assert!(
+                    (fd - an).abs() < 1e-5 * an.abs().max(1.0),
+                    "{name}: uv {v}.{k}: {an} vs {fd}"
+                );
+                nonzero += (an.abs() > 1e-3) as usize;
+            }
+        }
+        assert!(nonzero > 0, "{name}: every UV gradient is zero");
+    }
+
+    #[test]
+    fn pose_gradient_matches_differences() {
+        // Moving the camera by a correction [ε, u] is moving the world (mesh and lights)
+        // by the inverse motion p ↦ c + exp(−[ε]×)(p − c − u) in front of the fixed camera:
+        // central differences of that, in f64 (step 1e-7), lit (normals and lights turn
+        // together) and unlit, textured (through the barycentrics too). Then the same
+        // against renders through `pose::apply` itself (an f32 camera: step 1e-4, looser).
+        use crate::volume::pose;
+        let mut m = lit_octahedron();
+        m.uvs = Some(
+            (0..m.positions.len())
+                .map(|i| [0.1 + 0.13 * i as f64, 0.8 - 0.11 * i as f64])
+                .collect(),
+        );
+        m.texture = Some(Texture {
+            width: 3,
+            height: 2,
+            data: (0..6)
+                .map(|i| [0.1 * i as f64, 1.0 - 0.15 * i as f64, 0.5])
+                .collect(),
+        });
+        let cam = camera(12, 10);
+        let t = cam.c2w.translation;
+        let c = glam::DVec3::new(t.x as f64, t.y as f64, t.z as f64);
+        let wts = weights(12, 10);
+        let moved = |o: RenderOptions, delta: [f64; 6]| {
+            let eps = glam::DVec3::new(delta[0], delta[1], delta[2]);
+            let u = glam::DVec3::new(delta[3], delta[4], delta[5]);
+            let r = glam::DMat3::from_axis_angle(eps.normalize(), -eps.length());
+            let r = if eps.length() == 0.0 {
+                glam::DMat3::IDENTITY
+            } else {
+                r
+            };
+            let mut mm = m.clone();
+            for p in &mut mm.positions {
+                let q = c + r * (glam::DVec3::from_array(*p) - c - u);
+                *p = q.to_array();
+            }
+            let mut o = o;
+            if let Some(l) = &mut o.lighting {
+                for d in &mut l.lights {
+                    d.direction = (r * glam::DVec3::from_array(d.direction)).to_array();
+                }
+            }
+            loss(&mm, &cam, o, &wts)
+        };
+        for o in [opts(), lit_opts()] {
+            let lit = o.lighting.is_some();
+            let g = View::new(&m, &cam, o)
+                .unwrap()
+                .backward(&wts, false)
+                .unwrap();
+            for k in 0..6 {
+                let an = g.pose[k];
+                let h = 1e-7;
+                let (mut dp, mut dm) = ([0.0; 6], [0.0; 6]);
+                dp[k] = h;
+                dm[k] = -h;
+                let fd = (moved(o, dp) - moved(o, dm)) / (2.0 * h);
+                assert!(
+                    (fd - an).abs() < 1e-5 * an.abs().max(1.0),
+                    "pose {k} (lit: {lit}): analytic {an} vs fd {fd}"
+                );
+                assert!(an.abs() > 1e-2, "pose {k} (lit: {lit}): {an}");
+                let h = 1e-4f32;
+                let (mut dp, mut dm) = ([0.0f32; 6], [0.0f32; 6]);
+                dp[k] = h;
+                dm[k] = -h;
+                let lp = loss(&m, &pose::apply(&cam, &dp), o, &wts);
+                let lm = loss(&m, &pose::apply(&cam, &dm), o, &wts);
+                let fd = (lp - lm) / (2.0 * h as f64);
+                assert!(
+                    (fd - an).abs() < 1e-2 * an.abs().max(1.0),
+                    "pose {k} (lit: {lit}, pose::apply): analytic {an} vs fd {fd}"
+                );
+            }
         }
     }
 
@@ -1391,6 +2079,7 @@ mod tests {
         }
         // Positions through the UVs (away from texel borders, the sample is smooth).
         check("textured", &m, opts());
+        check_texels_and_uvs("textured", &m, opts());
     }
 
     #[test]
