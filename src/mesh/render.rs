@@ -1568,24 +1568,42 @@ mod tests {
             .sum()
     }
 
-    /// Checks every position and color gradient against central differences.
-    fn check(name: &str, mesh: &Mesh, opts: RenderOptions) {
+    /// The central difference of [`loss`] when `f(mesh, ±h)` moves one parameter.
+    fn central(
+        mesh: &Mesh,
+        cam: &Camera,
+        o: RenderOptions,
+        wts: &Image,
+        h: f64,
+        f: impl Fn(&mut Mesh, f64),
+    ) -> f64 {
+        let (mut p, mut m) = (mesh.clone(), mesh.clone());
+        f(&mut p, h);
+        f(&mut m, -h);
+        (loss(&p, cam, o, wts) - loss(&m, cam, o, wts)) / (2.0 * h)
+    }
+
+    /// The 12×10 test camera, the weights, and the gradient of their [`loss`].
+    fn gradient_12x10(mesh: &Mesh, opts: RenderOptions) -> (Camera, Image, MeshGrad) {
         let cam = camera(12, 10);
         let wts = weights(12, 10);
         let g = View::new(mesh, &cam, opts)
             .unwrap()
             .backward(&wts, true)
             .unwrap();
+        (cam, wts, g)
+    }
+
+    /// Checks every position and color gradient against central differences.
+    fn check(name: &str, mesh: &Mesh, opts: RenderOptions) {
+        let (cam, wts, g) = gradient_12x10(mesh, opts);
         // Small steps: pieces whose vertices are crossings of nearly parallel lines have
         // large second derivatives (at 1e-6 a fold's central difference is off by 2e-5).
         let h = 1e-7;
         let mut nonzero = 0;
         for v in 0..mesh.positions.len() {
             for k in 0..3 {
-                let (mut p, mut m) = (mesh.clone(), mesh.clone());
-                p.positions[v][k] += h;
-                m.positions[v][k] -= h;
-                let fd = (loss(&p, &cam, opts, &wts) - loss(&m, &cam, opts, &wts)) / (2.0 * h);
+                let fd = central(mesh, &cam, opts, &wts, h, |m, d| m.positions[v][k] += d);
                 let an = g.positions[v][k];
                 let err = (fd - an).abs() / an.abs().max(1.0);
                 assert!(
@@ -1596,10 +1614,9 @@ mod tests {
                     nonzero += 1;
                 }
                 if let (Some(gc), Some(_)) = (&g.colors, &mesh.colors) {
-                    let (mut p, mut m) = (mesh.clone(), mesh.clone());
-                    p.colors.as_mut().unwrap()[v][k] += h;
-                    m.colors.as_mut().unwrap()[v][k] -= h;
-                    let fd = (loss(&p, &cam, opts, &wts) - loss(&m, &cam, opts, &wts)) / (2.0 * h);
+                    let fd = central(mesh, &cam, opts, &wts, h, |m, d| {
+                        m.colors.as_mut().unwrap()[v][k] += d
+                    });
                     let an = gc[v][k];
                     assert!(
                         (fd - an).abs() < 1e-6 * an.abs().max(1.0),
@@ -1662,6 +1679,24 @@ mod tests {
                 .map(|i| [0.3 + 0.1 * i as f64, 0.9 - 0.1 * i as f64, 0.5])
                 .collect(),
         );
+        m
+    }
+
+    /// [`lit_octahedron`] with UVs and a 3×2 texture.
+    fn textured_octahedron() -> Mesh {
+        let mut m = lit_octahedron();
+        m.uvs = Some(
+            (0..m.positions.len())
+                .map(|i| [0.1 + 0.13 * i as f64, 0.8 - 0.11 * i as f64])
+                .collect(),
+        );
+        m.texture = Some(Texture {
+            width: 3,
+            height: 2,
+            data: (0..6)
+                .map(|i| [0.1 * i as f64, 1.0 - 0.15 * i as f64, 0.5])
+                .collect(),
+        });
         m
     }
 
@@ -1749,12 +1784,7 @@ mod tests {
     /// Checks the lighting's gradient (ambient, directions, intensities) against central
     /// differences.
     fn check_lighting(name: &str, mesh: &Mesh, opts: RenderOptions) {
-        let cam = camera(12, 10);
-        let wts = weights(12, 10);
-        let g = View::new(mesh, &cam, opts)
-            .unwrap()
-            .backward(&wts, true)
-            .unwrap();
+        let (cam, wts, g) = gradient_12x10(mesh, opts);
         let gl = g.lighting.unwrap();
         let base = opts.lighting.unwrap();
         let h = 1e-6;
@@ -1819,21 +1849,8 @@ mod tests {
 
     #[test]
     fn lit_texture_and_uv_gradients_match_differences() {
-        let mut m = lit_octahedron();
+        let mut m = textured_octahedron();
         m.colors = None;
-        let n = m.positions.len();
-        m.uvs = Some(
-            (0..n)
-                .map(|i| [0.1 + 0.13 * i as f64, 0.8 - 0.11 * i as f64])
-                .collect(),
-        );
-        m.texture = Some(Texture {
-            width: 3,
-            height: 2,
-            data: (0..6)
-                .map(|i| [0.1 * i as f64, 1.0 - 0.15 * i as f64, 0.5])
-                .collect(),
-        });
         check("lit textured", &m, lit_opts());
         check_lighting("lit textured", &m, lit_opts());
         check_texels_and_uvs("lit textured", &m, lit_opts());
@@ -1841,17 +1858,14 @@ mod tests {
 
     /// Checks texel and UV gradients against central differences.
     fn check_texels_and_uvs(name: &str, m: &Mesh, o: RenderOptions) {
-        let cam = camera(12, 10);
-        let wts = weights(12, 10);
-        let g = View::new(m, &cam, o).unwrap().backward(&wts, true).unwrap();
+        let (cam, wts, g) = gradient_12x10(m, o);
         let gt = g.texture.unwrap();
         let h = 1e-6;
         for i in 0..m.texture.as_ref().unwrap().data.len() {
             for c in 0..3 {
-                let (mut p, mut q) = (m.clone(), m.clone());
-                p.texture.as_mut().unwrap().data[i][c] += h;
-                q.texture.as_mut().unwrap().data[i][c] -= h;
-                let fd = (loss(&p, &cam, o, &wts) - loss(&q, &cam, o, &wts)) / (2.0 * h);
+                let fd = central(m, &cam, o, &wts, h, |m, d| {
+                    m.texture.as_mut().unwrap().data[i][c] += d
+                });
                 assert!(
                     (fd - gt[i][c]).abs() < 1e-6,
                     "{name}: texel {i}.{c}: {} vs {fd}",
@@ -1864,10 +1878,9 @@ mod tests {
         let mut nonzero = 0;
         for v in 0..m.positions.len() {
             for k in 0..2 {
-                let (mut p, mut q) = (m.clone(), m.clone());
-                p.uvs.as_mut().unwrap()[v][k] += h;
-                q.uvs.as_mut().unwrap()[v][k] -= h;
-                let fd = (loss(&p, &cam, o, &wts) - loss(&q, &cam, o, &wts)) / (2.0 * h);
+                let fd = central(m, &cam, o, &wts, h, |m, d| {
+                    m.uvs.as_mut().unwrap()[v][k] += d
+                });
                 let an = gu[v][k];
                 assert!(
                     (fd - an).abs() < 1e-5 * an.abs().max(1.0),
@@ -1887,19 +1900,7 @@ mod tests {
         // together) and unlit, textured (through the barycentrics too). Then the same
         // against renders through `pose::apply` itself (an f32 camera: step 1e-4, looser).
         use crate::volume::pose;
-        let mut m = lit_octahedron();
-        m.uvs = Some(
-            (0..m.positions.len())
-                .map(|i| [0.1 + 0.13 * i as f64, 0.8 - 0.11 * i as f64])
-                .collect(),
-        );
-        m.texture = Some(Texture {
-            width: 3,
-            height: 2,
-            data: (0..6)
-                .map(|i| [0.1 * i as f64, 1.0 - 0.15 * i as f64, 0.5])
-                .collect(),
-        });
+        let m = textured_octahedron();
         let cam = camera(12, 10);
         let t = cam.c2w.translation;
         let c = glam::DVec3::new(t.x as f64, t.y as f64, t.z as f64);
@@ -2056,27 +2057,6 @@ mod tests {
                 .map(|i| [0.1 * i as f64, 1.0 - 0.15 * i as f64, 0.5])
                 .collect(),
         });
-        let cam = camera(12, 10);
-        let wts = weights(12, 10);
-        let g = View::new(&m, &cam, opts())
-            .unwrap()
-            .backward(&wts, true)
-            .unwrap();
-        let gt = g.texture.unwrap();
-        let h = 1e-6;
-        for i in 0..6 {
-            for c in 0..3 {
-                let (mut p, mut q) = (m.clone(), m.clone());
-                p.texture.as_mut().unwrap().data[i][c] += h;
-                q.texture.as_mut().unwrap().data[i][c] -= h;
-                let fd = (loss(&p, &cam, opts(), &wts) - loss(&q, &cam, opts(), &wts)) / (2.0 * h);
-                assert!(
-                    (fd - gt[i][c]).abs() < 1e-6,
-                    "texel {i}.{c}: {} vs {fd}",
-                    gt[i][c]
-                );
-            }
-        }
         // Positions through the UVs (away from texel borders, the sample is smooth).
         check("textured", &m, opts());
         check_texels_and_uvs("textured", &m, opts());
