@@ -223,6 +223,7 @@ fn options(
         cull_back_faces: cull,
         near,
         lighting,
+        mipmaps: false,
     })
 }
 

@@ -45,10 +45,10 @@ pub struct MeshArgs {
     command: MeshCommand,
 }
 
-/// Lambert shading flags of `mesh render`, `mesh fit` and `view` (see
-/// `diffsvg::mesh::Lighting`); without them meshes render unlit.
+/// Shading flags of `mesh render`, `mesh fit` and `view`: Lambert lights (see
+/// `diffsvg::mesh::Lighting`; without them meshes render unlit) and mip levels.
 #[derive(clap::Args, Debug, Clone, Default)]
-pub struct LightArgs {
+pub struct ShadingArgs {
     /// A directional light: world-space direction towards the light, then optionally its
     /// RGB intensity (default 1,1,1); repeatable, at most 4. Shades the mesh (Lambert, smooth
     /// normals): albedo × (ambient + Σ max(0, n·l) · intensity).
@@ -57,9 +57,13 @@ pub struct LightArgs {
     /// Ambient light, RGB (default 0,0,0 with --light; alone it scales the albedo).
     #[arg(long, value_name = "R,G,B", value_parser = parse_rgb, allow_hyphen_values = true)]
     pub ambient: Option<[f64; 3]>,
+    /// Sample minified textures from mip levels (2×2 box-filtered, the level nearest the
+    /// pixel's footprint) instead of bilinear alone, which aliases.
+    #[arg(long)]
+    pub mipmaps: bool,
 }
 
-impl LightArgs {
+impl ShadingArgs {
     /// The lighting these flags ask for (`None`: unlit).
     pub fn lighting(&self) -> Result<Option<Lighting>> {
         if self.lights.is_empty() && self.ambient.is_none() {
@@ -143,7 +147,7 @@ pub struct RenderArgs {
     #[arg(long)]
     transparent: bool,
     #[command(flatten)]
-    light: LightArgs,
+    light: ShadingArgs,
 }
 
 /// Arguments of `diffsvg mesh fit`.
@@ -198,7 +202,7 @@ pub struct FitArgs {
     /// Fixed lights for the reference's and the model's renders (the fitted colors are
     /// albedo).
     #[command(flatten)]
-    light: LightArgs,
+    light: ShadingArgs,
 }
 
 /// Arguments of `diffsvg mesh refine`.
@@ -322,6 +326,7 @@ fn run_render(a: RenderArgs) -> Result<()> {
         background: (!a.transparent).then_some([1.0; 3]),
         cull_back_faces: !a.no_cull,
         lighting: a.light.lighting()?,
+        mipmaps: a.light.mipmaps,
         ..RenderOptions::default()
     };
     let cams = orbit_cameras(&mesh, a.orbit, a.size, 0.0)?;
@@ -381,6 +386,7 @@ fn run_fit(a: FitArgs) -> Result<()> {
         ..FitOptions::default()
     };
     opts.render.lighting = a.light.lighting()?;
+    opts.render.mipmaps = a.light.mipmaps;
     let (train, test, sphere) = match (&a.reference, &a.scene) {
         (Some(r), _) => {
             let reference = read_mesh(r)?;

@@ -32,6 +32,14 @@ pub struct RenderOptions {
     pub near: f64,
     /// Lambert shading; `None` (the default) renders unlit: the albedo as it is.
     pub lighting: Option<Lighting>,
+    /// Sample minified textures from mip levels (off by default): the level nearest to
+    /// the pixel's footprint (`round(log2 ρ)`, `ρ` texels per pixel along the longer of
+    /// the pixel's two axes, measured between the UVs at the pixel center and one pixel
+    /// right and down), bilinear inside it. Level `l + 1` is the 2×2 box average of
+    /// level `l` (odd sizes drop their last row or column). Texel gradients go through
+    /// the averages to the texture's own texels (exact); the level choice is piecewise
+    /// constant, so it adds no gradient.
+    pub mipmaps: bool,
 }
 
 /// Most directional lights a [`Lighting`] holds.
@@ -138,6 +146,7 @@ impl Default for RenderOptions {
             cull_back_faces: true,
             near: 1e-3,
             lighting: None,
+            mipmaps: false,
         }
     }
 }
@@ -227,6 +236,10 @@ pub struct View<'a> {
     eye: [f64; 3],
     /// The lighting, prepared (`None`: unlit).
     lit: Option<Lit>,
+    /// Mip levels 1, 2, … of the texture (empty without `mipmaps`), and each level's
+    /// first index in the concatenation of all levels (level 0 the texture's own).
+    mips: Vec<Texture>,
+    mip_start: Vec<u32>,
 }
 
 /// A [`Lighting`] prepared for one mesh: unit light directions and the smooth normals.
@@ -464,7 +477,17 @@ impl<'a> View<'a> {
             cache: std::sync::OnceLock::new(),
             eye,
             lit: opts.lighting.as_ref().map(|l| Lit::new(mesh, l)),
+            mips: Vec::new(),
+            mip_start: Vec::new(),
         };
+        if let (true, Some(t), Some(_)) = (opts.mipmaps, &mesh.texture, &mesh.uvs) {
+            view.mips = mip_levels(t);
+            let mut start = vec![0u32];
+            for l in std::iter::once(t).chain(&view.mips) {
+                start.push(start.last().copied().unwrap_or(0) + l.data.len() as u32);
+            }
+            view.mip_start = start;
+        }
         view.pc = mesh
             .positions
             .iter()
@@ -883,7 +906,7 @@ impl<'a> View<'a> {
         }
         if let (Some(tex), Some(uvs)) = (&mesh.texture, &mesh.uvs) {
             let uv = uv_at(uvs, tri, b);
-            let t = sample_value(tex, uv);
+            let t = sample_value(self.mip(tex, uvs, tri, q, uv).0, uv);
             for c in 0..3 {
                 col[c] *= t[c];
             }
@@ -1017,12 +1040,13 @@ impl<'a> View<'a> {
         let mut gb = [0.0f64; 3];
         if let (Some(tex), Some(uvs)) = (&mesh.texture, &mesh.uvs) {
             let uv = uv_at(uvs, tri, b);
-            let (tv, taps, duv) = sample(tex, uv);
+            let (level, off) = self.mip(tex, uvs, tri, q, uv);
+            let (tv, taps, duv) = sample(level, uv);
             t = tv;
             let gt = [gcol[0] * base[0], gcol[1] * base[1], gcol[2] * base[2]];
             if sink.texels {
                 for (idx, w) in taps {
-                    sink.texel.push((idx, gt.map(|v| v * w)));
+                    sink.texel.push((off + idx, gt.map(|v| v * w)));
                 }
             }
             // ∂L/∂uv, then ∂uv/∂b_k = uv_k.
@@ -1207,7 +1231,12 @@ impl<'a> View<'a> {
         let mut gcam = vec![[0.0f64; 3]; self.pc.len()];
         let mut gcol = mesh.colors.as_ref().map(|c| vec![[0.0f64; 3]; c.len()]);
         let mut gtex = match (&mesh.texture, texels) {
-            (Some(t), true) => Some(vec![[0.0f64; 3]; t.data.len()]),
+            (Some(t), true) => Some(vec![
+                [0.0f64; 3];
+                self.mip_start
+                    .last()
+                    .map_or(t.data.len(), |&n| n as usize)
+            ]),
             _ => None,
         };
         let mut guv = has_uv_grad.then(|| vec![[0.0f64; 2]; self.pc.len()]);
@@ -1245,6 +1274,23 @@ impl<'a> View<'a> {
             }
         }
         drop(chunks);
+        if let (Some(gt), Some(t)) = (&mut gtex, &mesh.texture) {
+            // Mip levels' texel gradients down to the texture's own, top level first.
+            for l in (1..self.mip_start.len().saturating_sub(1)).rev() {
+                let below = if l == 1 { t } else { &self.mips[l - 2] };
+                let (w, h) = (self.mips[l - 1].width, self.mips[l - 1].height);
+                let (s0, s1) = (self.mip_start[l - 1], self.mip_start[l]);
+                for y in 0..h {
+                    for x in 0..w {
+                        let g = gt[(s1 + y * w + x) as usize].map(|v| 0.25 * v);
+                        for i in box_children(below, x, y) {
+                            axpy(&mut gt[(s0 + i) as usize], 1.0, g);
+                        }
+                    }
+                }
+            }
+            gt.truncate(t.data.len());
+        }
         // Screen vertices back to camera space.
         for (s, g) in self.src.iter().zip(&gsv) {
             if *g == [0.0; 2] {
@@ -1318,6 +1364,39 @@ impl<'a> View<'a> {
             g[1] * self.fy / z,
             g[0] * self.fx * x / (z * z) - g[1] * self.fy * y / (z * z),
         ]
+    }
+
+    /// The texture level to sample for triangle `tri` at screen point `q` (UV `uv`
+    /// there) and the level's first index among all levels' texels.
+    fn mip<'t>(
+        &'t self,
+        tex: &'t Texture,
+        uvs: &[[f64; 2]],
+        tri: [u32; 3],
+        q: [f64; 2],
+        uv: [f64; 2],
+    ) -> (&'t Texture, u32) {
+        if self.mips.is_empty() {
+            return (tex, 0);
+        }
+        let (w, h) = (tex.width as f64, tex.height as f64);
+        let mut rho2 = 0.0f64;
+        for d in [[1.0, 0.0], [0.0, 1.0]] {
+            let b = self.bary(tri, [q[0] + d[0], q[1] + d[1]]).b;
+            let u2 = uv_at(uvs, tri, b);
+            let (du, dv) = ((u2[0] - uv[0]) * w, (u2[1] - uv[1]) * h);
+            rho2 = rho2.max(du * du + dv * dv);
+        }
+        // round(log2 ρ) = round(½ log2 ρ²).
+        let l = if rho2 > 1.0 {
+            ((0.5 * rho2.log2()).round() as usize).min(self.mips.len())
+        } else {
+            0
+        };
+        match l {
+            0 => (tex, 0),
+            l => (&self.mips[l - 1], self.mip_start[l]),
+        }
     }
 
     /// Number of triangles that survived culling and clipping (and touch the image).
@@ -1407,6 +1486,48 @@ fn background_px(bg: Option<[f64; 3]>) -> [f64; 4] {
     match bg {
         Some(b) => [b[0], b[1], b[2], 1.0],
         None => [0.0; 4],
+    }
+}
+
+/// The texels of `t` that level-above texel `(x, y)` averages (2×2; at an odd size's
+/// last row or column the block stays inside).
+fn box_children(t: &Texture, x: u32, y: u32) -> [u32; 4] {
+    let (x0, y0) = (2 * x, 2 * y);
+    let x1 = (x0 + 1).min(t.width - 1);
+    let y1 = (y0 + 1).min(t.height - 1);
+    [
+        y0 * t.width + x0,
+        y0 * t.width + x1,
+        y1 * t.width + x0,
+        y1 * t.width + x1,
+    ]
+}
+
+/// The mip levels 1, 2, … of `t` down to one texel a side: each the 2×2 box average of
+/// the level below, `max(1, side / 2)` texels a side.
+fn mip_levels(t: &Texture) -> Vec<Texture> {
+    let mut out: Vec<Texture> = Vec::new();
+    loop {
+        let below = out.last().unwrap_or(t);
+        if below.width == 1 && below.height == 1 {
+            return out;
+        }
+        let (w, h) = ((below.width / 2).max(1), (below.height / 2).max(1));
+        let mut data = Vec::with_capacity((w * h) as usize);
+        for y in 0..h {
+            for x in 0..w {
+                let mut v = [0.0; 3];
+                for i in box_children(below, x, y) {
+                    axpy(&mut v, 0.25, below.data[i as usize]);
+                }
+                data.push(v);
+            }
+        }
+        out.push(Texture {
+            width: w,
+            height: h,
+            data,
+        });
     }
 }
 
@@ -1634,7 +1755,89 @@ mod tests {
             cull_back_faces: false,
             near: 1e-3,
             lighting: None,
+            mipmaps: false,
         }
+    }
+
+    /// A unit square facing +z with UVs over `[0, 1]²` and `texture`.
+    fn textured_square(texture: Texture) -> Mesh {
+        Mesh {
+            positions: vec![
+                [-0.5, -0.5, 0.0],
+                [0.5, -0.5, 0.0],
+                [0.5, 0.5, 0.0],
+                [-0.5, 0.5, 0.0],
+            ],
+            triangles: vec![[0, 1, 2], [0, 2, 3]],
+            uvs: Some(vec![[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]),
+            colors: None,
+            texture: Some(texture),
+        }
+    }
+
+    #[test]
+    fn mipmaps_render_a_minified_checkerboard_near_its_mean() {
+        // 64×64 one-texel checks over a square about 16 pixels across (4 texels a
+        // pixel): bilinear alone aliases, the mip level is the checks' mean.
+        let n = 64;
+        let check = Texture {
+            width: n,
+            height: n,
+            data: (0..n * n)
+                .map(|i| [((i % n + i / n) % 2) as f64; 3])
+                .collect(),
+        };
+        let m = textured_square(check);
+        let cam =
+            Camera::look_at(Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO, Vec3::Y, 0.5, 24, 24).unwrap();
+        let worst = |mipmaps: bool| {
+            let o = RenderOptions {
+                background: None,
+                mipmaps,
+                ..opts()
+            };
+            let img = View::new(&m, &cam, o).unwrap().render_f64();
+            let full: Vec<f64> = img
+                .iter()
+                .filter(|p| p[3] > 0.999)
+                .map(|p| (p[0] / p[3] - 0.5).abs())
+                .collect();
+            assert!(full.len() > 100, "{} covered pixels", full.len());
+            full.iter().cloned().fold(0.0, f64::max)
+        };
+        let (bilinear, mip) = (worst(false), worst(true));
+        eprintln!("checkerboard: max error bilinear {bilinear:.3}, mip levels {mip:.1e}");
+        assert!(bilinear > 0.2, "bilinear alone: max error {bilinear}");
+        assert!(mip < 0.02, "mip levels: max error {mip}");
+    }
+
+    #[test]
+    fn mipmapped_texel_and_uv_gradients_match_differences() {
+        // A 32×32 random texture over about 12 pixels: sampled from level 1 or 2, its
+        // gradient reaches every texel of the texture through the box averages.
+        let mut s = 7u64;
+        let mut rnd = || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (s >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let tex = Texture {
+            width: 32,
+            height: 32,
+            data: (0..32 * 32).map(|_| [rnd(), rnd(), rnd()]).collect(),
+        };
+        let mut m = textured_square(tex);
+        m.positions[2] = [0.6, 0.45, 0.2];
+        let o = RenderOptions {
+            mipmaps: true,
+            ..opts()
+        };
+        check("mipmapped", &m, o);
+        check_texels_and_uvs("mipmapped", &m, o);
+        let (_, _, g) = gradient_12x10(&m, o);
+        let touched = g.texture.unwrap().iter().filter(|v| v[0] != 0.0).count();
+        assert!(touched > 500, "{touched} texels have a gradient");
     }
 
     /// Ambient light and two directional lights, one from behind-left.
