@@ -357,13 +357,8 @@ fn run_render(a: RenderArgs) -> Result<()> {
 /// Checks a mesh output path: OBJ (with its MTL and PNG beside it), or glTF (`.gltf`,
 /// `.glb`: one file), chosen by the extension.
 fn check_mesh_output(path: &Path) -> Result<()> {
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(str::to_ascii_lowercase)
-        .filter(|e| ["obj", "gltf", "glb"].contains(&e.as_str()));
-    match ext {
-        Some(e) => Ok(check_output(path, &e)?),
+    match diffsvg::mesh::MeshFormat::of(path) {
+        Some(f) => Ok(check_output(path, f.extension())?),
         None => bail!(
             "{}: output must be a .obj, .gltf or .glb file",
             path.display()

@@ -22,9 +22,7 @@ pub(crate) enum Viewed {
 
 /// Whether `path` names a mesh file (by its extension, as `mesh::read_mesh` reads them).
 pub(crate) fn is_mesh(path: &Path) -> bool {
-    path.extension()
-        .and_then(|e| e.to_str())
-        .is_some_and(|e| ["obj", "gltf", "glb"].contains(&e.to_ascii_lowercase().as_str()))
+    mesh::MeshFormat::of(path).is_some()
 }
 
 impl Viewed {

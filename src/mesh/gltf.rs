@@ -406,14 +406,9 @@ fn linear(v: f64) -> f64 {
 /// reader refuses); written to a temporary file and renamed.
 pub fn write_gltf(mesh: &Mesh, path: &Path) -> Result<()> {
     use serde_json::json;
-    let glb = match path
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(str::to_ascii_lowercase)
-        .as_deref()
-    {
-        Some("glb") => true,
-        Some("gltf") => false,
+    let glb = match super::MeshFormat::of(path) {
+        Some(super::MeshFormat::Glb) => true,
+        Some(super::MeshFormat::Gltf) => false,
         _ => return Err(invalid(path, "a glTF file ends in .gltf or .glb")),
     };
     mesh.validate(path)?;

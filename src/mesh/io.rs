@@ -15,15 +15,44 @@ pub(super) fn invalid(path: &Path, what: impl Into<String>) -> Error {
     }
 }
 
+/// A mesh file's format, by its extension (any case).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MeshFormat {
+    /// `.obj` (with an MTL and a PNG beside it).
+    Obj,
+    /// `.gltf`: JSON with its buffers embedded.
+    Gltf,
+    /// `.glb`: binary glTF.
+    Glb,
+}
+
+impl MeshFormat {
+    /// The format `path`'s extension names, or `None` for another extension.
+    pub fn of(path: &Path) -> Option<MeshFormat> {
+        let ext = path.extension()?.to_str()?.to_ascii_lowercase();
+        match ext.as_str() {
+            "obj" => Some(MeshFormat::Obj),
+            "gltf" => Some(MeshFormat::Gltf),
+            "glb" => Some(MeshFormat::Glb),
+            _ => None,
+        }
+    }
+
+    /// The extension, lowercase, without the dot.
+    pub fn extension(self) -> &'static str {
+        match self {
+            MeshFormat::Obj => "obj",
+            MeshFormat::Gltf => "gltf",
+            MeshFormat::Glb => "glb",
+        }
+    }
+}
+
 /// Reads a mesh by its file's extension: glTF (`.gltf`, `.glb`, [`read_gltf`](super::read_gltf))
 /// or otherwise OBJ ([`read_obj`]).
 pub fn read_mesh(path: &Path) -> Result<Mesh> {
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(str::to_ascii_lowercase);
-    match ext.as_deref() {
-        Some("gltf" | "glb") => super::read_gltf(path),
+    match MeshFormat::of(path) {
+        Some(MeshFormat::Gltf | MeshFormat::Glb) => super::read_gltf(path),
         _ => read_obj(path),
     }
 }
@@ -206,12 +235,8 @@ fn resolve(obj: &Path, tex: &str) -> PathBuf {
 /// Writes a mesh by its file's extension: glTF (`.gltf`, `.glb`,
 /// [`write_gltf`](super::write_gltf)) or otherwise OBJ ([`write_obj`]).
 pub fn write_mesh(mesh: &Mesh, path: &Path) -> Result<()> {
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(str::to_ascii_lowercase);
-    match ext.as_deref() {
-        Some("gltf" | "glb") => super::write_gltf(mesh, path),
+    match MeshFormat::of(path) {
+        Some(MeshFormat::Gltf | MeshFormat::Glb) => super::write_gltf(mesh, path),
         _ => write_obj(mesh, path),
     }
 }

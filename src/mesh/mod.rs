@@ -42,7 +42,7 @@ mod shapes;
 pub mod simplify;
 
 pub use gltf::{read_gltf, write_gltf};
-pub use io::{read_mesh, read_obj, write_mesh, write_obj};
+pub use io::{MeshFormat, read_mesh, read_obj, write_mesh, write_obj};
 pub use render::{
     DirLight, Lighting, LightingGrad, MAX_LIGHTS, MeshGrad, RenderOptions, View, render,
     render_backward,

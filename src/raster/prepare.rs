@@ -53,10 +53,10 @@ pub(crate) struct Item {
     /// ([`rings_cannot_overlap`](super::overlap::rings_cannot_overlap)). Only such items look for the cells whose
     /// coverage [`overlap`](super::overlap) computes exactly.
     pub(crate) can_overlap: bool,
-    /// The cell boxes of the runs of [`runs`](Self::runs) (filled with
-    /// [`can_overlap`](Self::can_overlap)): which rows of a band the search for cells of
-    /// exact coverage needs to walk ([`run_boxes`](super::overlap::run_boxes)).
-    pub(crate) run_boxes: Vec<super::overlap::RunBox>,
+    /// Where its cells can hold three winding values (found with
+    /// [`can_overlap`](Self::can_overlap)): which cells of a band the search for cells of
+    /// exact coverage needs to walk ([`Danger`](super::tangles::Danger)).
+    pub(crate) danger: super::tangles::Danger,
     /// Drawn without anti-aliasing ([`Path::crisp`](crate::scene::Path::crisp)): the
     /// deltas are winding numbers at pixel centers
     /// ([`accumulate_centers`](super::coverage::accumulate_centers)), and its edges get
@@ -256,11 +256,13 @@ impl Prepared {
         self.exact_overlaps = on;
         if on {
             for it in &mut self.items {
-                it.can_overlap = !super::overlap::rings_cannot_overlap(&it.pts, &it.rings)
-                    && !super::overlap::windings_two_valued(&it.pts, &it.rings);
-                if it.can_overlap && !it.crisp && it.run_boxes.is_empty() {
-                    it.run_boxes = super::overlap::run_boxes(&it.pts, &it.rings);
-                }
+                it.danger = if it.crisp || super::overlap::rings_cannot_overlap(&it.pts, &it.rings)
+                {
+                    Default::default()
+                } else {
+                    super::tangles::Danger::of(&it.pts, &it.rings)
+                };
+                it.can_overlap = !it.danger.is_empty();
             }
         }
     }
@@ -926,7 +928,7 @@ fn item(
         grid_aligned,
         // Found by `Prepared::set_exact_overlaps` when it is asked for.
         can_overlap: true,
-        run_boxes: Vec::new(),
+        danger: Default::default(),
         crisp: false,
         path,
         kind,
