@@ -10,7 +10,7 @@ from typing import Optional, Sequence, Tuple, Union
 import numpy as np
 import numpy.typing as npt
 
-from ._types import (DigitInfo, FitInfo, GlyphInfo, GradientPaint, Layout, MeshGrad,
+from ._types import (DigitInfo, FitInfo, GlyphInfo, GradientPaint, Layout, MeshGrad, MeshLight,
                      MeshProgress, Progress, ReconInfo, Structure, VectorizeInfo, Views)
 
 F32 = npt.NDArray[np.float32]
@@ -107,10 +107,14 @@ class Mesh:
     def texture(self, value: F64) -> None: ...
     def bounds(self) -> Tuple[Tuple[float, float, float], Tuple[float, float, float]]: ...
     def render(self, camera: Camera, background: Optional[Tuple[float, float, float]] = None,
-               cull: bool = True, near: float = 1e-3) -> F32: ...
+               cull: bool = True, near: float = 1e-3,
+               lights: Optional[Sequence[MeshLight]] = None,
+               ambient: Optional[Tuple[float, float, float]] = None) -> F32: ...
     def render_backward(self, camera: Camera, d_image: F32,
                         background: Optional[Tuple[float, float, float]] = None,
-                        cull: bool = True, near: float = 1e-3) -> MeshGrad: ...
+                        cull: bool = True, near: float = 1e-3,
+                        lights: Optional[Sequence[MeshLight]] = None,
+                        ambient: Optional[Tuple[float, float, float]] = None) -> MeshGrad: ...
     def fit(self, views: Sequence[Tuple[Camera, F32]], iters: int = 200,
             lr_positions: float = 2e-3, lr_colors: float = 1e-2, smoothness: float = 1e-3,
             background: Optional[Tuple[float, float, float]] = (1.0, 1.0, 1.0),

@@ -243,12 +243,25 @@ class GradJson(TypedDict):
     filters: NotRequired[List[dict]]
 
 
+MeshLight = Tuple[Tuple[float, float, float], Tuple[float, float, float]]
+"""A directional light for ``Mesh.render``: (world direction towards the light, RGB
+intensity)."""
+
+
 class MeshGrad(TypedDict):
-    """``Mesh.render_backward``: the loss's gradient per vertex position ``(n, 3)``, and
-    per vertex color ``(n, 3)`` and texel ``(h, w, 3)`` when the mesh has them."""
+    """``Mesh.render_backward``: the loss's gradient per vertex position ``(n, 3)``, of a
+    camera pose correction ``pose`` ``(6,)`` (rotation vector, then translation, world
+    axes), per vertex color ``(n, 3)``, texel ``(h, w, 3)`` and UV ``(n, 2)`` when the mesh
+    has them, and when lit of ``ambient`` ``(3,)``, ``light_directions`` and
+    ``light_intensities`` ``(k, 3)``."""
     positions: npt.NDArray[np.float64]
+    pose: npt.NDArray[np.float64]
     colors: NotRequired[npt.NDArray[np.float64]]
     texture: NotRequired[npt.NDArray[np.float64]]
+    uvs: NotRequired[npt.NDArray[np.float64]]
+    ambient: NotRequired[npt.NDArray[np.float64]]
+    light_directions: NotRequired[npt.NDArray[np.float64]]
+    light_intensities: NotRequired[npt.NDArray[np.float64]]
 
 
 class MeshStep(TypedDict):

@@ -11,7 +11,9 @@ use std::path::PathBuf;
 
 use diffsvg::Image;
 use diffsvg::mesh::fit::{FitOptions, Step, fit, orbit_cameras};
-use diffsvg::mesh::{Mesh, RenderOptions, Texture, View, icosphere, read_mesh, write_mesh};
+use diffsvg::mesh::{
+    DirLight, Lighting, Mesh, RenderOptions, Texture, View, icosphere, read_mesh, write_mesh,
+};
 use diffsvg::volume::camera::Camera;
 use glam::{Affine3A, Mat3A, Vec3, Vec3A};
 use numpy::ndarray::{Array2, Array3};
@@ -174,7 +176,37 @@ fn rows_in<const K: usize>(
         .collect())
 }
 
-fn options(background: Option<(f64, f64, f64)>, cull: bool, near: f64) -> PyResult<RenderOptions> {
+/// A light as Python gives it: `((dx, dy, dz), (r, g, b))` (tuples or lists).
+type PyLight = ([f64; 3], [f64; 3]);
+
+/// The lighting of `lights` and `ambient` (`None` when both are absent: unlit).
+fn lighting(
+    lights: Option<Vec<PyLight>>,
+    ambient: Option<(f64, f64, f64)>,
+) -> PyResult<Option<Lighting>> {
+    if lights.is_none() && ambient.is_none() {
+        return Ok(None);
+    }
+    let lights: Vec<DirLight> = lights
+        .unwrap_or_default()
+        .into_iter()
+        .map(|(direction, intensity)| DirLight {
+            direction,
+            intensity,
+        })
+        .collect();
+    let a = ambient.unwrap_or((0.0, 0.0, 0.0));
+    Lighting::new([a.0, a.1, a.2], &lights)
+        .map(Some)
+        .map_err(|e| bad(e.to_string()))
+}
+
+fn options(
+    background: Option<(f64, f64, f64)>,
+    cull: bool,
+    near: f64,
+    lighting: Option<Lighting>,
+) -> PyResult<RenderOptions> {
     if let Some(b) = background {
         let b = [b.0, b.1, b.2];
         if !b.iter().all(|v| (0.0..=1.0).contains(v)) {
@@ -190,6 +222,8 @@ fn options(background: Option<(f64, f64, f64)>, cull: bool, near: f64) -> PyResu
         background: background.map(|b| [b.0, b.1, b.2]),
         cull_back_faces: cull,
         near,
+        lighting,
+        mipmaps: false,
     })
 }
 
@@ -271,6 +305,17 @@ impl PyMesh {
     fn uvs<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyArray2<f64>>> {
         self.inner.uvs.as_ref().map(|c| rows_out(py, c))
     }
+    #[setter]
+    fn set_uvs(&mut self, a: Option<PyReadonlyArray2<'_, f64>>) -> PyResult<()> {
+        self.inner.uvs = match a {
+            None if self.inner.texture.is_some() => {
+                return Err(bad("uvs: a textured mesh needs them"));
+            }
+            None => None,
+            Some(a) => Some(rows_in(&a, self.inner.positions.len(), "uvs")?),
+        };
+        Ok(())
+    }
 
     /// The texture, `(height, width, 3)` straight RGB `float64` (row 0 at the top), or
     /// `None`.
@@ -319,7 +364,11 @@ impl PyMesh {
 
     /// The image seen by `camera`: premultiplied RGBA `float32`, `(height, width, 4)`;
     /// uncovered area transparent, or `background` (straight RGB) behind everything.
-    #[pyo3(signature = (camera, background=None, cull=true, near=1e-3))]
+    /// Unlit unless `lights` (a list of `((dx, dy, dz), (r, g, b))`: world direction
+    /// towards the light and RGB intensity, at most 4) or `ambient` (RGB) is given; then
+    /// Lambert shading with smooth normals: albedo × (ambient + Σ max(0, n·l)·intensity).
+    #[pyo3(signature = (camera, background=None, cull=true, near=1e-3, lights=None, ambient=None))]
+    #[allow(clippy::too_many_arguments)]
     fn render<'py>(
         &self,
         py: Python<'py>,
@@ -327,8 +376,10 @@ impl PyMesh {
         background: Option<(f64, f64, f64)>,
         cull: bool,
         near: f64,
+        lights: Option<Vec<PyLight>>,
+        ambient: Option<(f64, f64, f64)>,
     ) -> PyResult<Bound<'py, PyArray3<f32>>> {
-        let opts = options(background, cull, near)?;
+        let opts = options(background, cull, near, lighting(lights, ambient)?)?;
         let (m, c) = (&self.inner, &camera.inner);
         let img = py
             .detach(|| crate::on_pool(|| View::new(m, c, opts).map(|v| v.render())))
@@ -338,9 +389,15 @@ impl PyMesh {
 
     /// The gradient of a loss with respect to the mesh, given `d_image = ∂loss/∂image`
     /// (`float32`, the shape `render` gives) for the same camera and options: a dict with
-    /// `positions` `(n, 3)`, and `colors` `(n, 3)` and `texture` `(h, w, 3)` when the mesh
-    /// has them. Exact (the derivative of the rendered box-filtered image).
-    #[pyo3(signature = (camera, d_image, background=None, cull=true, near=1e-3))]
+    /// `positions` `(n, 3)`, `pose` `(6,)` (a camera pose correction `[ωx, ωy, ωz, vx,
+    /// vy, vz]` applied on top of `camera`: rotation about its center in world axes,
+    /// radians, then translation, world units; at zero), and `colors` `(n, 3)`, `texture`
+    /// `(h, w, 3)` and `uvs` `(n, 2)` when the mesh has them; lit, also `ambient` `(3,)`,
+    /// `light_directions` and `light_intensities` `(k, 3)`. Exact (the derivative of the
+    /// rendered box-filtered image).
+    #[pyo3(signature = (camera, d_image, background=None, cull=true, near=1e-3, lights=None,
+        ambient=None))]
+    #[allow(clippy::too_many_arguments)]
     fn render_backward<'py>(
         &self,
         py: Python<'py>,
@@ -349,8 +406,10 @@ impl PyMesh {
         background: Option<(f64, f64, f64)>,
         cull: bool,
         near: f64,
+        lights: Option<Vec<PyLight>>,
+        ambient: Option<(f64, f64, f64)>,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let opts = options(background, cull, near)?;
+        let opts = options(background, cull, near, lighting(lights, ambient)?)?;
         let d: Image = image_in(&d_image, "d_image")?;
         let c = &camera.inner;
         if (d.width, d.height) != (c.width, c.height) {
@@ -365,6 +424,15 @@ impl PyMesh {
             .map_err(to_py)?;
         let out = PyDict::new(py);
         out.set_item("positions", rows_out(py, &g.positions))?;
+        out.set_item("pose", g.pose.to_vec().into_pyarray(py))?;
+        if let Some(ug) = &g.uvs {
+            out.set_item("uvs", rows_out(py, ug))?;
+        }
+        if let Some(lg) = &g.lighting {
+            out.set_item("ambient", lg.ambient.to_vec().into_pyarray(py))?;
+            out.set_item("light_directions", rows_out(py, &lg.directions))?;
+            out.set_item("light_intensities", rows_out(py, &lg.intensities))?;
+        }
         if let Some(cg) = &g.colors {
             out.set_item("colors", rows_out(py, cg))?;
         }
@@ -417,7 +485,7 @@ impl PyMesh {
             lr_positions,
             lr_colors,
             smoothness,
-            render: options(background, cull, 1e-3)?,
+            render: options(background, cull, 1e-3, None)?,
         };
         let mut prog = Progress::new(progress);
         let mut mesh = self.inner.clone();

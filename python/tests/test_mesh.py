@@ -146,3 +146,73 @@ def test_spot_loads_with_its_texture():
     g = spot.render_backward(cam, np.ones((48, 48, 4), np.float32))
     assert g["texture"].shape == (1024, 1024, 3) and np.isfinite(g["texture"]).all()
     assert np.abs(g["texture"]).sum() > 0
+
+
+LIGHTS = [((0.4, 0.5, 1.0), (0.9, 0.8, 0.7)), ((-1.0, 0.2, -0.3), (0.3, 0.5, 0.6))]
+
+
+def test_lit_render_and_gradients_of_lights_uvs_and_pose():
+    m = colored_sphere(2)
+    cam = camera(32)
+    # Unlit by default; a white ambient light alone gives the same image.
+    assert np.array_equal(m.render(cam), m.render(cam, ambient=(1.0, 1.0, 1.0)))
+    lit = m.render(cam, lights=LIGHTS, ambient=(0.1, 0.1, 0.1))
+    assert not np.array_equal(lit, m.render(cam))
+    rng = np.random.default_rng(2)
+    w = rng.standard_normal((32, 32, 4)).astype(np.float32)
+    g = m.render_backward(cam, w, lights=LIGHTS, ambient=(0.1, 0.1, 0.1))
+    assert g["pose"].shape == (6,) and g["light_directions"].shape == (2, 3)
+
+    def loss(lights, ambient):
+        img = m.render(cam, lights=lights, ambient=ambient).astype(np.float64)
+        return float((img * w).sum())
+
+    # The image is float32: steps of 1e-3 on the light.
+    h = 1e-3
+    for k in range(3):
+        up = [list(map(list, l)) for l in LIGHTS]
+        down = [list(map(list, l)) for l in LIGHTS]
+        up[0][1][k] += h
+        down[0][1][k] -= h
+        up = [tuple(l) for l in up]  # pairs as tuples, the vectors as lists
+        down = [tuple(l) for l in down]
+        fd = (loss(up, (0.1,) * 3) - loss(down, (0.1,) * 3)) / (2 * h)
+        an = g["light_intensities"][0, k]
+        assert abs(fd - an) <= 1e-3 * max(1.0, abs(an)), (k, an, fd)
+        a_up = [0.1] * 3
+        a_up[k] += h
+        fd = (loss(LIGHTS, tuple(a_up)) - loss(LIGHTS, (0.1,) * 3)) / h
+        assert abs(fd - g["ambient"][k]) <= 1e-3 * max(1.0, abs(fd)), (k, g["ambient"][k], fd)
+    with pytest.raises(ValueError, match="at most 4"):
+        m.render(cam, lights=LIGHTS * 3)
+    with pytest.raises(ValueError, match="zero"):
+        m.render(cam, lights=[((0.0, 0.0, 0.0), (1.0, 1.0, 1.0))])
+
+
+def test_uv_gradients_of_spot():
+    data = shared_data("test_uv_gradients_of_spot")
+    spot = diffsvg.Mesh.load(data / "meshes" / "spot" / "spot.obj")
+    cam = diffsvg.Camera.orbit(spot, 1, 48)[0]
+    w = np.random.default_rng(4).standard_normal((48, 48, 4)).astype(np.float32)
+    g = spot.render_backward(cam, w)
+    assert g["uvs"].shape == spot.uvs.shape
+    uv0 = spot.uvs
+
+    def loss(uv):
+        spot.uvs = uv
+        return float((spot.render(cam).astype(np.float64) * w).sum())
+
+    # The vertices with the largest UV gradients, against central differences (a float32
+    # image: steps of 1e-4; a texel border may lie between, so one of two steps agrees).
+    big = np.argsort(-np.abs(g["uvs"]).sum(axis=1))[:4]
+    assert np.abs(g["uvs"][big[0]]).max() > 1e-2
+    for v in big:
+        for k in range(2):
+            fds = []
+            for h in (1e-4, 3e-5):
+                up, down = uv0.copy(), uv0.copy()
+                up[v, k] += h
+                down[v, k] -= h
+                fds.append((loss(up) - loss(down)) / (2 * h))
+            an = g["uvs"][v, k]
+            assert min(abs(f - an) for f in fds) <= 2e-2 * max(1.0, abs(an)), (v, k, an, fds)

@@ -12,7 +12,9 @@ use diffsvg::image_io::{check_output, side_by_side};
 use diffsvg::mesh::fit::{FitOptions, fit, mse, orbit_cameras, sphere_around, sphere_cameras};
 use diffsvg::mesh::refine::{Displacement, refine};
 use diffsvg::mesh::simplify::{reproject_texture, simplify};
-use diffsvg::mesh::{Mesh, RenderOptions, View, read_mesh, torus_knot, write_mesh};
+use diffsvg::mesh::{
+    DirLight, Lighting, Mesh, RenderOptions, View, read_mesh, torus_knot, write_mesh,
+};
 use diffsvg::metrics::{median, psnr_from_mse};
 use diffsvg::volume::camera::Camera;
 
@@ -43,6 +45,86 @@ pub struct MeshArgs {
     command: MeshCommand,
 }
 
+/// Shading flags of `mesh render`, `mesh fit` and `view`: Lambert lights (see
+/// `diffsvg::mesh::Lighting`; without them meshes render unlit) and mip levels.
+#[derive(clap::Args, Debug, Clone, Default)]
+pub struct ShadingArgs {
+    /// A directional light: world-space direction towards the light, then optionally its
+    /// RGB intensity (default 1,1,1); repeatable, at most 4. Shades the mesh (Lambert, smooth
+    /// normals): albedo × (ambient + Σ max(0, n·l) · intensity).
+    #[arg(long = "light", value_name = "DX,DY,DZ[,R,G,B]", value_parser = parse_light, allow_hyphen_values = true)]
+    pub lights: Vec<DirLight>,
+    /// Ambient light, RGB (default 0,0,0 with --light; alone it scales the albedo).
+    #[arg(long, value_name = "R,G,B", value_parser = parse_rgb, allow_hyphen_values = true)]
+    pub ambient: Option<[f64; 3]>,
+    /// Sample minified textures from mip levels (2×2 box-filtered, the level nearest the
+    /// pixel's footprint) instead of bilinear alone, which aliases.
+    #[arg(long)]
+    pub mipmaps: bool,
+}
+
+impl ShadingArgs {
+    /// The lighting these flags ask for (`None`: unlit).
+    pub fn lighting(&self) -> Result<Option<Lighting>> {
+        if self.lights.is_empty() && self.ambient.is_none() {
+            return Ok(None);
+        }
+        let l = Lighting::new(self.ambient.unwrap_or([0.0; 3]), &self.lights)
+            .map_err(|e| anyhow::anyhow!("--light: {e}"))?;
+        Ok(Some(l))
+    }
+}
+
+/// Parses `A,B,C…` into `n` finite numbers.
+fn parse_numbers(s: &str, counts: &[usize]) -> std::result::Result<Vec<f64>, String> {
+    let v = s
+        .split(',')
+        .map(|t| {
+            t.trim()
+                .parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| format!("{t:?} is not a finite number"))
+        })
+        .collect::<std::result::Result<Vec<f64>, String>>()?;
+    if !counts.contains(&v.len()) {
+        return Err(format!(
+            "{} numbers, expected {}",
+            v.len(),
+            counts
+                .iter()
+                .map(|c| c.to_string())
+                .collect::<Vec<_>>()
+                .join(" or ")
+        ));
+    }
+    Ok(v)
+}
+
+/// A clap value parser for `R,G,B`.
+fn parse_rgb(s: &str) -> std::result::Result<[f64; 3], String> {
+    let v = parse_numbers(s, &[3])?;
+    Ok([v[0], v[1], v[2]])
+}
+
+/// A clap value parser for `DX,DY,DZ[,R,G,B]`.
+fn parse_light(s: &str) -> std::result::Result<DirLight, String> {
+    let v = parse_numbers(s, &[3, 6])?;
+    let direction = [v[0], v[1], v[2]];
+    if direction == [0.0; 3] {
+        return Err("the direction is zero".into());
+    }
+    let intensity = if v.len() == 6 {
+        [v[3], v[4], v[5]]
+    } else {
+        [1.0; 3]
+    };
+    Ok(DirLight {
+        direction,
+        intensity,
+    })
+}
+
 /// Arguments of `diffsvg mesh render`.
 #[derive(clap::Args, Debug)]
 pub struct RenderArgs {
@@ -64,6 +146,8 @@ pub struct RenderArgs {
     /// Transparent background instead of white.
     #[arg(long)]
     transparent: bool,
+    #[command(flatten)]
+    light: ShadingArgs,
 }
 
 /// Arguments of `diffsvg mesh fit`.
@@ -115,6 +199,10 @@ pub struct FitArgs {
     /// No progress bar.
     #[arg(long)]
     quiet: bool,
+    /// Fixed lights for the reference's and the model's renders (the fitted colors are
+    /// albedo).
+    #[command(flatten)]
+    light: ShadingArgs,
 }
 
 /// Arguments of `diffsvg mesh refine`.
@@ -204,8 +292,8 @@ pub struct MeshBenchArgs {
     /// PyTorch3D's camera-position tutorial rebuilt instead: a generated torus knot of
     /// 2,560 triangles (a teapot's size; the mesh argument is ignored), silhouette loss
     /// (squared alpha difference to the silhouette from another orbit position), one
-    /// iteration = forward + backward to the vertices, reduced to the gradient of the
-    /// camera position (rotation held fixed).
+    /// iteration = forward + backward, giving the gradient of the camera pose (its
+    /// translation is printed).
     #[arg(long)]
     tutorial: bool,
 }
@@ -237,6 +325,8 @@ fn run_render(a: RenderArgs) -> Result<()> {
     let opts = RenderOptions {
         background: (!a.transparent).then_some([1.0; 3]),
         cull_back_faces: !a.no_cull,
+        lighting: a.light.lighting()?,
+        mipmaps: a.light.mipmaps,
         ..RenderOptions::default()
     };
     let cams = orbit_cameras(&mesh, a.orbit, a.size, 0.0)?;
@@ -290,6 +380,8 @@ fn run_fit(a: FitArgs) -> Result<()> {
         smoothness: a.smoothness,
         ..FitOptions::default()
     };
+    opts.render.lighting = a.light.lighting()?;
+    opts.render.mipmaps = a.light.mipmaps;
     let (train, test, sphere) = match (&a.reference, &a.scene) {
         (Some(r), _) => {
             let reference = read_mesh(r)?;
@@ -637,7 +729,7 @@ pub fn run_bench(a: MeshBenchArgs) -> Result<()> {
 }
 
 /// `bench mesh --tutorial`: PyTorch3D's camera-position tutorial scene (silhouette loss,
-/// gradient of the camera position), timed per iteration.
+/// gradient of the camera pose, `MeshGrad::pose`), timed per iteration.
 fn run_bench_tutorial(a: MeshBenchArgs) -> Result<()> {
     let mesh = torus_knot(128, 10);
     let cams = orbit_cameras(&mesh, 8, a.size, 0.0)?;
@@ -672,13 +764,8 @@ fn run_bench_tutorial(a: MeshBenchArgs) -> Result<()> {
                     *p = [0.0, 0.0, 0.0, 2.0 * e];
                 }
                 let g = view.backward(&d, false)?;
-                // Moving the camera by δ moves every vertex by −δ in camera space.
-                let mut gc = [0.0f64; 3];
-                for p in &g.positions {
-                    for k in 0..3 {
-                        gc[k] -= p[k];
-                    }
-                }
+                // The camera pose gradient: its translation part.
+                let gc = [g.pose[3], g.pose[4], g.pose[5]];
                 times.push(t.elapsed().as_secs_f64() * 1e3);
                 last = (loss, gc);
             }

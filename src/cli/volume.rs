@@ -146,6 +146,9 @@ pub struct ViewArgs {
     /// Print a JSON summary instead of a table.
     #[arg(long)]
     json: bool,
+    /// Lambert shading and mip levels of meshes (refused for other models).
+    #[command(flatten)]
+    light: super::mesh::ShadingArgs,
 }
 
 /// Runs `diffsvg recon`.
@@ -319,6 +322,16 @@ fn to_image(rgb: &[[f32; 3]], w: u32, h: u32) -> Image {
 /// Runs `diffsvg view`.
 pub fn run_view(a: ViewArgs) -> Result<()> {
     let mut model = super::viewed::Viewed::load(&a.model, a.step).map_err(flag_error)?;
+    let lighting = a.light.lighting()?;
+    if lighting.is_some() || a.light.mipmaps {
+        match &mut model {
+            super::viewed::Viewed::Mesh(_, opts) => {
+                opts.lighting = lighting;
+                opts.mipmaps = a.light.mipmaps;
+            }
+            _ => bail!("--light/--ambient/--mipmaps: only meshes (.obj, .gltf, .glb) are shaded"),
+        }
+    }
     if a.scene.is_none() && a.orbit == 0 {
         bail!("nothing to render: give --scene DIR and/or --orbit N");
     }

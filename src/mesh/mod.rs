@@ -26,6 +26,11 @@
 //!   covered fraction, with one every pixel is opaque.
 //! * **Texture**: straight RGB in `[0, 1]`, `(u, v)` with v up (OBJ), repeated outside
 //!   `[0, 1]`, bilinear between texel centers; no mip levels yet.
+//! * **Shading**: unlit by default (the color is the albedo: vertex colors times
+//!   texture); with [`RenderOptions::lighting`] Lambert shading by an ambient term and
+//!   directional lights with smooth (area-weighted, interpolated) normals ([`Lighting`]).
+//!   The backward pass also gives the gradient of the UVs, the lights and the camera
+//!   pose ([`MeshGrad`]).
 
 pub mod fit;
 mod geom;
@@ -38,7 +43,10 @@ pub mod simplify;
 
 pub use gltf::{read_gltf, write_gltf};
 pub use io::{MeshFormat, read_mesh, read_obj, write_mesh, write_obj};
-pub use render::{MeshGrad, RenderOptions, View, render, render_backward};
+pub use render::{
+    DirLight, Lighting, LightingGrad, MAX_LIGHTS, MeshGrad, RenderOptions, View, render,
+    render_backward,
+};
 pub use shapes::{icosphere, octahedron, torus_knot};
 
 use crate::Image;

@@ -30,6 +30,113 @@ pub struct RenderOptions {
     pub cull_back_faces: bool,
     /// Near-plane distance in front of the camera, world units (> 0).
     pub near: f64,
+    /// Lambert shading; `None` (the default) renders unlit: the albedo as it is.
+    pub lighting: Option<Lighting>,
+    /// Sample minified textures from mip levels (off by default): the level nearest to
+    /// the pixel's footprint (`round(log2 ρ)`, `ρ` texels per pixel along the longer of
+    /// the pixel's two axes, measured between the UVs at the pixel center and one pixel
+    /// right and down), bilinear inside it. Level `l + 1` is the 2×2 box average of
+    /// level `l` (odd sizes drop their last row or column). Texel gradients go through
+    /// the averages to the texture's own texels (exact); the level choice is piecewise
+    /// constant, so it adds no gradient.
+    pub mipmaps: bool,
+}
+
+/// Most directional lights a [`Lighting`] holds.
+pub const MAX_LIGHTS: usize = 4;
+
+/// A directional light: parallel rays, no falloff.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct DirLight {
+    /// World-space direction from the surface **towards** the light (any nonzero
+    /// length: it is normalized when rendering).
+    pub direction: [f64; 3],
+    /// Linear RGB intensity (1 = the albedo at normal incidence).
+    pub intensity: [f64; 3],
+}
+
+/// Lambert shading with fixed lights: a triangle's color at a pixel is its albedo (vertex
+/// colors times texture, what the unlit renderer shows) times `ambient + Σ_j max(0, n·l_j)
+/// · intensity_j`, where `l_j` is light `j`'s normalized direction and `n` the **smooth
+/// normal**: the perspective-correct interpolation, at the pixel center, of unit vertex
+/// normals, normalized. A vertex normal is the area-weighted sum of the face normals
+/// `(p1 − p0) × (p2 − p0)` of every triangle around it, normalized; vertices at one
+/// position (UV-seam copies) share one normal. Normals follow the triangles' winding (the
+/// front side), also for back faces drawn without culling.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Lighting {
+    /// Linear RGB ambient term.
+    pub ambient: [f64; 3],
+    /// The lights; only the first `count` are used.
+    pub lights: [DirLight; MAX_LIGHTS],
+    /// Number of lights in use (at most [`MAX_LIGHTS`]).
+    pub count: usize,
+}
+
+impl Lighting {
+    /// Ambient light plus up to [`MAX_LIGHTS`] directional lights; refuses more lights,
+    /// non-finite values and zero directions.
+    pub fn new(ambient: [f64; 3], lights: &[DirLight]) -> Result<Lighting> {
+        let l = Lighting {
+            ambient,
+            lights: [DirLight::default(); MAX_LIGHTS],
+            count: lights.len(),
+        };
+        if lights.len() > MAX_LIGHTS {
+            return Err(Error::Setting {
+                name: "lights".into(),
+                message: format!("{} lights: at most {MAX_LIGHTS}", lights.len()),
+            });
+        }
+        let mut l = l;
+        l.lights[..lights.len()].copy_from_slice(lights);
+        l.validate()?;
+        Ok(l)
+    }
+
+    /// The lights in use.
+    pub fn lights(&self) -> &[DirLight] {
+        &self.lights[..self.count.min(MAX_LIGHTS)]
+    }
+
+    fn validate(&self) -> Result<()> {
+        let bad = |message: String| Error::Setting {
+            name: "lights".into(),
+            message,
+        };
+        if self.count > MAX_LIGHTS {
+            return Err(bad(format!("{} lights: at most {MAX_LIGHTS}", self.count)));
+        }
+        if !self.ambient.iter().all(|v| v.is_finite()) {
+            return Err(bad(format!("ambient {:?} is not finite", self.ambient)));
+        }
+        for l in self.lights() {
+            if !l
+                .direction
+                .iter()
+                .chain(&l.intensity)
+                .all(|v| v.is_finite())
+            {
+                return Err(bad(format!("{l:?} is not finite")));
+            }
+            if dot(l.direction, l.direction) == 0.0 {
+                return Err(bad("a light's direction is zero".into()));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Gradients with respect to a [`Lighting`].
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct LightingGrad {
+    /// `∂L/∂ambient`.
+    pub ambient: [f64; 3],
+    /// `∂L/∂direction` per light in use (of the direction as given, before
+    /// normalization: orthogonal to it).
+    pub directions: Vec<[f64; 3]>,
+    /// `∂L/∂intensity` per light in use.
+    pub intensities: Vec<[f64; 3]>,
 }
 
 impl Default for RenderOptions {
@@ -38,6 +145,8 @@ impl Default for RenderOptions {
             background: None,
             cull_back_faces: true,
             near: 1e-3,
+            lighting: None,
+            mipmaps: false,
         }
     }
 }
@@ -49,8 +158,19 @@ pub struct MeshGrad {
     pub positions: Vec<[f64; 3]>,
     /// Per vertex color, when the mesh has colors.
     pub colors: Option<Vec<[f64; 3]>>,
-    /// Per texel, when the mesh has a texture.
+    /// Per texel, when the mesh has a texture and texel gradients were asked for.
     pub texture: Option<Vec<[f64; 3]>>,
+    /// Per vertex `(u, v)`, when the mesh has a texture (through the bilinear lookup;
+    /// zero where the texture is flat).
+    pub uvs: Option<Vec<[f64; 2]>>,
+    /// The lighting's, when it renders lit.
+    pub lighting: Option<LightingGrad>,
+    /// `∂L/∂[ε, u]` of a pose correction applied on top of the camera (the convention of
+    /// [`crate::volume::pose`]: the camera turns by `exp([ε]×)` about its center, in
+    /// world axes, then moves by `u`, world units), at `ε = u = 0`. For a stored
+    /// correction `δ` (the camera rendered being `pose::apply(camera, δ)`), the gradient
+    /// with respect to `δ` is `pose::delta_gradient(δ, pose)`.
+    pub pose: [f64; 6],
 }
 
 /// Where a screen vertex comes from.
@@ -112,6 +232,156 @@ pub struct View<'a> {
     row_prims: Vec<u32>,
     /// The first render's visible fragments per row, reused by the backward pass.
     cache: std::sync::OnceLock<Vec<RowVis>>,
+    /// Camera center, world units.
+    eye: [f64; 3],
+    /// The lighting, prepared (`None`: unlit).
+    lit: Option<Lit>,
+    /// Mip levels 1, 2, … of the texture (empty without `mipmaps`), and each level's
+    /// first index in the concatenation of all levels (level 0 the texture's own).
+    mips: Vec<Texture>,
+    mip_start: Vec<u32>,
+}
+
+/// A [`Lighting`] prepared for one mesh: unit light directions and the smooth normals.
+struct Lit {
+    ambient: [f64; 3],
+    /// Unit directions towards the lights, and the given directions' lengths.
+    dirs: Vec<[f64; 3]>,
+    dir_len: Vec<f64>,
+    intensity: Vec<[f64; 3]>,
+    /// Each vertex's group of vertices at one position.
+    group: Vec<u32>,
+    /// Per group: the area-weighted normal sum `N` and its unit vector (zero where `N`
+    /// is zero).
+    sum: Vec<[f64; 3]>,
+    normal: Vec<[f64; 3]>,
+}
+
+impl Lit {
+    fn new(mesh: &Mesh, l: &Lighting) -> Lit {
+        let (group, n_groups) = super::refine::position_groups(&mesh.positions);
+        let mut sum = vec![[0.0f64; 3]; n_groups];
+        for t in &mesh.triangles {
+            let p = t.map(|i| mesh.positions[i as usize]);
+            let fnrm = cross(sub(p[1], p[0]), sub(p[2], p[0]));
+            for &i in t {
+                axpy(&mut sum[group[i as usize] as usize], 1.0, fnrm);
+            }
+        }
+        let normal = sum
+            .iter()
+            .map(|n| {
+                let len = dot(*n, *n).sqrt();
+                if len > 0.0 && len.is_finite() {
+                    n.map(|v| v / len)
+                } else {
+                    [0.0; 3]
+                }
+            })
+            .collect();
+        let dir_len: Vec<f64> = l
+            .lights()
+            .iter()
+            .map(|d| dot(d.direction, d.direction).sqrt())
+            .collect();
+        Lit {
+            ambient: l.ambient,
+            dirs: l
+                .lights()
+                .iter()
+                .zip(&dir_len)
+                .map(|(d, len)| d.direction.map(|v| v / len))
+                .collect(),
+            dir_len,
+            intensity: l.lights().iter().map(|d| d.intensity).collect(),
+            group,
+            sum,
+            normal,
+        }
+    }
+
+    /// Adds the position gradient through the smooth normals, given `gnormal` (per vertex,
+    /// `∂L/∂` its unit normal), and returns the lighting's gradient from `glight` (see
+    /// `Acc::light`).
+    fn backward(
+        &self,
+        mesh: &Mesh,
+        gnormal: &[[f64; 3]],
+        glight: &[[f64; 3]],
+        positions: &mut [[f64; 3]],
+    ) -> LightingGrad {
+        // Per group: ∂L/∂n̂ summed, then through n̂ = N/|N| to ∂L/∂N.
+        let mut gsum = vec![[0.0f64; 3]; self.sum.len()];
+        for (i, g) in gnormal.iter().enumerate() {
+            axpy(&mut gsum[self.group[i] as usize], 1.0, *g);
+        }
+        for ((g, n), nh) in gsum.iter_mut().zip(&self.sum).zip(&self.normal) {
+            let len = dot(*n, *n).sqrt();
+            if !(len > 0.0 && len.is_finite()) {
+                *g = [0.0; 3];
+                continue;
+            }
+            let r = dot(*g, *nh);
+            *g = [0, 1, 2].map(|c| (g[c] - r * nh[c]) / len);
+        }
+        // N = Σ (p1 − p0) × (p2 − p0) over the triangles around the group.
+        for t in &mesh.triangles {
+            let mut gf = [0.0; 3];
+            for &i in t {
+                axpy(&mut gf, 1.0, gsum[self.group[i as usize] as usize]);
+            }
+            if gf == [0.0; 3] {
+                continue;
+            }
+            let p = t.map(|i| mesh.positions[i as usize]);
+            let (e1, e2) = (sub(p[1], p[0]), sub(p[2], p[0]));
+            let g1 = cross(e2, gf);
+            let g2 = cross(gf, e1);
+            axpy(&mut positions[t[1] as usize], 1.0, g1);
+            axpy(&mut positions[t[2] as usize], 1.0, g2);
+            axpy(&mut positions[t[0] as usize], -1.0, g1);
+            axpy(&mut positions[t[0] as usize], -1.0, g2);
+        }
+        let mut out = LightingGrad {
+            ambient: glight.first().copied().unwrap_or([0.0; 3]),
+            ..LightingGrad::default()
+        };
+        for (j, (d, len)) in self.dirs.iter().zip(&self.dir_len).enumerate() {
+            let g = glight[1 + 2 * j];
+            let r = dot(g, *d);
+            out.directions
+                .push([0, 1, 2].map(|c| (g[c] - r * d[c]) / len));
+            out.intensities.push(glight[2 + 2 * j]);
+        }
+        out
+    }
+
+    /// The unit normal of vertex `i`.
+    #[inline]
+    fn vertex_normal(&self, i: u32) -> [f64; 3] {
+        self.normal[self.group[i as usize] as usize]
+    }
+
+    /// The interpolated normal `n = Σ b_k n_k` of `tri` at barycentrics `b`, its length,
+    /// and the light factor `ambient + Σ_j max(0, n̂·l_j) I_j`.
+    fn factor(&self, tri: [u32; 3], b: [f64; 3]) -> ([f64; 3], f64, [f64; 3]) {
+        let mut n = [0.0; 3];
+        for k in 0..3 {
+            axpy(&mut n, b[k], self.vertex_normal(tri[k]));
+        }
+        let len = dot(n, n).sqrt();
+        let mut f = self.ambient;
+        if len > 0.0 {
+            let nh = n.map(|v| v / len);
+            for (d, i) in self.dirs.iter().zip(&self.intensity) {
+                let s = dot(nh, *d);
+                if s > 0.0 {
+                    axpy(&mut f, s, *i);
+                }
+            }
+        }
+        (n, len, f)
+    }
 }
 
 #[inline]
@@ -181,6 +451,9 @@ impl<'a> View<'a> {
         {
             return Err(setting("background", format!("{bg:?} is not finite")));
         }
+        if let Some(l) = &opts.lighting {
+            l.validate()?;
+        }
         let m = camera.c2w.matrix3;
         let rot = [m.x_axis, m.y_axis, m.z_axis].map(|a| [a.x as f64, a.y as f64, a.z as f64]);
         let t = camera.c2w.translation;
@@ -202,7 +475,19 @@ impl<'a> View<'a> {
             row_start: Vec::new(),
             row_prims: Vec::new(),
             cache: std::sync::OnceLock::new(),
+            eye,
+            lit: opts.lighting.as_ref().map(|l| Lit::new(mesh, l)),
+            mips: Vec::new(),
+            mip_start: Vec::new(),
         };
+        if let (true, Some(t), Some(_)) = (opts.mipmaps, &mesh.texture, &mesh.uvs) {
+            view.mips = mip_levels(t);
+            let mut start = vec![0u32];
+            for l in std::iter::once(t).chain(&view.mips) {
+                start.push(start.last().copied().unwrap_or(0) + l.data.len() as u32);
+            }
+            view.mip_start = start;
+        }
         view.pc = mesh
             .positions
             .iter()
@@ -621,9 +906,15 @@ impl<'a> View<'a> {
         }
         if let (Some(tex), Some(uvs)) = (&mesh.texture, &mesh.uvs) {
             let uv = uv_at(uvs, tri, b);
-            let t = sample_value(tex, uv);
+            let t = sample_value(self.mip(tex, uvs, tri, q, uv).0, uv);
             for c in 0..3 {
                 col[c] *= t[c];
+            }
+        }
+        if let Some(lit) = &self.lit {
+            let (_, _, f) = lit.factor(tri, b);
+            for c in 0..3 {
+                col[c] *= f[c];
             }
         }
         (col, bary)
@@ -731,6 +1022,13 @@ impl<'a> View<'a> {
         let mesh = self.mesh;
         let bary = self.bary(tri, q);
         let b = bary.b;
+        // Lit: color = albedo ⊙ f; the albedo's gradient is gcol ⊙ f.
+        let light = self.lit.as_ref().map(|lit| lit.factor(tri, b));
+        let glit = gcol;
+        let gcol = match light {
+            Some((_, _, f)) => [gcol[0] * f[0], gcol[1] * f[1], gcol[2] * f[2]],
+            None => gcol,
+        };
         let mut base = [1.0; 3];
         if let Some(vc) = &mesh.colors {
             base = [0.0; 3];
@@ -742,12 +1040,13 @@ impl<'a> View<'a> {
         let mut gb = [0.0f64; 3];
         if let (Some(tex), Some(uvs)) = (&mesh.texture, &mesh.uvs) {
             let uv = uv_at(uvs, tri, b);
-            let (tv, taps, duv) = sample(tex, uv);
+            let (level, off) = self.mip(tex, uvs, tri, q, uv);
+            let (tv, taps, duv) = sample(level, uv);
             t = tv;
             let gt = [gcol[0] * base[0], gcol[1] * base[1], gcol[2] * base[2]];
             if sink.texels {
                 for (idx, w) in taps {
-                    sink.texel.push((idx, gt.map(|v| v * w)));
+                    sink.texel.push((off + idx, gt.map(|v| v * w)));
                 }
             }
             // ∂L/∂uv, then ∂uv/∂b_k = uv_k.
@@ -759,9 +1058,39 @@ impl<'a> View<'a> {
             for k in 0..3 {
                 let uvk = uvs[tri[k] as usize];
                 gb[k] += guv[0] * uvk[0] + guv[1] * uvk[1];
+                let d = &mut sink.uv[tri[k] as usize];
+                d[0] += b[k] * guv[0];
+                d[1] += b[k] * guv[1];
             }
         }
-        let col = [base[0] * t[0], base[1] * t[1], base[2] * t[2]];
+        let mut col = [base[0] * t[0], base[1] * t[1], base[2] * t[2]];
+        if let (Some(lit), Some((n, len, f))) = (&self.lit, light) {
+            // ∂L/∂f = glit ⊙ albedo: the ambient directly, each lit light through
+            // s_j = n̂·l_j, then n̂ = n/|n| and n = Σ b_k n_k.
+            let ga = [glit[0] * col[0], glit[1] * col[1], glit[2] * col[2]];
+            axpy(&mut sink.light[0], 1.0, ga);
+            if len > 0.0 {
+                let nh = n.map(|v| v / len);
+                let mut gnh = [0.0; 3];
+                for (j, (d, i)) in lit.dirs.iter().zip(&lit.intensity).enumerate() {
+                    let s = dot(nh, *d);
+                    if s > 0.0 {
+                        axpy(&mut sink.light[2 + 2 * j], s, ga);
+                        let gs = dot(ga, *i);
+                        axpy(&mut gnh, gs, *d);
+                        axpy(&mut sink.light[1 + 2 * j], gs, nh);
+                    }
+                }
+                let r = dot(gnh, nh);
+                let gn = [0, 1, 2].map(|c| (gnh[c] - r * nh[c]) / len);
+                for k in 0..3 {
+                    let nk = lit.vertex_normal(tri[k]);
+                    axpy(&mut sink.normal[tri[k] as usize], b[k], gn);
+                    gb[k] += dot(gn, nk);
+                }
+            }
+            col = [col[0] * f[0], col[1] * f[1], col[2] * f[2]];
+        }
         let gbase = [gcol[0] * t[0], gcol[1] * t[1], gcol[2] * t[2]];
         if let Some(vc) = &mesh.colors {
             for k in 0..3 {
@@ -866,6 +1195,8 @@ impl<'a> View<'a> {
         let h = self.height as usize;
         let mesh = self.mesh;
         let cache = self.cache.get();
+        let has_uv_grad = mesh.texture.is_some() && mesh.uvs.is_some();
+        let n_light = self.lit.as_ref().map_or(0, |l| 1 + 2 * l.dirs.len());
         // Fixed chunks of rows (whatever the number of threads), each summed densely in
         // row order, then the chunks summed in order: the same bits on any thread count.
         let chunks: Vec<Acc> = (0..h.div_ceil(CHUNK_ROWS))
@@ -877,6 +1208,9 @@ impl<'a> View<'a> {
                     cam: vec![[0.0; 3]; self.pc.len()],
                     color: vec![[0.0; 3]; mesh.colors.as_ref().map_or(0, |c| c.len())],
                     texel: Vec::new(),
+                    uv: vec![[0.0; 2]; if has_uv_grad { self.pc.len() } else { 0 }],
+                    normal: vec![[0.0; 3]; if self.lit.is_some() { self.pc.len() } else { 0 }],
+                    light: vec![[0.0; 3]; n_light],
                 };
                 let mut s = Scratch::default();
                 let mut own = RowVis::default();
@@ -897,10 +1231,30 @@ impl<'a> View<'a> {
         let mut gcam = vec![[0.0f64; 3]; self.pc.len()];
         let mut gcol = mesh.colors.as_ref().map(|c| vec![[0.0f64; 3]; c.len()]);
         let mut gtex = match (&mesh.texture, texels) {
-            (Some(t), true) => Some(vec![[0.0f64; 3]; t.data.len()]),
+            (Some(t), true) => Some(vec![
+                [0.0f64; 3];
+                self.mip_start
+                    .last()
+                    .map_or(t.data.len(), |&n| n as usize)
+            ]),
             _ => None,
         };
+        let mut guv = has_uv_grad.then(|| vec![[0.0f64; 2]; self.pc.len()]);
+        let mut gnormal = vec![[0.0f64; 3]; if self.lit.is_some() { self.pc.len() } else { 0 }];
+        let mut glight = vec![[0.0f64; 3]; n_light];
         for a in &chunks {
+            if let Some(gu) = &mut guv {
+                for (d, g) in gu.iter_mut().zip(&a.uv) {
+                    d[0] += g[0];
+                    d[1] += g[1];
+                }
+            }
+            for (d, g) in gnormal.iter_mut().zip(&a.normal) {
+                axpy(d, 1.0, *g);
+            }
+            for (d, g) in glight.iter_mut().zip(&a.light) {
+                axpy(d, 1.0, *g);
+            }
             for (d, g) in gsv.iter_mut().zip(&a.sv) {
                 d[0] += g[0];
                 d[1] += g[1];
@@ -920,6 +1274,23 @@ impl<'a> View<'a> {
             }
         }
         drop(chunks);
+        if let (Some(gt), Some(t)) = (&mut gtex, &mesh.texture) {
+            // Mip levels' texel gradients down to the texture's own, top level first.
+            for l in (1..self.mip_start.len().saturating_sub(1)).rev() {
+                let below = if l == 1 { t } else { &self.mips[l - 2] };
+                let (w, h) = (self.mips[l - 1].width, self.mips[l - 1].height);
+                let (s0, s1) = (self.mip_start[l - 1], self.mip_start[l]);
+                for y in 0..h {
+                    for x in 0..w {
+                        let g = gt[(s1 + y * w + x) as usize].map(|v| 0.25 * v);
+                        for i in box_children(below, x, y) {
+                            axpy(&mut gt[(s0 + i) as usize], 1.0, g);
+                        }
+                    }
+                }
+            }
+            gt.truncate(t.data.len());
+        }
         // Screen vertices back to camera space.
         for (s, g) in self.src.iter().zip(&gsv) {
             if *g == [0.0; 2] {
@@ -950,7 +1321,7 @@ impl<'a> View<'a> {
         }
         // Camera space P = R (p − eye): ∂L/∂p = Rᵀ ∂L/∂P.
         let rot = self.rot;
-        let positions = gcam
+        let mut positions: Vec<[f64; 3]> = gcam
             .iter()
             .map(|g| {
                 let mut o = [0.0; 3];
@@ -960,10 +1331,27 @@ impl<'a> View<'a> {
                 o
             })
             .collect();
+        // A pose correction [ε, u] moves camera-space points as if every vertex moved by
+        // −ε × (p − eye) − u in world space (see `MeshGrad::pose`).
+        let mut pose = [0.0f64; 6];
+        for (g, p) in positions.iter().zip(&mesh.positions) {
+            let t = cross(*g, sub(*p, self.eye));
+            for k in 0..3 {
+                pose[k] += t[k];
+                pose[3 + k] -= g[k];
+            }
+        }
+        let lighting = self
+            .lit
+            .as_ref()
+            .map(|lit| lit.backward(mesh, &gnormal, &glight, &mut positions));
         Ok(MeshGrad {
             positions,
             colors: gcol,
             texture: gtex,
+            uvs: guv,
+            lighting,
+            pose,
         })
     }
 
@@ -976,6 +1364,39 @@ impl<'a> View<'a> {
             g[1] * self.fy / z,
             g[0] * self.fx * x / (z * z) - g[1] * self.fy * y / (z * z),
         ]
+    }
+
+    /// The texture level to sample for triangle `tri` at screen point `q` (UV `uv`
+    /// there) and the level's first index among all levels' texels.
+    fn mip<'t>(
+        &'t self,
+        tex: &'t Texture,
+        uvs: &[[f64; 2]],
+        tri: [u32; 3],
+        q: [f64; 2],
+        uv: [f64; 2],
+    ) -> (&'t Texture, u32) {
+        if self.mips.is_empty() {
+            return (tex, 0);
+        }
+        let (w, h) = (tex.width as f64, tex.height as f64);
+        let mut rho2 = 0.0f64;
+        for d in [[1.0, 0.0], [0.0, 1.0]] {
+            let b = self.bary(tri, [q[0] + d[0], q[1] + d[1]]).b;
+            let u2 = uv_at(uvs, tri, b);
+            let (du, dv) = ((u2[0] - uv[0]) * w, (u2[1] - uv[1]) * h);
+            rho2 = rho2.max(du * du + dv * dv);
+        }
+        // round(log2 ρ) = round(½ log2 ρ²).
+        let l = if rho2 > 1.0 {
+            ((0.5 * rho2.log2()).round() as usize).min(self.mips.len())
+        } else {
+            0
+        };
+        match l {
+            0 => (tex, 0),
+            l => (&self.mips[l - 1], self.mip_start[l]),
+        }
     }
 
     /// Number of triangles that survived culling and clipping (and touch the image).
@@ -1009,6 +1430,12 @@ struct Acc {
     cam: Vec<[f64; 3]>,
     color: Vec<[f64; 3]>,
     texel: Vec<(u32, [f64; 3])>,
+    /// Per vertex `∂L/∂uv` (empty without a texture).
+    uv: Vec<[f64; 2]>,
+    /// Per vertex `∂L/∂(unit vertex normal)` (empty unlit).
+    normal: Vec<[f64; 3]>,
+    /// Lit: `∂L/∂ambient`, then per light `∂L/∂(unit direction)` and `∂L/∂intensity`.
+    light: Vec<[f64; 3]>,
 }
 
 impl GradSink for Acc {
@@ -1059,6 +1486,48 @@ fn background_px(bg: Option<[f64; 3]>) -> [f64; 4] {
     match bg {
         Some(b) => [b[0], b[1], b[2], 1.0],
         None => [0.0; 4],
+    }
+}
+
+/// The texels of `t` that level-above texel `(x, y)` averages (2×2; at an odd size's
+/// last row or column the block stays inside).
+fn box_children(t: &Texture, x: u32, y: u32) -> [u32; 4] {
+    let (x0, y0) = (2 * x, 2 * y);
+    let x1 = (x0 + 1).min(t.width - 1);
+    let y1 = (y0 + 1).min(t.height - 1);
+    [
+        y0 * t.width + x0,
+        y0 * t.width + x1,
+        y1 * t.width + x0,
+        y1 * t.width + x1,
+    ]
+}
+
+/// The mip levels 1, 2, … of `t` down to one texel a side: each the 2×2 box average of
+/// the level below, `max(1, side / 2)` texels a side.
+fn mip_levels(t: &Texture) -> Vec<Texture> {
+    let mut out: Vec<Texture> = Vec::new();
+    loop {
+        let below = out.last().unwrap_or(t);
+        if below.width == 1 && below.height == 1 {
+            return out;
+        }
+        let (w, h) = ((below.width / 2).max(1), (below.height / 2).max(1));
+        let mut data = Vec::with_capacity((w * h) as usize);
+        for y in 0..h {
+            for x in 0..w {
+                let mut v = [0.0; 3];
+                for i in box_children(below, x, y) {
+                    axpy(&mut v, 0.25, below.data[i as usize]);
+                }
+                data.push(v);
+            }
+        }
+        out.push(Texture {
+            width: w,
+            height: h,
+            data,
+        });
     }
 }
 
@@ -1220,24 +1689,42 @@ mod tests {
             .sum()
     }
 
-    /// Checks every position and color gradient against central differences.
-    fn check(name: &str, mesh: &Mesh, opts: RenderOptions) {
+    /// The central difference of [`loss`] when `f(mesh, ±h)` moves one parameter.
+    fn central(
+        mesh: &Mesh,
+        cam: &Camera,
+        o: RenderOptions,
+        wts: &Image,
+        h: f64,
+        f: impl Fn(&mut Mesh, f64),
+    ) -> f64 {
+        let (mut p, mut m) = (mesh.clone(), mesh.clone());
+        f(&mut p, h);
+        f(&mut m, -h);
+        (loss(&p, cam, o, wts) - loss(&m, cam, o, wts)) / (2.0 * h)
+    }
+
+    /// The 12×10 test camera, the weights, and the gradient of their [`loss`].
+    fn gradient_12x10(mesh: &Mesh, opts: RenderOptions) -> (Camera, Image, MeshGrad) {
         let cam = camera(12, 10);
         let wts = weights(12, 10);
         let g = View::new(mesh, &cam, opts)
             .unwrap()
             .backward(&wts, true)
             .unwrap();
+        (cam, wts, g)
+    }
+
+    /// Checks every position and color gradient against central differences.
+    fn check(name: &str, mesh: &Mesh, opts: RenderOptions) {
+        let (cam, wts, g) = gradient_12x10(mesh, opts);
         // Small steps: pieces whose vertices are crossings of nearly parallel lines have
         // large second derivatives (at 1e-6 a fold's central difference is off by 2e-5).
         let h = 1e-7;
         let mut nonzero = 0;
         for v in 0..mesh.positions.len() {
             for k in 0..3 {
-                let (mut p, mut m) = (mesh.clone(), mesh.clone());
-                p.positions[v][k] += h;
-                m.positions[v][k] -= h;
-                let fd = (loss(&p, &cam, opts, &wts) - loss(&m, &cam, opts, &wts)) / (2.0 * h);
+                let fd = central(mesh, &cam, opts, &wts, h, |m, d| m.positions[v][k] += d);
                 let an = g.positions[v][k];
                 let err = (fd - an).abs() / an.abs().max(1.0);
                 assert!(
@@ -1248,10 +1735,9 @@ mod tests {
                     nonzero += 1;
                 }
                 if let (Some(gc), Some(_)) = (&g.colors, &mesh.colors) {
-                    let (mut p, mut m) = (mesh.clone(), mesh.clone());
-                    p.colors.as_mut().unwrap()[v][k] += h;
-                    m.colors.as_mut().unwrap()[v][k] -= h;
-                    let fd = (loss(&p, &cam, opts, &wts) - loss(&m, &cam, opts, &wts)) / (2.0 * h);
+                    let fd = central(mesh, &cam, opts, &wts, h, |m, d| {
+                        m.colors.as_mut().unwrap()[v][k] += d
+                    });
                     let an = gc[v][k];
                     assert!(
                         (fd - an).abs() < 1e-6 * an.abs().max(1.0),
@@ -1268,6 +1754,412 @@ mod tests {
             background: Some([0.2, 0.3, 0.4]),
             cull_back_faces: false,
             near: 1e-3,
+            lighting: None,
+            mipmaps: false,
+        }
+    }
+
+    /// A unit square facing +z with UVs over `[0, 1]²` and `texture`.
+    fn textured_square(texture: Texture) -> Mesh {
+        Mesh {
+            positions: vec![
+                [-0.5, -0.5, 0.0],
+                [0.5, -0.5, 0.0],
+                [0.5, 0.5, 0.0],
+                [-0.5, 0.5, 0.0],
+            ],
+            triangles: vec![[0, 1, 2], [0, 2, 3]],
+            uvs: Some(vec![[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]),
+            colors: None,
+            texture: Some(texture),
+        }
+    }
+
+    #[test]
+    fn mipmaps_render_a_minified_checkerboard_near_its_mean() {
+        // 64×64 one-texel checks over a square about 16 pixels across (4 texels a
+        // pixel): bilinear alone aliases, the mip level is the checks' mean.
+        let n = 64;
+        let check = Texture {
+            width: n,
+            height: n,
+            data: (0..n * n)
+                .map(|i| [((i % n + i / n) % 2) as f64; 3])
+                .collect(),
+        };
+        let m = textured_square(check);
+        let cam =
+            Camera::look_at(Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO, Vec3::Y, 0.5, 24, 24).unwrap();
+        let worst = |mipmaps: bool| {
+            let o = RenderOptions {
+                background: None,
+                mipmaps,
+                ..opts()
+            };
+            let img = View::new(&m, &cam, o).unwrap().render_f64();
+            let full: Vec<f64> = img
+                .iter()
+                .filter(|p| p[3] > 0.999)
+                .map(|p| (p[0] / p[3] - 0.5).abs())
+                .collect();
+            assert!(full.len() > 100, "{} covered pixels", full.len());
+            full.iter().cloned().fold(0.0, f64::max)
+        };
+        let (bilinear, mip) = (worst(false), worst(true));
+        eprintln!("checkerboard: max error bilinear {bilinear:.3}, mip levels {mip:.1e}");
+        assert!(bilinear > 0.2, "bilinear alone: max error {bilinear}");
+        assert!(mip < 0.02, "mip levels: max error {mip}");
+    }
+
+    #[test]
+    fn mipmapped_texel_and_uv_gradients_match_differences() {
+        // A 32×32 random texture over about 12 pixels: sampled from level 1 or 2, its
+        // gradient reaches every texel of the texture through the box averages.
+        let mut s = 7u64;
+        let mut rnd = || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (s >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let tex = Texture {
+            width: 32,
+            height: 32,
+            data: (0..32 * 32).map(|_| [rnd(), rnd(), rnd()]).collect(),
+        };
+        let mut m = textured_square(tex);
+        m.positions[2] = [0.6, 0.45, 0.2];
+        let o = RenderOptions {
+            mipmaps: true,
+            ..opts()
+        };
+        check("mipmapped", &m, o);
+        check_texels_and_uvs("mipmapped", &m, o);
+        let (_, _, g) = gradient_12x10(&m, o);
+        let touched = g.texture.unwrap().iter().filter(|v| v[0] != 0.0).count();
+        assert!(touched > 500, "{touched} texels have a gradient");
+    }
+
+    /// Ambient light and two directional lights, one from behind-left.
+    fn lights() -> Lighting {
+        Lighting::new(
+            [0.15, 0.2, 0.1],
+            &[
+                DirLight {
+                    direction: [0.4, 0.5, 1.0],
+                    intensity: [0.9, 0.8, 0.7],
+                },
+                DirLight {
+                    direction: [-1.0, 0.2, -0.3],
+                    intensity: [0.3, 0.5, 0.6],
+                },
+            ],
+        )
+        .unwrap()
+    }
+
+    fn lit_opts() -> RenderOptions {
+        RenderOptions {
+            lighting: Some(lights()),
+            ..opts()
+        }
+    }
+
+    /// A closed octahedron (shared vertices: smooth normals) turned off the axes, with
+    /// vertex colors.
+    fn lit_octahedron() -> Mesh {
+        let mut m = crate::mesh::octahedron();
+        for p in &mut m.positions {
+            *p = [
+                0.8 * p[0] + 0.3 * p[1],
+                -0.2 * p[0] + 0.7 * p[1] + 0.25 * p[2],
+                0.1 * p[0] - 0.2 * p[1] + 0.75 * p[2],
+            ];
+        }
+        let n = m.positions.len();
+        m.colors = Some(
+            (0..n)
+                .map(|i| [0.3 + 0.1 * i as f64, 0.9 - 0.1 * i as f64, 0.5])
+                .collect(),
+        );
+        m
+    }
+
+    /// [`lit_octahedron`] with UVs and a 3×2 texture.
+    fn textured_octahedron() -> Mesh {
+        let mut m = lit_octahedron();
+        m.uvs = Some(
+            (0..m.positions.len())
+                .map(|i| [0.1 + 0.13 * i as f64, 0.8 - 0.11 * i as f64])
+                .collect(),
+        );
+        m.texture = Some(Texture {
+            width: 3,
+            height: 2,
+            data: (0..6)
+                .map(|i| [0.1 * i as f64, 1.0 - 0.15 * i as f64, 0.5])
+                .collect(),
+        });
+        m
+    }
+
+    #[test]
+    fn unlit_is_the_default_and_a_white_ambient_gives_the_same_bits() {
+        assert_eq!(RenderOptions::default().lighting, None);
+        let m = lit_octahedron();
+        let cam = camera(12, 10);
+        let unlit = View::new(&m, &cam, opts()).unwrap().render_f64();
+        let white = RenderOptions {
+            lighting: Some(Lighting::new([1.0; 3], &[]).unwrap()),
+            ..opts()
+        };
+        assert_eq!(View::new(&m, &cam, white).unwrap().render_f64(), unlit);
+        let lit = View::new(&m, &cam, lit_opts()).unwrap().render_f64();
+        assert_ne!(lit, unlit);
+        // Refused: too many lights, zero directions, non-finite values.
+        let l = DirLight {
+            direction: [0.0, 0.0, 1.0],
+            intensity: [1.0; 3],
+        };
+        assert!(Lighting::new([0.0; 3], &[l; MAX_LIGHTS + 1]).is_err());
+        let zero = DirLight {
+            direction: [0.0; 3],
+            ..l
+        };
+        assert!(Lighting::new([0.0; 3], &[zero]).is_err());
+        assert!(Lighting::new([f64::NAN, 0.0, 0.0], &[l]).is_err());
+    }
+
+    #[test]
+    fn lambert_shading_is_the_albedo_times_the_light() {
+        // A flat triangle facing the camera, one light along its normal: every covered
+        // pixel's color is albedo × (ambient + intensity) times its coverage.
+        let m = soup(
+            &[[[-0.9, -0.6, 0.0], [0.8, -0.5, 0.0], [0.1, 0.7, 0.0]]],
+            &[[0.5, 0.4, 0.8]],
+        );
+        let cam =
+            Camera::look_at(Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO, Vec3::Y, 0.5, 12, 10).unwrap();
+        let o = RenderOptions {
+            background: None,
+            lighting: Some(
+                Lighting::new(
+                    [0.1, 0.2, 0.3],
+                    &[DirLight {
+                        direction: [0.0, 0.0, 2.0],
+                        intensity: [0.5, 0.6, 0.7],
+                    }],
+                )
+                .unwrap(),
+            ),
+            ..opts()
+        };
+        let img = View::new(&m, &cam, o).unwrap().render_f64();
+        let f = [0.6, 0.8, 1.0];
+        let mut covered = 0;
+        for p in &img {
+            for c in 0..3 {
+                let want = [0.5, 0.4, 0.8][c] * f[c] * p[3];
+                assert!((p[c] - want).abs() < 1e-12, "{p:?}");
+            }
+            covered += (p[3] > 0.99) as usize;
+        }
+        assert!(covered > 5);
+        // Turned away from the light: ambient only.
+        let away = RenderOptions {
+            lighting: Some(
+                Lighting::new(
+                    [0.1, 0.2, 0.3],
+                    &[DirLight {
+                        direction: [0.0, 0.0, -1.0],
+                        intensity: [0.5, 0.6, 0.7],
+                    }],
+                )
+                .unwrap(),
+            ),
+            ..o
+        };
+        for p in View::new(&m, &cam, away).unwrap().render_f64() {
+            assert!((p[0] - 0.05 * p[3]).abs() < 1e-12);
+        }
+    }
+
+    /// Checks the lighting's gradient (ambient, directions, intensities) against central
+    /// differences.
+    fn check_lighting(name: &str, mesh: &Mesh, opts: RenderOptions) {
+        let (cam, wts, g) = gradient_12x10(mesh, opts);
+        let gl = g.lighting.unwrap();
+        let base = opts.lighting.unwrap();
+        let h = 1e-6;
+        let fd = |f: &dyn Fn(&mut Lighting, f64)| {
+            let (mut p, mut m) = (base, base);
+            f(&mut p, h);
+            f(&mut m, -h);
+            let lo = |l: Lighting| {
+                let o = RenderOptions {
+                    lighting: Some(l),
+                    ..opts
+                };
+                loss(mesh, &cam, o, &wts)
+            };
+            (lo(p) - lo(m)) / (2.0 * h)
+        };
+        let mut nonzero = 0;
+        for c in 0..3 {
+            let mut cases: Vec<(String, f64, f64)> = vec![(
+                format!("ambient.{c}"),
+                gl.ambient[c],
+                fd(&|l, d| l.ambient[c] += d),
+            )];
+            for j in 0..base.count {
+                cases.push((
+                    format!("light {j} direction.{c}"),
+                    gl.directions[j][c],
+                    fd(&|l, d| l.lights[j].direction[c] += d),
+                ));
+                cases.push((
+                    format!("light {j} intensity.{c}"),
+                    gl.intensities[j][c],
+                    fd(&|l, d| l.lights[j].intensity[c] += d),
+                ));
+            }
+            for (what, an, fd) in cases {
+                assert!(
+                    (an - fd).abs() < 1e-6 * an.abs().max(1.0),
+                    "{name}: {what}: analytic {an} vs fd {fd}"
+                );
+                nonzero += (an.abs() > 1e-3) as usize;
+            }
+        }
+        assert!(nonzero >= 6, "{name}: {nonzero} nonzero lighting gradients");
+    }
+
+    #[test]
+    fn lit_gradients_match_differences() {
+        // Positions through the smooth normals, coverage and barycentrics; colors; the
+        // lights: a closed mesh over a background, culled and not.
+        let m = lit_octahedron();
+        check("lit octahedron", &m, lit_opts());
+        check_lighting("lit octahedron", &m, lit_opts());
+        let culled = RenderOptions {
+            cull_back_faces: true,
+            background: None,
+            ..lit_opts()
+        };
+        check("lit octahedron, culled, transparent", &m, culled);
+        check_lighting("lit octahedron, culled, transparent", &m, culled);
+    }
+
+    #[test]
+    fn lit_texture_and_uv_gradients_match_differences() {
+        let mut m = textured_octahedron();
+        m.colors = None;
+        check("lit textured", &m, lit_opts());
+        check_lighting("lit textured", &m, lit_opts());
+        check_texels_and_uvs("lit textured", &m, lit_opts());
+    }
+
+    /// Checks texel and UV gradients against central differences.
+    fn check_texels_and_uvs(name: &str, m: &Mesh, o: RenderOptions) {
+        let (cam, wts, g) = gradient_12x10(m, o);
+        let gt = g.texture.unwrap();
+        let h = 1e-6;
+        for i in 0..m.texture.as_ref().unwrap().data.len() {
+            for c in 0..3 {
+                let fd = central(m, &cam, o, &wts, h, |m, d| {
+                    m.texture.as_mut().unwrap().data[i][c] += d
+                });
+                assert!(
+                    (fd - gt[i][c]).abs() < 1e-6,
+                    "{name}: texel {i}.{c}: {} vs {fd}",
+                    gt[i][c]
+                );
+            }
+        }
+        let gu = g.uvs.unwrap();
+        let h = 1e-7;
+        let mut nonzero = 0;
+        for v in 0..m.positions.len() {
+            for k in 0..2 {
+                let fd = central(m, &cam, o, &wts, h, |m, d| {
+                    m.uvs.as_mut().unwrap()[v][k] += d
+                });
+                let an = gu[v][k];
+                assert!(
+                    (fd - an).abs() < 1e-5 * an.abs().max(1.0),
+                    "{name}: uv {v}.{k}: {an} vs {fd}"
+                );
+                nonzero += (an.abs() > 1e-3) as usize;
+            }
+        }
+        assert!(nonzero > 0, "{name}: every UV gradient is zero");
+    }
+
+    #[test]
+    fn pose_gradient_matches_differences() {
+        // Moving the camera by a correction [ε, u] is moving the world (mesh and lights)
+        // by the inverse motion p ↦ c + exp(−[ε]×)(p − c − u) in front of the fixed camera:
+        // central differences of that, in f64 (step 1e-7), lit (normals and lights turn
+        // together) and unlit, textured (through the barycentrics too). Then the same
+        // against renders through `pose::apply` itself (an f32 camera: step 1e-4, looser).
+        use crate::volume::pose;
+        let m = textured_octahedron();
+        let cam = camera(12, 10);
+        let t = cam.c2w.translation;
+        let c = glam::DVec3::new(t.x as f64, t.y as f64, t.z as f64);
+        let wts = weights(12, 10);
+        let moved = |o: RenderOptions, delta: [f64; 6]| {
+            let eps = glam::DVec3::new(delta[0], delta[1], delta[2]);
+            let u = glam::DVec3::new(delta[3], delta[4], delta[5]);
+            let r = glam::DMat3::from_axis_angle(eps.normalize(), -eps.length());
+            let r = if eps.length() == 0.0 {
+                glam::DMat3::IDENTITY
+            } else {
+                r
+            };
+            let mut mm = m.clone();
+            for p in &mut mm.positions {
+                let q = c + r * (glam::DVec3::from_array(*p) - c - u);
+                *p = q.to_array();
+            }
+            let mut o = o;
+            if let Some(l) = &mut o.lighting {
+                for d in &mut l.lights {
+                    d.direction = (r * glam::DVec3::from_array(d.direction)).to_array();
+                }
+            }
+            loss(&mm, &cam, o, &wts)
+        };
+        for o in [opts(), lit_opts()] {
+            let lit = o.lighting.is_some();
+            let g = View::new(&m, &cam, o)
+                .unwrap()
+                .backward(&wts, false)
+                .unwrap();
+            for k in 0..6 {
+                let an = g.pose[k];
+                let h = 1e-7;
+                let (mut dp, mut dm) = ([0.0; 6], [0.0; 6]);
+                dp[k] = h;
+                dm[k] = -h;
+                let fd = (moved(o, dp) - moved(o, dm)) / (2.0 * h);
+                assert!(
+                    (fd - an).abs() < 1e-5 * an.abs().max(1.0),
+                    "pose {k} (lit: {lit}): analytic {an} vs fd {fd}"
+                );
+                assert!(an.abs() > 1e-2, "pose {k} (lit: {lit}): {an}");
+                let h = 1e-4f32;
+                let (mut dp, mut dm) = ([0.0f32; 6], [0.0f32; 6]);
+                dp[k] = h;
+                dm[k] = -h;
+                let lp = loss(&m, &pose::apply(&cam, &dp), o, &wts);
+                let lm = loss(&m, &pose::apply(&cam, &dm), o, &wts);
+                let fd = (lp - lm) / (2.0 * h as f64);
+                assert!(
+                    (fd - an).abs() < 1e-2 * an.abs().max(1.0),
+                    "pose {k} (lit: {lit}, pose::apply): analytic {an} vs fd {fd}"
+                );
+            }
         }
     }
 
@@ -1368,29 +2260,9 @@ mod tests {
                 .map(|i| [0.1 * i as f64, 1.0 - 0.15 * i as f64, 0.5])
                 .collect(),
         });
-        let cam = camera(12, 10);
-        let wts = weights(12, 10);
-        let g = View::new(&m, &cam, opts())
-            .unwrap()
-            .backward(&wts, true)
-            .unwrap();
-        let gt = g.texture.unwrap();
-        let h = 1e-6;
-        for i in 0..6 {
-            for c in 0..3 {
-                let (mut p, mut q) = (m.clone(), m.clone());
-                p.texture.as_mut().unwrap().data[i][c] += h;
-                q.texture.as_mut().unwrap().data[i][c] -= h;
-                let fd = (loss(&p, &cam, opts(), &wts) - loss(&q, &cam, opts(), &wts)) / (2.0 * h);
-                assert!(
-                    (fd - gt[i][c]).abs() < 1e-6,
-                    "texel {i}.{c}: {} vs {fd}",
-                    gt[i][c]
-                );
-            }
-        }
         // Positions through the UVs (away from texel borders, the sample is smooth).
         check("textured", &m, opts());
+        check_texels_and_uvs("textured", &m, opts());
     }
 
     #[test]

@@ -1154,8 +1154,8 @@ mod tests {
     use super::*;
     use crate::Image;
     use crate::raster::render::BandRenderer;
-    use crate::raster::{RenderOptions, render, render_backward};
     use crate::raster::tangles::tests::{polygon, rect};
+    use crate::raster::{RenderOptions, render, render_backward};
     use crate::rng::Rng;
     use crate::scene::{Fill, FillRule, Node, Paint, Path, Scene};
 
@@ -1341,7 +1341,10 @@ mod tests {
             }
         }
         assert!(empty >= 20, "only {empty} of 240 need no search");
-        assert!(partial >= 20, "only {partial} rows of letters searched in part");
+        assert!(
+            partial >= 20,
+            "only {partial} rows of letters searched in part"
+        );
     }
 
     /// Issue 29: two coincident rectangles in one path, each covering the left half of

@@ -256,8 +256,7 @@ impl Prepared {
         self.exact_overlaps = on;
         if on {
             for it in &mut self.items {
-                it.danger = if it.crisp
-                    || super::overlap::rings_cannot_overlap(&it.pts, &it.rings)
+                it.danger = if it.crisp || super::overlap::rings_cannot_overlap(&it.pts, &it.rings)
                 {
                     Default::default()
                 } else {

@@ -82,8 +82,7 @@ pub(crate) fn danger_boxes(pts: &[Point], rings: &[(usize, usize)]) -> Vec<[f64;
     let end = sweep::overlapping_pairs(&cells, BUDGET, &mut scratch, |i, j| {
         let (a, b) = (&runs[i], &runs[j]);
         pairs.push((i as u32, j as u32));
-        if !overlap(a.exact, b.exact) || (rs.consecutive_runs(a, b) && monotone(a.dirs | b.dirs))
-        {
+        if !overlap(a.exact, b.exact) || (rs.consecutive_runs(a, b) && monotone(a.dirs | b.dirs)) {
             return true;
         }
         for ea in a.e0..a.e1 {
@@ -114,7 +113,12 @@ pub(crate) fn danger_boxes(pts: &[Point], rings: &[(usize, usize)]) -> Vec<[f64;
             && overlap(c, d)
             && (!rs.consecutive(ea, eb) || rs.on_line[ea] || rs.on_line[eb])
         {
-            out.push([c[0].max(d[0]), c[1].max(d[1]), c[2].min(d[2]), c[3].min(d[3])]);
+            out.push([
+                c[0].max(d[0]),
+                c[1].max(d[1]),
+                c[2].min(d[2]),
+                c[3].min(d[3]),
+            ]);
         }
     };
     for run in runs.iter().filter(|r| dirty_run(r)) {
@@ -269,7 +273,12 @@ impl Rings {
             let (s, n) = rs.rings[r];
             for e in s..s + n {
                 let (a, b) = (rs.pts[e], rs.pts[if e + 1 == s + n { s } else { e + 1 }]);
-                let bx = [a[0].min(b[0]), a[1].min(b[1]), a[0].max(b[0]), a[1].max(b[1])];
+                let bx = [
+                    a[0].min(b[0]),
+                    a[1].min(b[1]),
+                    a[0].max(b[0]),
+                    a[1].max(b[1]),
+                ];
                 let line = (a[0] == b[0] && a[0] == floor_f64(a[0]))
                     || (a[1] == b[1] && a[1] == floor_f64(a[1]));
                 let x = if line { 1.0 } else { 0.0 };
@@ -291,7 +300,10 @@ impl Rings {
     #[inline]
     fn edge(&self, e: usize) -> (Point, Point) {
         let (s, n) = self.rings[self.ring_of[e] as usize];
-        (self.pts[e], self.pts[if e + 1 == s + n { s } else { e + 1 }])
+        (
+            self.pts[e],
+            self.pts[if e + 1 == s + n { s } else { e + 1 }],
+        )
     }
 
     /// Rings that cannot be clean whatever else holds: fewer than three vertices, or two
@@ -305,8 +317,7 @@ impl Rings {
                         let (a, b) = self.edge(e);
                         let (_, c) = self.edge(if e + 1 == s + n { s } else { e + 1 });
                         orient(a, b, c) == 0
-                            && (b[0] - a[0]) * (c[0] - b[0]) + (b[1] - a[1]) * (c[1] - b[1])
-                                <= 0.0
+                            && (b[0] - a[0]) * (c[0] - b[0]) + (b[1] - a[1]) * (c[1] - b[1]) <= 0.0
                     })
             })
             .collect()
@@ -665,7 +676,10 @@ pub(crate) mod tests {
         // The hole's ring is not clean: cells where two of its edges that do not follow
         // each other can meet are boxed, none near the outer ring.
         assert!(!b.is_empty() && !covers(&b, 2.0, 10.0), "{b:?}");
-        assert!(b.iter().all(|c| (6.0..=13.0).contains(&c[0]) && (6.0..=13.0).contains(&c[3])));
+        assert!(
+            b.iter()
+                .all(|c| (6.0..=13.0).contains(&c[0]) && (6.0..=13.0).contains(&c[3]))
+        );
         let r = rect(1.0, 1.0, 1.5, 3.0);
         assert!(covers(&danger(&[r.clone(), r.clone()]), 1.0, 2.0));
         // A row of letters: the last two overlap, the others are boxed nowhere.
@@ -675,7 +689,10 @@ pub(crate) mod tests {
         row.push(polygon([75.0, 10.0], 5.0, 16, true));
         let b = danger(&row);
         // Only near where the last two cross (x = 72.5).
-        assert!(!b.is_empty() && b.iter().all(|c| c[0] >= 69.0 && c[2] <= 76.0), "{b:?}");
+        assert!(
+            !b.is_empty() && b.iter().all(|c| c[0] >= 69.0 && c[2] <= 76.0),
+            "{b:?}"
+        );
         for c in [5.0, 15.0, 30.0, 40.0, 50.0] {
             assert!(!covers(&b, c, 10.0), "column {c}: {b:?}");
         }
@@ -697,4 +714,3 @@ pub(crate) mod tests {
         assert_eq!(danger(&[r]), vec![EVERYWHERE]);
     }
 }
-

@@ -60,6 +60,59 @@ fn mesh_render_draws_a_generated_mesh_and_refuses_bad_files() {
 }
 
 #[test]
+fn mesh_render_shades_with_lights_and_refuses_bad_ones() {
+    let d = scratch("mesh_render_lights");
+    let obj = octahedron(&d);
+    let unlit = render_two_views(&obj, &d.join("unlit.png"));
+    let render = |name: &str, extra: &[&str]| {
+        let out = d.join(name);
+        let mut args = vec!["mesh", "render", s(&obj), "--orbit", "2", "--size", "32"];
+        args.extend_from_slice(extra);
+        args.extend_from_slice(&["-o", s(&out)]);
+        (diffsvg(&args), out)
+    };
+    // A white ambient light alone is the unlit image.
+    let (r, out) = render("white.png", &["--ambient", "1,1,1"]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    assert_eq!(diffsvg::Image::load(&out).unwrap(), unlit);
+    // One light from above: faces turned up are brighter than faces turned down, and no
+    // pixel is brighter than the albedo under ambient + intensity.
+    let (r, out) = render("lit.png", &["--light", "0,1,0", "--ambient", "0.1,0.1,0.1"]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let lit = diffsvg::Image::load(&out).unwrap();
+    assert_ne!(lit, unlit);
+    let h = lit.height as usize;
+    let w = lit.width as usize;
+    let reds = |rows: std::ops::Range<usize>| {
+        let v: Vec<f32> = rows
+            .flat_map(|y| (0..w).map(move |x| (x, y)))
+            .map(|(x, y)| lit.data[y * w + x])
+            .filter(|p| p[1] < 0.5)
+            .map(|p| p[0])
+            .collect();
+        v.iter().sum::<f32>() / v.len().max(1) as f32
+    };
+    let (top, bottom) = (reds(0..h / 2), reds(h / 2..h));
+    assert!(top > bottom + 0.1, "top {top} bottom {bottom}");
+    assert!(
+        lit.data
+            .iter()
+            .all(|p| p[0] <= 0.9 * 1.1 + 1e-3 || p[1] > 0.5)
+    );
+    for (flag, value, what) in [
+        ("--light", "0,0,0", "zero"),
+        ("--light", "1,2", "2 numbers"),
+        ("--ambient", "1,x,1", "not a finite number"),
+    ] {
+        let (r, out) = render("bad.png", &[flag, value]);
+        assert_fails(&r, flag, what, &out);
+    }
+    let five: Vec<&str> = ["--light", "0,1,0"].repeat(5);
+    let (r, out) = render("bad.png", &five);
+    assert_fails(&r, "--light", "at most 4", &out);
+}
+
+#[test]
 fn mesh_fit_moves_a_sphere_towards_a_generated_mesh_and_writes_an_obj() {
     let d = scratch("mesh_fit");
     let obj = octahedron(&d);
