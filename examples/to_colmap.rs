@@ -10,8 +10,10 @@
 //! world-to-camera with OpenCV axes. Points: SRC's point-cloud file (`points3d.ply`,
 //! `sparse_pc.ply`, `points.ply`) when it has one, otherwise `N` random points (default
 //! 1000) in the box the cameras look at, colored from the first photo each lands in.
-//! `diffsvg recon splat --scene DST` then loads the same cameras as `--scene SRC`, with
-//! COLMAP's split (every 8th photo by name held out). See `diffsvg::volume::colmap`.
+//! It also writes `DST/test.txt`, SRC's test views: `diffsvg recon splat --scene DST
+//! --test-list DST/test.txt` then loads the same cameras as `--scene SRC`, in SRC's split
+//! and order; without `--test-list`, COLMAP's split (every 8th photo by name held out).
+//! See `diffsvg::volume::colmap`.
 
 use std::path::PathBuf;
 

@@ -115,6 +115,10 @@ def _whole(v: Any, name: str, top: int = _U32) -> int:
     return n
 
 
+def _path_or_none(v: Any) -> Optional[str]:
+    return None if v is None else os.fspath(v)
+
+
 def _whole_or_none(v: Any, name: str, top: int = _U32) -> Optional[int]:
     return None if v is None else _whole(v, name, top)
 
@@ -941,7 +945,7 @@ def recon_voxel(scene, output, *, res: int = 128, iters: int = 3000, batch: int 
 def recon_splat(scene, output, *, iters: int = 5000, downscale: int = 1,
                 max_gaussians: int = 300_000, initial: int = 50_000, degree: int = 3,
                 bound: Optional[float] = None, seed: int = 0, eval_every: int = 0,
-                test_every: Optional[int] = None, antialias: bool = False,
+                test_every: Optional[int] = None, test_list=None, antialias: bool = False,
                 exposure: bool = False, mcmc: bool = False, refine_poses: bool = False,
                 perturb_poses: Optional[Tuple[float, float]] = None,
                 progress: Progress = None) -> ReconInfo:
@@ -959,9 +963,11 @@ def recon_splat(scene, output, *, iters: int = 5000, downscale: int = 1,
     test PSNR (NaN where not evaluated).
 
     ``test_every``: hold out every N-th view of instant-ngp and COLMAP folders (0: none;
-    default every 8th). ``antialias``: anti-aliased splats, saved with the model.
-    ``exposure``: learn a per-image color transform of each training photo. ``mcmc``: a
-    fixed budget of ``max_gaussians`` by relocation. ``refine_poses``, ``perturb_poses``
+    default every 8th); or ``test_list``: a file naming the test views, one a line (as
+    ``--test-list``; the ``to_colmap`` example writes the source's as ``test.txt``).
+    ``antialias``: anti-aliased splats, saved with the model. ``exposure``: learn a
+    per-image color transform of each training photo. ``mcmc``: a fixed budget of
+    ``max_gaussians`` by relocation. ``refine_poses``, ``perturb_poses``
     and ``pose_error``: as in :func:`recon_voxel`. As the CLI's flags of the same names.
     """
     return _native.recon_splat(
@@ -969,7 +975,7 @@ def recon_splat(scene, output, *, iters: int = 5000, downscale: int = 1,
         _whole(downscale, "downscale"), _whole(max_gaussians, "max_gaussians", _U64),
         _whole(initial, "initial", _U64), _whole(degree, "degree"), bound,
         _whole(seed, "seed", _U64), _whole(eval_every, "eval_every", _U64),
-        _whole_or_none(test_every, "test_every", _U64),
+        _whole_or_none(test_every, "test_every", _U64), _path_or_none(test_list),
         bool(antialias), bool(exposure), bool(mcmc), bool(refine_poses), _pair(perturb_poses),
         progress)
 
@@ -979,7 +985,7 @@ def recon_ngp(scene, output, *, iters: int = 2000, seconds: float = 0.0, batch: 
               steps: int = 512, levels: int = 16, log2_table: int = 16, min_res: int = 16,
               max_res: int = 1024, width: int = 64, lr: Tuple[float, float] = (1e-2, 1e-3),
               seed: int = 0, eval_every: int = 0, test_every: Optional[int] = None,
-              progress: Progress = None) -> ReconInfo:
+              test_list=None, progress: Progress = None) -> ReconInfo:
     """Fits an Instant-NGP neural field (a multiresolution hash grid and tiny MLPs) to the
     posed photos in ``scene`` and writes it to ``output`` (``.ngp``), exactly as ``diffsvg
     recon ngp`` with the same options (same file, bit for bit, for a fixed ``iters`` and
@@ -1005,7 +1011,7 @@ def recon_ngp(scene, output, *, iters: int = 2000, seconds: float = 0.0, batch: 
         _whole(levels, "levels"), _whole(log2_table, "log2_table"),
         _whole(min_res, "min_res"), _whole(max_res, "max_res"), _whole(width, "width"),
         _pair(lr, "lr", "(start, end)"), _whole(seed, "seed", _U64), _whole(eval_every, "eval_every", _U64),
-        _whole_or_none(test_every, "test_every", _U64), progress)
+        _whole_or_none(test_every, "test_every", _U64), _path_or_none(test_list), progress)
 
 
 def recon_nerf(scene, output, *, iters: int = 2000, seconds: float = 0.0, batch: int = 8192,
@@ -1013,7 +1019,8 @@ def recon_nerf(scene, output, *, iters: int = 2000, seconds: float = 0.0, batch:
                steps: int = 256, frequencies: int = 10, width: int = 64,
                density_layers: int = 4, color_layers: int = 1,
                lr: Tuple[float, float] = (2e-3, 2e-4), seed: int = 0, eval_every: int = 0,
-               test_every: Optional[int] = None, progress: Progress = None) -> ReconInfo:
+               test_every: Optional[int] = None, test_list=None,
+               progress: Progress = None) -> ReconInfo:
     """Fits a NeRF field (NeRF's positional encoding of ``frequencies`` octaves and an MLP
     of ``density_layers`` and ``color_layers`` hidden layers of ``width``) to the posed
     photos in ``scene`` and writes it to ``output`` (``.nerf``), exactly as ``diffsvg
@@ -1027,7 +1034,7 @@ def recon_nerf(scene, output, *, iters: int = 2000, seconds: float = 0.0, batch:
         _whole(frequencies, "frequencies"), _whole(width, "width"),
         _whole(density_layers, "density_layers"), _whole(color_layers, "color_layers"),
         _pair(lr, "lr", "(start, end)"), _whole(seed, "seed", _U64), _whole(eval_every, "eval_every", _U64),
-        _whole_or_none(test_every, "test_every", _U64), progress)
+        _whole_or_none(test_every, "test_every", _U64), _path_or_none(test_list), progress)
 
 
 def view(model, scene=None, *, split: str = "test", orbit: int = 0, elevation: float = 30.0,

@@ -158,6 +158,7 @@ def recon_splat(scene: str | PathLike[str], output: str | PathLike[str], iters: 
                 downscale: int = 1, max_gaussians: int = 300000, initial: int = 50000,
                 degree: int = 3, bound: Optional[float] = None, seed: int = 0,
                 eval_every: int = 0, test_every: Optional[int] = None,
+                test_list: Optional[str | PathLike[str]] = None,
                 antialias: bool = False, exposure: bool = False, mcmc: bool = False,
                 refine_poses: bool = False,
                 perturb_poses: Optional[Tuple[float, float]] = None,
@@ -168,6 +169,7 @@ def recon_ngp(scene: str | PathLike[str], output: str | PathLike[str], iters: in
               levels: int = 16, log2_table: int = 16, min_res: int = 16, max_res: int = 1024,
               width: int = 64, lr: Tuple[float, float] = (1e-2, 1e-3), seed: int = 0,
               eval_every: int = 0, test_every: Optional[int] = None,
+                test_list: Optional[str | PathLike[str]] = None,
               progress: Progress = None) -> ReconInfo: ...
 def recon_nerf(scene: str | PathLike[str], output: str | PathLike[str], iters: int = 2000,
                seconds: float = 0.0, batch: int = 8192, samples: int = 16384,
@@ -175,6 +177,7 @@ def recon_nerf(scene: str | PathLike[str], output: str | PathLike[str], iters: i
                frequencies: int = 10, width: int = 64, density_layers: int = 4,
                color_layers: int = 1, lr: Tuple[float, float] = (2e-3, 2e-4), seed: int = 0,
                eval_every: int = 0, test_every: Optional[int] = None,
+                test_list: Optional[str | PathLike[str]] = None,
                progress: Progress = None) -> ReconInfo: ...
 def view(model: str | PathLike[str], scene: Optional[str | PathLike[str]] = None,
          split: str = "test", orbit: int = 0, elevation: float = 30.0, downscale: int = 1,

@@ -104,6 +104,7 @@ pub(crate) fn recon_voxel<'py>(
         seed,
         eval_every,
         test_every: None,
+        test_list: None,
         refine_poses,
         perturb_poses: perturb_poses.map(|(d, u)| [d, u]),
     };
@@ -154,7 +155,7 @@ pub(crate) fn recon_voxel<'py>(
 #[pyfunction]
 #[pyo3(signature = (scene, output, iters=5000, downscale=1, max_gaussians=300_000,
     initial=50_000, degree=3, bound=None, seed=0, eval_every=0, test_every=None,
-    antialias=false, exposure=false, mcmc=false, refine_poses=false, perturb_poses=None,
+    test_list=None, antialias=false, exposure=false, mcmc=false, refine_poses=false, perturb_poses=None,
     progress=None))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn recon_splat<'py>(
@@ -170,6 +171,7 @@ pub(crate) fn recon_splat<'py>(
     seed: u64,
     eval_every: usize,
     test_every: Option<usize>,
+    test_list: Option<PathBuf>,
     antialias: bool,
     exposure: bool,
     mcmc: bool,
@@ -188,6 +190,7 @@ pub(crate) fn recon_splat<'py>(
         seed,
         eval_every,
         test_every,
+        test_list,
         antialias,
         exposure,
         mcmc,
@@ -293,7 +296,8 @@ fn run_field<'py>(
 #[pyfunction]
 #[pyo3(signature = (scene, output, iters=2000, seconds=0.0, batch=8192, samples=65536,
     downscale=1, bound=None, steps=512, levels=16, log2_table=16, min_res=16, max_res=1024,
-    width=64, lr=(1e-2, 1e-3), seed=0, eval_every=0, test_every=None, progress=None))]
+    width=64, lr=(1e-2, 1e-3), seed=0, eval_every=0, test_every=None, test_list=None,
+    progress=None))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn recon_ngp<'py>(
     py: Python<'py>,
@@ -315,6 +319,7 @@ pub(crate) fn recon_ngp<'py>(
     seed: u64,
     eval_every: usize,
     test_every: Option<usize>,
+    test_list: Option<PathBuf>,
     progress: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     check_output(&output, "ngp")?;
@@ -335,6 +340,7 @@ pub(crate) fn recon_ngp<'py>(
         seed,
         eval_every,
         test_every,
+        test_list,
         ..NgpJob::default()
     };
     run_field(py, scene, output, job, progress)
@@ -346,7 +352,8 @@ pub(crate) fn recon_ngp<'py>(
 #[pyfunction]
 #[pyo3(signature = (scene, output, iters=2000, seconds=0.0, batch=8192, samples=16384,
     downscale=1, bound=None, steps=256, frequencies=10, width=64, density_layers=4,
-    color_layers=1, lr=(2e-3, 2e-4), seed=0, eval_every=0, test_every=None, progress=None))]
+    color_layers=1, lr=(2e-3, 2e-4), seed=0, eval_every=0, test_every=None, test_list=None,
+    progress=None))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn recon_nerf<'py>(
     py: Python<'py>,
@@ -367,6 +374,7 @@ pub(crate) fn recon_nerf<'py>(
     seed: u64,
     eval_every: usize,
     test_every: Option<usize>,
+    test_list: Option<PathBuf>,
     progress: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     check_output(&output, "nerf")?;
@@ -392,6 +400,7 @@ pub(crate) fn recon_nerf<'py>(
         seed,
         eval_every,
         test_every,
+        test_list,
         ..NgpJob::nerf()
     };
     run_field(py, scene, output, job, progress)
@@ -460,7 +469,7 @@ pub(crate) fn view<'py>(
                     Some(d) => {
                         let loading = diffsvg::volume::dataset::Loading {
                             downscale,
-                            test_every: None,
+                            ..Default::default()
                         };
                         Some(m.load_dataset(d, &loading)?.0)
                     }

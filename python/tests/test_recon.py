@@ -85,6 +85,33 @@ def test_recon_splat_equals_the_cli_and_stops(tmp_path):
     assert (tmp_path / "stop.ply").exists()
 
 
+def test_recon_splat_test_list_is_the_cli_s(tmp_path):
+    # The ball as an instant-ngp folder (one transforms.json), its test views listed.
+    scene = write_scene(tmp_path / "ball")
+    frames = []
+    for split in ["train", "test"]:
+        path = scene / f"transforms_{split}.json"
+        frames += json.loads(path.read_text())["frames"]
+        path.unlink()
+    (scene / "transforms.json").write_text(json.dumps({"camera_angle_x": 0.7, "frames": frames}))
+    held = tmp_path / "held.txt"
+    held.write_text("test/r_0\n./test/r_1\n")
+    info = diffsvg.recon_splat(scene, tmp_path / "py.ply", iters=20, initial=100,
+                               test_list=held)
+    cli = cli_summary("recon", "splat", "--scene", scene, "-o", tmp_path / "cli.ply",
+                      "--iters", "20", "--initial", "100", "--test-list", held)
+    assert (tmp_path / "py.ply").read_bytes() == (tmp_path / "cli.ply").read_bytes()
+    assert info["test_psnr"] == cli["test_psnr"]
+    every = diffsvg.recon_splat(scene, tmp_path / "every.ply", iters=20, initial=100)
+    assert every["test_psnr"] != info["test_psnr"]
+    held.write_text("test/r_5\n")
+    with pytest.raises(diffsvg.DiffsvgError, match=r"held\.txt.*line 1.*test/r_5"):
+        diffsvg.recon_splat(scene, tmp_path / "bad.ply", iters=2, test_list=held)
+    with pytest.raises(diffsvg.DiffsvgError, match="transforms_test.json"):
+        diffsvg.recon_splat(write_scene(tmp_path / "synthetic"), tmp_path / "bad.ply",
+                            iters=2, test_list=held)
+
+
 @pytest.mark.parametrize("kind", ["ngp", "nerf"])
 def test_recon_fields_equal_the_cli_and_stop(tmp_path, kind):
     scene = write_scene(tmp_path / "ball")

@@ -445,7 +445,7 @@ fn dataset_views(
         dir,
         &Loading {
             downscale,
-            test_every: None,
+            ..Loading::default()
         },
     )?;
     if data.train.is_empty() {

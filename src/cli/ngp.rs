@@ -64,6 +64,9 @@ pub struct FieldArgs {
     /// `recon voxel --help`).
     #[arg(long, value_name = "N")]
     test_every: Option<usize>,
+    /// Hold out the views named in FILE instead (see `recon splat --help`).
+    #[arg(long, value_name = "FILE", conflicts_with = "test_every")]
+    test_list: Option<std::path::PathBuf>,
     #[command(flatten)]
     report: Reporting,
 }
@@ -87,6 +90,7 @@ impl FieldArgs {
             seed: self.seed,
             eval_every: self.report.eval_every,
             test_every: self.test_every,
+            test_list: self.test_list.clone(),
             ..base
         }
     }

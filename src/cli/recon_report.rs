@@ -140,7 +140,7 @@ pub(super) fn undistortion_note(dir: &Path, outside: f64) {
 pub(super) fn load_splat_dataset(dir: &Path, downscale: u32) -> Result<Dataset> {
     let loading = diffsvg::volume::dataset::Loading {
         downscale,
-        test_every: None,
+        ..Default::default()
     };
     let (data, undistorted) = load_for_splat(dir, &loading)?;
     super::util::print_warnings(&data.warnings);

@@ -57,6 +57,11 @@ pub struct SplatArgs {
     /// every 8th). NeRF-synthetic folders use transforms_test.json.
     #[arg(long, value_name = "N")]
     test_every: Option<usize>,
+    /// Instant-ngp and COLMAP folders: the test views are those named in FILE, one a
+    /// line (COLMAP: the image's name, such as test/r_0.png; instant-ngp: the frame's
+    /// file_path), instead of every N-th; to_colmap writes the source's as DIR/test.txt.
+    #[arg(long, value_name = "FILE", conflicts_with = "test_every")]
+    test_list: Option<PathBuf>,
     /// Anti-aliased splats (Mip-Splatting's 2D filter, gsplat's antialiased mode): each
     /// splat's opacity is scaled by √(det Σ / det(Σ + 0.3·I)) so that the model renders
     /// cleanly at other resolutions. Saved in the model; `view` renders it the same way.
@@ -95,6 +100,7 @@ pub fn run(a: SplatArgs) -> Result<()> {
         seed: a.seed,
         eval_every: a.report.eval_every,
         test_every: a.test_every,
+        test_list: a.test_list,
         antialias: a.antialias,
         exposure: a.exposure,
         mcmc: a.mcmc,

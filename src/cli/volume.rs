@@ -95,6 +95,11 @@ pub struct VoxelArgs {
     /// every 8th). NeRF-synthetic folders use transforms_test.json.
     #[arg(long, value_name = "N")]
     test_every: Option<usize>,
+    /// Instant-ngp and COLMAP folders: the test views are those named in FILE, one a
+    /// line (COLMAP: the image's name, such as test/r_0.png; instant-ngp: the frame's
+    /// file_path), instead of every N-th; to_colmap writes the source's as DIR/test.txt.
+    #[arg(long, value_name = "FILE", conflicts_with = "test_every")]
+    test_list: Option<PathBuf>,
     #[command(flatten)]
     poses: super::recon_report::PoseArgs,
     #[command(flatten)]
@@ -124,6 +129,9 @@ pub struct ViewArgs {
     /// Which views are test views (as in training): see `recon splat --help`.
     #[arg(long, value_name = "N")]
     test_every: Option<usize>,
+    /// Which views are test views (as in training): see `recon splat --help`.
+    #[arg(long, value_name = "FILE", conflicts_with = "test_every")]
+    test_list: Option<PathBuf>,
     /// Also render this many views on a circle around the model: orbit-NNN.png,
     /// orbit.gif and (from 2 views) orbit.png, a contact sheet of the first half of the
     /// circle above the second.
@@ -181,6 +189,7 @@ fn run_voxel(a: VoxelArgs) -> Result<()> {
         seed: a.seed,
         eval_every: a.report.eval_every,
         test_every: a.test_every,
+        test_list: a.test_list,
         refine_poses: a.poses.refine_poses,
         perturb_poses: a.poses.perturb_poses,
     };
@@ -346,6 +355,7 @@ pub fn run_view(a: ViewArgs) -> Result<()> {
             let loading = diffsvg::volume::dataset::Loading {
                 downscale: a.downscale,
                 test_every: a.test_every,
+                test_list: a.test_list.clone(),
             };
             let (data, undistorted) = model.load_dataset(d, &loading).map_err(flag_error)?;
             super::util::print_warnings(&data.warnings);

@@ -33,7 +33,11 @@
 //!   positions in world units, colors `rgb / 255`.
 //!
 //! **Split**: images sorted by name; those at positions 0, N, 2N, … are test views, with
-//! N = 8 by default (the reference 3DGS code's `llffhold`), or none when N = 0.
+//! N = 8 by default (the reference 3DGS code's `llffhold`), or none when N = 0; or the
+//! images named in a test list ([`Loading::test_list`](super::dataset::Loading::test_list), such as the `test.txt` that
+//! [`convert`] writes). Either way each split keeps `images`' id order (which the
+//! reference code's random draws make irrelevant there; here it fixes the sequence of
+//! views a seed gives, so that a converted folder trains as its source did).
 //!
 //! **Background**: the photos are real (no white background) unless every photo has an
 //! alpha channel (then it is composited over white, as NeRF-synthetic's are).
@@ -67,7 +71,7 @@ use std::path::{Path, PathBuf};
 use glam::{Affine3A, DMat3, DQuat, DVec3, Mat3A, Vec3A};
 
 use super::camera::{Camera, check_pose};
-use super::dataset::{Dataset, Loading, View, decode_all};
+use super::dataset::{Dataset, Holdout, View, decode_all};
 use super::splat::PointCloud;
 use crate::error::{Error, Result};
 use crate::limits::{MAX_GAUSSIANS, MAX_SIDE};
@@ -943,7 +947,8 @@ pub(crate) fn load(
     dir: &Path,
     sparse: &Path,
     form: Form,
-    loading: &Loading,
+    k: u32,
+    holdout: &Holdout,
     name: String,
 ) -> Result<Dataset> {
     let e = form.ext();
@@ -954,7 +959,10 @@ pub(crate) fn load(
         return Err(invalid(&imgs_file, "no images".into()));
     }
     let full = cameras(&model, &imgs_file, &cams_file)?;
-    let k = loading.downscale;
+    holdout.check_found(
+        model.images.iter().map(|im| im.name.as_str()),
+        &format!("an image of {}", imgs_file.display()),
+    )?;
     let scaled_dir = dir.join(format!("images_{k}"));
     let (folder, from_scaled) = if k > 1 && scaled_dir.is_dir() {
         (scaled_dir, true)
@@ -962,8 +970,15 @@ pub(crate) fn load(
         (dir.join("images"), false)
     };
     let canonical = dir.canonicalize().map_err(|err| Error::io(dir, err))?;
+    // The split counts positions in name order; each split is in id order.
+    let mut by_name: Vec<usize> = (0..model.images.len()).collect();
+    by_name.sort_by(|&a, &b| model.images[a].name.cmp(&model.images[b].name));
+    let mut rank = vec![0; by_name.len()];
+    for (position, &i) in by_name.iter().enumerate() {
+        rank[i] = position;
+    }
     let mut order: Vec<usize> = (0..model.images.len()).collect();
-    order.sort_by(|&a, &b| model.images[a].name.cmp(&model.images[b].name));
+    order.sort_by_key(|&i| model.images[i].id);
 
     let mut paths = Vec::with_capacity(order.len());
     let mut sizes = Vec::with_capacity(order.len());
@@ -1032,7 +1047,7 @@ pub(crate) fn load(
     let decoded = decode_all(dir, &refs, &sizes, if from_scaled { 1 } else { k })?;
     let white_background = decoded.iter().all(|d| d.alpha);
     let (mut train, mut test) = (Vec::new(), Vec::new());
-    for (position, (&i, img)) in order.iter().zip(decoded).enumerate() {
+    for (&i, img) in order.iter().zip(decoded) {
         let cam = full[i];
         let camera = if from_scaled {
             let (sx, sy) = (
@@ -1059,7 +1074,7 @@ pub(crate) fn load(
             camera,
             rgb: img.rgb,
         };
-        if loading.is_test(position) {
+        if holdout.is_test(rank[i], &view.name) {
             test.push(view);
         } else {
             train.push(view);
@@ -1075,6 +1090,10 @@ pub(crate) fn load(
         points,
     })
 }
+
+/// The file [`convert`] writes beside `sparse/`: the source's test views, one name a
+/// line, for [`Loading::test_list`](super::dataset::Loading::test_list).
+pub const TEST_LIST: &str = "test.txt";
 
 /// Options of [`convert`].
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -1112,13 +1131,16 @@ pub struct Converted {
 }
 
 /// Writes the NeRF-synthetic or instant-ngp folder `src` as a COLMAP dataset in `dst`:
-/// `dst/sparse/0/{cameras,images,points3D}.{bin|txt}` and the photos copied to
-/// `dst/images/` under their paths relative to `src` (`train/r_0.png`). Cameras with
+/// `dst/sparse/0/{cameras,images,points3D}.{bin|txt}`, the photos copied to
+/// `dst/images/` under their paths relative to `src` (`train/r_0.png`), with image ids
+/// in `src`'s order, and `dst/`[`TEST_LIST`] naming `src`'s test views (NeRF-synthetic:
+/// those of `transforms_test.json`; instant-ngp: every 8th). Cameras with
 /// distortion are `OPENCV`, others `PINHOLE`; poses are converted with
 /// [`pose_to_colmap`]. Points: `src`'s point-cloud file (`points3d.ply`, `sparse_pc.ply`
 /// or `points.ply`) when it has one, otherwise `opts.points` random points (see
 /// [`Convert`]). Loading `dst` gives the same cameras as loading `src` (to `f32`
-/// round-off), in the COLMAP split.
+/// round-off), in the COLMAP split; with `test.txt` as the test list, in `src`'s split and
+/// order.
 ///
 /// # Errors
 /// As [`Dataset::load`] for `src`; a `dst` that already holds a sparse model; I/O.
@@ -1189,6 +1211,13 @@ pub fn convert(src: &Path, dst: &Path, opts: &Convert) -> Result<Converted> {
         std::fs::copy(&f.image, &to).map_err(|e| Error::io(&to, e))?;
     }
     write(&model, &dst.join("sparse").join("0"), opts.form)?;
+    let list: String = frames
+        .iter()
+        .filter(|f| f.test)
+        .map(|f| format!("{}\n", f.name))
+        .collect();
+    let list_path = dst.join(TEST_LIST);
+    crate::image_io::write_atomic(&list_path, list.as_bytes())?;
     Ok(Converted {
         cameras: model.cameras.len(),
         images: model.images.len(),
@@ -1241,6 +1270,7 @@ fn random_points(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::volume::dataset::Loading;
     use glam::{Vec2, Vec3};
     use serde_json::json;
 
@@ -1614,16 +1644,18 @@ mod tests {
     fn colmap_folders_load_with_split_points_and_downscaled_folders() {
         let dir = colmap_folder("load", 10, Model::Pinhole, vec![9.0, 8.0, 4.0, 3.5], true);
         let ds = Dataset::load(&dir, 1).unwrap();
-        // Sorted by name; positions 0 and 8 are test views.
+        // Sorted by name, positions 0 and 8 are test views; each split is in id order
+        // (ids fall as names rise here).
         let names = |v: &[View]| v.iter().map(|v| v.name.clone()).collect::<Vec<_>>();
-        assert_eq!(names(&ds.test), ["im_00.png", "im_08.png"]);
-        assert_eq!(names(&ds.train)[..2], ["im_01.png", "im_02.png"]);
+        assert_eq!(names(&ds.test), ["im_08.png", "im_00.png"]);
+        assert_eq!(names(&ds.train)[..2], ["im_09.png", "im_07.png"]);
+        let named = |d: &Dataset, name: &str| d.train.iter().find(|v| v.name == name).cloned();
         assert!(!ds.white_background);
         assert_eq!(
             ds.points.as_ref().unwrap().positions,
             sample().points.positions
         );
-        let v = &ds.train[0];
+        let v = &named(&ds, "im_01.png").unwrap();
         assert_eq!(
             (v.width, v.height, v.rgb[0]),
             (8, 6, [10.0 / 255.0, 0.0, 0.0])
@@ -1638,8 +1670,8 @@ mod tests {
         let none = Dataset::load_with(
             &dir,
             &Loading {
-                downscale: 1,
                 test_every: Some(0),
+                ..Loading::default()
             },
         )
         .unwrap();
@@ -1647,18 +1679,54 @@ mod tests {
         let third = Dataset::load_with(
             &dir,
             &Loading {
-                downscale: 1,
                 test_every: Some(3),
+                ..Loading::default()
             },
         )
         .unwrap();
         assert_eq!(
             names(&third.test),
-            ["im_00.png", "im_03.png", "im_06.png", "im_09.png"]
+            ["im_09.png", "im_06.png", "im_03.png", "im_00.png"]
         );
+        // A test list: the views it names, in id order (ids fall as names rise here).
+        let list = dir.join("held.txt");
+        std::fs::write(&list, "# held out\nim_02.png\n\n./im_07.png\n").unwrap();
+        let listed = Loading {
+            test_list: Some(list.clone()),
+            ..Loading::default()
+        };
+        let held = Dataset::load_with(&dir, &listed).unwrap();
+        assert_eq!(names(&held.test), ["im_07.png", "im_02.png"]);
+        assert_eq!(held.train.len(), 8);
+        assert_eq!(names(&held.train)[..2], ["im_09.png", "im_08.png"]);
+        // A name that is no image, a name twice, a list with test_every: one line each.
+        for (text, want) in [
+            (
+                "im_02.png\nim_99.png\n",
+                "line 2: \"im_99.png\" is not an image of",
+            ),
+            (
+                "im_02.png\nim_02.png\n",
+                "line 2: \"im_02.png\" is listed twice (line 1)",
+            ),
+        ] {
+            std::fs::write(&list, text).unwrap();
+            let e = Dataset::load_with(&dir, &listed).unwrap_err().to_string();
+            assert!(e.contains("held.txt") && e.contains(want), "{e}");
+            assert_eq!(e.lines().count(), 1, "{e}");
+        }
+        let both = Loading {
+            test_every: Some(4),
+            ..listed.clone()
+        };
+        let e = Dataset::load_with(&dir, &both).unwrap_err().to_string();
+        assert!(e.contains("test_list") && e.contains("not both"), "{e}");
+        std::fs::remove_file(&list).unwrap();
+        let e = Dataset::load_with(&dir, &listed).unwrap_err().to_string();
+        assert!(e.contains("held.txt"), "{e}");
         // --downscale 2 reads images_2/ with intrinsics scaled by the photo's size.
         let half = Dataset::load(&dir, 2).unwrap();
-        let h = &half.train[0];
+        let h = &named(&half, "im_01.png").unwrap();
         assert_eq!(
             (h.width, h.height, h.rgb[0]),
             (4, 3, [10.0 / 255.0, 200.0 / 255.0, 0.0])
@@ -1670,7 +1738,10 @@ mod tests {
         // Without images_2/: block-averaged from images/.
         std::fs::remove_dir_all(dir.join("images_2")).unwrap();
         let half = Dataset::load(&dir, 2).unwrap();
-        assert_eq!(half.train[0].rgb[0], [10.0 / 255.0, 0.0, 0.0]);
+        assert_eq!(
+            named(&half, "im_01.png").unwrap().rgb[0],
+            [10.0 / 255.0, 0.0, 0.0]
+        );
         assert_eq!(half.train[0].camera, ds.train[0].camera.downscaled(2));
         // A missing photo: one line naming the file and the entry.
         std::fs::remove_file(dir.join("images/im_04.png")).unwrap();
@@ -1755,18 +1826,39 @@ mod tests {
         }
     }
 
+    /// `b` has the train and the test views of `a`, in the same order (names compared
+    /// without `.png`).
+    fn same_split(a: &Dataset, b: &Dataset) {
+        let names = |v: &[View]| {
+            v.iter()
+                .map(|v| v.name.trim_end_matches(".png").to_string())
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(names(&a.train), names(&b.train));
+        assert_eq!(names(&a.test), names(&b.test));
+    }
+
+    /// `Loading` with the test list `dst/test.txt`.
+    fn with_list(dst: &Path) -> Loading {
+        Loading {
+            test_list: Some(dst.join(TEST_LIST)),
+            ..Loading::default()
+        }
+    }
+
     #[test]
     fn converted_folders_load_to_the_same_cameras_in_both_forms() {
-        // NeRF-synthetic: 3 train + 2 test views of 8×6 RGBA photos.
+        // NeRF-synthetic: 12 train + 3 test views of 8×6 RGBA photos (r_10 sorts before
+        // r_2, so name order is not the source's).
         let src = scratch("conv-src");
-        for (split, n) in [("train", 3), ("test", 2)] {
+        for (split, n) in [("train", 12), ("test", 3)] {
             let frames: Vec<_> = (0..n)
                 .map(|i| {
                     std::fs::create_dir_all(src.join(split)).unwrap();
                     image::RgbaImage::from_fn(8, 6, |x, _| image::Rgba([i * 40, 9, 9, if x < 4 { 255 } else { 0 }]))
                         .save(src.join(format!("{split}/r_{i}.png")))
                         .unwrap();
-                    let m = glam::Mat4::from(tilted(i as usize + 3 * (split == "test") as usize));
+                    let m = glam::Mat4::from(tilted(i as usize + 12 * (split == "test") as usize));
                     json!({"file_path": format!("./{split}/r_{i}"),
                            "transform_matrix": (0..4).map(|r| m.row(r).to_array()).collect::<Vec<_>>()})
                 })
@@ -1790,12 +1882,20 @@ mod tests {
                 out,
                 Converted {
                     cameras: 1,
-                    images: 5,
+                    images: 15,
                     points: 50
                 }
             );
             let ds = Dataset::load(&dst, 1).unwrap();
             same_cameras(&original, &ds);
+            // By default COLMAP's split (every 8th by name: test/r_0 and train/r_3, in
+            // id order); with the list the converter wrote, the source's split in the
+            // source's order.
+            let held: Vec<&str> = ds.test.iter().map(|v| v.name.as_str()).collect();
+            assert_eq!(held, ["train/r_3.png", "test/r_0.png"]);
+            let listed = Dataset::load_with(&dst, &with_list(&dst)).unwrap();
+            same_split(&original, &listed);
+            same_cameras(&original, &listed);
             assert!(ds.white_background, "RGBA photos are composited over white");
             let pts = ds.points.unwrap();
             assert_eq!(pts.positions.len(), 50);
@@ -1815,9 +1915,9 @@ mod tests {
         // instant-ngp with distortion: OPENCV.
         let src = scratch("conv-ngp");
         std::fs::create_dir_all(src.join("images")).unwrap();
-        let frames: Vec<_> = (0..4)
+        let frames: Vec<_> = (0..12)
             .map(|i| {
-                image::RgbImage::from_pixel(10, 6, image::Rgb([i * 50, 100, 0]))
+                image::RgbImage::from_pixel(10, 6, image::Rgb([i * 20, 100, 0]))
                     .save(src.join(format!("images/{i}.jpg")))
                     .unwrap();
                 let m = glam::Mat4::from(tilted(i as usize));
@@ -1847,6 +1947,11 @@ mod tests {
             .unwrap();
             let ds = Dataset::load(&dst, 1).unwrap();
             same_cameras(&original, &ds);
+            // images/10.jpg sorts before images/2.jpg: the held-out views by name are
+            // others than the source's; the list gives the source's.
+            assert_ne!(ds.test[1].name, original.test[1].name);
+            let listed = Dataset::load_with(&dst, &with_list(&dst)).unwrap();
+            same_split(&original, &listed);
             assert!(!ds.white_background && ds.points.is_none());
             assert_eq!(
                 read(&dst.join("sparse/0"), form).unwrap().cameras[0].model,

@@ -9,7 +9,8 @@
 //! * **instant-ngp** (`transforms.json`): frames whose image is missing are skipped with one
 //!   warning on stderr naming them all; of the frames present, in file order, those at
 //!   positions 0, 8, 16, … are the test views and the rest are train views
-//!   ([`Loading::test_every`] chooses another interval). nerfstudio's `transforms.json`
+//!   ([`Loading::test_every`] chooses another interval, [`Loading::test_list`] names the
+//!   test views instead). nerfstudio's `transforms.json`
 //!   reads the same way (its `applied_transform` is informational and ignored).
 //!
 //! Both formats share one reader. Intrinsics come from the top level and may be
@@ -117,7 +118,7 @@ pub struct Dataset {
 }
 
 /// How to load a dataset: [`Dataset::load_with`].
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Loading {
     /// Divide image sizes by this integer, at least 1 (COLMAP: read `images_K/` when it
     /// exists).
@@ -127,6 +128,13 @@ pub struct Loading {
     /// none; `None`: every 8th. NeRF-synthetic folders have their own test split and
     /// refuse `Some`.
     pub test_every: Option<usize>,
+    /// Instant-ngp and COLMAP folders: a text file naming the test views instead, one a
+    /// line as [`View::name`] gives them (COLMAP: the image's name in `images`, such as
+    /// `test/r_0.png`; instant-ngp: the frame's `file_path` without a leading `./`);
+    /// blank lines and lines starting with `#` are skipped, a leading `./` is ignored.
+    /// Every name must be one of the folder's photos. Excludes `test_every`;
+    /// NeRF-synthetic folders refuse it.
+    pub test_list: Option<PathBuf>,
 }
 
 impl Default for Loading {
@@ -134,16 +142,91 @@ impl Default for Loading {
         Loading {
             downscale: 1,
             test_every: None,
+            test_list: None,
         }
     }
 }
 
-impl Loading {
-    /// Whether the view at `position` is a test view.
-    pub(crate) fn is_test(&self, position: usize) -> bool {
-        match self.test_every.unwrap_or(HOLDOUT) {
-            0 => false,
-            n => position.is_multiple_of(n),
+/// The test split of a [`Loading`] for an instant-ngp or COLMAP folder, its list read.
+pub(crate) struct Holdout {
+    every: usize,
+    /// The list's file and its names, each with its line (from 1).
+    list: Option<(PathBuf, Vec<(String, usize)>)>,
+}
+
+impl Holdout {
+    /// Reads `loading.test_list`, if any.
+    ///
+    /// # Errors
+    /// Both a list and `test_every`; an unreadable or oversized list; a name listed twice.
+    pub(crate) fn new(loading: &Loading) -> Result<Holdout> {
+        let Some(path) = &loading.test_list else {
+            return Ok(Holdout {
+                every: loading.test_every.unwrap_or(HOLDOUT),
+                list: None,
+            });
+        };
+        if let Some(n) = loading.test_every {
+            return Err(Error::Setting {
+                name: "test_list".into(),
+                message: format!(
+                    "{}: choose it or test_every ({n}), not both",
+                    path.display()
+                ),
+            });
+        }
+        let bytes = read_bounded(path)?;
+        let text = String::from_utf8(bytes).map_err(|_| Error::InvalidValue {
+            path: path.clone(),
+            what: "the test list is not UTF-8 text".into(),
+        })?;
+        let mut names: Vec<(String, usize)> = Vec::new();
+        let mut seen = std::collections::HashMap::new();
+        for (i, line) in text.lines().enumerate() {
+            let name = line.trim();
+            if name.is_empty() || name.starts_with('#') {
+                continue;
+            }
+            let name = name.trim_start_matches("./").to_string();
+            if let Some(first) = seen.insert(name.clone(), i + 1) {
+                return Err(Error::InvalidValue {
+                    path: path.clone(),
+                    what: format!("line {}: {name:?} is listed twice (line {first})", i + 1),
+                });
+            }
+            names.push((name, i + 1));
+        }
+        Ok(Holdout {
+            every: 0,
+            list: Some((path.clone(), names)),
+        })
+    }
+
+    /// Whether the view named `name` at `position` (in the format's order) is a test view.
+    pub(crate) fn is_test(&self, position: usize, name: &str) -> bool {
+        match &self.list {
+            Some((_, names)) => names.iter().any(|(n, _)| n == name),
+            None => self.every != 0 && position.is_multiple_of(self.every),
+        }
+    }
+
+    /// Checks that every listed name is one of `names` (all the folder's views); the
+    /// error names the list, the line and the name. `what` says what the names are.
+    pub(crate) fn check_found<'a>(
+        &self,
+        names: impl Iterator<Item = &'a str>,
+        what: &str,
+    ) -> Result<()> {
+        let Some((path, list)) = &self.list else {
+            return Ok(());
+        };
+        let names: std::collections::HashSet<&str> = names.collect();
+        match list.iter().find(|(n, _)| !names.contains(n.as_str())) {
+            Some((name, line)) => Err(Error::InvalidValue {
+                path: path.clone(),
+                what: format!("line {line}: {name:?} is not {what}"),
+            }),
+            None => Ok(()),
         }
     }
 }
@@ -214,7 +297,7 @@ pub fn load(dir: &Path, downscale: u32) -> Result<Dataset> {
         dir,
         &Loading {
             downscale,
-            test_every: None,
+            ..Loading::default()
         },
     )
 }
@@ -257,6 +340,17 @@ pub fn load_with(dir: &Path, loading: &Loading) -> Result<Dataset> {
     let mut frames: Vec<(Frame, bool)> = Vec::new();
     let mut warnings = Vec::new();
     if synthetic.is_file() {
+        if let Some(list) = &loading.test_list {
+            return Err(Error::Setting {
+                name: "test_list".into(),
+                message: format!(
+                    "{}: {} is a NeRF-synthetic folder, whose test views are those of \
+                     transforms_test.json",
+                    list.display(),
+                    dir.display()
+                ),
+            });
+        }
         if let Some(n) = loading.test_every {
             return Err(Error::Setting {
                 name: "test_every".into(),
@@ -305,14 +399,22 @@ pub fn load_with(dir: &Path, loading: &Loading) -> Result<Dataset> {
                 names.join(", ")
             ));
         }
-        frames.extend(
-            present
-                .into_iter()
-                .enumerate()
-                .map(|(i, f)| (f, loading.is_test(i))),
-        );
+        let holdout = Holdout::new(loading)?;
+        let trimmed = |f: &Frame| f.file_path.trim_start_matches("./").to_string();
+        holdout.check_found(
+            present.iter().map(|f| f.file_path.trim_start_matches("./")),
+            &format!(
+                "the file_path of a frame with its image in {}",
+                ngp.display()
+            ),
+        )?;
+        frames.extend(present.into_iter().enumerate().map(|(i, f)| {
+            let test = holdout.is_test(i, &trimmed(&f));
+            (f, test)
+        }));
     } else if let Some((sparse, form)) = super::colmap::find(dir) {
-        return super::colmap::load(dir, &sparse, form, loading, name);
+        let holdout = Holdout::new(loading)?;
+        return super::colmap::load(dir, &sparse, form, loading.downscale, &holdout, name);
     } else {
         return Err(not_found(
             dir,
@@ -383,11 +485,13 @@ pub fn load_with(dir: &Path, loading: &Loading) -> Result<Dataset> {
 }
 
 /// One photo of a NeRF-synthetic or instant-ngp folder, for the COLMAP converter: its
-/// path relative to the folder (with its extension), its file and its full-size camera.
+/// path relative to the folder (with its extension), its file, its full-size camera and
+/// whether [`load`] makes it a test view by default.
 pub(super) struct SourceFrame {
     pub name: String,
     pub image: PathBuf,
     pub camera: Camera,
+    pub test: bool,
 }
 
 /// The photos of a NeRF-synthetic (train, then test) or instant-ngp folder (those
@@ -401,7 +505,7 @@ pub(super) fn source_frames(dir: &Path) -> Result<(Vec<SourceFrame>, bool)> {
             if json == synthetic || json.is_file() {
                 let f = parse_transforms(&json)?;
                 require_images(&json, &f)?;
-                frames.extend(f);
+                frames.extend(f.into_iter().map(|f| (f, json != synthetic)));
             }
         }
     } else {
@@ -415,12 +519,14 @@ pub(super) fn source_frames(dir: &Path) -> Result<(Vec<SourceFrame>, bool)> {
         frames.extend(
             parse_transforms(&ngp)?
                 .into_iter()
-                .filter(|f| f.image.is_some()),
+                .filter(|f| f.image.is_some())
+                .enumerate()
+                .map(|(i, f)| (f, i.is_multiple_of(HOLDOUT))),
         );
     }
     let out = frames
         .iter()
-        .map(|f| {
+        .map(|(f, test)| {
             let image = f.image.clone().expect("present");
             let (w, h) = header_size(&image)?;
             let name = image
@@ -433,6 +539,7 @@ pub(super) fn source_frames(dir: &Path) -> Result<(Vec<SourceFrame>, bool)> {
                 name,
                 camera: f.camera(w, h)?,
                 image,
+                test: *test,
             })
         })
         .collect::<Result<Vec<_>>>()?;
@@ -1160,8 +1267,8 @@ pub(crate) mod tests {
         let ds = load_with(
             &dir,
             &Loading {
-                downscale: 1,
                 test_every: Some(2),
+                ..Loading::default()
             },
         )
         .unwrap();
@@ -1169,6 +1276,26 @@ pub(crate) mod tests {
         assert_eq!(ds.train[0].camera.fx, 10.0);
         assert_eq!(ds.train[0].camera.k1, 0.01);
         assert_eq!(ds.train[0].camera.c2w, pose(1));
+        // A test list names frames by file_path (a leading ./ ignored).
+        let list = dir.join("held.txt");
+        std::fs::write(&list, "./images/frame_00001.png\n").unwrap();
+        let listed = Loading {
+            test_list: Some(list.clone()),
+            ..Loading::default()
+        };
+        let ds = load_with(&dir, &listed).unwrap();
+        let names = |v: &[View]| v.iter().map(|v| v.name.clone()).collect::<Vec<_>>();
+        assert_eq!(names(&ds.test), ["images/frame_00001.png"]);
+        assert_eq!(
+            names(&ds.train),
+            ["images/frame_00000.png", "images/frame_00002.png"]
+        );
+        std::fs::write(&list, "images/frame_00003.png\n").unwrap();
+        let e = load_with(&dir, &listed).unwrap_err().to_string();
+        assert!(
+            e.contains("held.txt") && e.contains("line 1") && e.contains("frame_00003"),
+            "{e}"
+        );
         // Fisheye is refused in one line; NeRF-synthetic refuses test_every.
         let mut j: Value =
             serde_json::from_slice(&std::fs::read(dir.join("transforms.json")).unwrap()).unwrap();
@@ -1180,14 +1307,19 @@ pub(crate) mod tests {
         let e = load_with(
             &dir,
             &Loading {
-                downscale: 1,
                 test_every: Some(4),
+                ..Loading::default()
             },
         )
         .unwrap_err()
         .to_string();
         assert!(
             e.contains("test_every") && e.contains("transforms_test.json"),
+            "{e}"
+        );
+        let e = load_with(&dir, &listed).unwrap_err().to_string();
+        assert!(
+            e.contains("test_list") && e.contains("transforms_test.json"),
             "{e}"
         );
         std::fs::remove_dir_all(&dir).unwrap();

@@ -99,6 +99,54 @@ pub(crate) fn apply_to_ray(ray: &Ray, rot: &Mat3, v: Vec3) -> Ray {
     }
 }
 
+/// Removes from the corrections `deltas` of cameras centered at `centers` (world units,
+/// before correction) their common rigid motion: the turn `ω` about the world origin and
+/// the move `t` that, applied to every camera at once (each then turns by `ω` and moves by
+/// `ω × c + t`), best explain them in least squares, with moves measured in units of
+/// `scale` (world units per radian). Photos alone cannot tell the scene and all its
+/// cameras moved together from where they were (the gauge freedom of bundle
+/// adjustment); without this, noisy steps let the training cameras drift together away
+/// from the held-out ones, which keep their loaded poses. Linear in the corrections
+/// (exact to first order in `ω`).
+pub(crate) fn remove_common_motion(deltas: &mut [PoseDelta], centers: &[Vec3], scale: f32) {
+    use glam::{DMat3, DVec3};
+    let n = deltas.len().min(centers.len());
+    if n == 0 {
+        return;
+    }
+    let w2 = 1.0 / (scale as f64 * scale as f64);
+    let omega = |d: &PoseDelta| DVec3::new(d[0] as f64, d[1] as f64, d[2] as f64);
+    let v = |d: &PoseDelta| DVec3::new(d[3] as f64, d[4] as f64, d[5] as f64);
+    let inv = 1.0 / n as f64;
+    let c_mean = centers[..n].iter().map(|c| c.as_dvec3()).sum::<DVec3>() * inv;
+    let v_mean = deltas[..n].iter().map(v).sum::<DVec3>() * inv;
+    // With t = v̄ + c̄ × ω, minimise Σ |ωᵢ − ω|² + w² Σ |(vᵢ − v̄) + dᵢ × ω|², dᵢ = cᵢ − c̄.
+    let mut m = DMat3::IDENTITY * n as f64;
+    let mut rhs = DVec3::ZERO;
+    for (d, c) in deltas[..n].iter().zip(centers) {
+        let di = c.as_dvec3() - c_mean;
+        let k = DMat3::from_cols(
+            DVec3::new(0.0, di.z, -di.y),
+            DVec3::new(-di.z, 0.0, di.x),
+            DVec3::new(di.y, -di.x, 0.0),
+        );
+        m -= k * k * w2;
+        rhs += omega(d) + di.cross(v(d) - v_mean) * w2;
+    }
+    let w = m.inverse() * rhs;
+    if !w.is_finite() {
+        return;
+    }
+    let t = v_mean + c_mean.cross(w);
+    for (d, c) in deltas[..n].iter_mut().zip(centers) {
+        let dv = w.cross(c.as_dvec3()) + t;
+        for k in 0..3 {
+            d[k] = (d[k] as f64 - w[k]) as f32;
+            d[3 + k] = (d[3 + k] as f64 - dv[k]) as f32;
+        }
+    }
+}
+
 /// How far pose `b` is from pose `a`: the angle of `R_b·R_aᵀ` in degrees and the
 /// distance between the centers in world units.
 pub fn pose_error(a: &Camera, b: &Camera) -> (f64, f64) {
@@ -206,6 +254,51 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// A common motion of every camera is removed entirely; what is left has none (a
+    /// second pass changes nothing), and a motion that differs between the cameras is
+    /// kept but for its common part.
+    #[test]
+    fn common_motion_is_removed() {
+        let centers: Vec<Vec3> = (0..12)
+            .map(|i| {
+                let a = i as f32 * 0.7;
+                Vec3::new(4.0 * a.cos(), 4.0 * a.sin(), 1.0 + 0.3 * i as f32)
+            })
+            .collect();
+        let (w, t) = (Vec3::new(0.01, -0.02, 0.005), Vec3::new(0.03, 0.01, -0.02));
+        let common = |c: Vec3| {
+            let v = w.cross(c) + t;
+            [w.x, w.y, w.z, v.x, v.y, v.z]
+        };
+        let mut deltas: Vec<PoseDelta> = centers.iter().map(|&c| common(c)).collect();
+        remove_common_motion(&mut deltas, &centers, 4.0);
+        for d in &deltas {
+            assert!(d.iter().all(|x| x.abs() < 1e-6), "{d:?}");
+        }
+        // Own motions plus the common one: the common part goes, a second pass is a no-op.
+        let mut rng = Rng::new(7);
+        let own: Vec<PoseDelta> = centers
+            .iter()
+            .map(|_| std::array::from_fn(|_| (rng.uniform() - 0.5) * 0.02))
+            .collect();
+        let mut mixed: Vec<PoseDelta> = own
+            .iter()
+            .zip(&centers)
+            .map(|(o, &c)| std::array::from_fn(|k| o[k] + common(c)[k]))
+            .collect();
+        let mut alone = own.clone();
+        remove_common_motion(&mut mixed, &centers, 4.0);
+        remove_common_motion(&mut alone, &centers, 4.0);
+        let once = mixed.clone();
+        remove_common_motion(&mut mixed, &centers, 4.0);
+        for ((a, b), c) in mixed.iter().zip(&once).zip(&alone) {
+            for k in 0..6 {
+                assert!((a[k] - b[k]).abs() < 1e-6 && (b[k] - c[k]).abs() < 1e-6);
+            }
+        }
+        assert!(alone.iter().flatten().any(|x| x.abs() > 1e-3));
     }
 
     #[test]

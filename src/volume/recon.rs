@@ -71,6 +71,8 @@ pub struct VoxelJob {
     pub eval_every: usize,
     /// Which views are held out ([`Loading::test_every`]); `None`: the format's default.
     pub test_every: Option<usize>,
+    /// Or the views named in this file ([`Loading::test_list`]).
+    pub test_list: Option<std::path::PathBuf>,
     /// Learn a pose correction of each training view ([`crate::volume::pose`],
     /// [`voxel::TrainOptions::refine_poses`]); test views keep their poses.
     pub refine_poses: bool,
@@ -96,6 +98,7 @@ impl Default for VoxelJob {
             seed: 0,
             eval_every: 0,
             test_every: None,
+            test_list: None,
             refine_poses: false,
             perturb_poses: None,
         }
@@ -127,6 +130,8 @@ pub struct SplatJob {
     pub eval_every: usize,
     /// Which views are held out ([`Loading::test_every`]); `None`: the format's default.
     pub test_every: Option<usize>,
+    /// Or the views named in this file ([`Loading::test_list`]).
+    pub test_list: Option<std::path::PathBuf>,
     /// Train [anti-aliased](splat::Gaussians::antialiased) splats (saved with the model).
     pub antialias: bool,
     /// Learn a per-image affine color transform of each training view
@@ -154,6 +159,7 @@ impl Default for SplatJob {
             seed: 0,
             eval_every: 0,
             test_every: None,
+            test_list: None,
             antialias: false,
             exposure: false,
             mcmc: false,
@@ -209,6 +215,8 @@ pub struct NgpJob {
     pub eval_every: usize,
     /// Which views are held out ([`Loading::test_every`]); `None`: the format's default.
     pub test_every: Option<usize>,
+    /// Or the views named in this file ([`Loading::test_list`]).
+    pub test_list: Option<std::path::PathBuf>,
 }
 
 impl Default for NgpJob {
@@ -235,6 +243,7 @@ impl Default for NgpJob {
             seed: 0,
             eval_every: 0,
             test_every: None,
+            test_list: None,
         }
     }
 }
@@ -268,6 +277,7 @@ impl NgpJob {
         Loading {
             downscale: self.downscale,
             test_every: self.test_every,
+            test_list: self.test_list.clone(),
         }
     }
 
@@ -601,6 +611,7 @@ impl VoxelJob {
         Loading {
             downscale: self.downscale,
             test_every: self.test_every,
+            test_list: self.test_list.clone(),
         }
     }
 
@@ -649,6 +660,7 @@ impl SplatJob {
         Loading {
             downscale: self.downscale,
             test_every: self.test_every,
+            test_list: self.test_list.clone(),
         }
     }
 

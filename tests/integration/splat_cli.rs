@@ -48,6 +48,46 @@ fn files_in(dir: &Path) -> Vec<String> {
 // ---------------------------------------------------------------------------------------
 // End to end
 
+/// A NeRF-synthetic folder converted to COLMAP (the `to_colmap` example's [`convert`],
+/// no points) trains with its `test.txt` as `--test-list` exactly as the folder itself:
+/// the same test views, the same sequence of training views, the same random start.
+///
+/// [`convert`]: diffsvg::volume::colmap::convert
+#[test]
+fn converted_folder_with_its_test_list_trains_as_the_original() {
+    let dir = scratch("splat_cli_converted");
+    let scene = dir.join("scene");
+    write_scene(&scene, 12, 3, 16);
+    let colmap = dir.join("colmap");
+    let opts = diffsvg::volume::colmap::Convert {
+        points: 0,
+        ..Default::default()
+    };
+    diffsvg::volume::colmap::convert(&scene, &colmap, &opts).unwrap();
+    let list = colmap.join(diffsvg::volume::colmap::TEST_LIST);
+    let flags = ["--iters", "30", "--initial", "300", "--seed", "4", "--json"];
+    let run = |scene: &Path, out: &str, extra: &[&str]| {
+        let extra: Vec<&str> = flags.iter().chain(extra).copied().collect();
+        let r = recon_splat(scene, &dir.join(out), &extra);
+        assert!(r.status.success(), "{}", stderr(&r));
+        summary(&r)
+    };
+    let a = run(&scene, "a", &[]);
+    let b = run(&colmap, "b", &["--test-list", s(&list)]);
+    let c = run(&colmap, "c", &[]);
+    let psnr = |v: &serde_json::Value| v["test_psnr"].as_f64().unwrap();
+    println!(
+        "test PSNR: {} original, {} converted with test.txt, {} every 8th",
+        psnr(&a),
+        psnr(&b),
+        psnr(&c)
+    );
+    assert!((psnr(&a) - psnr(&b)).abs() < 1e-3, "{a} vs {b}");
+    assert_eq!(a["gaussians"], b["gaussians"]);
+    // Without the list the test views are others (every 8th by name).
+    assert!((psnr(&a) - psnr(&c)).abs() > 1e-3, "{a} vs {c}");
+}
+
 #[test]
 fn recon_splat_writes_a_ply_that_round_trips_renders_and_views() {
     let dir = scratch("splat_cli_e2e");
@@ -510,6 +550,23 @@ fn recon_splat_rejects_bad_scenes_and_flags_cleanly() {
         println!("--bound {bound}: {}", stderr(&r).trim());
         assert_clean_failure(&r, &[&format!("--bound {bound}"), "must be between"], &out);
     }
+
+    // --test-list: refused for NeRF-synthetic folders (their split is their own); a
+    // name that is no photo of the folder is one line naming the list and the line.
+    let list = dir.join("held.txt");
+    std::fs::write(&list, "test/r_0.png\n").unwrap();
+    let r = recon_splat(&good, &out, &["--test-list", s(&list)]);
+    assert_clean_failure(
+        &r,
+        &["--test-list", "held.txt", "transforms_test.json"],
+        &out,
+    );
+    let colmap = dir.join("colmap");
+    diffsvg::volume::colmap::convert(&good, &colmap, &Default::default()).unwrap();
+    std::fs::write(&list, "test/r_0.png\ntest/r_9.png\n").unwrap();
+    let r = recon_splat(&colmap, &out, &["--test-list", s(&list)]);
+    println!("--test-list, unknown name: {}", stderr(&r).trim());
+    assert_clean_failure(&r, &["held.txt", "line 2", "test/r_9.png"], &out);
 
     // --max-gaussians 0 (and above the limit).
     let r = recon_splat(&good, &out, &["--max-gaussians", "0"]);
