@@ -109,12 +109,14 @@ class Mesh:
     def render(self, camera: Camera, background: Optional[Tuple[float, float, float]] = None,
                cull: bool = True, near: float = 1e-3,
                lights: Optional[Sequence[MeshLight]] = None,
-               ambient: Optional[Tuple[float, float, float]] = None) -> F32: ...
+               ambient: Optional[Tuple[float, float, float]] = None,
+               mipmaps: bool = False) -> F32: ...
     def render_backward(self, camera: Camera, d_image: F32,
                         background: Optional[Tuple[float, float, float]] = None,
                         cull: bool = True, near: float = 1e-3,
                         lights: Optional[Sequence[MeshLight]] = None,
-                        ambient: Optional[Tuple[float, float, float]] = None) -> MeshGrad: ...
+                        ambient: Optional[Tuple[float, float, float]] = None,
+                        mipmaps: bool = False) -> MeshGrad: ...
     def fit(self, views: Sequence[Tuple[Camera, F32]], iters: int = 200,
             lr_positions: float = 2e-3, lr_colors: float = 1e-2, smoothness: float = 1e-3,
             background: Optional[Tuple[float, float, float]] = (1.0, 1.0, 1.0),

@@ -206,6 +206,7 @@ fn options(
     cull: bool,
     near: f64,
     lighting: Option<Lighting>,
+    mipmaps: bool,
 ) -> PyResult<RenderOptions> {
     if let Some(b) = background {
         let b = [b.0, b.1, b.2];
@@ -223,7 +224,7 @@ fn options(
         cull_back_faces: cull,
         near,
         lighting,
-        mipmaps: false,
+        mipmaps,
     })
 }
 
@@ -367,7 +368,10 @@ impl PyMesh {
     /// Unlit unless `lights` (a list of `((dx, dy, dz), (r, g, b))`: world direction
     /// towards the light and RGB intensity, at most 4) or `ambient` (RGB) is given; then
     /// Lambert shading with smooth normals: albedo × (ambient + Σ max(0, n·l)·intensity).
-    #[pyo3(signature = (camera, background=None, cull=true, near=1e-3, lights=None, ambient=None))]
+    /// `mipmaps`: a minified texture is read from the mip level of each pixel's footprint
+    /// (2×2 box averages) rather than bilinearly from the full texture.
+    #[pyo3(signature = (camera, background=None, cull=true, near=1e-3, lights=None, ambient=None,
+        mipmaps=false))]
     #[allow(clippy::too_many_arguments)]
     fn render<'py>(
         &self,
@@ -378,8 +382,9 @@ impl PyMesh {
         near: f64,
         lights: Option<Vec<PyLight>>,
         ambient: Option<(f64, f64, f64)>,
+        mipmaps: bool,
     ) -> PyResult<Bound<'py, PyArray3<f32>>> {
-        let opts = options(background, cull, near, lighting(lights, ambient)?)?;
+        let opts = options(background, cull, near, lighting(lights, ambient)?, mipmaps)?;
         let (m, c) = (&self.inner, &camera.inner);
         let img = py
             .detach(|| crate::on_pool(|| View::new(m, c, opts).map(|v| v.render())))
@@ -396,7 +401,7 @@ impl PyMesh {
     /// `light_directions` and `light_intensities` `(k, 3)`. Exact (the derivative of the
     /// rendered box-filtered image).
     #[pyo3(signature = (camera, d_image, background=None, cull=true, near=1e-3, lights=None,
-        ambient=None))]
+        ambient=None, mipmaps=false))]
     #[allow(clippy::too_many_arguments)]
     fn render_backward<'py>(
         &self,
@@ -408,8 +413,9 @@ impl PyMesh {
         near: f64,
         lights: Option<Vec<PyLight>>,
         ambient: Option<(f64, f64, f64)>,
+        mipmaps: bool,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let opts = options(background, cull, near, lighting(lights, ambient)?)?;
+        let opts = options(background, cull, near, lighting(lights, ambient)?, mipmaps)?;
         let d: Image = image_in(&d_image, "d_image")?;
         let c = &camera.inner;
         if (d.width, d.height) != (c.width, c.height) {
@@ -485,7 +491,7 @@ impl PyMesh {
             lr_positions,
             lr_colors,
             smoothness,
-            render: options(background, cull, 1e-3, None)?,
+            render: options(background, cull, 1e-3, None, false)?,
         };
         let mut prog = Progress::new(progress);
         let mut mesh = self.inner.clone();

@@ -216,3 +216,36 @@ def test_uv_gradients_of_spot():
                 fds.append((loss(up) - loss(down)) / (2 * h))
             an = g["uvs"][v, k]
             assert min(abs(f - an) for f in fds) <= 2e-2 * max(1.0, abs(an)), (v, k, an, fds)
+
+
+def test_mipmaps_read_a_minified_texture_as_the_cli_does(tmp_path):
+    data = shared_data("test_mipmaps_read_a_minified_texture_as_the_cli_does")
+    path = data / "meshes" / "spot" / "spot.obj"
+    spot = diffsvg.Mesh.load(path)
+    # Spot's 1024² texture seen at 24²: each pixel covers many texels.
+    cam = diffsvg.Camera.orbit(spot, 1, 24)[0]
+    plain = spot.render(cam, background=(1.0, 1.0, 1.0))
+    mip = spot.render(cam, background=(1.0, 1.0, 1.0), mipmaps=True)
+    assert np.abs(mip - plain).max() > 1e-3
+    out = tmp_path / "cli.png"
+    run_cli("mesh", "render", path, "--size", 24, "--mipmaps", "-o", out)
+    cli = diffsvg.load_image(str(out))
+    assert np.abs(np.round(mip * 255) - np.round(cli * 255)).max() <= 1
+    w = np.random.default_rng(5).standard_normal((24, 24, 4)).astype(np.float32)
+    g = spot.render_backward(cam, w, mipmaps=True)
+    assert np.isfinite(g["texture"]).all() and np.abs(g["texture"]).sum() > 0
+    # The texture's gradient is that of the mipmapped image: one texel by differences.
+    t = spot.texture
+    iy, ix = np.unravel_index(np.argmax(np.abs(g["texture"][..., 0])), t.shape[:2])
+    h = 0.05
+    def loss(v):
+        tt = t.copy()
+        tt[iy, ix, 0] = v
+        spot.texture = tt
+        return float((spot.render(cam, mipmaps=True).astype(np.float64) * w).sum())
+    # The image is linear in a texel: a difference within [0, 1] is exact up to rounding.
+    lo, hi = max(0.0, t[iy, ix, 0] - h), min(1.0, t[iy, ix, 0] + h)
+    fd = (loss(hi) - loss(lo)) / (hi - lo)
+    spot.texture = t
+    an = g["texture"][iy, ix, 0]
+    assert abs(fd - an) <= 2e-2 * max(1.0, abs(an)), (an, fd)
