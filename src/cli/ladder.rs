@@ -44,6 +44,10 @@ pub struct Args {
     /// Hold out every N-th view (instant-ngp and COLMAP folders; see `recon voxel --help`).
     #[arg(long, value_name = "N")]
     test_every: Option<usize>,
+    /// Hold out the views named in FILE, one a line, instead (instant-ngp and COLMAP
+    /// folders; see `recon splat --help`).
+    #[arg(long, value_name = "FILE", conflicts_with = "test_every")]
+    test_list: Option<std::path::PathBuf>,
     /// Score only the first N test views (default: all); the NeRF field renders a 100²
     /// view in tens of seconds on 2 cores.
     #[arg(long, value_name = "N")]
@@ -66,6 +70,7 @@ fn parse_rung(s: &str) -> std::result::Result<Rung, String> {
 /// Runs `diffsvg ladder`.
 pub fn run(a: Args) -> Result<()> {
     let mut job = LadderJob::new(a.seconds, a.downscale).with_views(a.test_every, a.seed);
+    job = job.with_test_list(a.test_list.clone());
     job.rungs = a.rungs.clone();
     job.voxel.iters = a.voxel_iters;
     job.voxel.res = a.voxel_res;

@@ -110,6 +110,16 @@ impl LadderJob {
         }
     }
 
+    /// Holds out the views named in `list` in every job, instead of every N-th
+    /// ([`Loading::test_list`](crate::volume::dataset::Loading::test_list)).
+    pub fn with_test_list(mut self, list: Option<std::path::PathBuf>) -> LadderJob {
+        self.voxel.test_list = list.clone();
+        self.splat.test_list = list.clone();
+        self.ngp.test_list = list.clone();
+        self.nerf.test_list = list;
+        self
+    }
+
     /// Sets the held-out views and the seed of every job.
     pub fn with_views(mut self, test_every: Option<usize>, seed: u64) -> LadderJob {
         self.voxel.test_every = test_every;

@@ -260,10 +260,14 @@ fn ladder_trains_every_representation_and_writes_the_table() {
     assert_eq!(md.lines().filter(|l| l.starts_with("| ")).count(), 5);
 
     let bad = dir.join("bad");
+    let list = dir.join("test.txt");
+    std::fs::write(&list, "test/r_0.png\n").unwrap();
     for args in [
         vec!["--seconds", "0"],
         vec!["--seconds", "1", "--rungs", "voxel,mesh"],
         vec!["--seconds", "1", "--downscale", "0"],
+        // A NeRF-synthetic folder has its own test views: a list is refused.
+        vec!["--seconds", "1", "--test-list", s(&list)],
     ] {
         let mut a = vec!["ladder", "--scene", s(&scene), "-o", s(&bad)];
         a.extend(args);
