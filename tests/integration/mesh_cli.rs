@@ -399,6 +399,12 @@ fn held_out_psnr(stdout: &str) -> (f64, f64) {
     (nums[0], nums[1])
 }
 
+/// The last line of `stdout`, as JSON (`view --json`'s summary).
+fn last_json(stdout: &[u8]) -> serde_json::Value {
+    let text = String::from_utf8_lossy(stdout);
+    serde_json::from_str(text.trim().lines().last().unwrap()).unwrap()
+}
+
 #[test]
 fn view_renders_a_mesh_from_a_dataset_s_cameras_and_an_orbit() {
     let d = scratch("mesh_view");
@@ -424,13 +430,7 @@ fn view_renders_a_mesh_from_a_dataset_s_cameras_and_an_orbit() {
     // Its own renders: only the photos' 8-bit rounding differs.
     let (r, out) = view(&obj, "same", &["--orbit", "2"]);
     assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
-    let last = String::from_utf8_lossy(&r.stdout)
-        .trim()
-        .lines()
-        .last()
-        .unwrap()
-        .to_string();
-    let v: serde_json::Value = serde_json::from_str(&last).unwrap();
+    let v = last_json(&r.stdout);
     assert_eq!(v["views"], 2);
     assert!(v["psnr"].as_f64().unwrap() > 45.0, "{v}");
     for f in [
@@ -447,13 +447,7 @@ fn view_renders_a_mesh_from_a_dataset_s_cameras_and_an_orbit() {
     let moved = d.join("moved.obj");
     diffsvg::mesh::write_obj(&m, &moved).unwrap();
     let (r, _) = view(&moved, "moved", &[]);
-    let last = String::from_utf8_lossy(&r.stdout)
-        .trim()
-        .lines()
-        .last()
-        .unwrap()
-        .to_string();
-    let v: serde_json::Value = serde_json::from_str(&last).unwrap();
+    let v = last_json(&r.stdout);
     assert!(v["psnr"].as_f64().unwrap() < 30.0, "{v}");
     // Depth images are not drawn for meshes: one line, nothing written.
     let (r, out) = view(&obj, "depth", &["--depth"]);
