@@ -47,8 +47,11 @@
 //! a side leaves a sliver).
 //!
 //! **Which rows.** Before walking any edge, the item's danger boxes (found once per item)
-//! mark the columns of each row where a candidate can be. Only the edges near those cells
-//! are walked; a band without any walks none.
+//! mark the columns of each row where a candidate can be. Only the flagged cells of each
+//! edge are walked (and the cells beyond the box's right and bottom lines beside them); a
+//! band without any walks none. A forward pass leaves out the cells that are candidates
+//! only for a neighbour's piece on a grid line: they hold two windings, and only their
+//! gradient needs the portions.
 //!
 //! **Off by default** ([`RenderOptions::exact_overlaps`](super::RenderOptions)): on, the
 //! bundled drawings whose paths do overlap themselves (a self-crossing stroke, a star,
@@ -163,6 +166,48 @@ impl Flags {
             let lo = (w * 64).max(i0) - w * 64;
             let hi = ((w + 1) * 64 - 1).min(i1) - w * 64;
             *word |= (u64::MAX >> (63 - hi)) & (u64::MAX << lo);
+        }
+    }
+
+    /// Calls `f(i0, i1)` for each run of consecutive flagged box columns `i0..=i1` of row
+    /// `r` that reaches device columns `c0..=c1`, left to right.
+    fn runs(&self, r: usize, c0: f64, c1: f64, f: &mut impl FnMut(usize, usize)) {
+        let rg = self.range[r];
+        if rg.0 > c1 || c0 > rg.1 {
+            return;
+        }
+        let (i0, i1) = self.span(c0.max(rg.0), c1.min(rg.1));
+        let row = &self.bits[r * self.words..(r + 1) * self.words];
+        let (mut i, hi) = (i0, i1);
+        while i <= hi {
+            // The next flagged column at or after `i`.
+            let w = i / 64;
+            let rest = row[w] & (u64::MAX << (i % 64));
+            if rest == 0 {
+                i = (w + 1) * 64;
+                continue;
+            }
+            let start = w * 64 + rest.trailing_zeros() as usize;
+            if start > hi {
+                break;
+            }
+            // The first unflagged column after it.
+            let mut end = start;
+            loop {
+                let w = end / 64;
+                let unset = !row[w] & (u64::MAX << (end % 64));
+                if unset != 0 {
+                    end = w * 64 + unset.trailing_zeros() as usize;
+                    break;
+                }
+                end = (w + 1) * 64;
+                if end >= self.cols {
+                    break;
+                }
+            }
+            let end = end.min(hi + 1);
+            f(start, end - 1);
+            i = end;
         }
     }
 
@@ -336,7 +381,6 @@ impl Overlaps {
         let (state, touched) = (&mut self.state, &mut self.touched);
         let all = &mut self.all;
         all.clear();
-        let walk_box = [bx[0], bx[1], bx[2] + 1.0, bx[3] + 1.0];
         item.for_each_edge_near(bx[1], bx[3], |ia, ib| {
             let (p, q) = (item.pts[ia], item.pts[ib]);
             // Only the rows where a candidate can be (every edge touching them).
@@ -345,13 +389,10 @@ impl Overlaps {
                 floor_f64(p[0].min(q[0])) - 1.0,
                 floor_f64(p[0].max(q[0])) + 1.0,
             );
-            if !(r0..=r1).any(|r| near_flag(r, c0, c1)) {
-                return;
-            }
             let bits = dir_bits(q[0] - p[0], q[1] - p[1]);
             let on_v = p[0] == q[0] && p[0] == floor_f64(p[0]);
             let on_h = p[1] == q[1] && p[1] == floor_f64(p[1]);
-            walk(p, q, walk_box, &mut |col, row, ta, tb| {
+            let mut visit = |col: usize, row: usize, ta: f64, tb: f64| {
                 let piece = |slot: usize, beyond: bool| Piece {
                     slot: slot as u32,
                     a: ia as u32,
@@ -361,11 +402,6 @@ impl Overlaps {
                     half: false,
                     beyond,
                 };
-                // The cell (or for a piece beyond, the cell inside beside it) flagged.
-                let fc = x0 + col.min(cols - 1) as f64;
-                if !near_flag(row.min(rows - 1), fc, fc) {
-                    return;
-                }
                 if col == cols || row == rows {
                     // Beyond the box: only a piece on the line, for the cell inside.
                     if col == cols && row < rows && on_v && col > 0 {
@@ -416,13 +452,32 @@ impl Overlaps {
                 } else {
                     s.inner = true;
                 }
-            });
+            };
+            // Only the flagged cells of those rows are walked (and the cells beyond the
+            // box's right and bottom lines beside them).
+            for r in r0..=r1 {
+                flagged.runs(r, c0, c1, &mut |a, b| {
+                    let sub = [
+                        x0 + a as f64,
+                        y0 + r as f64,
+                        x0 + b as f64 + if b + 1 == cols { 2.0 } else { 1.0 },
+                        y0 + r as f64 + if r + 1 == rows { 2.0 } else { 1.0 },
+                    ];
+                    walk(p, q, sub, &mut |col, row, ta, tb| {
+                        visit(col + a, row + r, ta, tb)
+                    });
+                });
+            }
         });
         let found = &mut self.found;
         found.clear();
         for &k in touched.iter() {
             let s = &state[k as usize];
-            if (s.candidate || (s.on_line && s.inner)) && s.count as usize <= SAMPLED_PIECES {
+            // A cell that is a candidate only for a neighbour's piece on a grid line holds
+            // two windings: only its gradient needs it.
+            if (s.candidate || (portions && s.on_line && s.inner))
+                && s.count as usize <= SAMPLED_PIECES
+            {
                 found.push(k);
             }
         }
