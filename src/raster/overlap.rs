@@ -544,9 +544,12 @@ impl Overlaps {
     /// item's danger boxes ([`Item::danger`], [`danger_boxes`](super::tangles::danger_boxes)).
     /// Returns whether any cell is flagged.
     fn flag_rows(&mut self, item: &Item, bx: [f64; 4], rows: usize) -> bool {
+        let (rlo, rhi) = (bx[1], bx[3] - 1.0);
+        if item.danger.near_rows(rlo, rhi).next().is_none() {
+            return false;
+        }
         let flags = &mut self.flags;
         flags.reset(bx[0], (bx[2] - bx[0]) as usize, rows);
-        let (rlo, rhi) = (bx[1], bx[3] - 1.0);
         let mut any = false;
         for c in item.danger.near_rows(rlo, rhi) {
             let (a, b) = (c[1].max(rlo), c[3].min(rhi));

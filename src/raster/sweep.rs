@@ -62,27 +62,28 @@ pub(crate) fn overlapping_pairs(
     // About √n strips, each a box height at least; one when the boxes would be copied
     // into too many.
     let mut strips = ((n as f64).sqrt() as usize).clamp(1, 1024);
-    let mut height = (yhi - ylo) / strips as f64;
-    let strip_of = |y: f64, strips: usize, height: f64| -> usize {
+    // Strips per unit of y (a product, not a quotient, in the loops below).
+    let mut per = strips as f64 / (yhi - ylo);
+    let strip_of = |y: f64, strips: usize, per: f64| -> usize {
         if strips == 1 {
             0
         } else {
-            (((y - ylo) / height) as usize).min(strips - 1)
+            (((y - ylo) * per) as usize).min(strips - 1)
         }
     };
-    if !(height > 0.0) {
+    if !(per > 0.0 && per.is_finite()) {
         strips = 1;
     } else {
         let copies: usize = boxes
             .iter()
-            .map(|b| strip_of(b[3], strips, height) - strip_of(b[1], strips, height) + 1)
+            .map(|b| strip_of(b[3], strips, per) - strip_of(b[1], strips, per) + 1)
             .sum();
         if copies > 16 * n {
             strips = 1;
         }
     }
     if strips == 1 {
-        height = 1.0;
+        per = 1.0;
     }
     // Counting sort into strips.
     let Scratch {
@@ -93,7 +94,7 @@ pub(crate) fn overlapping_pairs(
     starts.clear();
     starts.resize(strips + 1, 0);
     for b in boxes {
-        for s in strip_of(b[1], strips, height)..=strip_of(b[3], strips, height) {
+        for s in strip_of(b[1], strips, per)..=strip_of(b[3], strips, per) {
             starts[s + 1] += 1;
         }
     }
@@ -105,7 +106,7 @@ pub(crate) fn overlapping_pairs(
     next.clear();
     next.extend_from_slice(&starts[..strips]);
     for (i, b) in boxes.iter().enumerate() {
-        for s in strip_of(b[1], strips, height)..=strip_of(b[3], strips, height) {
+        for s in strip_of(b[1], strips, per)..=strip_of(b[3], strips, per) {
             order[next[s] as usize] = i as u32;
             next[s] += 1;
         }
@@ -131,7 +132,7 @@ pub(crate) fn overlapping_pairs(
                     continue;
                 }
                 // Reported in the strip of the top of the common y range only.
-                if strips > 1 && strip_of(bi[1].max(bj[1]), strips, height) != s {
+                if strips > 1 && strip_of(bi[1].max(bj[1]), strips, per) != s {
                     continue;
                 }
                 if !f(i.min(j), i.max(j)) {

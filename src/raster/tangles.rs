@@ -48,6 +48,10 @@ use crate::scene::Point;
 /// apart keep apart).
 pub(crate) const BOX_EDGES: usize = 4;
 
+/// Edges per block of a chain, whose box lets [`Rings::tangled`] skip the edges of two
+/// chains that are far apart in x.
+const CHAIN_BLOCK: usize = 8;
+
 /// Box comparisons at most (edge runs, then rings), before the plane is one box.
 const BUDGET: usize = 1 << 16;
 
@@ -175,6 +179,41 @@ fn overlap(a: [f64; 4], b: [f64; 4]) -> bool {
     a[0] <= b[2] && b[0] <= a[2] && a[1] <= b[3] && b[1] <= a[3]
 }
 
+/// Calls `visit(i, j)` for every pair of spans `i < la` of one sequence and `j < lb` of
+/// another that share a point, each span given by `a(i)`/`b(j)` as its first and last point
+/// in the order of `(y, x)` ([`before`]); each sequence ascends, one span ending where the
+/// next starts. A merge: the span that ends first moves on (when both end at one point,
+/// the next span of `b` starts there too and meets the current one of `a`).
+fn spans_meeting(
+    la: usize,
+    lb: usize,
+    a: impl Fn(usize) -> (Point, Point),
+    b: impl Fn(usize) -> (Point, Point),
+    mut visit: impl FnMut(usize, usize),
+) {
+    let (mut i, mut j) = (0, 0);
+    while i < la && j < lb {
+        let ((loa, hia), (lob, hib)) = (a(i), b(j));
+        if before(hia, lob) {
+            i += 1;
+        } else if before(hib, loa) {
+            j += 1;
+        } else {
+            visit(i, j);
+            if before(hia, hib) {
+                i += 1;
+            } else if before(hib, hia) {
+                j += 1;
+            } else {
+                if j + 1 < lb {
+                    visit(i, j + 1);
+                }
+                i += 1;
+            }
+        }
+    }
+}
+
 /// Whether `a` comes before `b` in the order of `(y, x)`.
 #[inline]
 fn before(a: Point, b: Point) -> bool {
@@ -288,18 +327,30 @@ impl Rings {
     /// close together or too many edge pairs to test.
     fn tangled(&self) -> Option<Vec<bool>> {
         let m = self.pts.len();
-        // Chains: their edges back to back in `order`, ascending.
+        // Edges chain after chain, ascending: their indices and their first and last ends.
         let mut order: Vec<u32> = Vec::with_capacity(m);
-        // `(first in order, edges, ascending along the ring)`.
-        let mut chains: Vec<(usize, usize, bool)> = Vec::new();
+        let mut lo: Vec<Point> = Vec::with_capacity(m);
+        let mut hi: Vec<Point> = Vec::with_capacity(m);
+        // Blocks of up to `CHAIN_BLOCK` consecutive edges of a chain: their `order` range,
+        // their first and last ends, and their box.
+        let mut blocks: Vec<(usize, usize, Point, Point, [f64; 4])> = Vec::new();
+        // Chains: their range of `blocks`, and their box.
+        let mut chains: Vec<(usize, usize)> = Vec::new();
         let mut boxes: Vec<[f64; 4]> = Vec::new();
-        // Whether each edge ascends.
         let up: Vec<bool> = (0..m)
             .map(|e| {
                 let (a, b) = self.edge(e);
                 before(a, b)
             })
             .collect();
+        let join = |a: [f64; 4], c: [f64; 4]| {
+            [
+                a[0].min(c[0]),
+                a[1].min(c[1]),
+                a[2].max(c[2]),
+                a[3].max(c[3]),
+            ]
+        };
         for &(s, n) in &self.rings {
             let up = &up[s..s + n];
             // Chains start where the direction changes (anywhere when it never does).
@@ -307,7 +358,7 @@ impl Rings {
                 .find(|&k| up[k] != up[if k == 0 { n - 1 } else { k - 1 }])
                 .unwrap_or(0);
             let at = |j: usize| {
-                if start + j >= n {
+                s + if start + j >= n {
                     start + j - n
                 } else {
                     start + j
@@ -315,77 +366,67 @@ impl Rings {
             };
             let mut k = 0;
             while k < n {
-                let dir = up[at(k)];
-                let len = (k + 1..n).find(|&j| up[at(j)] != dir).unwrap_or(n) - k;
+                let dir = up[at(k) - s];
+                let len = (k + 1..n).find(|&j| up[at(j) - s] != dir).unwrap_or(n) - k;
                 let first = order.len();
-                let edge = |j: usize| (s + at(j)) as u32;
-                if dir {
-                    order.extend((k..k + len).map(edge));
-                } else {
-                    order.extend((k..k + len).rev().map(edge));
+                for j in 0..len {
+                    let e = at(if dir { k + j } else { k + len - 1 - j });
+                    let (a, b) = self.edge(e);
+                    order.push(e as u32);
+                    lo.push(if dir { a } else { b });
+                    hi.push(if dir { b } else { a });
                 }
-                let bx = order[first..]
-                    .iter()
-                    .fold(self.boxes[order[first] as usize], |a, &e| {
-                        let c = self.boxes[e as usize];
-                        [
-                            a[0].min(c[0]),
-                            a[1].min(c[1]),
-                            a[2].max(c[2]),
-                            a[3].max(c[3]),
-                        ]
-                    });
-                chains.push((first, len, dir));
-                boxes.push(bx);
+                let b0 = blocks.len();
+                for f in (first..first + len).step_by(CHAIN_BLOCK) {
+                    let t = (f + CHAIN_BLOCK).min(first + len);
+                    let bx = order[f + 1..t]
+                        .iter()
+                        .fold(self.boxes[order[f] as usize], |a, &e| {
+                            join(a, self.boxes[e as usize])
+                        });
+                    blocks.push((f, t, lo[f], hi[t - 1], bx));
+                }
+                chains.push((b0, blocks.len()));
+                boxes.push(
+                    blocks[b0 + 1..]
+                        .iter()
+                        .fold(blocks[b0].4, |a, b| join(a, b.4)),
+                );
                 k += len;
             }
         }
         let mut tangled = vec![false; m];
         let mut work = 0usize;
-        let test = |ea: u32, eb: u32, tangled: &mut [bool]| {
-            let (ea, eb) = (ea as usize, eb as usize);
-            if overlap(self.boxes[ea], self.boxes[eb]) && self.meet(ea, eb) {
-                tangled[ea] = true;
-                tangled[eb] = true;
-            }
-        };
-        // An edge's ends, first and last in the order.
-        let ends = |e: u32, up: bool| {
-            let (a, b) = self.edge(e as usize);
-            if up { (a, b) } else { (b, a) }
-        };
         let mut scratch = sweep::Scratch::default();
         let end = sweep::overlapping_pairs(&boxes, BUDGET, &mut scratch, |i, j| {
-            let ((fa, la, ua), (fb, lb, ub)) = (chains[i], chains[j]);
-            let (ca, cb) = (&order[fa..fa + la], &order[fb..fb + lb]);
-            // Skip the edges that end before the other chain starts.
-            let first = |c: &[u32], up: bool, from: Point| {
-                c.partition_point(|&e| before(ends(e, up).1, from))
-            };
-            let mut i = first(ca, ua, ends(cb[0], ub).0);
-            let mut j = first(cb, ub, ends(ca[0], ua).0);
-            while i < la && j < lb {
-                let ((loa, hia), (lob, hib)) = (ends(ca[i], ua), ends(cb[j], ub));
-                if before(hia, lob) {
-                    i += 1;
-                } else if before(hib, loa) {
-                    j += 1;
-                } else {
-                    work += 1;
-                    test(ca[i], cb[j], &mut tangled);
-                    if before(hia, hib) {
-                        i += 1;
-                    } else if before(hib, hia) {
-                        j += 1;
-                    } else {
-                        // Both end at one point, where the next edge of `b` starts.
-                        if j + 1 < lb {
-                            test(ca[i], cb[j + 1], &mut tangled);
-                        }
-                        i += 1;
+            let ((a0, a1), (b0, b1)) = (chains[i], chains[j]);
+            let (ba, bb) = (&blocks[a0..a1], &blocks[b0..b1]);
+            spans_meeting(
+                ba.len(),
+                bb.len(),
+                |i| (ba[i].2, ba[i].3),
+                |j| (bb[j].2, bb[j].3),
+                |i, j| {
+                    let ((fa, ta, _, _, xa), (fb, tb, _, _, xb)) = (ba[i], bb[j]);
+                    if !overlap(xa, xb) {
+                        return;
                     }
-                }
-            }
+                    spans_meeting(
+                        ta - fa,
+                        tb - fb,
+                        |i| (lo[fa + i], hi[fa + i]),
+                        |j| (lo[fb + j], hi[fb + j]),
+                        |i, j| {
+                            work += 1;
+                            let (ea, eb) = (order[fa + i] as usize, order[fb + j] as usize);
+                            if overlap(self.boxes[ea], self.boxes[eb]) && self.meet(ea, eb) {
+                                tangled[ea] = true;
+                                tangled[eb] = true;
+                            }
+                        },
+                    );
+                },
+            );
             work <= BUDGET * 16
         });
         (end == sweep::Pairs::All).then_some(tangled)
@@ -566,9 +607,9 @@ impl Rings {
 /// Edges bucketed by horizontal bands of rows, for winding numbers at points.
 struct RowIndex {
     y0: f64,
-    /// Band height (a power of two, at least 1), chosen so that no more than about
-    /// eight entries per edge are made.
-    height: f64,
+    /// Bands per unit of y: the inverse of the band height (a power of two, at least 1),
+    /// chosen so that no more than about eight entries per edge are made.
+    per: f64,
     /// Edge indices band after band; band `k` is `edges[starts[k]..starts[k + 1]]`.
     starts: Vec<u32>,
     edges: Vec<u32>,
@@ -586,24 +627,30 @@ impl RowIndex {
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), b| {
                 (lo.min(b[1]), hi.max(b[3]))
             });
-        let mut height = 1.0f64;
-        let band = |y: f64, h: f64| ((y - y0) / h) as usize;
+        // Bands per unit of y: a power of two, so products are exact quotients.
+        let mut per = 1.0f64;
+        let band = |y: f64, per: f64| ((y - y0) * per) as usize;
         loop {
-            let bands = band(y1, height) + 1;
+            let bands = band(y1, per) + 1;
             let entries: usize = rs
                 .boxes
                 .iter()
-                .map(|b| band(b[3], height) - band(b[1], height) + 1)
+                .map(|b| band(b[3], per) - band(b[1], per) + 1)
                 .sum();
             if bands <= 8 * m + 8 && entries <= 8 * m + 8 {
                 break;
             }
-            height *= 2.0;
+            per *= 0.5;
         }
-        let bands = band(y1, height) + 1;
+        let spans: Vec<(usize, usize)> = rs
+            .boxes
+            .iter()
+            .map(|b| (band(b[1], per), band(b[3], per)))
+            .collect();
+        let bands = band(y1, per) + 1;
         let mut starts = vec![0u32; bands + 1];
-        for b in &rs.boxes {
-            for k in band(b[1], height)..=band(b[3], height) {
+        for &(k0, k1) in &spans {
+            for k in k0..=k1 {
                 starts[k + 1] += 1;
             }
         }
@@ -612,15 +659,15 @@ impl RowIndex {
         }
         let mut next = starts.clone();
         let mut edges = vec![0u32; starts[bands] as usize];
-        for (e, b) in rs.boxes.iter().enumerate() {
-            for k in band(b[1], height)..=band(b[3], height) {
+        for (e, &(k0, k1)) in spans.iter().enumerate() {
+            for k in k0..=k1 {
                 edges[next[k] as usize] = e as u32;
                 next[k] += 1;
             }
         }
         Some(RowIndex {
             y0,
-            height,
+            per,
             starts,
             edges,
         })
@@ -630,7 +677,7 @@ impl RowIndex {
     /// y) of every edge but `skip`, which passes through `x`; `work` counts the edges
     /// looked at.
     fn winding(&self, rs: &Rings, x: Point, skip: usize, work: &mut usize) -> i64 {
-        let k = (((x[1] - self.y0) / self.height) as usize).min(self.starts.len() - 2);
+        let k = (((x[1] - self.y0) * self.per) as usize).min(self.starts.len() - 2);
         let list = &self.edges[self.starts[k] as usize..self.starts[k + 1] as usize];
         *work += list.len();
         list.iter().map(|&e| rs.crossing(e as usize, x, skip)).sum()
@@ -788,6 +835,19 @@ pub(crate) mod tests {
             let mut pts: Vec<Point> = Vec::new();
             let mut spans = Vec::new();
             for _ in 0..1 + rng.below(3) {
+                if case % 3 == 0 {
+                    // Long chains (many blocks): polygons, some snapped to half pixels.
+                    let c = [rng.range(2.0, 6.0), rng.range(2.0, 6.0)];
+                    let r = rng.range(1.0, 4.0);
+                    let ring = polygon(c, r, 20 + rng.below(60), rng.below(2) == 0);
+                    let snap = rng.below(2) == 0;
+                    spans.push((pts.len(), ring.len()));
+                    pts.extend(ring.iter().map(|q| match snap {
+                        true => q.map(|v| (2.0 * v).round() / 2.0),
+                        false => *q,
+                    }));
+                    continue;
+                }
                 let n = 2 + rng.below(11);
                 spans.push((pts.len(), n));
                 for _ in 0..n {
