@@ -905,7 +905,8 @@ def recon_voxel(scene, output, *, res: int = 128, iters: int = 3000, batch: int 
                 downscale: int = 1, degree: int = 2, bound: Optional[float] = None,
                 step: float = 0.5, tv_density: Optional[float] = None,
                 tv_sh: Optional[float] = None, sparsity: Optional[float] = None,
-                seed: int = 0, eval_every: int = 0, refine_poses: bool = False,
+                seed: int = 0, eval_every: int = 0, test_every: Optional[int] = None,
+                test_list=None, refine_poses: bool = False,
                 perturb_poses: Optional[Tuple[float, float]] = None,
                 progress: Progress = None) -> ReconInfo:
     """Fits a sparse voxel grid of density and spherical-harmonic color (Plenoxels) to
@@ -919,7 +920,8 @@ def recon_voxel(scene, output, *, res: int = 128, iters: int = 3000, batch: int 
     runs after every iteration with ``iteration``, ``loss``, ``psnr`` (batch, dB),
     ``rays_per_second``, ``res``, ``allocated``, ``seconds`` and ``test_psnr`` (``None``
     unless this iteration evaluated the test views, every ``eval_every``); returning
-    ``False`` stops, and the model so far is written.
+    ``False`` stops, and the model so far is written. ``test_every`` and ``test_list``
+    choose the test views of instant-ngp and COLMAP folders, as for :func:`recon_splat`.
 
     Returns a dict: ``output``, ``iterations``, ``stopped``, ``seconds`` (training),
     ``load_seconds``, ``test_psnr`` (mean over the test views, dB; ``None`` without any),
@@ -938,8 +940,9 @@ def recon_voxel(scene, output, *, res: int = 128, iters: int = 3000, batch: int 
         os.fspath(scene), os.fspath(output), _whole(res, "res"), _whole(iters, "iters", _U64),
         _whole(batch, "batch", _U64), _whole(downscale, "downscale"), _whole(degree, "degree"),
         bound, step, tv_density, tv_sh, sparsity, _whole(seed, "seed", _U64),
-        _whole(eval_every, "eval_every", _U64), bool(refine_poses), _pair(perturb_poses),
-        progress)
+        _whole(eval_every, "eval_every", _U64),
+        _whole_or_none(test_every, "test_every", _U64), _path_or_none(test_list),
+        bool(refine_poses), _pair(perturb_poses), progress)
 
 
 def recon_splat(scene, output, *, iters: int = 5000, downscale: int = 1,
@@ -1038,12 +1041,15 @@ def recon_nerf(scene, output, *, iters: int = 2000, seconds: float = 0.0, batch:
 
 
 def view(model, scene=None, *, split: str = "test", orbit: int = 0, elevation: float = 30.0,
-         downscale: int = 1, step: float = 0.5, depth: bool = False) -> Views:
+         downscale: int = 1, step: float = 0.5, depth: bool = False,
+         test_every: Optional[int] = None, test_list=None) -> Views:
     """Renders a trained model (``.vox`` or Gaussian ``.ply``, told apart by its header)
     as ``diffsvg view`` does, into arrays: from the cameras of the dataset ``scene``'s
     ``split`` views ("test" or "train"), and from ``orbit`` new cameras around the model
     (a circle raised by ``elevation`` degrees; for real photos, the arc their cameras
-    span). ``step``: sample spacing in voxels (voxel models).
+    span). ``step``: sample spacing in voxels (voxel models). ``test_every`` and
+    ``test_list`` choose the test views of instant-ngp and COLMAP folders as the training
+    run did (as for :func:`recon_splat`).
 
     Returns a dict: ``views``, a list of ``(name, rendering, photo)``, and ``orbit``, a
     list of renderings; each an ``(h, w, 3)`` ``float32`` array of linear RGB, unclamped.
@@ -1056,4 +1062,6 @@ def view(model, scene=None, *, split: str = "test", orbit: int = 0, elevation: f
         raise TypeError(f"depth must be True or False, got {depth!r}")
     return _native.view(os.fspath(model), None if scene is None else os.fspath(scene),
                         split, _whole(orbit, "orbit", _U64), elevation,
-                        _whole(downscale, "downscale"), step, depth)
+                        _whole(downscale, "downscale"), step, depth,
+                        _whole_or_none(test_every, "test_every", _U64),
+                        _path_or_none(test_list))

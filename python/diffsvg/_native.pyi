@@ -153,6 +153,8 @@ def recon_voxel(scene: str | PathLike[str], output: str | PathLike[str], res: in
                 bound: Optional[float] = None, step: float = 0.5,
                 tv_density: Optional[float] = None, tv_sh: Optional[float] = None,
                 sparsity: Optional[float] = None, seed: int = 0, eval_every: int = 0,
+                test_every: Optional[int] = None,
+                test_list: Optional[str | PathLike[str]] = None,
                 refine_poses: bool = False,
                 perturb_poses: Optional[Tuple[float, float]] = None,
                 progress: Progress = None) -> ReconInfo: ...
@@ -183,4 +185,5 @@ def recon_nerf(scene: str | PathLike[str], output: str | PathLike[str], iters: i
                progress: Progress = None) -> ReconInfo: ...
 def view(model: str | PathLike[str], scene: Optional[str | PathLike[str]] = None,
          split: str = "test", orbit: int = 0, elevation: float = 30.0, downscale: int = 1,
-         step: float = 0.5, depth: bool = False) -> Views: ...
+         step: float = 0.5, depth: bool = False, test_every: Optional[int] = None,
+         test_list: Optional[str | PathLike[str]] = None) -> Views: ...

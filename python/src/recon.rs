@@ -67,7 +67,7 @@ fn summary<'py>(
 #[pyfunction]
 #[pyo3(signature = (scene, output, res=128, iters=3000, batch=8192, downscale=1, degree=2,
     bound=None, step=0.5, tv_density=None, tv_sh=None, sparsity=None, seed=0, eval_every=0,
-    refine_poses=false, perturb_poses=None, progress=None))]
+    test_every=None, test_list=None, refine_poses=false, perturb_poses=None, progress=None))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn recon_voxel<'py>(
     py: Python<'py>,
@@ -85,6 +85,8 @@ pub(crate) fn recon_voxel<'py>(
     sparsity: Option<f32>,
     seed: u64,
     eval_every: usize,
+    test_every: Option<usize>,
+    test_list: Option<PathBuf>,
     refine_poses: bool,
     perturb_poses: Option<(f32, f32)>,
     progress: Option<Py<PyAny>>,
@@ -103,8 +105,8 @@ pub(crate) fn recon_voxel<'py>(
         sparsity,
         seed,
         eval_every,
-        test_every: None,
-        test_list: None,
+        test_every,
+        test_list,
         refine_poses,
         perturb_poses: perturb_poses.map(|(d, u)| [d, u]),
     };
@@ -431,10 +433,12 @@ fn set_pose_error(
 /// `(h, w, 3)` renderings. With `depth`, also `depth` and `orbit_depth`: per view (and per
 /// orbit camera) a dict of `expected` and `median` `(h, w)` `float32` depth images (world
 /// units along the viewing axis, as `diffsvg view --depth` writes them; Gaussian and voxel
-/// models only). The GIL is released while it renders.
+/// models only). `test_every` and `test_list` choose an instant-ngp or COLMAP folder's
+/// held-out views as `recon` did (`diffsvg view --test-every/--test-list`). The GIL is
+/// released while it renders.
 #[pyfunction]
 #[pyo3(signature = (model, scene=None, split="test", orbit=0, elevation=30.0, downscale=1,
-    step=0.5, depth=false))]
+    step=0.5, depth=false, test_every=None, test_list=None))]
 #[allow(clippy::too_many_arguments, clippy::type_complexity)]
 pub(crate) fn view<'py>(
     py: Python<'py>,
@@ -446,6 +450,8 @@ pub(crate) fn view<'py>(
     downscale: u32,
     step: f32,
     depth: bool,
+    test_every: Option<usize>,
+    test_list: Option<PathBuf>,
 ) -> PyResult<Bound<'py, PyDict>> {
     use diffsvg::volume::view::{Model, Split, check_downscale, orbit_cameras};
     use numpy::PyArrayMethods as _;
@@ -469,7 +475,8 @@ pub(crate) fn view<'py>(
                     Some(d) => {
                         let loading = diffsvg::volume::dataset::Loading {
                             downscale,
-                            ..Default::default()
+                            test_every,
+                            test_list: test_list.clone(),
                         };
                         Some(m.load_dataset(d, &loading)?.0)
                     }

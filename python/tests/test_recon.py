@@ -85,8 +85,9 @@ def test_recon_splat_equals_the_cli_and_stops(tmp_path):
     assert (tmp_path / "stop.ply").exists()
 
 
-def test_recon_splat_test_list_is_the_cli_s(tmp_path):
-    # The ball as an instant-ngp folder (one transforms.json), its test views listed.
+def ngp_ball(tmp_path):
+    """The ball as an instant-ngp folder (one transforms.json), and a file listing two of
+    its views as the test views."""
     scene = write_scene(tmp_path / "ball")
     frames = []
     for split in ["train", "test"]:
@@ -96,6 +97,11 @@ def test_recon_splat_test_list_is_the_cli_s(tmp_path):
     (scene / "transforms.json").write_text(json.dumps({"camera_angle_x": 0.7, "frames": frames}))
     held = tmp_path / "held.txt"
     held.write_text("test/r_0\n./test/r_1\n")
+    return scene, held
+
+
+def test_recon_splat_test_list_is_the_cli_s(tmp_path):
+    scene, held = ngp_ball(tmp_path)
     info = diffsvg.recon_splat(scene, tmp_path / "py.ply", iters=20, initial=100,
                                test_list=held)
     cli = cli_summary("recon", "splat", "--scene", scene, "-o", tmp_path / "cli.ply",
@@ -110,6 +116,24 @@ def test_recon_splat_test_list_is_the_cli_s(tmp_path):
     with pytest.raises(diffsvg.DiffsvgError, match="transforms_test.json"):
         diffsvg.recon_splat(write_scene(tmp_path / "synthetic"), tmp_path / "bad.ply",
                             iters=2, test_list=held)
+
+
+def test_recon_voxel_and_view_take_the_test_list_as_the_cli(tmp_path):
+    scene, held = ngp_ball(tmp_path)
+    info = diffsvg.recon_voxel(scene, tmp_path / "py.vox", res=16, iters=30, batch=256,
+                               test_list=held)
+    cli = cli_summary("recon", "voxel", "--scene", scene, "-o", tmp_path / "cli.vox",
+                      "--res", "16", "--iters", "30", "--batch", "256", "--test-list", held)
+    assert (tmp_path / "py.vox").read_bytes() == (tmp_path / "cli.vox").read_bytes()
+    assert info["test_psnr"] == cli["test_psnr"]
+    every = diffsvg.recon_voxel(scene, tmp_path / "every.vox", res=16, iters=30, batch=256)
+    assert every["test_psnr"] != info["test_psnr"]
+    listed = diffsvg.view(tmp_path / "py.vox", scene, test_list=held)["views"]
+    assert sorted(name for name, _, _ in listed) == ["test/r_0", "test/r_1"]
+    halves = diffsvg.view(tmp_path / "py.vox", scene, test_every=2)["views"]
+    assert len(halves) != len(listed) and len(halves) > 0
+    with pytest.raises(diffsvg.DiffsvgError, match="test_every|test-every|test_list|test-list"):
+        diffsvg.view(tmp_path / "py.vox", scene, test_every=2, test_list=held)
 
 
 @pytest.mark.parametrize("kind", ["ngp", "nerf"])
