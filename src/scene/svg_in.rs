@@ -1550,6 +1550,11 @@ fn recognize_primitive(p: &usvg::Path, out: &mut Path, t: &Affine, frame: &Affin
         else {
             return;
         };
+        // `rel` is the identity's linear part but for rounding when the shape is drawn
+        // in the frame itself: no turn (which SVG out would write as a `rotate(0 …)`).
+        if prim.angle.abs() <= 1e-9 {
+            prim.angle = 0.0;
+        }
         let l = [frame[0], frame[1], frame[2], frame[3]];
         if let Some(s) = &mut stroke {
             // The stroke's frame relative to the group's, a similarity there (recognize
