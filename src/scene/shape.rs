@@ -9,7 +9,10 @@
 //!
 //! # Conventions
 //!
-//! * Device pixels, y down (as every coordinate of a [`Scene`](super::Scene)).
+//! * Device pixels, y down (as every coordinate of a [`Scene`](super::Scene)); under a
+//!   general affine group transform, the group's frame instead, the outline mapped by
+//!   the primitive's [`frame`](Primitive::frame) (module
+//!   [`transform`](super::transform)).
 //! * `angle` rotates the shape about its center, in radians; positive turns the x axis
 //!   toward the y axis (clockwise on screen). SVG out writes it as
 //!   `transform="rotate(degrees cx cy)"`.
@@ -881,52 +884,65 @@ mod tests {
         assert!((skewed.frame[2] - k).abs() < 1e-6, "{:?}", skewed.frame);
     }
 
+    /// `prim.chain` of a linear function of the outline's points against central
+    /// differences of every parameter and every entry of the frame.
+    fn assert_chain_matches_differences(prim: &Primitive) {
+        let n = prim.outline().0.len();
+        let a: Vec<f64> = (0..2 * n)
+            .map(|i| ((i * 37 % 19) as f64 - 9.0) / 7.0)
+            .collect();
+        let f = |p: &Primitive| -> f64 {
+            let pts = p.outline().0;
+            pts.iter()
+                .flat_map(|q| [q[0], q[1]])
+                .zip(&a)
+                .map(|(x, y)| x * y)
+                .sum()
+        };
+        let mut g = vec![0.0; prim.slot_count()];
+        let g_frame = prim.chain(&a, &mut g);
+        // The change `nudge(q, h)` makes, against `got`.
+        let check = |what: String, got: f64, nudge: &dyn Fn(&mut Primitive, f64)| {
+            let h = 1e-5;
+            let at = |h: f64| {
+                let mut q = prim.clone();
+                nudge(&mut q, h);
+                f(&q)
+            };
+            let num = (at(h) - at(-h)) / (2.0 * h);
+            assert!(
+                (num - got).abs() < 1e-6 * (1.0 + num.abs()),
+                "{prim:?} {what}: {got} vs {num}"
+            );
+        };
+        for j in 0..prim.slot_count() {
+            check(format!("slot {j}"), g[j], &|q, h| {
+                let mut k = 0;
+                q.walk(0, Part::Point, &mut |_, _, _, v| {
+                    if k == j {
+                        *v += h;
+                    }
+                    k += 1;
+                });
+            });
+        }
+        for j in 0..4 {
+            check(format!("frame {j}"), g_frame[j], &|q, h| q.frame[j] += h);
+        }
+    }
+
     #[test]
     fn outline_gradient_chains_to_every_parameter() {
         // A linear function of the outline's points; its gradient through `chain` must
         // match central differences of the parameters.
-        let prims = [
+        for prim in [
             Primitive::circle([10.0, 12.0], 5.0),
             Primitive::ellipse([10.0, 12.0], 5.0, 3.0, 0.4),
             Primitive::rect(3.0, 4.0, 12.0, 7.0, None, -0.3),
             Primitive::rect(3.0, 4.0, 12.0, 7.0, Some([2.0, 1.5]), 0.7),
             Primitive::rect(3.0, 4.0, 12.0, 7.0, Some([2.0, 1.5]), 0.0),
-        ];
-        for prim in prims {
-            let n = prim.outline().0.len();
-            let a: Vec<f64> = (0..2 * n)
-                .map(|i| ((i * 37 % 19) as f64 - 9.0) / 7.0)
-                .collect();
-            let f = |p: &Primitive| -> f64 {
-                let pts = p.outline().0;
-                pts.iter()
-                    .flat_map(|q| [q[0], q[1]])
-                    .zip(&a)
-                    .map(|(x, y)| x * y)
-                    .sum()
-            };
-            let mut g = vec![0.0; prim.slot_count()];
-            prim.chain(&a, &mut g);
-            for j in 0..prim.slot_count() {
-                let nudge = |h: f64| {
-                    let mut q = prim.clone();
-                    let mut k = 0;
-                    q.walk(0, Part::Point, &mut |_, _, _, v| {
-                        if k == j {
-                            *v += h;
-                        }
-                        k += 1;
-                    });
-                    f(&q)
-                };
-                let h = 1e-5;
-                let num = (nudge(h) - nudge(-h)) / (2.0 * h);
-                assert!(
-                    (num - g[j]).abs() < 1e-6 * (1.0 + num.abs()),
-                    "{prim:?} slot {j}: {} vs {num}",
-                    g[j]
-                );
-            }
+        ] {
+            assert_chain_matches_differences(&prim);
         }
     }
 
@@ -953,50 +969,7 @@ mod tests {
                 ];
                 assert!((q[0] - want[0]).abs() < 1e-12 && (q[1] - want[1]).abs() < 1e-12);
             }
-            let n = plain.len();
-            let a: Vec<f64> = (0..2 * n)
-                .map(|i| ((i * 37 % 19) as f64 - 9.0) / 7.0)
-                .collect();
-            let f = |p: &Primitive| -> f64 {
-                let pts = p.outline().0;
-                pts.iter()
-                    .flat_map(|q| [q[0], q[1]])
-                    .zip(&a)
-                    .map(|(x, y)| x * y)
-                    .sum()
-            };
-            let mut g = vec![0.0; prim.slot_count()];
-            let g_frame = prim.chain(&a, &mut g);
-            let h = 1e-5;
-            let check = |num: f64, got: f64, what: &str| {
-                assert!(
-                    (num - got).abs() < 1e-6 * (1.0 + num.abs()),
-                    "{prim:?} {what}: {got} vs {num}"
-                );
-            };
-            for j in 0..prim.slot_count() {
-                let nudge = |h: f64| {
-                    let mut q = prim.clone();
-                    let mut k = 0;
-                    q.walk(0, Part::Point, &mut |_, _, _, v| {
-                        if k == j {
-                            *v += h;
-                        }
-                        k += 1;
-                    });
-                    f(&q)
-                };
-                check((nudge(h) - nudge(-h)) / (2.0 * h), g[j], &format!("slot {j}"));
-            }
-            for j in 0..4 {
-                let nudge = |h: f64| {
-                    let mut q = prim.clone();
-                    q.frame[j] += h;
-                    f(&q)
-                };
-                let num = (nudge(h) - nudge(-h)) / (2.0 * h);
-                check(num, g_frame[j], &format!("frame {j}"));
-            }
+            assert_chain_matches_differences(&prim);
         }
     }
 

@@ -1227,8 +1227,7 @@ fn bake(nodes: &mut Vec<Node>) {
             Node::Path(mut p) => {
                 // A primitive held in a general map's frame is no primitive in device
                 // space: its outline, baked.
-                if p
-                    .primitive
+                if p.primitive
                     .as_ref()
                     .is_some_and(|q| q.frame != FRAME_IDENTITY)
                 {
@@ -1546,8 +1545,7 @@ fn recognize_primitive(p: &usvg::Path, out: &mut Path, t: &Affine, frame: &Affin
         let Some(rel) = invert(frame).map(|i| concat(&i, t)) else {
             return;
         };
-        let Some(mut prim) = super::Primitive::recognize(&local, &rel, out.stroke.is_some())
-        else {
+        let Some(mut prim) = super::Primitive::recognize(&local, &rel, out.stroke.is_some()) else {
             return;
         };
         // `rel` is the identity's linear part but for rounding when the shape is drawn
