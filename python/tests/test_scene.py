@@ -275,6 +275,47 @@ def test_group_transforms_are_arrays(tmp_path):
     assert float(g["transforms"][0]["angle"]) > 0  # turning back lowers the loss
 
 
+SKEWED_SHAPES = """<svg xmlns="http://www.w3.org/2000/svg" width="64" height="48">
+  <g id="leaning" transform="matrix(1.1 0.15 0.4 0.75 -3 5)">
+    <circle id="dot" cx="12" cy="14" r="6" fill="#27ae60"/>
+    <rect id="card" x="14" y="26" width="20" height="12" rx="3" fill="#c0392b"/>
+  </g>
+</svg>"""
+
+
+def test_skewed_groups_keep_circles_as_circles(tmp_path):
+    # Issue 30: a circle under a skewed group keeps its center and radius (in the
+    # group's frame, as written), and the group its six slots.
+    s = diffsvg.Scene.from_svg(SKEWED_SHAPES)
+    st = s.structure()
+    assert [(t["id"], t["len"]) for t in st["transforms"]] == [("leaning", 6)]
+    assert [sh["primitive"]["kind"] for sh in st["shapes"]] == ["circle", "rect"]
+    a = s.arrays(np.float64)
+    dot = a["shapes"][0]
+    assert set(dot) >= {"center", "radius"} and "points" not in dot
+    assert np.allclose(dot["center"], [12, 14], atol=1e-5)
+    assert abs(float(dot["radius"]) - 6) < 1e-5
+    t = a["transforms"][0]
+    assert t["translate"].shape == (2,) and t["linear"].shape == (4,)
+    assert np.allclose(t["linear"], [1.1, 0.15, 0.4, 0.75], atol=1e-6)
+    # The radius grows in the group's frame; saved, it stays a <circle> in the group.
+    dot["radius"] = dot["radius"] + 1
+    s.set_arrays(a)
+    s.save(tmp_path / "skewed.svg")
+    text = (tmp_path / "skewed.svg").read_text()
+    assert '<g id="leaning" transform="matrix(' in text and '<circle id="dot"' in text
+    back = diffsvg.Scene.load(tmp_path / "skewed.svg").arrays(np.float64)
+    assert abs(float(back["shapes"][0]["radius"]) - 7) < 1e-4
+    assert np.allclose(back["transforms"][0]["linear"], t["linear"], atol=1e-5)
+    # Gradients reach the radius and the six slots.
+    target = diffsvg.render(diffsvg.Scene.from_svg(SKEWED_SHAPES))
+    _, d = diffsvg.loss(diffsvg.render(s), target, grad=True)
+    g = diffsvg.render_backward(s, d)
+    assert float(g["shapes"][0]["radius"]) > 0  # shrinking back lowers the loss
+    assert np.all(np.isfinite(g["transforms"][0]["linear"]))
+    assert np.any(g["transforms"][0]["linear"] != 0)
+
+
 def test_colors_survive_to_svg_exactly():
     s = diffsvg.Scene.load(SAMPLES / "10-logo.svg")
     p = s.params()

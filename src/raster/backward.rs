@@ -349,8 +349,9 @@ pub fn render_and_backward_fused(scene: &Scene, p: &Prepared, loss: &dyn BandLos
 }
 
 /// Gradients beside the parameter vector's, by slot, for `chain_gradient`: a stroke
-/// frame's `∂L/∂[a, b, c, d]` (then two zeros) at its width slot, and a radial gradient
-/// paint's transform terms (`PaintEval::transform_len`) at its first slot.
+/// frame's `∂L/∂[a, b, c, d]` (then two zeros) at its width slot, a primitive's
+/// ([`Primitive::frame`](crate::scene::Primitive::frame)) at its first slot, and a radial
+/// gradient paint's transform terms (`PaintEval::transform_len`) at its first slot.
 pub(crate) type SideGrads = Vec<(usize, [f64; 6])>;
 
 /// The result of [`backward_bands`].
@@ -519,7 +520,14 @@ fn backward_bands(
             );
         }
         match (&path.primitive, outline_g) {
-            (Some(prim), Some(g)) => prim.chain(&g, &mut block.g[off.points - block.base..]),
+            (Some(prim), Some(g)) => {
+                let [a, b, c, d] = prim.chain(&g, &mut block.g[off.points - block.base..]);
+                // A primitive's frame (a general group transform's map), keyed by its
+                // first slot.
+                if want_frames {
+                    maps.push((off.points, [a, b, c, d, 0.0, 0.0]));
+                }
+            }
             _ => join_closing_gradients(path, off.points - block.base, block.g),
         }
         if want_frames && off.stroke.is_some() && frame_g != [0.0; 4] {

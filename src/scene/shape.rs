@@ -9,7 +9,10 @@
 //!
 //! # Conventions
 //!
-//! * Device pixels, y down (as every coordinate of a [`Scene`](super::Scene)).
+//! * Device pixels, y down (as every coordinate of a [`Scene`](super::Scene)); under a
+//!   general affine group transform, the group's frame instead, the outline mapped by
+//!   the primitive's [`frame`](Primitive::frame) (module
+//!   [`transform`](super::transform)).
 //! * `angle` rotates the shape about its center, in radians; positive turns the x axis
 //!   toward the y axis (clockwise on screen). SVG out writes it as
 //!   `transform="rotate(degrees cx cy)"`.
@@ -98,6 +101,13 @@ pub struct Primitive {
     pub angle: f64,
     /// Cubic segments per quarter turn of an arc, ≥ 1 (fixed while fitting).
     pub arcs_per_quarter: u32,
+    /// The linear map `[a, b, c, d]` (SVG's `matrix` order) the outline takes about the
+    /// center: every outline point is `center + frame·R(angle)·o`. The identity but under
+    /// a general affine group transform ([`transform`](super::transform)), which keeps
+    /// the primitive in its own frame and maps its outline (a circle's becomes an ellipse
+    /// on the canvas, a rectangle's a parallelogram); sizes are then in that frame's units.
+    /// No parameter: the group's slots move it.
+    pub frame: [f64; 4],
 }
 
 /// What a parameter slot of a primitive is.
@@ -122,6 +132,7 @@ impl Primitive {
             shape: Shape::Circle { center, r },
             angle: 0.0,
             arcs_per_quarter: arcs_per_quarter(r),
+            frame: FRAME_IDENTITY,
         }
     }
 
@@ -131,6 +142,7 @@ impl Primitive {
             shape: Shape::Ellipse { center, rx, ry },
             angle,
             arcs_per_quarter: arcs_per_quarter(rx.max(ry)),
+            frame: FRAME_IDENTITY,
         }
     }
 
@@ -155,6 +167,7 @@ impl Primitive {
             },
             angle,
             arcs_per_quarter: arcs_per_quarter(r),
+            frame: FRAME_IDENTITY,
         }
     }
 
@@ -305,10 +318,19 @@ impl Primitive {
         let c = self.center();
         let [cs, sn] = self.rotation();
         let sharp_rect = matches!(self.shape, Shape::Rect { radii: None, .. });
+        let f = self.frame;
+        let framed = f != FRAME_IDENTITY;
         let points = coefs
             .iter()
             .map(|k| {
                 let o = [k[0] * w + k[1] * rx, k[2] * h + k[3] * ry];
+                if framed {
+                    let v = [cs * o[0] - sn * o[1], sn * o[0] + cs * o[1]];
+                    return [
+                        c[0] + f[0] * v[0] + f[2] * v[1],
+                        c[1] + f[1] * v[0] + f[3] * v[1],
+                    ];
+                }
                 if self.angle == 0.0 {
                     if let (true, Shape::Rect { x, y, .. }) = (sharp_rect, &self.shape) {
                         // The corners exactly where the rectangle's numbers put them.
@@ -415,11 +437,15 @@ impl Primitive {
     }
 
     /// Chains the gradient of the outline's points (`x, y` per point of
-    /// [`outline`](Self::outline)) to the parameters, added into `out` (slot order).
-    pub(crate) fn chain(&self, point_grad: &[f64], out: &mut [f64]) {
+    /// [`outline`](Self::outline)) to the parameters, added into `out` (slot order), and
+    /// returns the gradient of the [`frame`](Self::frame) (`∂L/∂[a, b, c, d]`), which a
+    /// general group transform carries onto its slots.
+    pub(crate) fn chain(&self, point_grad: &[f64], out: &mut [f64]) -> [f64; 4] {
         let (coefs, _) = self.template();
         let [w, h, rx, ry] = self.sizes();
         let [cs, sn] = self.rotation();
+        let f = self.frame;
+        let mut g_frame = [0.0; 4];
         // Rotating a local vector, and its derivative in the angle.
         let rot = |v: [f64; 2]| [cs * v[0] - sn * v[1], sn * v[0] + cs * v[1]];
         let drot = |v: [f64; 2]| [-sn * v[0] - cs * v[1], cs * v[0] - sn * v[1]];
@@ -434,13 +460,22 @@ impl Primitive {
             }
             d[0] += g[0];
             d[1] += g[1];
-            // A rectangle's center moves by half its growth.
+            // A rectangle's center moves by half its growth (device pixels: the corner
+            // slots are the center's less half the sides, whatever the frame).
             let half = if rect { 0.5 } else { 0.0 };
-            d[2] += dot(g, rot([k[0], 0.0])) + half * g[0];
-            d[3] += dot(g, rot([0.0, k[2]])) + half * g[1];
+            let o = [k[0] * w + k[1] * rx, k[2] * h + k[3] * ry];
+            let v = rot(o);
+            g_frame[0] += g[0] * v[0];
+            g_frame[1] += g[1] * v[0];
+            g_frame[2] += g[0] * v[1];
+            g_frame[3] += g[1] * v[1];
+            let half_g = [half * g[0], half * g[1]];
+            // The offsets go through the frame: their gradient is `frameᵀ·g`.
+            let g = [f[0] * g[0] + f[1] * g[1], f[2] * g[0] + f[3] * g[1]];
+            d[2] += dot(g, rot([k[0], 0.0])) + half_g[0];
+            d[3] += dot(g, rot([0.0, k[2]])) + half_g[1];
             d[4] += dot(g, rot([k[1], 0.0]));
             d[5] += dot(g, rot([0.0, k[3]]));
-            let o = [k[0] * w + k[1] * rx, k[2] * h + k[3] * ry];
             d[6] += dot(g, drot(o));
         }
         match self.shape {
@@ -466,6 +501,7 @@ impl Primitive {
                 }
             }
         }
+        g_frame
     }
 
     /// Clamps the parameters into their valid range: positions within
@@ -529,6 +565,20 @@ impl Primitive {
                 *v *= s;
             }
         }
+    }
+
+    /// Maps by `x ↦ k·x + d` (`k > 0`): the sizes scale, or, with a
+    /// [`frame`](Self::frame) other than the identity, the frame does (as a stroke's
+    /// frame: a general group transform's localized content keeps the identity frame).
+    pub(crate) fn scale_translate(&mut self, k: f64, d: Point) {
+        let c = self.center();
+        if self.frame == FRAME_IDENTITY {
+            self.scale(k);
+        } else {
+            self.frame = self.frame.map(|v| v * k);
+        }
+        let now = self.center();
+        self.translate([k * c[0] + d[0] - now[0], k * c[1] + d[1] - now[1]]);
     }
 
     /// The primitive that `local`, a shape's outline in its own user space as usvg builds
@@ -595,6 +645,7 @@ impl Primitive {
             shape,
             angle,
             arcs_per_quarter: m,
+            frame: FRAME_IDENTITY,
         })
     }
 }
@@ -638,6 +689,7 @@ fn recognize_local(local: &Path) -> Option<Primitive> {
             shape,
             angle: 0.0,
             arcs_per_quarter: m as u32,
+            frame: FRAME_IDENTITY,
         })
     } else if kinds.len() == 3 && kinds.iter().all(|k| *k == SegmentKind::Line) {
         Some(Primitive {
@@ -650,6 +702,7 @@ fn recognize_local(local: &Path) -> Option<Primitive> {
             },
             angle: 0.0,
             arcs_per_quarter: 1,
+            frame: FRAME_IDENTITY,
         })
     } else if kinds.len() % 4 == 0 && kinds.len() >= 8 && kinds[0] == SegmentKind::Line {
         let m = kinds.len() / 4 - 1;
@@ -672,6 +725,7 @@ fn recognize_local(local: &Path) -> Option<Primitive> {
             },
             angle: 0.0,
             arcs_per_quarter: m as u32,
+            frame: FRAME_IDENTITY,
         })
     } else {
         None
@@ -819,55 +873,103 @@ mod tests {
         // A large circle has more arcs per quarter (kurbo's tolerance), kept.
         assert_eq!(got[5].as_ref().unwrap().arcs_per_quarter, 2);
         assert_eq!(shape(6), None, "a triangle is a path");
-        assert_eq!(shape(7), None, "a skewed circle is a path");
+        // A skewed circle is one in its own frame, its outline mapped (issue 30).
+        let skewed = got[7].as_ref().unwrap();
+        let k = 20f64.to_radians().tan();
+        let Shape::Circle { center, r } = skewed.shape else {
+            panic!("{skewed:?}")
+        };
+        assert!((center[0] - 50.0 - 250.0 * k).abs() < 1e-4 && (center[1] - 250.0).abs() < 1e-4);
+        assert!((r - 10.0).abs() < 1e-5, "{r}");
+        assert!((skewed.frame[2] - k).abs() < 1e-6, "{:?}", skewed.frame);
+    }
+
+    /// `prim.chain` of a linear function of the outline's points against central
+    /// differences of every parameter and every entry of the frame.
+    fn assert_chain_matches_differences(prim: &Primitive) {
+        let n = prim.outline().0.len();
+        let a: Vec<f64> = (0..2 * n)
+            .map(|i| ((i * 37 % 19) as f64 - 9.0) / 7.0)
+            .collect();
+        let f = |p: &Primitive| -> f64 {
+            let pts = p.outline().0;
+            pts.iter()
+                .flat_map(|q| [q[0], q[1]])
+                .zip(&a)
+                .map(|(x, y)| x * y)
+                .sum()
+        };
+        let mut g = vec![0.0; prim.slot_count()];
+        let g_frame = prim.chain(&a, &mut g);
+        // The change `nudge(q, h)` makes, against `got`.
+        let check = |what: String, got: f64, nudge: &dyn Fn(&mut Primitive, f64)| {
+            let h = 1e-5;
+            let at = |h: f64| {
+                let mut q = prim.clone();
+                nudge(&mut q, h);
+                f(&q)
+            };
+            let num = (at(h) - at(-h)) / (2.0 * h);
+            assert!(
+                (num - got).abs() < 1e-6 * (1.0 + num.abs()),
+                "{prim:?} {what}: {got} vs {num}"
+            );
+        };
+        for j in 0..prim.slot_count() {
+            check(format!("slot {j}"), g[j], &|q, h| {
+                let mut k = 0;
+                q.walk(0, Part::Point, &mut |_, _, _, v| {
+                    if k == j {
+                        *v += h;
+                    }
+                    k += 1;
+                });
+            });
+        }
+        for j in 0..4 {
+            check(format!("frame {j}"), g_frame[j], &|q, h| q.frame[j] += h);
+        }
     }
 
     #[test]
     fn outline_gradient_chains_to_every_parameter() {
         // A linear function of the outline's points; its gradient through `chain` must
         // match central differences of the parameters.
-        let prims = [
+        for prim in [
             Primitive::circle([10.0, 12.0], 5.0),
             Primitive::ellipse([10.0, 12.0], 5.0, 3.0, 0.4),
             Primitive::rect(3.0, 4.0, 12.0, 7.0, None, -0.3),
             Primitive::rect(3.0, 4.0, 12.0, 7.0, Some([2.0, 1.5]), 0.7),
             Primitive::rect(3.0, 4.0, 12.0, 7.0, Some([2.0, 1.5]), 0.0),
-        ];
-        for prim in prims {
-            let n = prim.outline().0.len();
-            let a: Vec<f64> = (0..2 * n)
-                .map(|i| ((i * 37 % 19) as f64 - 9.0) / 7.0)
-                .collect();
-            let f = |p: &Primitive| -> f64 {
-                let pts = p.outline().0;
-                pts.iter()
-                    .flat_map(|q| [q[0], q[1]])
-                    .zip(&a)
-                    .map(|(x, y)| x * y)
-                    .sum()
-            };
-            let mut g = vec![0.0; prim.slot_count()];
-            prim.chain(&a, &mut g);
-            for j in 0..prim.slot_count() {
-                let nudge = |h: f64| {
-                    let mut q = prim.clone();
-                    let mut k = 0;
-                    q.walk(0, Part::Point, &mut |_, _, _, v| {
-                        if k == j {
-                            *v += h;
-                        }
-                        k += 1;
-                    });
-                    f(&q)
-                };
-                let h = 1e-5;
-                let num = (nudge(h) - nudge(-h)) / (2.0 * h);
-                assert!(
-                    (num - g[j]).abs() < 1e-6 * (1.0 + num.abs()),
-                    "{prim:?} slot {j}: {} vs {num}",
-                    g[j]
-                );
+        ] {
+            assert_chain_matches_differences(&prim);
+        }
+    }
+
+    /// Under a frame (a general map's linear part) the outline is the frame's image of
+    /// the unframed one about the center, and `chain` gives the parameters' and the
+    /// frame's gradients, against central differences.
+    #[test]
+    fn framed_outlines_chain_to_parameters_and_frame() {
+        let frame = [1.1, 0.15, 0.4, 0.75];
+        for mut prim in [
+            Primitive::circle([10.0, 12.0], 5.0),
+            Primitive::ellipse([10.0, 12.0], 5.0, 3.0, 0.4),
+            Primitive::rect(3.0, 4.0, 12.0, 7.0, None, 0.0),
+            Primitive::rect(3.0, 4.0, 12.0, 7.0, Some([2.0, 1.5]), 0.7),
+        ] {
+            let plain = prim.outline().0;
+            prim.frame = frame;
+            let c = prim.center();
+            for (q, p) in prim.outline().0.iter().zip(&plain) {
+                let v = [p[0] - c[0], p[1] - c[1]];
+                let want = [
+                    c[0] + frame[0] * v[0] + frame[2] * v[1],
+                    c[1] + frame[1] * v[0] + frame[3] * v[1],
+                ];
+                assert!((q[0] - want[0]).abs() < 1e-12 && (q[1] - want[1]).abs() < 1e-12);
             }
+            assert_chain_matches_differences(&prim);
         }
     }
 

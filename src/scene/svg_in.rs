@@ -968,6 +968,12 @@ fn convert_group_children(g: &usvg::Group, ctx: &Ctx, t: &Affine, role: Role) ->
                         bake(&mut children);
                         None
                     }
+                    // The same under a general map above: the turn goes into the angle, the
+                    // outline keeps the outer frame's map.
+                    Some((r, true)) if turned_about_center(&r, &gt, &children) => {
+                        turn_into_angle(&mut children, &r, &outer);
+                        None
+                    }
                     Some((r, general)) if super::transform::movable(&children, general) => {
                         // Rotate and scale about the content's center in the local frame
                         // (which a change of the transform leaves where it is, so a file
@@ -1139,6 +1145,28 @@ fn turned_about_center(r: &Affine, gt: &Affine, nodes: &[Node]) -> bool {
     (a.hypot(b) - 1.0).abs() <= 1e-6 && (moved[0] - c[0]).hypot(moved[1] - c[1]) <= tol
 }
 
+/// The one primitive of `nodes` (which [`turned_about_center`] accepted), its frame
+/// `lin(gt)` (`gt = outer · r`, `r` a rotation about its center), held in the frame
+/// `outer` maps to device pixels instead: the frame `lin(outer)`, the turn added to its
+/// angle.
+fn turn_into_angle(nodes: &mut [Node], r: &Affine, outer: &Affine) {
+    let [Node::Path(p)] = nodes else {
+        return;
+    };
+    if let Some(q) = &mut p.primitive {
+        q.frame = [outer[0], outer[1], outer[2], outer[3]];
+        q.angle += r[1].atan2(r[0]);
+        // The stroke, drawn in the same frame, keeps its width (the turn keeps its pen).
+        if let Some(s) = &mut p.stroke
+            && s.frame != FRAME_IDENTITY
+        {
+            s.frame = q.frame;
+            s.normalize_frame();
+        }
+        p.sync_primitive();
+    }
+}
+
 /// The center of the bounds of every control point under `nodes` (device pixels) mapped
 /// by `to_local`.
 fn local_center(nodes: &[Node], to_local: &Affine) -> Option<Point> {
@@ -1155,8 +1183,21 @@ fn local_center(nodes: &[Node], to_local: &Affine) -> Option<Point> {
         // not change: its bounds from its center and radius instead.
         Some(c) if matches!(c.shape, super::Shape::Circle { .. }) => {
             let [x, y] = apply(to_local, c.center());
-            let r = k * c.radius();
-            add([x - r, y - r, x + r, y + r]);
+            // The circle's image under the linear map `m`: its half extents are the
+            // radius times the rows' lengths.
+            let f = c.frame;
+            let m = [
+                to_local[0] * f[0] + to_local[2] * f[1],
+                to_local[1] * f[0] + to_local[3] * f[1],
+                to_local[0] * f[2] + to_local[2] * f[3],
+                to_local[1] * f[2] + to_local[3] * f[3],
+            ];
+            let (rx, ry) = if f == FRAME_IDENTITY {
+                (k * c.radius(), k * c.radius())
+            } else {
+                (c.radius() * m[0].hypot(m[2]), c.radius() * m[1].hypot(m[3]))
+            };
+            add([x - rx, y - ry, x + rx, y + ry]);
         }
         _ => {
             for q in &p.points {
@@ -1183,7 +1224,17 @@ fn bake(nodes: &mut Vec<Node>) {
                     out.extend(g.children);
                 }
             }
-            p => out.push(p),
+            Node::Path(mut p) => {
+                // A primitive held in a general map's frame is no primitive in device
+                // space: its outline, baked.
+                if p.primitive
+                    .as_ref()
+                    .is_some_and(|q| q.frame != FRAME_IDENTITY)
+                {
+                    p.outline_primitive();
+                }
+                out.push(Node::Path(p));
+            }
         }
     }
     *nodes = out;
@@ -1461,15 +1512,20 @@ fn convert_path(p: &usvg::Path, ctx: &Ctx, t: &Affine, role: Role) -> Result<Opt
         return Ok(None);
     }
     out.stroke_first = p.paint_order() == usvg::PaintOrder::StrokeAndFill;
-    recognize_primitive(p, &mut out, &t);
+    recognize_primitive(p, &mut out, &t, &ctx.frame.get());
     Ok(Some(out))
 }
 
 /// Makes `out` a circle, ellipse or rectangle with its own parameters when its outline is
 /// one (as usvg builds `<circle>`, `<ellipse>` and `<rect>`) under a transform that keeps
-/// it one, and the outline the primitive builds is the one loaded.
-fn recognize_primitive(p: &usvg::Path, out: &mut Path, t: &Affine) {
-    if !out.stroke_in_device_space() {
+/// it one, and the outline the primitive builds is the one loaded. Under a general
+/// affine group transform (`frame`, the map from its frame to device pixels, no
+/// similarity), the transform relative to that frame must keep it one: the primitive is
+/// then held in that frame, its outline mapped ([`Primitive::frame`](super::Primitive::frame)),
+/// and a stroke's pen must be round in that frame (its width then in the frame's units).
+fn recognize_primitive(p: &usvg::Path, out: &mut Path, t: &Affine, frame: &Affine) {
+    let general = GroupTransform::from_affine(frame, [0.0; 2]).is_none();
+    if !general && !out.stroke_in_device_space() {
         return;
     }
     let mut local = Path::new("");
@@ -1484,8 +1540,49 @@ fn recognize_primitive(p: &usvg::Path, out: &mut Path, t: &Affine) {
             _ => return,
         }
     }
-    let Some(prim) = super::Primitive::recognize(&local, t, out.stroke.is_some()) else {
-        return;
+    let mut stroke = out.stroke.clone();
+    let prim = if general {
+        let Some(rel) = invert(frame).map(|i| concat(&i, t)) else {
+            return;
+        };
+        let Some(mut prim) = super::Primitive::recognize(&local, &rel, out.stroke.is_some()) else {
+            return;
+        };
+        // `rel` is the identity's linear part but for rounding when the shape is drawn
+        // in the frame itself: no turn (which SVG out would write as a `rotate(0 …)`).
+        if prim.angle.abs() <= 1e-9 {
+            prim.angle = 0.0;
+        }
+        let l = [frame[0], frame[1], frame[2], frame[3]];
+        if let Some(s) = &mut stroke {
+            // The stroke's frame relative to the group's, a similarity there (recognize
+            // refuses a stroked shape otherwise): its scale goes into the width.
+            let Some(li) = invert(&[l[0], l[1], l[2], l[3], 0.0, 0.0]) else {
+                return;
+            };
+            let f = s.frame;
+            s.frame = [
+                li[0] * f[0] + li[2] * f[1],
+                li[1] * f[0] + li[3] * f[1],
+                li[0] * f[2] + li[2] * f[3],
+                li[1] * f[2] + li[3] * f[3],
+            ];
+            s.normalize_frame();
+            if s.frame != FRAME_IDENTITY {
+                return;
+            }
+            s.frame = l;
+        }
+        let c = apply(frame, prim.center());
+        let now = prim.center();
+        prim.translate([c[0] - now[0], c[1] - now[1]]);
+        prim.frame = l;
+        prim
+    } else {
+        let Some(prim) = super::Primitive::recognize(&local, t, out.stroke.is_some()) else {
+            return;
+        };
+        prim
     };
     let (built, _) = prim.outline();
     let scale = out
@@ -1499,6 +1596,7 @@ fn recognize_primitive(p: &usvg::Path, out: &mut Path, t: &Affine) {
             .all(|(a, b)| (a[0] - b[0]).abs().max((a[1] - b[1]).abs()) <= 1e-6 * scale);
     if same {
         out.primitive = Some(prim);
+        out.stroke = stroke;
         out.sync_primitive();
     }
 }

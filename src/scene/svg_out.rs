@@ -515,7 +515,12 @@ impl Writer {
             .filter(|f| *f != FRAME_IDENTITY);
         // A circle, ellipse or rectangle is written as itself, its rotation as a
         // `rotate` about its center (its paints then in the rotated frame).
-        let primitive = p.primitive.as_ref().filter(|_| frame.is_none());
+        // (One held in a general map's frame outside that map's group, in device space,
+        // is no primitive there: its outline.)
+        let primitive = p
+            .primitive
+            .as_ref()
+            .filter(|q| frame.is_none() && q.frame == FRAME_IDENTITY);
         let (to_local, transform_attr) = match frame {
             None if primitive.is_some_and(|q| q.angle != 0.0) => {
                 let q = primitive.expect("checked");

@@ -101,8 +101,7 @@ pub(crate) fn map_path(p: &mut Path, k: f64, d: Point) {
         *q = add_scaled(d, *q, k);
     }
     if let Some(prim) = &mut p.primitive {
-        prim.scale(k);
-        prim.translate(d);
+        prim.scale_translate(k, d);
         p.sync_primitive();
     }
     if let Some(f) = &mut p.fill {

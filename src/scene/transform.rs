@@ -38,15 +38,22 @@
 //!   circles, ellipses and rectangles included: four slots;
 //! * any other invertible map (a skew, a non-uniform scale, a mirror) as a **general
 //!   affine** one, over paths with solid or gradient paints, filled or stroked (dashed
-//!   too): six slots. A stroke under such a map is drawn as SVG draws it: built
+//!   too), circles, ellipses and rectangles included: six slots. A stroke under such a
+//!   map is drawn as SVG draws it: built
 //!   in the local frame, where its pen is round, and mapped, so its pen is an ellipse on
 //!   the canvas. Its [`frame`](super::Stroke::frame) takes the map's linear part (its
 //!   width and dashes stay, in the frame's units), and the backward pass reports the
 //!   gradient of every stroke frame, which `chain_gradient` carries onto the slots
 //!   (`∂L/∂L = ∂L/∂F · Fₗᵀ` for the device frame `F = L·Fₗ`) and into the frame of a
-//!   nested map. The affine image of a rectangle is no rectangle, so content with a
-//!   primitive keeps such a transform baked (an unstroked rectangle under an axis-aligned
-//!   scale still keeps its own parameters then, [`shape`](super::shape)).
+//!   nested map. A circle, ellipse or rectangle (rounded too) keeps its own parameters
+//!   in the local frame the same way: the affine image of its outline is no such shape on
+//!   the canvas, so its [`frame`](super::Primitive::frame) takes the map's linear part
+//!   (every outline point `center + F·R(angle)·o`, the center mapped, the sizes and angle
+//!   in the frame's units), the backward pass reports the frame's gradient (keyed by the
+//!   primitive's first slot) and `chain_gradient` carries it as a stroke frame's. A
+//!   primitive's own general transform (`<ellipse transform="skewX(20)">`) is such a
+//!   group of one shape; one turned about its own center inside a general map keeps that
+//!   turn as its angle, as under a similarity.
 //!
 //! **Gradient paints** inside either kind: the paint's transform (gradient space →
 //! device) is held in the local frame and mapped forward with the content, as points are;
@@ -72,9 +79,10 @@
 //!
 //! `pivot` (not a parameter) is the center of the content's bounds in the local frame
 //! when the file was read, so that turning or scaling does not also swing the group
-//! across the canvas. A stroke drawn in its group's frame has the identity frame there
-//! (snapped to it when `f32` leaves it off by less than 1e-6), so it is written plainly
-//! inside the group. SVG out writes either kind as `transform="matrix(…)"` (`f32`, as
+//! across the canvas. A stroke or primitive drawn in its group's frame has the identity
+//! frame there (snapped to it when `f32` leaves it off by less than 1e-6), so it is
+//! written plainly inside the group (a primitive as its `<circle>`, `<ellipse>` or
+//! `<rect>`; one left in device space with a frame, its group baked, is a path). SVG out writes either kind as `transform="matrix(…)"` (`f32`, as
 //! it is read), on the `<g>` or, for a shape's own transform, on the shape's element
 //! (when the shape writes no transform of its own: no turned primitive, no stroke
 //! frame), so a written file reads back to the same kinds and slots.
@@ -226,8 +234,8 @@ impl GroupTransform {
         }
     }
 
-    /// (A general map's `scale` and `angle` are those of no similarity: its content holds
-    /// no primitive, and its strokes' frames take its linear part instead.)
+    /// (A general map's `scale` and `angle` are those of no similarity: its strokes' and
+    /// primitives' frames take its linear part instead.)
     fn forward(&self) -> Map {
         Map {
             affine: self.affine(),
@@ -335,13 +343,15 @@ pub(crate) fn movable(nodes: &[Node], general: bool) -> bool {
             p.fill.as_ref().is_none_or(|f| paint_ok(&f.paint))
                 && if general {
                     // A stroke's frame takes the map (its pen, round in the local frame,
-                    // an ellipse on the canvas), dashes included; a primitive under a skew
-                    // is no longer one.
-                    p.stroke.as_ref().is_none_or(|s| paint_ok(&s.paint)) && p.primitive.is_none()
+                    // an ellipse on the canvas), dashes included; so does a primitive's.
+                    p.stroke.as_ref().is_none_or(|s| paint_ok(&s.paint))
                 } else {
                     p.stroke.as_ref().is_none_or(|s| {
                         paint_ok(&s.paint) && s.dash.is_none() && s.frame == super::FRAME_IDENTITY
-                    })
+                    }) && p
+                        .primitive
+                        .as_ref()
+                        .is_none_or(|q| q.frame == super::FRAME_IDENTITY)
                 }
         }
     })
@@ -361,13 +371,20 @@ fn map_nodes(nodes: &mut [Node], m: &Map) {
 fn map_path(p: &mut Path, m: &Map) {
     if let Some(prim) = &mut p.primitive {
         let c = apply(&m.affine, prim.center());
-        prim.scale(m.scale);
+        if m.general || prim.frame != super::FRAME_IDENTITY {
+            // The outline is the map's image: the frame takes its linear part, the
+            // sizes and angle stay (in the frame's units).
+            let l = [m.affine[0], m.affine[1], m.affine[2], m.affine[3]];
+            prim.frame = lin_mul(l, prim.frame);
+        } else {
+            prim.scale(m.scale);
+            // A circle's angle only places its outline's start.
+            if !matches!(prim.shape, Shape::Circle { .. }) {
+                prim.angle += m.angle;
+            }
+        }
         let now = prim.center();
         prim.translate([c[0] - now[0], c[1] - now[1]]);
-        // A circle's angle only places its outline's start.
-        if !matches!(prim.shape, Shape::Circle { .. }) {
-            prim.angle += m.angle;
-        }
         p.sync_primitive();
     } else {
         for q in &mut p.points {
@@ -415,16 +432,24 @@ pub(crate) fn localize(nodes: &mut [Node]) {
 /// stroke drawn in its group's frame, the group's map read in `f32` as the frame was) to
 /// exactly the identity, so that the local stroke is written as it was read.
 fn snap_frames(nodes: &mut [Node]) {
+    let near = |f: &[f64; 4]| {
+        f.iter()
+            .zip(super::FRAME_IDENTITY)
+            .all(|(a, b)| (a - b).abs() <= 1e-6)
+    };
     super::paths_of_mut(nodes, &mut |p| {
-        if let Some(s) = &mut p.stroke {
-            let near = s
-                .frame
-                .iter()
-                .zip(super::FRAME_IDENTITY)
-                .all(|(a, b)| (a - b).abs() <= 1e-6);
-            if near {
-                s.frame = super::FRAME_IDENTITY;
-            }
+        if let Some(s) = &mut p.stroke
+            && near(&s.frame)
+        {
+            s.frame = super::FRAME_IDENTITY;
+        }
+        // A primitive's too (its outline then rebuilt from its own parameters).
+        if let Some(q) = &mut p.primitive
+            && q.frame != super::FRAME_IDENTITY
+            && near(&q.frame)
+        {
+            q.frame = super::FRAME_IDENTITY;
+            p.sync_primitive();
         }
     });
 }
@@ -632,6 +657,14 @@ impl Chain<'_> {
                     chain_frame(s.frame, l, &d_lin, &mut gf, &mut acc);
                     g[..4].copy_from_slice(&gf);
                 }
+                // A primitive's frame, keyed by its first slot, likewise.
+                if let (Some(q), Some(l), Some(g)) =
+                    (&p.primitive, t.linear, self.frames.get_mut(&off.points))
+                {
+                    let mut gf = [g[0], g[1], g[2], g[3]];
+                    chain_frame(q.frame, l, &d_lin, &mut gf, &mut acc);
+                    g[..4].copy_from_slice(&gf);
+                }
                 k += 1;
             });
             for (i, v) in acc.iter().take(t.slot_count()).enumerate() {
@@ -786,20 +819,40 @@ fn chain_path(
     acc: &mut [f64; 6],
 ) {
     if let Some(l) = t.linear {
-        // Points (no primitive: `movable`): `x = L·(v − p) + p + t`. A stroke's width
-        // stays (its frame takes the map: `chain_frame`).
-        for (i, q) in p.points.iter().enumerate() {
-            let at = off.points + 2 * i;
-            let g = [grad[at], grad[at + 1]];
-            let r = [q[0] - t.pivot[0], q[1] - t.pivot[1]];
+        // A position `v` mapped to `x = L·(v − p) + p + t`, with gradient `g` at `x`:
+        // the slots' share, and `Lᵀ·g`. A stroke's width stays (its frame takes the
+        // map: `chain_frame`), as do a primitive's sizes and angle (its frame takes it).
+        let position = |v: Point, g: Point, acc: &mut [f64; 6]| -> Point {
+            let r = [v[0] - t.pivot[0], v[1] - t.pivot[1]];
             acc[0] += g[0];
             acc[1] += g[1];
             acc[2] += g[0] * r[0];
             acc[3] += g[1] * r[0];
             acc[4] += g[0] * r[1];
             acc[5] += g[1] * r[1];
-            grad[at] = l[0] * g[0] + l[1] * g[1];
-            grad[at + 1] = l[2] * g[0] + l[3] * g[1];
+            [l[0] * g[0] + l[1] * g[1], l[2] * g[0] + l[3] * g[1]]
+        };
+        if let Some(prim) = &p.primitive {
+            // The center is mapped; a rectangle's corner slots are the center's less
+            // half the sides (device and local alike), so a side also moves the mapped
+            // corner by `½·(Lᵀ − I)·g` along its axis.
+            let at = off.points;
+            let g = [grad[at], grad[at + 1]];
+            let local = position(prim.center(), g, acc);
+            grad[at] = local[0];
+            grad[at + 1] = local[1];
+            if let Shape::Rect { .. } = prim.shape {
+                let w = prim.size_slots().start;
+                grad[at + w] += 0.5 * (local[0] - g[0]);
+                grad[at + w + 1] += 0.5 * (local[1] - g[1]);
+            }
+            return;
+        }
+        for (i, q) in p.points.iter().enumerate() {
+            let at = off.points + 2 * i;
+            let local = position(*q, [grad[at], grad[at + 1]], acc);
+            grad[at] = local[0];
+            grad[at + 1] = local[1];
         }
         return;
     }
