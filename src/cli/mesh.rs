@@ -15,7 +15,7 @@ use diffsvg::mesh::fit::{
 use diffsvg::mesh::refine::{Displacement, refine};
 use diffsvg::mesh::simplify::{reproject_texture, simplify};
 use diffsvg::mesh::{
-    DirLight, Lighting, Mesh, RenderOptions, View, read_mesh, torus_knot, write_mesh,
+    DirLight, Lighting, Mesh, MipPyramid, RenderOptions, View, read_mesh, torus_knot, write_mesh,
 };
 use diffsvg::metrics::{median, psnr_from_mse};
 use diffsvg::volume::camera::Camera;
@@ -327,6 +327,11 @@ pub struct MeshBenchArgs {
     /// Thread counts.
     #[arg(long, value_delimiter = ',', default_value = "1,2")]
     threads: Vec<usize>,
+    /// Sample the texture from mip levels (trilinear); the pyramid is built once, before
+    /// the timed runs, as a fit step or a render of many views shares it (its build
+    /// time is printed).
+    #[arg(long)]
+    mipmaps: bool,
     /// PyTorch3D's camera-position tutorial rebuilt instead: a generated torus knot of
     /// 2,560 triangles (a teapot's size; the mesh argument is ignored), silhouette loss
     /// (squared alpha difference to the silhouette from another orbit position), one
@@ -369,9 +374,10 @@ fn run_render(a: RenderArgs) -> Result<()> {
     };
     let cams = orbit_cameras(&mesh, a.orbit, a.size, 0.0)?;
     let t = Instant::now();
+    let pyramid = MipPyramid::for_mesh(&mesh, &opts);
     let imgs: Vec<Image> = cams
         .iter()
-        .map(|c| Ok(View::new(&mesh, c, opts)?.render()))
+        .map(|c| Ok(View::with_pyramid(&mesh, c, opts, pyramid.as_ref())?.render()))
         .collect::<diffsvg::Result<_>>()?;
     let ms = t.elapsed().as_secs_f64() * 1e3 / imgs.len() as f64;
     let out = if imgs.len() == 1 {
@@ -739,16 +745,24 @@ fn render_views(
     cams: &[Camera],
     opts: &FitOptions,
 ) -> diffsvg::Result<Vec<(Camera, Image)>> {
+    let pyramid = MipPyramid::for_mesh(mesh, &opts.render);
     cams.iter()
-        .map(|c| Ok((*c, View::new(mesh, c, opts.render)?.render())))
+        .map(|c| {
+            let view = View::with_pyramid(mesh, c, opts.render, pyramid.as_ref())?;
+            Ok((*c, view.render()))
+        })
         .collect()
 }
 
 /// Mean PSNR (dB, of the mean MSE) of `m`'s renders against held-out `(camera, image)`s.
 fn held_out_psnr(m: &Mesh, test: &[(Camera, Image)], opts: &FitOptions) -> diffsvg::Result<f64> {
     let mut e = 0.0;
+    let pyramid = MipPyramid::for_mesh(m, &opts.render);
     for (c, t) in test {
-        e += mse(&View::new(m, c, opts.render)?.render(), t);
+        e += mse(
+            &View::with_pyramid(m, c, opts.render, pyramid.as_ref())?.render(),
+            t,
+        );
     }
     Ok(psnr_from_mse(e / test.len().max(1) as f64))
 }
@@ -912,14 +926,25 @@ pub fn run_bench(a: MeshBenchArgs) -> Result<()> {
     let cam = orbit_cameras(&mesh, 8, a.size, 0.0)?[1];
     let opts = RenderOptions {
         background: Some([1.0; 3]),
+        mipmaps: a.mipmaps,
         ..RenderOptions::default()
     };
+    let t = Instant::now();
+    let pyramid = MipPyramid::for_mesh(&mesh, &opts);
+    let pyramid_ms = t.elapsed().as_secs_f64() * 1e3;
     println!(
-        "{}: {} triangles, {}² (median of {} runs)",
+        "{}: {} triangles, {}² (median of {} runs){}",
         path.display(),
         mesh.triangles.len(),
         a.size,
-        a.runs
+        a.runs,
+        match &pyramid {
+            Some(p) => format!(
+                ", mip levels ({} above the texture) built once in {pyramid_ms:.2} ms",
+                p.len()
+            ),
+            None => String::new(),
+        }
     );
     println!("| threads | forward ms | forward + backward ms |\n|---|---|---|");
     for &n in &a.threads {
@@ -931,14 +956,14 @@ pub fn run_bench(a: MeshBenchArgs) -> Result<()> {
         pool.install(|| -> Result<()> {
             for _ in 0..a.runs + 1 {
                 let t = Instant::now();
-                let img = View::new(&mesh, &cam, opts)?.render();
+                let img = View::with_pyramid(&mesh, &cam, opts, pyramid.as_ref())?.render();
                 let f = t.elapsed().as_secs_f64() * 1e3;
                 let mut d = img.clone();
                 for p in &mut d.data {
                     *p = p.map(|v| v - 0.5);
                 }
                 let t = Instant::now();
-                let view = View::new(&mesh, &cam, opts)?;
+                let view = View::with_pyramid(&mesh, &cam, opts, pyramid.as_ref())?;
                 let img2 = view.render();
                 let g = view.backward(&d, true)?;
                 let b = t.elapsed().as_secs_f64() * 1e3;

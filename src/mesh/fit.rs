@@ -2,7 +2,7 @@
 //! uniform-Laplacian smoothness term: vertex positions and vertex colors (or texels), and
 //! on request the lights, the UVs and a pose correction of each training camera.
 
-use super::render::{Lighting, RenderOptions, View};
+use super::render::{Lighting, MipPyramid, RenderOptions, View};
 use super::{Mesh, icosphere};
 use crate::Image;
 use crate::error::{Error, Result};
@@ -332,13 +332,15 @@ pub fn fit(
         let mut guv = vec![0.0f64; nuv];
         let mut gpose = vec![0.0f64; pose_m.len()];
         let mut err = 0.0;
+        // Mip levels (with `render.mipmaps`): once per texture version, for every view.
+        let pyramid = MipPyramid::for_mesh(mesh, &render);
         for (v, (cam, target)) in views.iter().enumerate() {
             let cam = if fit_poses {
                 pose::apply(cam, &poses[v])
             } else {
                 *cam
             };
-            let view = View::new(mesh, &cam, render)?;
+            let view = View::with_pyramid(mesh, &cam, render, pyramid.as_ref())?;
             let img = view.render();
             if (img.width, img.height) != (target.width, target.height) {
                 return Err(Error::Setting {
