@@ -112,36 +112,45 @@ fn mesh_render_shades_with_lights_and_refuses_bad_ones() {
     assert_fails(&r, "--light", "at most 4", &out);
 }
 
+/// `mesh fit MESH` from a once-subdivided sphere: 3 training and 2 held-out views at
+/// 24², 30 steps, written to `out`, with `extra` flags.
+fn small_fit(
+    mesh: &std::path::Path,
+    out: &std::path::Path,
+    extra: &[&str],
+) -> std::process::Output {
+    let mut args = vec![
+        "mesh",
+        "fit",
+        s(mesh),
+        "--views",
+        "3",
+        "--test-views",
+        "2",
+        "--size",
+        "24",
+        "--iters",
+        "30",
+        "--subdivisions",
+        "1",
+        "--lr-positions",
+        "0.02",
+        "--lr-colors",
+        "0.05",
+        "-o",
+        s(out),
+    ];
+    args.extend_from_slice(extra);
+    diffsvg(&args)
+}
+
 #[test]
 fn mesh_fit_moves_a_sphere_towards_a_generated_mesh_and_writes_an_obj() {
     let d = scratch("mesh_fit");
     let obj = octahedron(&d);
     let out = d.join("fit.obj");
     // One fit, written to `out` (OBJ or glTF by its extension).
-    let run = |out: &std::path::Path| {
-        diffsvg(&[
-            "mesh",
-            "fit",
-            s(&obj),
-            "--views",
-            "3",
-            "--test-views",
-            "2",
-            "--size",
-            "24",
-            "--iters",
-            "30",
-            "--subdivisions",
-            "1",
-            "--lr-positions",
-            "0.02",
-            "--lr-colors",
-            "0.05",
-            "--quiet",
-            "-o",
-            s(out),
-        ])
-    };
+    let run = |out: &std::path::Path| small_fit(&obj, out, &["--quiet"]);
     let r = run(&out);
     let stdout = String::from_utf8_lossy(&r.stdout);
     assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
@@ -190,30 +199,7 @@ fn mesh_fit_logs_held_out_psnr_against_time_and_plots_it() {
     let d = scratch("mesh_fit_log");
     let obj = octahedron(&d);
     let out = d.join("fit.obj");
-    let r = diffsvg(&[
-        "mesh",
-        "fit",
-        s(&obj),
-        "--views",
-        "3",
-        "--test-views",
-        "2",
-        "--size",
-        "24",
-        "--iters",
-        "30",
-        "--subdivisions",
-        "1",
-        "--lr-positions",
-        "0.02",
-        "--lr-colors",
-        "0.05",
-        "--eval-every",
-        "10",
-        "--json",
-        "-o",
-        s(&out),
-    ]);
+    let r = small_fit(&obj, &out, &["--eval-every", "10", "--json"]);
     assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
     let lines = json_lines(&r.stdout);
     let summary = lines.last().unwrap();
@@ -254,7 +240,7 @@ fn mesh_fit_logs_held_out_psnr_against_time_and_plots_it() {
         assert!((t - r.2).abs() < 1e-3, "{log}");
     }
     // The plot, as PNG and SVG.
-    let png = diffsvg::Image::load(&d.join("fit.psnr.png")).unwrap();
+    let png = diffsvg::Image::load(d.join("fit.psnr.png")).unwrap();
     assert!(png.width > 100 && png.height > 100);
     let svg = std::fs::read_to_string(d.join("fit.psnr.svg")).unwrap();
     assert!(svg.contains("<svg") && svg.contains("PSNR"), "{svg}");
