@@ -446,6 +446,9 @@ fn run_fit(a: FitArgs) -> Result<()> {
     } else if !a.reference_lights.is_empty() {
         bail!("--reference-light: only with --fit-lights");
     }
+    if a.scene.is_some() && !a.reference_lights.is_empty() {
+        bail!("--reference-light: only with a reference mesh (photos have their own lights)");
+    }
     let (mut train, test, sphere) = match (&a.reference, &a.scene) {
         (Some(r), _) => {
             let reference = read_mesh(r)?;

@@ -325,6 +325,12 @@ fn mesh_fit_refines_perturbed_poses_and_fits_lights() {
     // Bad flags: one line naming them, no output.
     std::fs::remove_file(&out).unwrap();
     assert_fails(&run(&["--fit-lights"]), "--fit-lights", "--light", &out);
+    assert_fails(
+        &run(&["--reference-light", "0,1,0"]),
+        "--reference-light",
+        "--fit-lights",
+        &out,
+    );
     assert_fails(&run(&["--lr-uvs", "0.1"]), "--lr-uvs", "texture", &out);
     assert_fails(
         &run(&["--refine-poses", "--perturb-poses", "200,0"]),
