@@ -10,7 +10,9 @@
 use std::path::PathBuf;
 
 use diffsvg::Image;
-use diffsvg::mesh::fit::{FitOptions, Step, fit, orbit_cameras};
+use diffsvg::mesh::fit::{FitOptions, Snapshot, Step, fit, orbit_cameras};
+use diffsvg::mesh::refine::{Displacement, refine};
+use diffsvg::mesh::simplify::{reproject_texture, simplify};
 use diffsvg::mesh::{
     DirLight, Lighting, Mesh, RenderOptions, Texture, View, icosphere, read_mesh, write_mesh,
 };
@@ -456,11 +458,14 @@ impl PyMesh {
     /// Fits the positions and colors (vertex colors, or texels when the mesh has a
     /// texture) to `views`, a list of `(camera, target)` with targets premultiplied RGBA
     /// `float32` of each camera's size, in place, as `diffsvg mesh fit` does (Adam,
-    /// smoothness `½ w Σ_edges |p_i − p_j|²`, every view rendered each step). `progress`
-    /// gets `{"iter", "mse"}` each step and stops the fit by returning `False`. Returns
-    /// the final training mean squared error.
+    /// smoothness `½ w Σ_edges |p_i − p_j|²`, every view rendered each step). `lights`,
+    /// `ambient` and `mipmaps` render every view as `render` does (the lights fixed, the
+    /// fitted colors albedo; `mipmaps` shares one pyramid between the views of a step).
+    /// `progress` gets `{"iter", "mse"}` each step and stops the fit by returning
+    /// `False`. Returns the final training mean squared error.
     #[pyo3(signature = (views, iters=200, lr_positions=2e-3, lr_colors=1e-2,
-        smoothness=1e-3, background=Some((1.0, 1.0, 1.0)), cull=true, progress=None))]
+        smoothness=1e-3, background=Some((1.0, 1.0, 1.0)), cull=true, progress=None,
+        lights=None, ambient=None, mipmaps=false))]
     #[allow(clippy::too_many_arguments)]
     fn fit(
         &mut self,
@@ -473,6 +478,9 @@ impl PyMesh {
         background: Option<(f64, f64, f64)>,
         cull: bool,
         progress: Option<Py<PyAny>>,
+        lights: Option<Vec<PyLight>>,
+        ambient: Option<(f64, f64, f64)>,
+        mipmaps: bool,
     ) -> PyResult<f64> {
         let mut vs = Vec::with_capacity(views.len());
         for (k, (c, t)) in views.iter().enumerate() {
@@ -491,12 +499,13 @@ impl PyMesh {
             lr_positions,
             lr_colors,
             smoothness,
-            render: options(background, cull, 1e-3, None, false)?,
+            render: options(background, cull, 1e-3, lighting(lights, ambient)?, mipmaps)?,
+            ..FitOptions::default()
         };
         let mut prog = Progress::new(progress);
         let mut mesh = self.inner.clone();
         let out = py.detach(|| {
-            fit(&mut mesh, &vs, &opts, |s: Step| {
+            fit(&mut mesh, &vs, &opts, |s: Step, _: &Snapshot| {
                 prog.call(|d| {
                     d.set_item("iter", s.iter)?;
                     d.set_item("mse", s.mse)
@@ -504,9 +513,69 @@ impl PyMesh {
             })
         });
         prog.finish()?;
-        let mse = out.map_err(to_py)?;
+        let mse = out.map_err(to_py)?.mse;
         self.inner = mesh;
         Ok(mse)
+    }
+
+    /// The library function behind `diffsvg mesh refine`: every triangle split in four
+    /// `levels` times (UVs and colors interpolated at edge midpoints), then every vertex
+    /// moved along its normal by `displace` times the bounding radius times smooth value
+    /// noise in `[−1, 1]` (`octaves` octaves, the first `frequency` cycles per bounding
+    /// radius, lattice from `seed`); seam copies move together. A new mesh. Counts are
+    /// checked before allocating; `levels` at most 8.
+    #[pyo3(signature = (levels=4, displace=0.03, frequency=16.0, octaves=3, seed=1))]
+    fn refine(
+        &self,
+        py: Python<'_>,
+        levels: u32,
+        displace: f64,
+        frequency: f64,
+        octaves: u32,
+        seed: u64,
+    ) -> PyResult<Self> {
+        if levels > 8 {
+            return Err(bad(format!("levels: {levels} must be at most 8")));
+        }
+        let d = Displacement {
+            amplitude: displace,
+            frequency,
+            octaves,
+            seed,
+        };
+        let m = &self.inner;
+        let out = py.detach(|| refine(m, levels, &d)).map_err(to_py)?;
+        Ok(PyMesh { inner: out })
+    }
+
+    /// The classic simplification behind `diffsvg mesh simplify`: quadric-error edge
+    /// collapses (meshoptimizer) to at most `triangles`, surviving vertices keeping their
+    /// attributes (UV seams collapse only along themselves). With `reference` (a mesh
+    /// with the surface to copy colors from, such as the one simplified) and
+    /// `texture_size`, the result gets a `texture_size`² texture reprojected from it in
+    /// its own UV chart (needs UVs) and loses its vertex colors, as `mesh simplify`'s
+    /// baseline. A new mesh; optimize it further with `fit`.
+    #[pyo3(signature = (triangles, reference=None, texture_size=512))]
+    fn simplify(
+        &self,
+        py: Python<'_>,
+        triangles: usize,
+        reference: Option<PyRef<'_, PyMesh>>,
+        texture_size: u32,
+    ) -> PyResult<Self> {
+        let m = &self.inner;
+        let r = reference.as_ref().map(|r| &r.inner);
+        let out = py
+            .detach(|| -> diffsvg::Result<Mesh> {
+                let mut low = simplify(m, triangles)?;
+                if let Some(r) = r {
+                    low.texture = Some(reproject_texture(&low, r, texture_size)?);
+                    low.colors = None;
+                }
+                Ok(low)
+            })
+            .map_err(to_py)?;
+        Ok(PyMesh { inner: out })
     }
 
     fn __repr__(&self) -> String {

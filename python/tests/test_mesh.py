@@ -249,3 +249,76 @@ def test_mipmaps_read_a_minified_texture_as_the_cli_does(tmp_path):
     spot.texture = t
     an = g["texture"][iy, ix, 0]
     assert abs(fd - an) <= 2e-2 * max(1.0, abs(an)), (an, fd)
+
+
+def test_fit_with_lights_and_mipmaps_as_the_cli():
+    # A lit sphere's colors fitted with the lights fixed: the fitted colors are the
+    # albedo, so the views are matched and the colors come back where the views see them.
+    truth = colored_sphere(2)
+    lights = [((0.3, 0.8, 0.5), (0.9, 0.9, 0.9))]
+    lit = dict(lights=lights, ambient=(0.2, 0.2, 0.2))
+    cams = diffsvg.Camera.orbit(truth, 6, 32)
+    views = [(c, truth.render(c, background=(1.0, 1.0, 1.0), **lit)) for c in cams]
+    m = colored_sphere(2)
+    m.colors = np.full_like(m.colors, 0.5)
+    first = m.fit(views, iters=1, lr_positions=0.0, **lit)
+    final = m.fit(views, iters=80, lr_positions=0.0, lr_colors=0.05, mipmaps=True, **lit)
+    assert final < 0.1 * first, (first, final)
+    # Vertices near the equator (the orbit sees them) facing the light: albedo recovered.
+    p = truth.positions
+    eq = (np.abs(p[:, 1]) < 0.4) & (p @ np.array([0.3, 0.8, 0.5]) / np.sqrt(0.98) > 0.3)
+    assert eq.sum() > 5
+    err = np.abs(m.colors[eq] - truth.colors[eq]).mean()
+    assert err < 0.05, err
+    with pytest.raises(ValueError, match="light"):
+        m.fit(views, iters=1, lights=[((0.0, 0.0, 0.0), (1.0, 1.0, 1.0))])
+
+
+def textured_octahedron(tmp_path):
+    """An octahedron with a UV per vertex and an 8x8 texture (a horizontal ramp)."""
+    tex = np.zeros((8, 8, 4), np.float32)
+    tex[..., :3] = np.linspace(0.0, 1.0, 8, dtype=np.float32)[None, :, None]
+    tex[..., 3] = 1.0
+    diffsvg.save_png(tex, str(tmp_path / "octa.png"))
+    (tmp_path / "octa.mtl").write_text("newmtl t\nKd 1 1 1\nmap_Kd octa.png\n")
+    v = [(1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1)]
+    lines = ["mtllib octa.mtl"] + [f"v {x} {y} {z}" for x, y, z in v]
+    lines += [f"vt {0.5 + 0.4 * x} {0.5 + 0.4 * y + 0.05 * z}" for x, y, z in v]
+    lines.append("usemtl t")
+    for f in [(1, 3, 5), (3, 2, 5), (2, 4, 5), (4, 1, 5), (3, 1, 6), (2, 3, 6), (4, 2, 6),
+              (1, 4, 6)]:
+        lines.append("f " + " ".join(f"{i}/{i}" for i in f))
+    path = tmp_path / "octa.obj"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def test_refine_and_simplify_as_the_cli(tmp_path):
+    path = textured_octahedron(tmp_path)
+    m = diffsvg.Mesh.load(path)
+    assert m.texture.shape == (8, 8, 3)
+    ref = m.refine(levels=3, displace=0.02, seed=3)
+    assert ref.triangles.shape == (8 * 64, 3)
+    assert ref.texture.shape == (8, 8, 3) and ref.uvs is not None
+    # The same mesh as `mesh refine` writes.
+    out = tmp_path / "ref.obj"
+    run_cli("mesh", "refine", path, "--levels", 3, "--displace", 0.02, "--seed", 3, "-o", out)
+    cli = diffsvg.Mesh.load(out)
+    def rows(a):
+        r = np.round(a, 4) + 0.0
+        return np.unique(r, axis=0)
+    assert np.allclose(rows(cli.positions), rows(ref.positions), atol=2e-4)
+    # Another seed moves the surface elsewhere.
+    other = m.refine(levels=3, displace=0.02, seed=4)
+    assert np.abs(other.positions - ref.positions).max() > 1e-3
+    low = ref.simplify(100)
+    assert 50 <= low.triangles.shape[0] <= 100, low
+    textured = ref.simplify(100, reference=ref, texture_size=16)
+    assert textured.texture.shape == (16, 16, 3) and textured.colors is None
+    # The reprojected ramp still runs from dark (u small) to light.
+    t = textured.texture
+    assert t[:, :4].mean() < t[:, -4:].mean()
+    with pytest.raises(ValueError, match="levels"):
+        m.refine(levels=9)
+    with pytest.raises(ValueError, match="triangles"):
+        m.simplify(0)

@@ -9,11 +9,13 @@ use anyhow::{Result, bail};
 use super::progress::{install_interrupt_handler, interrupted, terminal_bar};
 use diffsvg::Image;
 use diffsvg::image_io::{check_output, side_by_side};
-use diffsvg::mesh::fit::{FitOptions, fit, mse, orbit_cameras, sphere_around, sphere_cameras};
+use diffsvg::mesh::fit::{
+    FitOptions, Fitted, fit, mse, orbit_cameras, sphere_around, sphere_cameras,
+};
 use diffsvg::mesh::refine::{Displacement, refine};
 use diffsvg::mesh::simplify::{reproject_texture, simplify};
 use diffsvg::mesh::{
-    DirLight, Lighting, Mesh, RenderOptions, View, read_mesh, torus_knot, write_mesh,
+    DirLight, Lighting, Mesh, MipPyramid, RenderOptions, View, read_mesh, torus_knot, write_mesh,
 };
 use diffsvg::metrics::{median, psnr_from_mse};
 use diffsvg::volume::camera::Camera;
@@ -193,16 +195,52 @@ pub struct FitArgs {
     /// Weight of the edge-length smoothness term.
     #[arg(long, default_value_t = 1e-3)]
     smoothness: f64,
-    /// Output mesh: OBJ (with MTL), or glTF (`.glb`, `.gltf`), by the extension.
+    /// Output mesh: OBJ (with MTL), or glTF (`.glb`, `.gltf`), by the extension. Beside
+    /// it: `.log.csv` (held-out and training PSNR against training seconds) and the plot
+    /// `.psnr.png` / `.psnr.svg`.
     #[arg(short, long)]
     output: PathBuf,
     /// No progress bar.
     #[arg(long)]
     quiet: bool,
-    /// Fixed lights for the reference's and the model's renders (the fitted colors are
-    /// albedo).
+    /// Every this many steps, render the held-out views and log their mean PSNR (the time
+    /// this takes is not counted as training time); always before the first step and at
+    /// the end. 0: only those two.
+    #[arg(long, default_value_t = 10)]
+    eval_every: usize,
+    /// Print one JSON object per held-out evaluation and a JSON summary instead of a
+    /// progress bar.
+    #[arg(long)]
+    json: bool,
+    /// Lights for the reference's and the model's renders (the fitted colors are albedo);
+    /// fixed unless --fit-lights.
     #[command(flatten)]
     light: ShadingArgs,
+    /// Fit the model's lights too, starting from --light/--ambient (which must be given);
+    /// with a reference mesh, the reference is rendered with --reference-light instead,
+    /// when given.
+    #[arg(long)]
+    fit_lights: bool,
+    /// Learning rate of the lights (ambient and intensities; directions as unit vectors).
+    #[arg(long, default_value_t = 1e-2)]
+    lr_lights: f64,
+    /// The reference's lights when they differ from the model's start (with a reference
+    /// mesh and --fit-lights): a directional light as --light, repeatable.
+    #[arg(long = "reference-light", value_name = "DX,DY,DZ[,R,G,B]", value_parser = parse_light, allow_hyphen_values = true)]
+    reference_lights: Vec<DirLight>,
+    /// Learning rate of the UVs, per step (a textured --start mesh); 0 keeps them.
+    #[arg(long, default_value_t = 0.0)]
+    lr_uvs: f64,
+    /// Learn a pose correction of each training camera; held-out views keep theirs.
+    #[command(flatten)]
+    poses: super::recon_report::PoseArgs,
+    /// Learning rate of the pose corrections' rotation, radians per step; their
+    /// translation's is this times the start mesh's bounding radius.
+    #[arg(long, default_value_t = 1e-3)]
+    lr_pose: f64,
+    /// Seed of --perturb-poses.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
 }
 
 /// Arguments of `diffsvg mesh refine`.
@@ -289,6 +327,11 @@ pub struct MeshBenchArgs {
     /// Thread counts.
     #[arg(long, value_delimiter = ',', default_value = "1,2")]
     threads: Vec<usize>,
+    /// Sample the texture from mip levels (trilinear); the pyramid is built once, before
+    /// the timed runs, as a fit step or a render of many views shares it (its build
+    /// time is printed).
+    #[arg(long)]
+    mipmaps: bool,
     /// PyTorch3D's camera-position tutorial rebuilt instead: a generated torus knot of
     /// 2,560 triangles (a teapot's size; the mesh argument is ignored), silhouette loss
     /// (squared alpha difference to the silhouette from another orbit position), one
@@ -331,9 +374,10 @@ fn run_render(a: RenderArgs) -> Result<()> {
     };
     let cams = orbit_cameras(&mesh, a.orbit, a.size, 0.0)?;
     let t = Instant::now();
+    let pyramid = MipPyramid::for_mesh(&mesh, &opts);
     let imgs: Vec<Image> = cams
         .iter()
-        .map(|c| Ok(View::new(&mesh, c, opts)?.render()))
+        .map(|c| Ok(View::with_pyramid(&mesh, c, opts, pyramid.as_ref())?.render()))
         .collect::<diffsvg::Result<_>>()?;
     let ms = t.elapsed().as_secs_f64() * 1e3 / imgs.len() as f64;
     let out = if imgs.len() == 1 {
@@ -372,20 +416,51 @@ fn run_fit(a: FitArgs) -> Result<()> {
     if a.subdivisions > 6 {
         bail!("--subdivisions {} must be at most 6", a.subdivisions);
     }
+    for (flag, v) in [
+        ("--lr-lights", a.lr_lights),
+        ("--lr-uvs", a.lr_uvs),
+        ("--lr-pose", a.lr_pose),
+    ] {
+        if !(v.is_finite() && v >= 0.0) {
+            bail!("{flag} {v} must be finite and not negative");
+        }
+    }
+    diffsvg::volume::recon::check_perturbation(a.poses.perturb_poses)
+        .map_err(|e| anyhow::anyhow!("--perturb-poses: {e}"))?;
     check_mesh_output(&a.output)?;
     let mut opts = FitOptions {
         iters: a.iters,
         lr_positions: a.lr_positions,
         lr_colors: a.lr_colors,
         smoothness: a.smoothness,
+        lr_uvs: a.lr_uvs,
         ..FitOptions::default()
     };
     opts.render.lighting = a.light.lighting()?;
     opts.render.mipmaps = a.light.mipmaps;
-    let (train, test, sphere) = match (&a.reference, &a.scene) {
+    if a.fit_lights {
+        if opts.render.lighting.is_none() {
+            bail!("--fit-lights: give the lights to start from with --light or --ambient");
+        }
+        opts.lr_lights = a.lr_lights;
+    } else if !a.reference_lights.is_empty() {
+        bail!("--reference-light: only with --fit-lights");
+    }
+    if a.scene.is_some() && !a.reference_lights.is_empty() {
+        bail!("--reference-light: only with a reference mesh (photos have their own lights)");
+    }
+    let (mut train, test, sphere) = match (&a.reference, &a.scene) {
         (Some(r), _) => {
             let reference = read_mesh(r)?;
-            let render_all = |cams: &[Camera]| render_views(&reference, cams, &opts);
+            let mut ref_opts = opts;
+            if !a.reference_lights.is_empty() {
+                let ambient = opts.render.lighting.map_or([0.0; 3], |l| l.ambient);
+                ref_opts.render.lighting = Some(
+                    Lighting::new(ambient, &a.reference_lights)
+                        .map_err(|e| anyhow::anyhow!("--reference-light: {e}"))?,
+                );
+            }
+            let render_all = |cams: &[Camera]| render_views(&reference, cams, &ref_opts);
             let train = render_all(&orbit_cameras(&reference, a.views, a.size, 0.0)?)?;
             let test = render_all(&orbit_cameras(&reference, a.test_views, a.size, 0.5)?)?;
             (train, test, sphere_around(&reference, a.subdivisions))
@@ -405,24 +480,215 @@ fn run_fit(a: FitArgs) -> Result<()> {
         }
         None => sphere,
     };
-    let start_psnr = held_out_psnr(&model, &test, &opts)?;
-    let t = Instant::now();
-    let train_mse = fit_with_progress(&mut model, &train, &opts, a.quiet)?;
-    let secs = t.elapsed().as_secs_f64();
-    let end_psnr = held_out_psnr(&model, &test, &opts)?;
+    if a.lr_uvs > 0.0 && (model.texture.is_none() || model.uvs.is_none()) {
+        bail!("--lr-uvs: the start mesh has no texture and UVs (give a textured --start)");
+    }
+    // Pose refinement: the training cameras (perturbed on request); held-out views keep
+    // theirs.
+    let loaded: Vec<Camera> = train.iter().map(|(c, _)| *c).collect();
+    if let Some([deg, dist]) = a.poses.perturb_poses {
+        let mut cams = loaded.clone();
+        diffsvg::volume::pose::perturb_cameras(&mut cams, deg, dist, a.seed);
+        for ((c, _), p) in train.iter_mut().zip(cams) {
+            *c = p;
+        }
+    }
+    if a.poses.refine_poses {
+        let (lo, hi) = model.bounds();
+        let r = 0.5 * (0..3).map(|k| (hi[k] - lo[k]).powi(2)).sum::<f64>().sqrt();
+        opts.lr_poses = [a.lr_pose, a.lr_pose * r];
+    }
+    let eval = Eval {
+        test: &test,
+        every: a.eval_every,
+        json: a.json,
+    };
+    let run = fit_with_progress(&mut model, &train, &opts, a.quiet || a.json, Some(eval))?;
+    let pose_error = a.poses.perturb_poses.map(|_| {
+        let given: Vec<Camera> = train.iter().map(|(c, _)| *c).collect();
+        diffsvg::volume::recon::mean_pose_error(&loaded, &given, &run.fitted.poses)
+    });
     write_mesh(&model, &a.output)?;
-    println!(
-        "fitted {} triangles to {} views at {}² in {secs:.1} s ({} steps): train PSNR {:.2} dB, \
-         held-out PSNR {start_psnr:.2} → {end_psnr:.2} dB over {} views → {}",
-        model.triangles.len(),
-        train.len(),
-        train[0].0.width,
-        a.iters,
-        psnr_from_mse(train_mse),
-        test.len(),
-        a.output.display()
-    );
+    run.write_log(&a.output)?;
+    let (start_psnr, end_psnr) = (run.tests[0].2, run.tests.last().map_or(f64::NAN, |t| t.2));
+    let lights = run
+        .fitted
+        .lighting
+        .filter(|_| a.fit_lights)
+        .map(|l| {
+            let dirs: Vec<String> = l
+                .lights()
+                .iter()
+                .map(|d| {
+                    format!(
+                        "({:.3}, {:.3}, {:.3})",
+                        d.direction[0], d.direction[1], d.direction[2]
+                    )
+                })
+                .collect();
+            format!("; fitted light directions {}", dirs.join(", "))
+        })
+        .unwrap_or_default();
+    if a.json {
+        println!(
+            "{}",
+            serde_json::json!({"done": true, "output": a.output, "triangles": model.triangles.len(),
+                "steps": run.steps, "seconds": run.seconds, "train_psnr": psnr_from_mse(run.fitted.mse),
+                "test_psnr_start": start_psnr, "test_psnr": end_psnr, "test_views": test.len(),
+                "lighting": run.fitted.lighting.filter(|_| a.fit_lights).map(|l| serde_json::json!({
+                    "ambient": l.ambient,
+                    "lights": l.lights().iter().map(|d| serde_json::json!({
+                        "direction": d.direction, "intensity": d.intensity})).collect::<Vec<_>>()})),
+                "pose_corrections": if opts.fits_poses() { run.fitted.poses.len() } else { 0 },
+                "pose_error": super::recon_report::pose_error_json(&pose_error)})
+        );
+    } else {
+        println!(
+            "fitted {} triangles to {} views at {}² in {:.1} s ({} steps): train PSNR {:.2} dB, \
+             held-out PSNR {start_psnr:.2} → {end_psnr:.2} dB over {} views{lights}{} → {}",
+            model.triangles.len(),
+            train.len(),
+            train[0].0.width,
+            run.seconds,
+            run.steps,
+            psnr_from_mse(run.fitted.mse),
+            test.len(),
+            super::recon_report::pose_error_text(&pose_error),
+            a.output.display()
+        );
+    }
     Ok(())
+}
+
+/// Held-out evaluation during a fit: the views, every how many steps, JSON rows or not.
+#[derive(Clone, Copy)]
+struct Eval<'a> {
+    test: &'a [(Camera, Image)],
+    every: usize,
+    json: bool,
+}
+
+/// A fit as run by [`fit_with_progress`].
+struct FitRun {
+    fitted: Fitted,
+    /// Steps taken.
+    steps: usize,
+    /// Training seconds (held-out evaluations excluded).
+    seconds: f64,
+    /// `(step, training seconds, training PSNR)` of every step.
+    train: Vec<(usize, f64, f64)>,
+    /// `(step, training seconds, held-out PSNR)` of every evaluation, the start first
+    /// and the end last.
+    tests: Vec<(usize, f64, f64)>,
+}
+
+impl FitRun {
+    /// Writes `<model>.log.csv` (step, training seconds, training PSNR, held-out PSNR
+    /// where evaluated; a last row for the end) and the PSNR plot beside `model`.
+    fn write_log(&self, model: &Path) -> Result<()> {
+        use std::fmt::Write as _;
+        let mut csv = String::from("iteration,seconds,train_psnr,test_psnr\n");
+        let test_at = |i: usize| self.tests.iter().find(|t| t.0 == i).map(|t| t.2);
+        for &(i, secs, p) in &self.train {
+            let cell = test_at(i).map(|t| format!("{t:.3}")).unwrap_or_default();
+            let _ = writeln!(csv, "{i},{secs:.3},{p:.3},{cell}");
+        }
+        if let Some(&(i, secs, p)) = self.tests.last().filter(|t| t.0 == self.steps) {
+            let _ = writeln!(csv, "{i},{secs:.3},,{p:.3}");
+        }
+        diffsvg::image_io::write_atomic(
+            &super::recon_report::sibling(model, ".log.csv"),
+            csv.as_bytes(),
+        )?;
+        super::recon_report::write_psnr_plot(
+            model,
+            self.tests.iter().map(|t| (t.1, t.2)).collect(),
+            self.train.iter().map(|t| (t.1, t.2)).collect(),
+            "training views",
+        )
+    }
+}
+
+/// [`fit`] with a progress bar (or a line every 25 steps without a terminal, nothing when
+/// `quiet`), stopped by Ctrl-C; with `eval`, the held-out views' PSNR before the first
+/// step, every `eval.every` steps and at the end (their time excluded from the training
+/// seconds).
+fn fit_with_progress(
+    model: &mut Mesh,
+    train: &[(Camera, Image)],
+    opts: &FitOptions,
+    quiet: bool,
+    eval: Option<Eval>,
+) -> diffsvg::Result<FitRun> {
+    install_interrupt_handler();
+    let bar = terminal_bar(quiet, opts.iters, "steps");
+    let start = Instant::now();
+    let mut eval_secs = 0.0;
+    let mut tests = Vec::new();
+    let mut rows = Vec::new();
+    let mut failed = None;
+    let mut evaluate = |step: usize, m: &Mesh, render: RenderOptions, secs: f64| {
+        let Some(e) = eval else { return Ok(0.0) };
+        let t = Instant::now();
+        let p = held_out_psnr(m, e.test, &FitOptions { render, ..*opts })?;
+        tests.push((step, secs, p));
+        if e.json {
+            println!(
+                "{}",
+                serde_json::json!({"iteration": step, "seconds": secs, "test_psnr": p})
+            );
+        }
+        Ok::<f64, diffsvg::Error>(t.elapsed().as_secs_f64())
+    };
+    let mut stopped = false;
+    let fitted = fit(model, train, opts, |s, snap| {
+        let secs = start.elapsed().as_secs_f64() - eval_secs;
+        rows.push((s.iter, secs, psnr_from_mse(s.mse)));
+        if let Some(e) = eval
+            && (s.iter == 0 || (e.every > 0 && s.iter % e.every == 0))
+        {
+            match evaluate(s.iter, snap.mesh, snap.render, secs) {
+                Ok(dt) => eval_secs += dt,
+                Err(err) => {
+                    failed = Some(err);
+                    return false;
+                }
+            }
+        }
+        if let Some(b) = &bar {
+            b.set_position(s.iter as u64);
+            b.set_message(format!("train PSNR {:.2} dB", psnr_from_mse(s.mse)));
+        } else if !quiet && (s.iter % 25 == 0) {
+            println!(
+                "step {:4}  train PSNR {:.2} dB",
+                s.iter,
+                psnr_from_mse(s.mse)
+            );
+        }
+        stopped = interrupted();
+        !stopped
+    })?;
+    if let Some(err) = failed {
+        return Err(err);
+    }
+    let seconds = start.elapsed().as_secs_f64() - eval_secs;
+    // A stop comes before its step.
+    let steps = rows.len() - usize::from(stopped);
+    if let Some(b) = bar {
+        b.finish_and_clear();
+    }
+    let render = RenderOptions {
+        lighting: fitted.lighting,
+        ..opts.render
+    };
+    evaluate(steps, model, render, seconds)?;
+    Ok(FitRun {
+        fitted,
+        steps,
+        seconds,
+        train: rows,
+        tests,
+    })
 }
 
 /// Images with the cameras they are seen from.
@@ -482,47 +748,26 @@ fn render_views(
     cams: &[Camera],
     opts: &FitOptions,
 ) -> diffsvg::Result<Vec<(Camera, Image)>> {
+    let pyramid = MipPyramid::for_mesh(mesh, &opts.render);
     cams.iter()
-        .map(|c| Ok((*c, View::new(mesh, c, opts.render)?.render())))
+        .map(|c| {
+            let view = View::with_pyramid(mesh, c, opts.render, pyramid.as_ref())?;
+            Ok((*c, view.render()))
+        })
         .collect()
 }
 
 /// Mean PSNR (dB, of the mean MSE) of `m`'s renders against held-out `(camera, image)`s.
 fn held_out_psnr(m: &Mesh, test: &[(Camera, Image)], opts: &FitOptions) -> diffsvg::Result<f64> {
     let mut e = 0.0;
+    let pyramid = MipPyramid::for_mesh(m, &opts.render);
     for (c, t) in test {
-        e += mse(&View::new(m, c, opts.render)?.render(), t);
+        e += mse(
+            &View::with_pyramid(m, c, opts.render, pyramid.as_ref())?.render(),
+            t,
+        );
     }
     Ok(psnr_from_mse(e / test.len().max(1) as f64))
-}
-
-/// [`fit`] with a progress bar (or a line every 25 steps without a terminal, nothing when
-/// `quiet`), stopped by Ctrl-C; the final training MSE.
-fn fit_with_progress(
-    model: &mut Mesh,
-    train: &[(Camera, Image)],
-    opts: &FitOptions,
-    quiet: bool,
-) -> diffsvg::Result<f64> {
-    install_interrupt_handler();
-    let bar = terminal_bar(quiet, opts.iters, "steps");
-    let train_mse = fit(model, train, opts, |s| {
-        if let Some(b) = &bar {
-            b.set_position(s.iter as u64);
-            b.set_message(format!("train PSNR {:.2} dB", psnr_from_mse(s.mse)));
-        } else if !quiet && (s.iter % 25 == 0) {
-            println!(
-                "step {:4}  train PSNR {:.2} dB",
-                s.iter,
-                psnr_from_mse(s.mse)
-            );
-        }
-        !interrupted()
-    })?;
-    if let Some(b) = bar {
-        b.finish_and_clear();
-    }
-    Ok(train_mse)
 }
 
 fn run_refine(a: RefineArgs) -> Result<()> {
@@ -643,7 +888,9 @@ fn run_simplify(a: SimplifyArgs) -> Result<()> {
         write_mesh(&model, c)?;
     }
     let t = Instant::now();
-    let train_mse = fit_with_progress(&mut model, &train, &opts, a.quiet)?;
+    let train_mse = fit_with_progress(&mut model, &train, &opts, a.quiet, None)?
+        .fitted
+        .mse;
     let fit_secs = t.elapsed().as_secs_f64();
     let end_psnr = held_out_psnr(&model, &test, &opts)?;
     write_mesh(&model, &a.output)?;
@@ -682,14 +929,25 @@ pub fn run_bench(a: MeshBenchArgs) -> Result<()> {
     let cam = orbit_cameras(&mesh, 8, a.size, 0.0)?[1];
     let opts = RenderOptions {
         background: Some([1.0; 3]),
+        mipmaps: a.mipmaps,
         ..RenderOptions::default()
     };
+    let t = Instant::now();
+    let pyramid = MipPyramid::for_mesh(&mesh, &opts);
+    let pyramid_ms = t.elapsed().as_secs_f64() * 1e3;
     println!(
-        "{}: {} triangles, {}² (median of {} runs)",
+        "{}: {} triangles, {}² (median of {} runs){}",
         path.display(),
         mesh.triangles.len(),
         a.size,
-        a.runs
+        a.runs,
+        match &pyramid {
+            Some(p) => format!(
+                ", mip levels ({} above the texture) built once in {pyramid_ms:.2} ms",
+                p.len()
+            ),
+            None => String::new(),
+        }
     );
     println!("| threads | forward ms | forward + backward ms |\n|---|---|---|");
     for &n in &a.threads {
@@ -701,14 +959,14 @@ pub fn run_bench(a: MeshBenchArgs) -> Result<()> {
         pool.install(|| -> Result<()> {
             for _ in 0..a.runs + 1 {
                 let t = Instant::now();
-                let img = View::new(&mesh, &cam, opts)?.render();
+                let img = View::with_pyramid(&mesh, &cam, opts, pyramid.as_ref())?.render();
                 let f = t.elapsed().as_secs_f64() * 1e3;
                 let mut d = img.clone();
                 for p in &mut d.data {
                     *p = p.map(|v| v - 0.5);
                 }
                 let t = Instant::now();
-                let view = View::new(&mesh, &cam, opts)?;
+                let view = View::with_pyramid(&mesh, &cam, opts, pyramid.as_ref())?;
                 let img2 = view.render();
                 let g = view.backward(&d, true)?;
                 let b = t.elapsed().as_secs_f64() * 1e3;

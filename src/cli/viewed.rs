@@ -16,8 +16,13 @@ use glam::Vec3;
 pub(crate) enum Viewed {
     /// A volume model, as `volume::view::Model` loads it.
     Volume(Model),
-    /// A triangle mesh and how it is rendered (its background is the dataset's).
-    Mesh(Mesh, mesh::RenderOptions),
+    /// A triangle mesh and how it is rendered (its background is the dataset's), and its
+    /// mip levels once a view with `mipmaps` built them (shared by every view).
+    Mesh(
+        Mesh,
+        mesh::RenderOptions,
+        std::sync::OnceLock<Option<mesh::MipPyramid>>,
+    ),
 }
 
 /// Whether `path` names a mesh file (by its extension, as `mesh::read_mesh` reads them).
@@ -35,7 +40,7 @@ impl Viewed {
                 background: Some([1.0; 3]),
                 ..mesh::RenderOptions::default()
             };
-            Ok(Viewed::Mesh(m, opts))
+            Ok(Viewed::Mesh(m, opts, std::sync::OnceLock::new()))
         } else {
             Model::load(path, step).map(Viewed::Volume)
         }
@@ -55,7 +60,7 @@ impl Viewed {
     ) -> Result<(Dataset, Option<f64>)> {
         match self {
             Viewed::Volume(m) => m.load_dataset(dir, loading),
-            Viewed::Mesh(_, opts) => {
+            Viewed::Mesh(_, opts, _) => {
                 let data = Dataset::load_with(dir, loading)?;
                 opts.background = Some(if data.white_background {
                     [1.0; 3]
@@ -71,9 +76,10 @@ impl Viewed {
     pub(crate) fn render(&self, camera: &Camera) -> Result<Vec<[f32; 3]>> {
         match self {
             Viewed::Volume(m) => m.render(camera),
-            Viewed::Mesh(m, opts) => {
+            Viewed::Mesh(m, opts, pyramid) => {
                 // Over an opaque background every pixel is opaque: premultiplied RGB is RGB.
-                let img = mesh::render(m, camera, opts)?;
+                let pyramid = pyramid.get_or_init(|| mesh::MipPyramid::for_mesh(m, opts));
+                let img = mesh::View::with_pyramid(m, camera, *opts, pyramid.as_ref())?.render();
                 Ok(img.data.iter().map(|p| [p[0], p[1], p[2]]).collect())
             }
         }
@@ -94,7 +100,7 @@ impl Viewed {
     pub(crate) fn bounds(&self) -> (Vec3, f32) {
         match self {
             Viewed::Volume(m) => m.bounds(),
-            Viewed::Mesh(m, _) => {
+            Viewed::Mesh(m, _, _) => {
                 let (lo, hi) = m.bounds();
                 let (lo, hi) = (
                     Vec3::from(lo.map(|v| v as f32)),

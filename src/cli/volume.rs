@@ -334,7 +334,7 @@ pub fn run_view(a: ViewArgs) -> Result<()> {
     let lighting = a.light.lighting()?;
     if lighting.is_some() || a.light.mipmaps {
         match &mut model {
-            super::viewed::Viewed::Mesh(_, opts) => {
+            super::viewed::Viewed::Mesh(_, opts, _) => {
                 opts.lighting = lighting;
                 opts.mipmaps = a.light.mipmaps;
             }

@@ -1,12 +1,14 @@
-//! Fitting a mesh's vertex positions and vertex colors (or texels) to images of it from
-//! known cameras, with Adam ([`crate::optim`]) and a uniform-Laplacian smoothness term.
+//! Fitting a mesh to images of it from known cameras, with Adam ([`crate::optim`]) and a
+//! uniform-Laplacian smoothness term: vertex positions and vertex colors (or texels), and
+//! on request the lights, the UVs and a pose correction of each training camera.
 
-use super::render::{RenderOptions, View};
+use super::render::{Lighting, MipPyramid, RenderOptions, View};
 use super::{Mesh, icosphere};
 use crate::Image;
 use crate::error::{Error, Result};
 use crate::optim::{Moments, Rule};
 use crate::volume::camera::{Camera, orbit};
+use crate::volume::pose::{self, PoseDelta};
 
 /// How [`fit`] runs.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -20,7 +22,21 @@ pub struct FitOptions {
     /// Weight of the smoothness energy `½ w Σ_edges |p_i − p_j|²`, per unit of the
     /// image loss (mean squared error over the pixels of all views).
     pub smoothness: f64,
-    /// Rendering of every view.
+    /// Adam learning rate of the lights of `render.lighting` (ambient and intensities,
+    /// linear RGB; directions, as unit vectors, renormalized after each step); 0 keeps
+    /// them fixed. Ambient and intensities are kept non-negative.
+    pub lr_lights: f64,
+    /// Adam learning rate of the UVs (texture coordinates per step; with a texture); 0
+    /// keeps them fixed.
+    pub lr_uvs: f64,
+    /// Adam learning rates of each training view's pose correction
+    /// ([`crate::volume::pose`]): rotation (radians per step) and translation (world
+    /// units per step); `[0, 0]` keeps the cameras as given. When vertex positions move
+    /// too, the corrections' common rigid motion is removed after every step
+    /// (`pose::remove_common_motion`), since moving the mesh and every camera together
+    /// changes no image.
+    pub lr_poses: [f64; 2],
+    /// Rendering of every view (its `lighting` is where [`fit`] starts from).
     pub render: RenderOptions,
 }
 
@@ -31,11 +47,21 @@ impl Default for FitOptions {
             lr_positions: 2e-3,
             lr_colors: 1e-2,
             smoothness: 1e-3,
+            lr_lights: 0.0,
+            lr_uvs: 0.0,
+            lr_poses: [0.0; 2],
             render: RenderOptions {
                 background: Some([1.0; 3]),
                 ..RenderOptions::default()
             },
         }
+    }
+}
+
+impl FitOptions {
+    /// Whether the training cameras get pose corrections.
+    pub fn fits_poses(&self) -> bool {
+        self.lr_poses != [0.0; 2]
     }
 }
 
@@ -165,18 +191,71 @@ pub struct Step {
     pub mse: f64,
 }
 
-/// Fits `mesh`'s positions and colors (vertex colors, or texels when it has a texture)
-/// to `views` (camera, target image) in place. Vertices at bit-identical positions
-/// (UV-seam copies) share their summed position gradient and so move together.
-/// `progress` sees every step and stops the fit by returning `false`. Returns the final
-/// training MSE. Deterministic: views are rendered one after another and their gradients
-/// added in order.
+/// The fit's state as [`fit`]'s `progress` sees it, before step [`Step::iter`]: after
+/// `iter` steps.
+#[derive(Clone, Copy, Debug)]
+pub struct Snapshot<'a> {
+    /// The mesh.
+    pub mesh: &'a Mesh,
+    /// The rendering options with the current lights: render held-out views with these.
+    pub render: RenderOptions,
+    /// Each training view's pose correction.
+    pub poses: &'a [PoseDelta],
+}
+
+/// What [`fit`] returns besides the mesh it fits in place.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Fitted {
+    /// The final training MSE (before the last step).
+    pub mse: f64,
+    /// The fitted lights (`render.lighting` as given when `lr_lights` is 0).
+    pub lighting: Option<Lighting>,
+    /// Each training view's pose correction, in the order of the views (zeros when
+    /// poses are not fitted): the view was rendered from `pose::apply(camera, δ)`.
+    pub poses: Vec<PoseDelta>,
+}
+
+/// Checks that a learning rate or weight is finite and not negative.
+fn check_rate(name: &str, v: f64) -> Result<()> {
+    if v >= 0.0 && v.is_finite() {
+        Ok(())
+    } else {
+        Err(Error::Setting {
+            name: name.into(),
+            message: format!("{v} must be finite and not negative"),
+        })
+    }
+}
+
+/// One Adam step of the flat parameters `flat`, every one at rate `lr`.
+fn adam_step(m: &mut Moments<f64>, flat: &mut [f64], grad: &[f64], lr: f64) {
+    m.step(flat, grad, &vec![lr; flat.len()], 1.0);
+}
+
+/// The lights as a flat vector: ambient, then each light's direction and intensity.
+fn lights_flat(l: &Lighting) -> Vec<f64> {
+    let mut v = l.ambient.to_vec();
+    for d in l.lights() {
+        v.extend_from_slice(&d.direction);
+        v.extend_from_slice(&d.intensity);
+    }
+    v
+}
+
+/// Fits `mesh` to `views` (camera, target image) in place: vertex positions, colors
+/// (vertex colors, or texels when it has a texture), and, when their rates are not zero,
+/// the lights of `opts.render.lighting`, the UVs and a pose correction per training view
+/// (held-out views are not given to `fit`: they keep their cameras). Vertices at
+/// bit-identical positions (UV-seam copies) share their summed position gradient and so
+/// move together. `progress` sees every step with the state before it, and stops the fit
+/// by returning `false`. Deterministic: views are rendered one after another and their
+/// gradients added in order.
 pub fn fit(
     mesh: &mut Mesh,
     views: &[(Camera, Image)],
     opts: &FitOptions,
-    mut progress: impl FnMut(Step) -> bool,
-) -> Result<f64> {
+    mut progress: impl FnMut(Step, &Snapshot) -> bool,
+) -> Result<Fitted> {
     if views.is_empty() {
         return Err(Error::Setting {
             name: "views".into(),
@@ -188,15 +267,27 @@ pub fn fit(
         ("lr_positions", opts.lr_positions),
         ("lr_colors", opts.lr_colors),
         ("smoothness", opts.smoothness),
+        ("lr_lights", opts.lr_lights),
+        ("lr_uvs", opts.lr_uvs),
+        ("lr_poses", opts.lr_poses[0]),
+        ("lr_poses", opts.lr_poses[1]),
     ] {
-        if !(v >= 0.0 && v.is_finite()) {
-            return Err(Error::Setting {
-                name: name.into(),
-                message: format!("{v} must be finite and not negative"),
-            });
-        }
+        check_rate(name, v)?;
     }
     mesh.validate(std::path::Path::new("<mesh>"))?;
+    let setting = |name: &str, message: &str| Error::Setting {
+        name: name.into(),
+        message: message.into(),
+    };
+    let fit_lights = opts.lr_lights > 0.0;
+    if fit_lights && opts.render.lighting.is_none() {
+        return Err(setting("lr_lights", "there are no lights to fit"));
+    }
+    let fit_uvs = opts.lr_uvs > 0.0;
+    if fit_uvs && (mesh.texture.is_none() || mesh.uvs.is_none()) {
+        return Err(setting("lr_uvs", "the mesh has no texture and UVs to fit"));
+    }
+    let fit_poses = opts.fits_poses();
     let adam = Rule::Adam {
         beta1: 0.9,
         beta2: 0.99,
@@ -212,6 +303,18 @@ pub fn fit(
         .unwrap_or(0)
         * 3;
     let mut col_m = Moments::new(adam, ncol);
+    let mut render = opts.render;
+    let nlight = render.lighting.as_ref().map_or(0, |l| lights_flat(l).len());
+    let mut light_m = Moments::new(adam, if fit_lights { nlight } else { 0 });
+    let nuv = if fit_uvs { mesh.positions.len() * 2 } else { 0 };
+    let mut uv_m = Moments::new(adam, nuv);
+    let mut poses: Vec<PoseDelta> = vec![[0.0; 6]; views.len()];
+    let mut pose_m = Moments::new(adam, if fit_poses { 6 * views.len() } else { 0 });
+    let centers: Vec<glam::Vec3> = views.iter().map(|(c, _)| c.position()).collect();
+    let radius = {
+        let (lo, hi) = mesh.bounds();
+        ((0..3).map(|k| (hi[k] - lo[k]).powi(2)).sum::<f64>().sqrt() * 0.5).max(1e-9)
+    };
     let edges = edges(mesh);
     // Vertices at one position (UV-seam copies) share their summed gradient, so they
     // move together and the surface does not crack.
@@ -225,9 +328,19 @@ pub fn fit(
     for iter in 0..opts.iters {
         let mut gpos = vec![0.0f64; np];
         let mut gcol = vec![0.0f64; ncol];
+        let mut glight = vec![0.0f64; if fit_lights { nlight } else { 0 }];
+        let mut guv = vec![0.0f64; nuv];
+        let mut gpose = vec![0.0f64; pose_m.len()];
         let mut err = 0.0;
-        for (cam, target) in views {
-            let view = View::new(mesh, cam, opts.render)?;
+        // Mip levels (with `render.mipmaps`): once per texture version, for every view.
+        let pyramid = MipPyramid::for_mesh(mesh, &render);
+        for (v, (cam, target)) in views.iter().enumerate() {
+            let cam = if fit_poses {
+                pose::apply(cam, &poses[v])
+            } else {
+                *cam
+            };
+            let view = View::with_pyramid(mesh, &cam, render, pyramid.as_ref())?;
             let img = view.render();
             if (img.width, img.height) != (target.width, target.height) {
                 return Err(Error::Setting {
@@ -260,9 +373,39 @@ pub fn fit(
                     }
                 }
             }
+            if let (true, Some(lg)) = (fit_lights, &g.lighting) {
+                let mut j = 0;
+                for k in 0..3 {
+                    glight[k] += lg.ambient[k];
+                }
+                for (d, i) in lg.directions.iter().zip(&lg.intensities) {
+                    for k in 0..3 {
+                        glight[3 + j + k] += d[k];
+                        glight[6 + j + k] += i[k];
+                    }
+                    j += 6;
+                }
+            }
+            if let (true, Some(gu)) = (fit_uvs, &g.uvs) {
+                for (i, u) in gu.iter().enumerate() {
+                    guv[2 * i] += u[0];
+                    guv[2 * i + 1] += u[1];
+                }
+            }
+            if fit_poses {
+                let gd = pose::delta_gradient(&poses[v], &g.pose);
+                for k in 0..6 {
+                    gpose[6 * v + k] = gd[k] as f64;
+                }
+            }
         }
         last = err / (4.0 * pixels);
-        if !progress(Step { iter, mse: last }) {
+        let snap = Snapshot {
+            mesh,
+            render,
+            poses: &poses,
+        };
+        if !progress(Step { iter, mse: last }, &snap) {
             break;
         }
         for &(a, b) in &edges {
@@ -285,7 +428,7 @@ pub fn fit(
             }
         }
         let mut flat: Vec<f64> = mesh.positions.iter().flatten().copied().collect();
-        pos_m.step(&mut flat, &gpos, &vec![opts.lr_positions; np], 1.0);
+        adam_step(&mut pos_m, &mut flat, &gpos, opts.lr_positions);
         for (p, c) in mesh.positions.iter_mut().zip(flat.chunks_exact(3)) {
             p.copy_from_slice(c);
         }
@@ -296,7 +439,7 @@ pub fn fit(
         };
         if let Some(cols) = cols {
             let mut flat: Vec<f64> = cols.iter().flatten().copied().collect();
-            col_m.step(&mut flat, &gcol, &vec![opts.lr_colors; ncol], 1.0);
+            adam_step(&mut col_m, &mut flat, &gcol, opts.lr_colors);
             for (p, c) in cols.iter_mut().zip(flat.chunks_exact(3)) {
                 *p = [
                     c[0].clamp(0.0, 1.0),
@@ -305,8 +448,51 @@ pub fn fit(
                 ];
             }
         }
+        if let (true, Some(l)) = (fit_lights, render.lighting.as_mut()) {
+            let mut flat = lights_flat(l);
+            adam_step(&mut light_m, &mut flat, &glight, opts.lr_lights);
+            for k in 0..3 {
+                l.ambient[k] = flat[k].max(0.0);
+            }
+            let count = l.lights().len();
+            for (j, d) in l.lights[..count].iter_mut().enumerate() {
+                let o = 3 + 6 * j;
+                let n = (flat[o..o + 3].iter().map(|v| v * v).sum::<f64>()).sqrt();
+                // A direction that collapsed to zero keeps its last value.
+                if n > 0.0 && n.is_finite() {
+                    d.direction = [flat[o] / n, flat[o + 1] / n, flat[o + 2] / n];
+                }
+                for k in 0..3 {
+                    d.intensity[k] = flat[o + 3 + k].max(0.0);
+                }
+            }
+        }
+        if let (true, Some(uvs)) = (fit_uvs, mesh.uvs.as_mut()) {
+            let mut flat: Vec<f64> = uvs.iter().flatten().copied().collect();
+            adam_step(&mut uv_m, &mut flat, &guv, opts.lr_uvs);
+            for (p, c) in uvs.iter_mut().zip(flat.chunks_exact(2)) {
+                p.copy_from_slice(c);
+            }
+        }
+        if fit_poses {
+            let mut flat: Vec<f64> = poses.iter().flatten().map(|&v| v as f64).collect();
+            let rates: Vec<f64> = (0..flat.len())
+                .map(|i| opts.lr_poses[(i % 6) / 3])
+                .collect();
+            pose_m.step(&mut flat, &gpose, &rates, 1.0);
+            for (p, c) in poses.iter_mut().zip(flat.chunks_exact(6)) {
+                *p = std::array::from_fn(|k| c[k] as f32);
+            }
+            if opts.lr_positions > 0.0 && poses.len() > 1 {
+                pose::remove_common_motion(&mut poses, &centers, radius as f32);
+            }
+        }
     }
-    Ok(last)
+    Ok(Fitted {
+        mse: last,
+        lighting: render.lighting,
+        poses,
+    })
 }
 
 /// The mesh's undirected edges, each once, sorted.
@@ -358,11 +544,12 @@ mod tests {
             lr_colors: 2e-2,
             ..FitOptions::default()
         };
-        let last = fit(&mut model, &views, &opts, |s| {
+        let last = fit(&mut model, &views, &opts, |s, _| {
             first.get_or_insert(s.mse);
             true
         })
-        .unwrap();
+        .unwrap()
+        .mse;
         let first = first.unwrap();
         assert!(last < 0.5 * first, "mse {first} → {last}");
     }
@@ -400,8 +587,188 @@ mod tests {
             }
         }
         let start = model.positions[0];
-        fit(&mut model, &views, &opts, |_| true).unwrap();
+        fit(&mut model, &views, &opts, |_, _| true).unwrap();
         assert_ne!(model.positions[0], start, "the vertex moved");
         assert_eq!(model.positions[0], model.positions[6]);
+    }
+
+    /// `mesh`'s renders from `cams` with `opts`.
+    fn renders(mesh: &Mesh, cams: &[Camera], opts: &RenderOptions) -> Vec<(Camera, Image)> {
+        cams.iter()
+            .map(|c| (*c, super::super::render(mesh, c, opts).unwrap()))
+            .collect()
+    }
+
+    /// A fit that moves nothing but what `opts` turns on.
+    fn only(opts: FitOptions) -> FitOptions {
+        FitOptions {
+            lr_positions: 0.0,
+            lr_colors: 0.0,
+            smoothness: 0.0,
+            ..opts
+        }
+    }
+
+    fn angle_deg(a: [f64; 3], b: [f64; 3]) -> f64 {
+        let n = |v: [f64; 3]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+        let c = (a[0] * b[0] + a[1] * b[1] + a[2] * b[2]) / (n(a) * n(b));
+        c.clamp(-1.0, 1.0).acos().to_degrees()
+    }
+
+    #[test]
+    fn fitting_lights_recovers_a_turned_light() {
+        // A gray sphere lit by one light; the model is the same sphere with the light
+        // turned by about 25° and its intensity and ambient off: fitting the lights alone
+        // brings the direction back within a few degrees.
+        use crate::mesh::DirLight;
+        let mut sphere = icosphere(3, 0.6);
+        sphere.colors = Some(vec![[0.8; 3]; sphere.positions.len()]);
+        let truth = [0.3, 0.8, 0.5];
+        let lit = |direction: [f64; 3], intensity: f64, ambient: f64| RenderOptions {
+            lighting: Some(
+                Lighting::new(
+                    [ambient; 3],
+                    &[DirLight {
+                        direction,
+                        intensity: [intensity; 3],
+                    }],
+                )
+                .unwrap(),
+            ),
+            ..FitOptions::default().render
+        };
+        let cams = orbit_cameras(&sphere, 6, 32, 0.0).unwrap();
+        let views = renders(&sphere, &cams, &lit(truth, 0.9, 0.2));
+        let start = [0.7, 0.65, 0.1];
+        let before = angle_deg(start, truth);
+        let opts = only(FitOptions {
+            iters: 120,
+            lr_lights: 1e-2,
+            render: lit(start, 0.7, 0.3),
+            ..FitOptions::default()
+        });
+        let mut model = sphere.clone();
+        let mut first = None;
+        let out = fit(&mut model, &views, &opts, |s, _| {
+            first.get_or_insert(s.mse);
+            true
+        })
+        .unwrap();
+        let l = out.lighting.unwrap();
+        let after = angle_deg(l.lights()[0].direction, truth);
+        eprintln!(
+            "light: {before:.1}° → {after:.2}° off, intensity {:.3}, ambient {:.3}, mse {:.2e} → {:.2e}",
+            l.lights()[0].intensity[0],
+            l.ambient[0],
+            first.unwrap(),
+            out.mse
+        );
+        assert!(before > 20.0, "{before}");
+        assert!(after < 3.0, "the light is {after}° off");
+        assert_eq!(model, sphere, "nothing else moved");
+    }
+
+    #[test]
+    fn fitting_poses_turns_a_turned_camera_back() {
+        // Four views of a colored torus knot (a silhouette that shows every turn); the
+        // second camera is given turned by 1° about an axis across its view (the image
+        // moves by about a pixel): its pose correction turns it back. (A turn across the
+        // view looks much like a move sideways; with the move held fixed the angle is
+        // what the images decide, with both the images still match.)
+        let mut sphere = crate::mesh::torus_knot(96, 8);
+        sphere.colors = Some(
+            sphere
+                .positions
+                .iter()
+                .map(|p| p.map(|v| 0.5 + 0.4 * v.clamp(-1.0, 1.0)))
+                .collect(),
+        );
+        let opts = FitOptions::default();
+        let cams = orbit_cameras(&sphere, 4, 64, 0.0).unwrap();
+        let mut views = renders(&sphere, &cams, &opts.render);
+        let m = cams[1].c2w.matrix3;
+        let w = (glam::Vec3::from(m.x_axis) * 0.6 + glam::Vec3::from(m.y_axis) * 0.8).normalize()
+            * 1f32.to_radians();
+        views[1].0 = pose::apply(&cams[1], &[w.x, w.y, w.z, 0.0, 0.0, 0.0]);
+        let (deg0, _) = pose::pose_error(&views[1].0, &cams[1]);
+        for (lr, most) in [([5e-4, 0.0], 0.5), ([5e-4, 5e-4], 1.0)] {
+            let o = only(FitOptions {
+                iters: 80,
+                lr_poses: lr,
+                ..opts
+            });
+            let mut model = sphere.clone();
+            let mut mses = Vec::new();
+            let out = fit(&mut model, &views, &o, |s, _| {
+                mses.push(s.mse);
+                true
+            })
+            .unwrap();
+            assert_eq!(
+                out.poses.len(),
+                views.len(),
+                "one correction per training view"
+            );
+            let (deg1, dist1) =
+                pose::pose_error(&pose::apply(&views[1].0, &out.poses[1]), &cams[1]);
+            let (first, last) = (mses[0], *mses.last().unwrap());
+            eprintln!(
+                "pose (rates {lr:?}): {deg0:.3}° → {deg1:.3}°, moved {dist1:.4}; mse {first:.2e} → {last:.2e}"
+            );
+            assert!(last < 0.1 * first, "mse {first} → {last}");
+            assert!(deg1 < most * deg0, "{deg0}° → {deg1}°");
+            assert_eq!(model, sphere, "the mesh is not moved");
+            for v in [0, 2, 3] {
+                let (deg, _) = pose::pose_error(&pose::apply(&cams[v], &out.poses[v]), &cams[v]);
+                assert!(
+                    deg < 0.25,
+                    "view {v}, rendered from its own pose, turned by {deg}°"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn fitting_uvs_lowers_the_error_of_shifted_uvs() {
+        let mut sphere = icosphere(2, 0.6);
+        sphere.uvs = Some(
+            sphere
+                .positions
+                .iter()
+                .map(|p| [0.5 + 0.35 * p[0], 0.5 + 0.35 * p[1]])
+                .collect(),
+        );
+        sphere.texture = Some(crate::mesh::Texture {
+            width: 8,
+            height: 8,
+            data: (0..64)
+                .map(|i| [(i % 8) as f64 / 7.0, (i / 8) as f64 / 7.0, 0.5])
+                .collect(),
+        });
+        let opts = FitOptions::default();
+        let cams = orbit_cameras(&sphere, 4, 32, 0.0).unwrap();
+        let views = renders(&sphere, &cams, &opts.render);
+        let mut model = sphere.clone();
+        for uv in model.uvs.as_mut().unwrap() {
+            uv[0] += 0.04;
+            uv[1] -= 0.03;
+        }
+        let opts = only(FitOptions {
+            iters: 60,
+            lr_uvs: 2e-3,
+            ..opts
+        });
+        let mut first = None;
+        let out = fit(&mut model, &views, &opts, |s, _| {
+            first.get_or_insert(s.mse);
+            true
+        })
+        .unwrap();
+        let first = first.unwrap();
+        eprintln!("uvs: mse {first:.2e} → {:.2e}", out.mse);
+        assert!(out.mse < 0.25 * first, "mse {first} → {}", out.mse);
+        // Without a texture there are no UVs to fit.
+        let mut plain = icosphere(1, 1.0);
+        assert!(fit(&mut plain, &views, &opts, |_, _| true).is_err());
     }
 }

@@ -44,8 +44,8 @@ pub mod simplify;
 pub use gltf::{read_gltf, write_gltf};
 pub use io::{MeshFormat, read_mesh, read_obj, write_mesh, write_obj};
 pub use render::{
-    DirLight, Lighting, LightingGrad, MAX_LIGHTS, MeshGrad, RenderOptions, View, render,
-    render_backward,
+    DirLight, Lighting, LightingGrad, MAX_LIGHTS, MeshGrad, MipPyramid, RenderOptions, View,
+    render, render_backward,
 };
 pub use shapes::{icosphere, octahedron, torus_knot};
 

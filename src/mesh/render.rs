@@ -32,13 +32,14 @@ pub struct RenderOptions {
     pub near: f64,
     /// Lambert shading; `None` (the default) renders unlit: the albedo as it is.
     pub lighting: Option<Lighting>,
-    /// Sample minified textures from mip levels (off by default): the level nearest to
-    /// the pixel's footprint (`round(log2 ρ)`, `ρ` texels per pixel along the longer of
-    /// the pixel's two axes, measured between the UVs at the pixel center and one pixel
-    /// right and down), bilinear inside it. Level `l + 1` is the 2×2 box average of
-    /// level `l` (odd sizes drop their last row or column). Texel gradients go through
-    /// the averages to the texture's own texels (exact); the level choice is piecewise
-    /// constant, so it adds no gradient.
+    /// Sample minified textures from mip levels (off by default), **trilinearly**: at
+    /// level `λ = log2 ρ` (`ρ` texels per pixel along the longer of the pixel's two
+    /// axes, measured between the UVs at the pixel center and one pixel right and down),
+    /// the bilinear samples of levels `⌊λ⌋` and `⌊λ⌋ + 1` blended by `λ − ⌊λ⌋` (level 0
+    /// alone for `λ ≤ 0`, the top level alone above it). Level `l + 1` is the 2×2 box
+    /// average of level `l` (odd sizes drop their last row or column; [`MipPyramid`]).
+    /// Texel gradients go through the averages to the texture's own texels, and the
+    /// blend weight's gradient through `ρ` to the UVs and positions: all exact.
     pub mipmaps: bool,
 }
 
@@ -236,10 +237,59 @@ pub struct View<'a> {
     eye: [f64; 3],
     /// The lighting, prepared (`None`: unlit).
     lit: Option<Lit>,
-    /// Mip levels 1, 2, … of the texture (empty without `mipmaps`), and each level's
-    /// first index in the concatenation of all levels (level 0 the texture's own).
-    mips: Vec<Texture>,
-    mip_start: Vec<u32>,
+    /// The texture's mip levels (`None` without `mipmaps`): built by [`View::new`], or
+    /// shared between views ([`View::with_pyramid`]).
+    pyramid: Option<std::borrow::Cow<'a, MipPyramid>>,
+}
+
+/// A texture's mip levels 1, 2, … down to one texel a side, each the 2×2 box average of
+/// the level below (`max(1, side / 2)` texels a side; an odd side drops its last row or
+/// column), for [`RenderOptions::mipmaps`]. Build it once per texture version and share
+/// it between views with [`View::with_pyramid`] ([`View::new`] builds one per view).
+#[derive(Clone, Debug, PartialEq)]
+pub struct MipPyramid {
+    /// Levels 1, 2, … (level 0 is the texture).
+    levels: Vec<Texture>,
+    /// Each level's first index in the concatenation of all levels' texels (level 0
+    /// first), then the total.
+    start: Vec<u32>,
+    /// The texture's size.
+    base: (u32, u32),
+}
+
+impl MipPyramid {
+    /// The mip levels of `texture`.
+    pub fn new(texture: &Texture) -> MipPyramid {
+        let levels = mip_levels(texture);
+        let mut start = vec![0u32];
+        for l in std::iter::once(texture).chain(&levels) {
+            start.push(start.last().copied().unwrap_or(0) + l.data.len() as u32);
+        }
+        MipPyramid {
+            levels,
+            start,
+            base: (texture.width, texture.height),
+        }
+    }
+
+    /// The pyramid `View::new` would build for `mesh` with `opts`: `Some` with
+    /// `opts.mipmaps` and a textured mesh with UVs.
+    pub fn for_mesh(mesh: &Mesh, opts: &RenderOptions) -> Option<MipPyramid> {
+        match (opts.mipmaps, &mesh.texture, &mesh.uvs) {
+            (true, Some(t), Some(_)) => Some(MipPyramid::new(t)),
+            _ => None,
+        }
+    }
+
+    /// Number of levels above the texture itself.
+    pub fn len(&self) -> usize {
+        self.levels.len()
+    }
+
+    /// Whether the texture is one texel (no level above it).
+    pub fn is_empty(&self) -> bool {
+        self.levels.is_empty()
+    }
 }
 
 /// A [`Lighting`] prepared for one mesh: unit light directions and the smooth normals.
@@ -416,6 +466,48 @@ impl<'a> View<'a> {
     /// distortion and a near plane that is not positive and finite; the mesh should be
     /// [`validated`](Mesh::validate) (indices in range, finite values).
     pub fn new(mesh: &'a Mesh, camera: &Camera, opts: RenderOptions) -> Result<View<'a>> {
+        let pyramid = MipPyramid::for_mesh(mesh, &opts).map(std::borrow::Cow::Owned);
+        View::prepare(mesh, camera, opts, pyramid)
+    }
+
+    /// [`View::new`] with the mip levels `pyramid` of the mesh's texture, built once
+    /// ([`MipPyramid::for_mesh`]) and shared between views of one texture (used with
+    /// `opts.mipmaps`; `None` builds the view's own, as [`View::new`]). Refuses a
+    /// pyramid of another texture size; a pyramid of other texels of that size is the
+    /// caller's mistake.
+    pub fn with_pyramid(
+        mesh: &'a Mesh,
+        camera: &Camera,
+        opts: RenderOptions,
+        pyramid: Option<&'a MipPyramid>,
+    ) -> Result<View<'a>> {
+        let Some(pyramid) = pyramid else {
+            return View::new(mesh, camera, opts);
+        };
+        let pyramid = match (opts.mipmaps, &mesh.texture, &mesh.uvs) {
+            (true, Some(t), Some(_)) => {
+                if pyramid.base != (t.width, t.height) {
+                    return Err(Error::Setting {
+                        name: "pyramid".into(),
+                        message: format!(
+                            "is of a {}×{} texture, the mesh's is {}×{}",
+                            pyramid.base.0, pyramid.base.1, t.width, t.height
+                        ),
+                    });
+                }
+                Some(std::borrow::Cow::Borrowed(pyramid))
+            }
+            _ => None,
+        };
+        View::prepare(mesh, camera, opts, pyramid)
+    }
+
+    fn prepare(
+        mesh: &'a Mesh,
+        camera: &Camera,
+        opts: RenderOptions,
+        pyramid: Option<std::borrow::Cow<'a, MipPyramid>>,
+    ) -> Result<View<'a>> {
         let setting = |name: &str, message: String| Error::Setting {
             name: name.into(),
             message,
@@ -477,17 +569,8 @@ impl<'a> View<'a> {
             cache: std::sync::OnceLock::new(),
             eye,
             lit: opts.lighting.as_ref().map(|l| Lit::new(mesh, l)),
-            mips: Vec::new(),
-            mip_start: Vec::new(),
+            pyramid,
         };
-        if let (true, Some(t), Some(_)) = (opts.mipmaps, &mesh.texture, &mesh.uvs) {
-            view.mips = mip_levels(t);
-            let mut start = vec![0u32];
-            for l in std::iter::once(t).chain(&view.mips) {
-                start.push(start.last().copied().unwrap_or(0) + l.data.len() as u32);
-            }
-            view.mip_start = start;
-        }
         view.pc = mesh
             .positions
             .iter()
@@ -906,7 +989,19 @@ impl<'a> View<'a> {
         }
         if let (Some(tex), Some(uvs)) = (&mesh.texture, &mesh.uvs) {
             let uv = uv_at(uvs, tri, b);
-            let t = sample_value(self.mip(tex, uvs, tri, q, uv).0, uv);
+            let t = match self.pyramid.as_deref() {
+                None => sample_value(tex, uv),
+                Some(pyr) => {
+                    let pick = self.mip(pyr, tex, uvs, tri, q, uv);
+                    let a = sample_value(pick.lo.0, uv);
+                    if pick.f > 0.0 {
+                        let b = sample_value(pick.hi.0, uv);
+                        [0, 1, 2].map(|c| a[c] + pick.f * (b[c] - a[c]))
+                    } else {
+                        a
+                    }
+                }
+            };
             for c in 0..3 {
                 col[c] *= t[c];
             }
@@ -1040,21 +1135,62 @@ impl<'a> View<'a> {
         let mut gb = [0.0f64; 3];
         if let (Some(tex), Some(uvs)) = (&mesh.texture, &mesh.uvs) {
             let uv = uv_at(uvs, tri, b);
-            let (level, off) = self.mip(tex, uvs, tri, q, uv);
-            let (tv, taps, duv) = sample(level, uv);
-            t = tv;
             let gt = [gcol[0] * base[0], gcol[1] * base[1], gcol[2] * base[2]];
-            if sink.texels {
-                for (idx, w) in taps {
-                    sink.texel.push((off + idx, gt.map(|v| v * w)));
+            let mut guv = [0.0; 2];
+            // One bilinear level `(texture, first index)` with weight `w`: its texels'
+            // and ∂L/∂uv; its value.
+            let mut level = |(tex, off): (&Texture, u32), w: f64, sink: &mut Acc| {
+                let (tv, taps, duv) = sample(tex, uv);
+                if sink.texels {
+                    for (idx, tw) in taps {
+                        sink.texel.push((off + idx, gt.map(|v| v * tw * w)));
+                    }
+                }
+                for c in 0..3 {
+                    guv[0] += w * gt[c] * duv[c][0];
+                    guv[1] += w * gt[c] * duv[c][1];
+                }
+                tv
+            };
+            match self.pyramid.as_deref() {
+                None => t = level((tex, 0), 1.0, sink),
+                Some(pyr) => {
+                    let pick = self.mip(pyr, tex, uvs, tri, q, uv);
+                    let a = level(pick.lo, 1.0 - pick.f, sink);
+                    if pick.f > 0.0 || pick.df != 0.0 {
+                        let hb = level(pick.hi, pick.f, sink);
+                        t = [0, 1, 2].map(|c| a[c] + pick.f * (hb[c] - a[c]));
+                        // The blend weight f(ρ²): ∂L/∂f = gt · (hi − lo), through ρ² to
+                        // the UV step Δ = uv(q + d) − uv(q) along the chosen pixel axis.
+                        let gf: f64 = (0..3).map(|c| gt[c] * (hb[c] - a[c])).sum();
+                        let g2 = gf * pick.df;
+                        if g2 != 0.0 {
+                            let (tw, th) = (tex.width as f64, tex.height as f64);
+                            let gd = [
+                                g2 * 2.0 * pick.delta[0] * tw * tw,
+                                g2 * 2.0 * pick.delta[1] * th * th,
+                            ];
+                            // Δ = Σ_k (b'_k − b_k) uv_k.
+                            let q2 = [q[0] + pick.step[0], q[1] + pick.step[1]];
+                            let bary2 = self.bary(tri, q2);
+                            let mut gb2 = [0.0; 3];
+                            for k in 0..3 {
+                                let uvk = uvs[tri[k] as usize];
+                                let gk = gd[0] * uvk[0] + gd[1] * uvk[1];
+                                gb2[k] += gk;
+                                gb[k] -= gk;
+                                let d = &mut sink.uv[tri[k] as usize];
+                                d[0] += (bary2.b[k] - b[k]) * gd[0];
+                                d[1] += (bary2.b[k] - b[k]) * gd[1];
+                            }
+                            self.bary_backward(tri, &bary2, gb2, sink);
+                        }
+                    } else {
+                        t = a;
+                    }
                 }
             }
-            // ∂L/∂uv, then ∂uv/∂b_k = uv_k.
-            let mut guv = [0.0; 2];
-            for c in 0..3 {
-                guv[0] += gt[c] * duv[c][0];
-                guv[1] += gt[c] * duv[c][1];
-            }
+            // ∂uv/∂b_k = uv_k.
             for k in 0..3 {
                 let uvk = uvs[tri[k] as usize];
                 gb[k] += guv[0] * uvk[0] + guv[1] * uvk[1];
@@ -1098,9 +1234,17 @@ impl<'a> View<'a> {
                 gb[k] += dot(gbase, vc[tri[k] as usize]);
             }
         }
+        self.bary_backward(tri, &bary, gb, sink);
+        col
+    }
+
+    /// `∂L/∂b` of the clamped perspective-correct barycentrics `bary` of `tri` (see
+    /// [`View::bary`]) into the camera-space vertex gradients.
+    fn bary_backward(&self, tri: [u32; 3], bary: &Bary, gb: [f64; 3], sink: &mut Acc) {
         if !(bary.sum > 0.0 && bary.sum.is_finite()) || gb == [0.0; 3] {
-            return col;
+            return;
         }
+        let b = bary.b;
         // b = m / Σm: ∂b_i/∂m_j = (δ_ij − b_i) / Σm.
         let gb_dot_b = gb[0] * b[0] + gb[1] * b[1] + gb[2] * b[2];
         let p = tri.map(|i| self.pc[i as usize]);
@@ -1119,7 +1263,6 @@ impl<'a> View<'a> {
         for k in 0..3 {
             axpy(&mut sink.cam[tri[k] as usize], 1.0, gp[k]);
         }
-        col
     }
 
     /// Renders the image (premultiplied RGBA, see [`crate::mesh`]).
@@ -1233,8 +1376,9 @@ impl<'a> View<'a> {
         let mut gtex = match (&mesh.texture, texels) {
             (Some(t), true) => Some(vec![
                 [0.0f64; 3];
-                self.mip_start
-                    .last()
+                self.pyramid
+                    .as_deref()
+                    .and_then(|p| p.start.last())
                     .map_or(t.data.len(), |&n| n as usize)
             ]),
             _ => None,
@@ -1276,10 +1420,14 @@ impl<'a> View<'a> {
         drop(chunks);
         if let (Some(gt), Some(t)) = (&mut gtex, &mesh.texture) {
             // Mip levels' texel gradients down to the texture's own, top level first.
-            for l in (1..self.mip_start.len().saturating_sub(1)).rev() {
-                let below = if l == 1 { t } else { &self.mips[l - 2] };
-                let (w, h) = (self.mips[l - 1].width, self.mips[l - 1].height);
-                let (s0, s1) = (self.mip_start[l - 1], self.mip_start[l]);
+            let (mips, mip_start): (&[Texture], &[u32]) = match self.pyramid.as_deref() {
+                Some(p) => (&p.levels, &p.start),
+                None => (&[], &[]),
+            };
+            for l in (1..mip_start.len().saturating_sub(1)).rev() {
+                let below = if l == 1 { t } else { &mips[l - 2] };
+                let (w, h) = (mips[l - 1].width, mips[l - 1].height);
+                let (s0, s1) = (mip_start[l - 1], mip_start[l]);
                 for y in 0..h {
                     for x in 0..w {
                         let g = gt[(s1 + y * w + x) as usize].map(|v| 0.25 * v);
@@ -1366,36 +1514,56 @@ impl<'a> View<'a> {
         ]
     }
 
-    /// The texture level to sample for triangle `tri` at screen point `q` (UV `uv`
-    /// there) and the level's first index among all levels' texels.
+    /// The two levels to blend for triangle `tri` at screen point `q` (UV `uv` there)
+    /// and how (see [`RenderOptions::mipmaps`]).
     fn mip<'t>(
-        &'t self,
+        &self,
+        pyr: &'t MipPyramid,
         tex: &'t Texture,
         uvs: &[[f64; 2]],
         tri: [u32; 3],
         q: [f64; 2],
         uv: [f64; 2],
-    ) -> (&'t Texture, u32) {
-        if self.mips.is_empty() {
-            return (tex, 0);
-        }
+    ) -> MipPick<'t> {
         let (w, h) = (tex.width as f64, tex.height as f64);
         let mut rho2 = 0.0f64;
+        let mut delta = [0.0; 2];
+        let mut step = [1.0, 0.0];
         for d in [[1.0, 0.0], [0.0, 1.0]] {
             let b = self.bary(tri, [q[0] + d[0], q[1] + d[1]]).b;
             let u2 = uv_at(uvs, tri, b);
-            let (du, dv) = ((u2[0] - uv[0]) * w, (u2[1] - uv[1]) * h);
-            rho2 = rho2.max(du * du + dv * dv);
+            let dd = [u2[0] - uv[0], u2[1] - uv[1]];
+            let r2 = (dd[0] * w).powi(2) + (dd[1] * h).powi(2);
+            if r2 > rho2 {
+                (rho2, delta, step) = (r2, dd, d);
+            }
         }
-        // round(log2 ρ) = round(½ log2 ρ²).
-        let l = if rho2 > 1.0 {
-            ((0.5 * rho2.log2()).round() as usize).min(self.mips.len())
-        } else {
-            0
-        };
-        match l {
+        let level = |l: usize| match l {
             0 => (tex, 0),
-            l => (&self.mips[l - 1], self.mip_start[l]),
+            l => (&pyr.levels[l - 1], pyr.start[l]),
+        };
+        let top = pyr.levels.len();
+        // λ = log2 ρ = ½ log2 ρ².
+        let lambda = if rho2 > 1.0 { 0.5 * rho2.log2() } else { 0.0 };
+        if lambda <= 0.0 || lambda >= top as f64 || !lambda.is_finite() {
+            let l = if lambda > 0.0 { top } else { 0 };
+            return MipPick {
+                lo: level(l),
+                hi: level(l),
+                f: 0.0,
+                df: 0.0,
+                delta,
+                step,
+            };
+        }
+        let l0 = lambda.floor() as usize;
+        MipPick {
+            lo: level(l0),
+            hi: level(l0 + 1),
+            f: lambda - l0 as f64,
+            df: 0.5 / (rho2 * std::f64::consts::LN_2),
+            delta,
+            step,
         }
     }
 
@@ -1403,6 +1571,18 @@ impl<'a> View<'a> {
     pub fn visible_triangles(&self) -> usize {
         self.prims.len()
     }
+}
+
+/// Two mip levels `(texture, first index among all levels' texels)` and their blend
+/// `lo + f · (hi − lo)`; `df = ∂f/∂ρ²` (0 where `f` is clamped), with the chosen pixel
+/// axis `step` and its UV difference `delta` (through which `ρ²` moves).
+struct MipPick<'t> {
+    lo: (&'t Texture, u32),
+    hi: (&'t Texture, u32),
+    f: f64,
+    df: f64,
+    delta: [f64; 2],
+    step: [f64; 2],
 }
 
 /// Perspective-correct barycentrics and what their backward pass needs.
@@ -1838,6 +2018,52 @@ mod tests {
         let (_, _, g) = gradient_12x10(&m, o);
         let touched = g.texture.unwrap().iter().filter(|v| v[0] != 0.0).count();
         assert!(touched > 500, "{touched} texels have a gradient");
+    }
+
+    #[test]
+    fn a_shared_pyramid_gives_the_view_s_own_bits() {
+        let tex = Texture {
+            width: 16,
+            height: 16,
+            data: (0..256)
+                .map(|i| [(i * 37 % 101) as f64 / 100.0, (i % 7) as f64 / 6.0, 0.5])
+                .collect(),
+        };
+        let mut m = textured_square(tex);
+        m.positions[2] = [0.6, 0.45, 0.2];
+        let o = RenderOptions {
+            mipmaps: true,
+            ..opts()
+        };
+        let cam =
+            Camera::look_at(Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO, Vec3::Y, 0.5, 12, 10).unwrap();
+        let pyr = MipPyramid::for_mesh(&m, &o).unwrap();
+        assert_eq!(pyr.len(), 4);
+        let own = View::new(&m, &cam, o).unwrap();
+        let shared = View::with_pyramid(&m, &cam, o, Some(&pyr)).unwrap();
+        assert_eq!(own.render_f64(), shared.render_f64());
+        let d = weights(12, 10);
+        assert_eq!(
+            own.backward(&d, true).unwrap(),
+            shared.backward(&d, true).unwrap()
+        );
+        // A pyramid of another texture size is refused; without mipmaps it is ignored.
+        let other = MipPyramid::new(&Texture {
+            width: 4,
+            height: 4,
+            data: vec![[0.5; 3]; 16],
+        });
+        assert!(View::with_pyramid(&m, &cam, o, Some(&other)).is_err());
+        let plain = RenderOptions {
+            mipmaps: false,
+            ..o
+        };
+        assert_eq!(
+            View::with_pyramid(&m, &cam, plain, Some(&other))
+                .unwrap()
+                .render_f64(),
+            View::new(&m, &cam, plain).unwrap().render_f64()
+        );
     }
 
     /// Ambient light and two directional lights, one from behind-left.

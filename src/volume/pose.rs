@@ -163,6 +163,21 @@ pub fn pose_error(a: &Camera, b: &Camera) -> (f64, f64) {
 /// units of translation (in a uniformly random direction), drawn from `seed`; returns
 /// the corrections applied, in the order of `views`. Used to test pose refinement.
 pub fn perturb(views: &mut [View], degrees: f32, distance: f32, seed: u64) -> Vec<PoseDelta> {
+    let mut cams: Vec<Camera> = views.iter().map(|v| v.camera).collect();
+    let deltas = perturb_cameras(&mut cams, degrees, distance, seed);
+    for (v, c) in views.iter_mut().zip(cams) {
+        v.camera = c;
+    }
+    deltas
+}
+
+/// [`perturb`] on cameras alone (the same corrections for the same seed).
+pub fn perturb_cameras(
+    cams: &mut [Camera],
+    degrees: f32,
+    distance: f32,
+    seed: u64,
+) -> Vec<PoseDelta> {
     let mut rng = Rng::new(seed ^ 0x5eed_905e);
     let unit = |rng: &mut Rng| loop {
         let p = Vec3::new(rng.uniform(), rng.uniform(), rng.uniform()) * 2.0 - 1.0;
@@ -171,13 +186,12 @@ pub fn perturb(views: &mut [View], degrees: f32, distance: f32, seed: u64) -> Ve
             return p / l;
         }
     };
-    views
-        .iter_mut()
-        .map(|v| {
+    cams.iter_mut()
+        .map(|c| {
             let w = unit(&mut rng) * degrees.to_radians();
             let t = unit(&mut rng) * distance;
             let delta = [w.x, w.y, w.z, t.x, t.y, t.z];
-            v.camera = apply(&v.camera, &delta);
+            *c = apply(c, &delta);
             delta
         })
         .collect()

@@ -532,8 +532,9 @@ pub struct SplatResult {
     pub pose_error: Option<PoseError>,
 }
 
-/// Checks [`VoxelJob::perturb_poses`].
-fn check_perturbation(p: Option<[f32; 2]>) -> Result<()> {
+/// Checks [`VoxelJob::perturb_poses`] (and `mesh fit --perturb-poses`): degrees in
+/// `[0, 180]`, a finite distance ≥ 0.
+pub fn check_perturbation(p: Option<[f32; 2]>) -> Result<()> {
     if let Some([deg, dist]) = p
         && !(deg.is_finite() && (0.0..=180.0).contains(&deg) && dist.is_finite() && dist >= 0.0)
     {
@@ -565,6 +566,18 @@ fn pose_error_of(
     views: &[View],
     poses: &[PoseDelta],
 ) -> PoseError {
+    let given: Vec<_> = views.iter().map(|v| v.camera).collect();
+    mean_pose_error(loaded, &given, poses)
+}
+
+/// [`PoseError`] of cameras `given` (perturbed) against `loaded` (where they belong),
+/// before and after the corrections `poses` (`pose::apply`; a missing one counts as
+/// zero): the mean rotation angle (degrees) and center distance (world units).
+pub fn mean_pose_error(
+    loaded: &[crate::volume::camera::Camera],
+    given: &[crate::volume::camera::Camera],
+    poses: &[PoseDelta],
+) -> PoseError {
     let mean = |f: &dyn Fn(usize) -> crate::volume::camera::Camera| {
         let mut sum = [0.0f64; 2];
         for (i, l) in loaded.iter().enumerate() {
@@ -575,10 +588,10 @@ fn pose_error_of(
         sum.map(|v| v / loaded.len().max(1) as f64)
     };
     PoseError {
-        before: mean(&|i| views[i].camera),
+        before: mean(&|i| given[i]),
         after: mean(&|i| match poses.get(i) {
-            Some(d) => pose::apply(&views[i].camera, d),
-            None => views[i].camera,
+            Some(d) => pose::apply(&given[i], d),
+            None => given[i],
         }),
     }
 }

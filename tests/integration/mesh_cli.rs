@@ -112,36 +112,45 @@ fn mesh_render_shades_with_lights_and_refuses_bad_ones() {
     assert_fails(&r, "--light", "at most 4", &out);
 }
 
+/// `mesh fit MESH` from a once-subdivided sphere: 3 training and 2 held-out views at
+/// 24², 30 steps, written to `out`, with `extra` flags.
+fn small_fit(
+    mesh: &std::path::Path,
+    out: &std::path::Path,
+    extra: &[&str],
+) -> std::process::Output {
+    let mut args = vec![
+        "mesh",
+        "fit",
+        s(mesh),
+        "--views",
+        "3",
+        "--test-views",
+        "2",
+        "--size",
+        "24",
+        "--iters",
+        "30",
+        "--subdivisions",
+        "1",
+        "--lr-positions",
+        "0.02",
+        "--lr-colors",
+        "0.05",
+        "-o",
+        s(out),
+    ];
+    args.extend_from_slice(extra);
+    diffsvg(&args)
+}
+
 #[test]
 fn mesh_fit_moves_a_sphere_towards_a_generated_mesh_and_writes_an_obj() {
     let d = scratch("mesh_fit");
     let obj = octahedron(&d);
     let out = d.join("fit.obj");
     // One fit, written to `out` (OBJ or glTF by its extension).
-    let run = |out: &std::path::Path| {
-        diffsvg(&[
-            "mesh",
-            "fit",
-            s(&obj),
-            "--views",
-            "3",
-            "--test-views",
-            "2",
-            "--size",
-            "24",
-            "--iters",
-            "30",
-            "--subdivisions",
-            "1",
-            "--lr-positions",
-            "0.02",
-            "--lr-colors",
-            "0.05",
-            "--quiet",
-            "-o",
-            s(out),
-        ])
-    };
+    let run = |out: &std::path::Path| small_fit(&obj, out, &["--quiet"]);
     let r = run(&out);
     let stdout = String::from_utf8_lossy(&r.stdout);
     assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
@@ -175,6 +184,160 @@ fn mesh_fit_moves_a_sphere_towards_a_generated_mesh_and_writes_an_obj() {
     assert!(near(&back.positions, &fitted.positions));
     let txt = d.join("fit.txt");
     assert_fails(&run(&txt), "fit.txt", ".glb", &txt);
+}
+
+/// Every JSON object `stdout` prints, one a line.
+fn json_lines(stdout: &[u8]) -> Vec<serde_json::Value> {
+    String::from_utf8_lossy(stdout)
+        .lines()
+        .filter_map(|l| serde_json::from_str(l).ok())
+        .collect()
+}
+
+#[test]
+fn mesh_fit_logs_held_out_psnr_against_time_and_plots_it() {
+    let d = scratch("mesh_fit_log");
+    let obj = octahedron(&d);
+    let out = d.join("fit.obj");
+    let r = small_fit(&obj, &out, &["--eval-every", "10", "--json"]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let lines = json_lines(&r.stdout);
+    let summary = lines.last().unwrap();
+    assert_eq!(summary["done"], true, "{summary}");
+    // Held-out PSNR at steps 0, 10, 20 and at the end (30), one JSON row each.
+    let rows: Vec<(u64, f64, f64)> = lines
+        .iter()
+        .filter(|l| l.get("test_psnr").is_some() && l.get("done").is_none())
+        .map(|l| {
+            (
+                l["iteration"].as_u64().unwrap(),
+                l["seconds"].as_f64().unwrap(),
+                l["test_psnr"].as_f64().unwrap(),
+            )
+        })
+        .collect();
+    assert_eq!(
+        rows.iter().map(|r| r.0).collect::<Vec<_>>(),
+        [0, 10, 20, 30],
+        "{rows:?}"
+    );
+    assert!(
+        rows.windows(2).all(|w| w[1].1 >= w[0].1),
+        "time runs forward: {rows:?}"
+    );
+    let (first, last) = (rows[0].2, rows[3].2);
+    assert!(last > first + 1.0, "held-out PSNR rises: {rows:?}");
+    assert_eq!(summary["test_psnr"].as_f64().unwrap(), last);
+    // The log: the same held-out PSNRs (3 decimals) and a training PSNR every step.
+    let log = std::fs::read_to_string(d.join("fit.log.csv")).unwrap();
+    let mut it = log.lines();
+    assert_eq!(it.next(), Some("iteration,seconds,train_psnr,test_psnr"));
+    let cells: Vec<Vec<&str>> = it.map(|l| l.split(',').collect()).collect();
+    assert_eq!(cells.len(), 31, "{log}");
+    let tests: Vec<f64> = cells.iter().filter_map(|c| c[3].parse().ok()).collect();
+    assert_eq!(tests.len(), 4, "{log}");
+    for (t, r) in tests.iter().zip(&rows) {
+        assert!((t - r.2).abs() < 1e-3, "{log}");
+    }
+    // The plot, as PNG and SVG.
+    let png = diffsvg::Image::load(d.join("fit.psnr.png")).unwrap();
+    assert!(png.width > 100 && png.height > 100);
+    let svg = std::fs::read_to_string(d.join("fit.psnr.svg")).unwrap();
+    assert!(svg.contains("<svg") && svg.contains("PSNR"), "{svg}");
+}
+
+#[test]
+fn mesh_fit_refines_perturbed_poses_and_fits_lights() {
+    let d = scratch("mesh_fit_poses");
+    let obj = octahedron(&d);
+    let out = d.join("fit.obj");
+    // The model starts as the reference itself; only the cameras or the lights are off.
+    let run = |extra: &[&str]| {
+        let mut args = vec![
+            "mesh",
+            "fit",
+            s(&obj),
+            "--start",
+            s(&obj),
+            "--views",
+            "4",
+            "--test-views",
+            "2",
+            "--size",
+            "32",
+            "--iters",
+            "40",
+            "--lr-positions",
+            "0",
+            "--lr-colors",
+            "0",
+            "--json",
+            "-o",
+            s(&out),
+        ];
+        args.extend_from_slice(extra);
+        diffsvg(&args)
+    };
+    let r = run(&["--refine-poses", "--perturb-poses", "1,0.01"]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let summary = json_lines(&r.stdout).pop().unwrap();
+    let e = &summary["pose_error"];
+    let (before, after) = (
+        e["before"]["degrees"].as_f64().unwrap(),
+        e["after"]["degrees"].as_f64().unwrap(),
+    );
+    assert!((before - 1.0).abs() < 1e-3, "{summary}");
+    assert!(after < 0.5 * before, "{summary}");
+    // One correction per training view; the held-out views keep their cameras.
+    assert_eq!(summary["pose_corrections"], 4, "{summary}");
+    // Lights: the reference lit from (0.3, 0.8, 0.5), the model's light starting 34.9°
+    // away (5.4° when written).
+    let truth = [0.3, 0.8, 0.5];
+    let r = run(&[
+        "--reference-light",
+        "0.3,0.8,0.5",
+        "--light",
+        "0.7,0.65,0.1",
+        "--ambient",
+        "0.2,0.2,0.2",
+        "--fit-lights",
+        "--lr-lights",
+        "0.01",
+    ]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let summary = json_lines(&r.stdout).pop().unwrap();
+    let dir: Vec<f64> = summary["lighting"]["lights"][0]["direction"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    let angle = |a: &[f64], b: &[f64]| {
+        let n = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
+        let c = a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>() / (n(a) * n(b));
+        c.clamp(-1.0, 1.0).acos().to_degrees()
+    };
+    let (start, end) = (angle(&[0.7, 0.65, 0.1], &truth), angle(&dir, &truth));
+    assert!(
+        end < 0.5 * start,
+        "light {start:.1}° → {end:.1}° off: {summary}"
+    );
+    // Bad flags: one line naming them, no output.
+    std::fs::remove_file(&out).unwrap();
+    assert_fails(&run(&["--fit-lights"]), "--fit-lights", "--light", &out);
+    assert_fails(
+        &run(&["--reference-light", "0,1,0"]),
+        "--reference-light",
+        "--fit-lights",
+        &out,
+    );
+    assert_fails(&run(&["--lr-uvs", "0.1"]), "--lr-uvs", "texture", &out);
+    assert_fails(
+        &run(&["--refine-poses", "--perturb-poses", "200,0"]),
+        "--perturb-poses",
+        "degrees",
+        &out,
+    );
 }
 
 #[test]
