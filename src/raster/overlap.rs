@@ -55,7 +55,8 @@
 //!
 //! **Off by default** ([`RenderOptions::exact_overlaps`](super::RenderOptions)): on, the
 //! bundled drawings whose paths do overlap themselves (a self-crossing stroke, a star,
-//! dashes' caps) still take up to 1.6× as long (docs/performance.md); off, the clamped
+//! dashes' caps) still take up to about 3× as long: the even-odd star's long crossing
+//! edges give danger boxes that cover most of it (docs/performance.md); off, the clamped
 //! winding integral everywhere, as before issue 29.
 //!
 //! **Bounds.** A cell with up to [`EXACT_PIECES`] pieces is exact (its pairwise crossings
