@@ -48,6 +48,9 @@ pub(crate) struct Item {
     /// horizontal at integer y). Only then do pixels with a zero winding integral take
     /// part in the backward pass.
     pub(crate) grid_aligned: bool,
+    /// About how many (edge, pixel row) pairs accumulating the item writes: `|Δy| + 1`
+    /// summed over its edges that are not horizontal.
+    pub(crate) row_crossings: f64,
     /// Whether the winding number can take more than two adjacent values inside one
     /// pixel: anything but simple rings (convex, or monotone in y) apart from each other
     /// ([`rings_cannot_overlap`](super::overlap::rings_cannot_overlap)). Only such items look for the cells whose
@@ -916,16 +919,20 @@ fn item(
     if !bbox.iter().all(|v| v.is_finite()) {
         return None;
     }
-    let mut grid_aligned = false;
+    let (mut grid_aligned, mut row_crossings) = (false, 0.0);
     for &(s, n) in &rings {
         for k in 0..n {
             let (a, b) = (pts[s + k], pts[s + (k + 1) % n]);
             grid_aligned |= (a[0] == b[0] && a[0] == floor_f64(a[0]))
                 || (a[1] == b[1] && a[1] == floor_f64(a[1]));
+            if a[1] != b[1] {
+                row_crossings += (a[1] - b[1]).abs() + 1.0;
+            }
         }
     }
     Some(Item {
         grid_aligned,
+        row_crossings,
         // Found by `Prepared::set_exact_overlaps` when it is asked for.
         can_overlap: true,
         danger: Default::default(),
