@@ -327,35 +327,25 @@ impl Rings {
     /// close together or too many edge pairs to test.
     fn tangled(&self) -> Option<Vec<bool>> {
         let m = self.pts.len();
-        // Edges chain after chain, ascending: their indices and their first and last ends.
-        let mut order: Vec<u32> = Vec::with_capacity(m);
-        let mut lo: Vec<Point> = Vec::with_capacity(m);
-        let mut hi: Vec<Point> = Vec::with_capacity(m);
-        // Blocks of up to `CHAIN_BLOCK` consecutive edges of a chain: their `order` range,
-        // their first and last ends, and their box.
-        let mut blocks: Vec<(usize, usize, Point, Point, [f64; 4])> = Vec::new();
+        // Chains one after the other, each as its vertices in ascending order (`verts`) and
+        // its edges (`edges`); a chain of `k` edges holds `k + 1` vertices, so the edge at
+        // `edges[i]` of the `c`-th chain runs from `verts[i + c]` to `verts[i + c + 1]`.
+        let mut verts: Vec<Point> = Vec::with_capacity(m + 2 * self.rings.len());
+        let mut edges: Vec<u32> = Vec::with_capacity(m);
+        // Blocks of up to `CHAIN_BLOCK` consecutive edges of a chain: the `verts` index of
+        // their first vertex, their edge count, and their box.
+        let mut blocks: Vec<(usize, usize, [f64; 4])> = Vec::new();
         // Chains: their range of `blocks`, and their box.
         let mut chains: Vec<(usize, usize)> = Vec::new();
         let mut boxes: Vec<[f64; 4]> = Vec::new();
-        let up: Vec<bool> = (0..m)
-            .map(|e| {
-                let (a, b) = self.edge(e);
-                before(a, b)
-            })
-            .collect();
-        let join = |a: [f64; 4], c: [f64; 4]| {
-            [
-                a[0].min(c[0]),
-                a[1].min(c[1]),
-                a[2].max(c[2]),
-                a[3].max(c[3]),
-            ]
+        let up = |e: usize| {
+            let (a, b) = self.edge(e);
+            before(a, b)
         };
         for &(s, n) in &self.rings {
-            let up = &up[s..s + n];
             // Chains start where the direction changes (anywhere when it never does).
             let start = (0..n)
-                .find(|&k| up[k] != up[if k == 0 { n - 1 } else { k - 1 }])
+                .find(|&k| up(s + k) != up(s + if k == 0 { n - 1 } else { k - 1 }))
                 .unwrap_or(0);
             let at = |j: usize| {
                 s + if start + j >= n {
@@ -366,62 +356,104 @@ impl Rings {
             };
             let mut k = 0;
             while k < n {
-                let dir = up[at(k) - s];
-                let len = (k + 1..n).find(|&j| up[at(j) - s] != dir).unwrap_or(n) - k;
-                let first = order.len();
+                let dir = up(at(k));
+                let len = (k + 1..n).find(|&j| up(at(j)) != dir).unwrap_or(n) - k;
+                // Vertices in ascending order: the edges' first ends, then the last end.
+                let v0 = verts.len();
                 for j in 0..len {
                     let e = at(if dir { k + j } else { k + len - 1 - j });
                     let (a, b) = self.edge(e);
-                    order.push(e as u32);
-                    lo.push(if dir { a } else { b });
-                    hi.push(if dir { b } else { a });
+                    edges.push(e as u32);
+                    verts.push(if dir { a } else { b });
                 }
+                let (a, b) = self.edge(at(if dir { k + len - 1 } else { k }));
+                verts.push(if dir { b } else { a });
                 let b0 = blocks.len();
-                for f in (first..first + len).step_by(CHAIN_BLOCK) {
-                    let t = (f + CHAIN_BLOCK).min(first + len);
-                    let bx = order[f + 1..t]
-                        .iter()
-                        .fold(self.boxes[order[f] as usize], |a, &e| {
-                            join(a, self.boxes[e as usize])
-                        });
-                    blocks.push((f, t, lo[f], hi[t - 1], bx));
+                let mut chain_box = [
+                    f64::INFINITY,
+                    f64::INFINITY,
+                    f64::NEG_INFINITY,
+                    f64::NEG_INFINITY,
+                ];
+                for f in (0..len).step_by(CHAIN_BLOCK) {
+                    let t = (f + CHAIN_BLOCK).min(len);
+                    let bx = verts[v0 + f..=v0 + t].iter().fold(
+                        [
+                            f64::INFINITY,
+                            f64::INFINITY,
+                            f64::NEG_INFINITY,
+                            f64::NEG_INFINITY,
+                        ],
+                        |b, q| {
+                            [
+                                b[0].min(q[0]),
+                                b[1].min(q[1]),
+                                b[2].max(q[0]),
+                                b[3].max(q[1]),
+                            ]
+                        },
+                    );
+                    chain_box = [
+                        chain_box[0].min(bx[0]),
+                        chain_box[1].min(bx[1]),
+                        chain_box[2].max(bx[2]),
+                        chain_box[3].max(bx[3]),
+                    ];
+                    blocks.push((v0 + f, t - f, bx));
                 }
                 chains.push((b0, blocks.len()));
-                boxes.push(
-                    blocks[b0 + 1..]
-                        .iter()
-                        .fold(blocks[b0].4, |a, b| join(a, b.4)),
-                );
+                boxes.push(chain_box);
                 k += len;
             }
         }
+        // The `edges` index of the edge starting at `verts[v]` of the chain whose blocks
+        // begin at `b0`: chain `c` holds `c` more vertices before it than edges.
+        let chain_of_block: Vec<u32> = {
+            let mut v = vec![0u32; blocks.len()];
+            for (c, &(b0, b1)) in chains.iter().enumerate() {
+                v[b0..b1].fill(c as u32);
+            }
+            v
+        };
         let mut tangled = vec![false; m];
         let mut work = 0usize;
         let mut scratch = sweep::Scratch::default();
         let end = sweep::overlapping_pairs(&boxes, BUDGET, &mut scratch, |i, j| {
             let ((a0, a1), (b0, b1)) = (chains[i], chains[j]);
             let (ba, bb) = (&blocks[a0..a1], &blocks[b0..b1]);
+            let ends = |&(v, k, _): &(usize, usize, [f64; 4])| (verts[v], verts[v + k]);
             spans_meeting(
                 ba.len(),
                 bb.len(),
-                |i| (ba[i].2, ba[i].3),
-                |j| (bb[j].2, bb[j].3),
+                |i| ends(&ba[i]),
+                |j| ends(&bb[j]),
                 |i, j| {
-                    let ((fa, ta, _, _, xa), (fb, tb, _, _, xb)) = (ba[i], bb[j]);
+                    let ((va, ka, xa), (vb, kb, xb)) = (ba[i], bb[j]);
                     if !overlap(xa, xb) {
                         return;
                     }
+                    let (ca, cb) = (
+                        chain_of_block[a0 + i] as usize,
+                        chain_of_block[b0 + j] as usize,
+                    );
                     spans_meeting(
-                        ta - fa,
-                        tb - fb,
-                        |i| (lo[fa + i], hi[fa + i]),
-                        |j| (lo[fb + j], hi[fb + j]),
+                        ka,
+                        kb,
+                        |i| (verts[va + i], verts[va + i + 1]),
+                        |j| (verts[vb + j], verts[vb + j + 1]),
                         |i, j| {
                             work += 1;
-                            let (ea, eb) = (order[fa + i] as usize, order[fb + j] as usize);
-                            if overlap(self.boxes[ea], self.boxes[eb]) && self.meet(ea, eb) {
-                                tangled[ea] = true;
-                                tangled[eb] = true;
+                            let (p, q) = (verts[va + i], verts[va + i + 1]);
+                            let (u, v) = (verts[vb + j], verts[vb + j + 1]);
+                            // Their (y, x) spans overlap, so their y ranges do.
+                            if p[0].min(q[0]) <= u[0].max(v[0]) && u[0].min(v[0]) <= p[0].max(q[0])
+                            {
+                                let ea = edges[va + i - ca] as usize;
+                                let eb = edges[vb + j - cb] as usize;
+                                if self.meet(ea, eb) {
+                                    tangled[ea] = true;
+                                    tangled[eb] = true;
+                                }
                             }
                         },
                     );
@@ -880,5 +912,118 @@ pub(crate) mod tests {
     fn non_finite_points_box_everything() {
         let r = vec![[1.0, 1.0], [f64::NAN, 2.0], [3.0, 4.0]];
         assert_eq!(danger(&[r]), vec![EVERYWHERE]);
+    }
+}
+
+#[cfg(test)]
+mod zz_time {
+    use crate::raster::{Prepared, RenderOptions, render_prepared};
+    use std::time::Instant;
+    #[test]
+    fn zz_time_exact() {
+        let t = std::path::Path::new("/work/shared/data/resvg-tests");
+        let fonts = crate::scene::Fonts::new()
+            .with_dir(t.join("fonts"))
+            .with_fallback(true);
+        fn walk(p: &std::path::Path) -> Vec<std::path::PathBuf> {
+            let mut v = Vec::new();
+            for e in std::fs::read_dir(p).unwrap() {
+                let e = e.unwrap().path();
+                if e.is_dir() {
+                    v.extend(walk(&e));
+                } else if e.extension().is_some_and(|x| x == "svg") {
+                    v.push(e);
+                }
+            }
+            v
+        }
+        let mut files = Vec::new();
+        for d in ["tests/masking", "tests/text"] {
+            files.extend(walk(&t.join(d)));
+        }
+        let med = |mut v: Vec<f64>| {
+            v.sort_by(f64::total_cmp);
+            v[v.len() / 2]
+        };
+        let (mut td, mut tr0, mut tr1, mut tp) = (0.0, 0.0, 0.0, 0.0);
+        let mut logs = (0.0, 0.0, 0usize);
+        let mut keep: Vec<(Vec<[f64; 2]>, Vec<(usize, usize)>)> = Vec::new();
+        for f in &files {
+            let data = std::fs::read(f).unwrap();
+            let Ok(tree) = crate::scene::svg_in::parse_tree_with(&data, f, &fonts) else {
+                continue;
+            };
+            let Ok(scene) = crate::scene::svg_in::from_tree(&tree, f, crate::Sizing::Natural)
+            else {
+                continue;
+            };
+            let opts = RenderOptions::default();
+            let (mut a, mut b, mut c, mut d) = (vec![], vec![], vec![], vec![]);
+            let mut p = Prepared::new(&scene, &opts);
+            for _ in 0..15 {
+                let s = Instant::now();
+                p = Prepared::new(&scene, &opts);
+                a.push(s.elapsed().as_secs_f64());
+                let s = Instant::now();
+                let _ = render_prepared(&p);
+                c.push(s.elapsed().as_secs_f64());
+                let s = Instant::now();
+                p.set_exact_overlaps(true);
+                b.push(s.elapsed().as_secs_f64());
+                let s = Instant::now();
+                let _ = render_prepared(&p);
+                d.push(s.elapsed().as_secs_f64());
+            }
+            let (a, b, c, d) = (med(a), med(b), med(c), med(d));
+            tp += a;
+            td += b;
+            tr0 += c;
+            tr1 += d;
+            logs.0 += ((a + c) / (a + b + d)).ln();
+            logs.1 += ((a + c) / (a + b + c)).ln();
+            logs.2 += 1;
+            for it in &p.items {
+                if !crate::raster::overlap::rings_cannot_overlap(&it.pts, &it.rings) {
+                    keep.push((it.pts.clone(), it.rings.clone()));
+                }
+            }
+        }
+        let n = logs.2 as f64;
+        println!(
+            "prepare {:.1} ms, detect {:.1} ms, render default {:.1} ms, render exact {:.1} ms",
+            tp * 1e3,
+            td * 1e3,
+            tr0 * 1e3,
+            tr1 * 1e3
+        );
+        println!(
+            "geo speed ratio exact/default {:.3}; detection-only {:.3}",
+            (logs.0 / n).exp(),
+            (logs.1 / n).exp()
+        );
+        let rs: Vec<super::Rings> = keep
+            .iter()
+            .map(|(p, r)| super::Rings::clean(p, r).unwrap())
+            .collect();
+        let s = Instant::now();
+        for _ in 0..100 {
+            for r in &rs {
+                std::hint::black_box(r.tangled());
+            }
+        }
+        println!(
+            "loop tangled: {:.2} ms per pass",
+            s.elapsed().as_secs_f64() * 1e3 / 100.0
+        );
+        let s = Instant::now();
+        for _ in 0..100 {
+            for (p, r) in &keep {
+                std::hint::black_box(super::Danger::of(p, r));
+            }
+        }
+        println!(
+            "loop Danger::of: {:.2} ms per pass",
+            s.elapsed().as_secs_f64() * 1e3 / 100.0
+        );
     }
 }
