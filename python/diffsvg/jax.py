@@ -37,8 +37,8 @@ NaN, as JAX's own functions do, with a one-line :class:`DiffsvgWarning` naming t
 
 from __future__ import annotations
 
+import ctypes
 import functools
-import warnings
 import weakref
 from collections.abc import Mapping
 from typing import Any, Optional, Sequence, Tuple
@@ -206,70 +206,34 @@ def params(scene: Scene, dtype=jnp.float32, arrays: Any = None) -> Params:
     return Params(flat, lay)
 
 
-# ----- the callbacks ----------------------------------------------------------------------
-def _rows(scene: Scene, v: np.ndarray) -> np.ndarray:
-    """Batched vectors as ``(batch, n)`` ``float64``, keeping each ``float64`` value of the
-    scene whose ``float32`` rounding a ``float32`` vector holds."""
-    v = np.asarray(v)
-    rows = v.reshape(-1, v.shape[-1])
-    if rows.dtype == np.float32:
-        cur = scene._current()
-        return np.where(cur.astype(np.float32) == rows, cur, rows.astype(np.float64))
-    return np.ascontiguousarray(rows, dtype=np.float64)
+# ----- the custom calls -------------------------------------------------------------------
+def _register_targets() -> None:
+    """Registers diffsvg's two XLA FFI handlers (``_native``'s ``diffsvg_ffi_render`` and
+    ``diffsvg_ffi_render_backward``, see ``python/src/ffi.rs``) as CPU custom-call targets."""
+    lib = ctypes.CDLL(_native.__file__)
+    for name in ("render", "render_backward"):
+        jax.ffi.register_ffi_target(f"diffsvg_{name}",
+                                    jax.ffi.pycapsule(getattr(lib, f"diffsvg_ffi_{name}")),
+                                    platform="cpu")
 
 
-def _warn_non_finite(bad: np.ndarray, rows: np.ndarray, what: str) -> None:
-    """One warning naming the first non-finite value of the first bad row."""
-    b = int(np.argmax(bad))
-    where = f"row {b}, " if rows.shape[0] > 1 else ""
-    r = rows[b].reshape(-1)
-    i = int(np.argmax(~np.isfinite(r)))
-    warnings.warn(DiffsvgWarning(
-        f"diffsvg.jax.render: {what} {where}value {i} is {r[i]} (not finite); the result "
-        "is NaN"), stacklevel=3)
+_register_targets()
 
 
-def _forward_cb(scene, background, tolerance, v):
-    batch = v.shape[:-1]
-    rows = _rows(scene, v)
-    try:
-        img = _native.render_batch(_scene(scene), rows, background, tolerance)
-    except DiffsvgError:
-        # Inside jit a callback must not raise: rows with a non-finite value render NaN.
-        bad = ~np.isfinite(rows).all(axis=1)
-        if not bad.any():
-            raise
-        _warn_non_finite(bad, rows, "params")
-        rows = rows.copy()
-        rows[bad] = scene._current()
-        img = _native.render_batch(_scene(scene), rows, background, tolerance)
-        img[bad] = np.nan
-    return img.reshape(*batch, scene.height, scene.width, 4)
+def _attributes(scene: Scene, background: Optional[tuple], tolerance: float) -> dict:
+    """The custom calls' attributes: the scene's id in the native registry (its entry
+    follows the scene's changes and goes when the scene is dropped), ``tolerance`` and
+    ``background`` (straight RGBA, when given)."""
+    attrs = {"scene": np.uint64(_native.ffi_scene(_scene(scene))),
+             "tolerance": np.float64(tolerance)}
+    if background is not None:
+        attrs["background"] = np.asarray(background, np.float32)
+    return attrs
 
 
-def _backward_cb(scene, background, tolerance, v, d):
-    batch = v.shape[:-1]
-    rows = _rows(scene, v)
-    d = np.ascontiguousarray(np.broadcast_to(d, (*batch, scene.height, scene.width, 4)),
-                             dtype=np.float32).reshape(-1, scene.height, scene.width, 4)
-    try:
-        g = _native.render_backward_batch(_scene(scene), rows, d, background, tolerance)
-    except DiffsvgError:
-        bad_p = ~np.isfinite(rows).all(axis=1)
-        bad_d = ~np.isfinite(d).all(axis=(1, 2, 3))
-        if not (bad_p | bad_d).any():
-            raise
-        if bad_p.any():
-            _warn_non_finite(bad_p, rows, "params")
-        else:
-            _warn_non_finite(bad_d, d, "d_image")
-        bad = bad_p | bad_d
-        rows, d = rows.copy(), d.copy()
-        rows[bad] = scene._current()
-        d[bad] = 0
-        g = _native.render_backward_batch(_scene(scene), rows, d, background, tolerance)
-        g[bad] = np.nan
-    return g.reshape(*batch, rows.shape[1]).astype(v.dtype)
+def _native_dtype(flat):
+    """``flat`` as the handlers take it: ``float32`` or ``float64`` (others as ``float32``)."""
+    return flat if flat.dtype in (jnp.float32, jnp.float64) else flat.astype(jnp.float32)
 
 
 @functools.partial(jax.custom_vjp, nondiff_argnums=(0, 1, 2))
@@ -281,27 +245,10 @@ def render_flat(scene: Scene, background: Optional[tuple], tolerance: float,
     return _forward(scene, background, tolerance, flat)
 
 
-_CALLBACKS: "weakref.WeakKeyDictionary[Scene, dict]" = weakref.WeakKeyDictionary()
-
-
-def _callbacks(scene, background, tolerance):
-    """The forward and backward callbacks of one scene and options, the same objects on
-    every call: JAX caches what it compiles for a callback by the callable, so outside
-    ``jit`` a new one per call would compile each step anew."""
-    per_scene = _CALLBACKS.setdefault(scene, {})
-    key = (background, tolerance)
-    if key not in per_scene:
-        ref = weakref.ref(scene)  # not the scene itself: the cache must not keep it alive
-        per_scene[key] = (
-            lambda v: _forward_cb(ref(), background, tolerance, v),
-            lambda v, d: _backward_cb(ref(), background, tolerance, v, d))
-    return per_scene[key]
-
-
 def _forward(scene, background, tolerance, flat):
     shape = jax.ShapeDtypeStruct((scene.height, scene.width, 4), jnp.float32)
-    cb = _callbacks(scene, background, tolerance)[0]
-    return jax.pure_callback(cb, shape, flat, vmap_method="broadcast_all")
+    call = jax.ffi.ffi_call("diffsvg_render", shape, vmap_method="broadcast_all")
+    return call(_native_dtype(jnp.asarray(flat)), **_attributes(scene, background, tolerance))
 
 
 def _fwd(scene, background, tolerance, flat):
@@ -309,9 +256,12 @@ def _fwd(scene, background, tolerance, flat):
 
 
 def _bwd(scene, background, tolerance, flat, d_image):
-    out = jax.ShapeDtypeStruct(flat.shape, flat.dtype)
-    cb = _callbacks(scene, background, tolerance)[1]
-    return (jax.pure_callback(cb, out, flat, d_image, vmap_method="broadcast_all"),)
+    x = _native_dtype(jnp.asarray(flat))
+    out = jax.ShapeDtypeStruct(x.shape, x.dtype)
+    call = jax.ffi.ffi_call("diffsvg_render_backward", out, vmap_method="broadcast_all")
+    d = jnp.asarray(d_image, jnp.float32)
+    g = call(x, d, **_attributes(scene, background, tolerance))
+    return (g.astype(flat.dtype),)
 
 
 render_flat.defvjp(_fwd, _bwd)
