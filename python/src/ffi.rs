@@ -43,6 +43,7 @@
 
 use std::collections::HashMap;
 use std::ffi::{CString, c_char, c_int, c_void};
+use std::panic::AssertUnwindSafe;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, OnceLock};
 
@@ -268,15 +269,23 @@ impl Operand {
         self.dims.iter().product()
     }
 
-    /// The values as `T` (checked: `T`'s dtype code `dtype`).
-    fn input<T>(&self, dtype: c_int) -> Result<&[T], String> {
+    /// The number of values, checking the dtype code; `None` when there is no data.
+    fn count(&self, dtype: c_int) -> Result<Option<usize>, String> {
         if self.dtype != dtype {
-            return Err(format!("dtype code {} where {dtype} was expected", self.dtype));
+            return Err(format!(
+                "dtype code {} where {dtype} was expected",
+                self.dtype
+            ));
         }
         let n = self.len();
-        if n == 0 || self.data.is_null() {
+        Ok((n > 0 && !self.data.is_null()).then_some(n))
+    }
+
+    /// The values as `T` (`dtype`: `T`'s code).
+    fn input<T>(&self, dtype: c_int) -> Result<&[T], String> {
+        let Some(n) = self.count(dtype)? else {
             return Ok(&[]);
-        }
+        };
         // SAFETY: XLA's buffer of this dtype holds `product(dims)` aligned elements of it
         // for the duration of the call (c_api.h, XLA_FFI_Buffer); an input is not written.
         Ok(unsafe { std::slice::from_raw_parts(self.data as *const T, n) })
@@ -284,13 +293,9 @@ impl Operand {
 
     /// The values as `T`, to write (an output).
     fn output<T>(&mut self, dtype: c_int) -> Result<&mut [T], String> {
-        if self.dtype != dtype {
-            return Err(format!("dtype code {} where {dtype} was expected", self.dtype));
-        }
-        let n = self.len();
-        if n == 0 || self.data.is_null() {
+        let Some(n) = self.count(dtype)? else {
             return Ok(&mut []);
-        }
+        };
         // SAFETY: as in `input`; a result buffer is ours to write during the call, and
         // `&mut self` keeps this the only slice of it.
         Ok(unsafe { std::slice::from_raw_parts_mut(self.data as *mut T, n) })
@@ -313,7 +318,10 @@ impl Frame<'_> {
     fn operand(&self, ret: bool, i: usize, what: &str) -> Result<Operand, String> {
         let list = if ret { &self.0.rets } else { &self.0.args };
         if i as i64 >= list.size {
-            return Err(format!("{what}: missing (the call has {} operands)", list.size));
+            return Err(format!(
+                "{what}: missing (the call has {} operands)",
+                list.size
+            ));
         }
         // SAFETY: `types` and `items` hold `size` entries (c_api.h, XLA_FFI_Args/Rets),
         // and `i < size`.
@@ -464,10 +472,20 @@ unsafe fn handle(
         return std::ptr::null_mut();
     }
     let frame = Frame(f);
-    let done = frame
-        .options()
-        .and_then(|o| run(&frame, o))
-        .and_then(|warning| warning.map_or(Ok(()), |msg| warn(&msg)));
+    // A panic must not unwind into XLA (it would abort the process): it becomes the
+    // call's error.
+    let done = std::panic::catch_unwind(AssertUnwindSafe(|| {
+        frame.options().and_then(|o| run(&frame, o))
+    }))
+    .unwrap_or_else(|p| {
+        let what = p
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| p.downcast_ref::<String>().cloned())
+            .unwrap_or_default();
+        Err(format!("internal error (a panic): {what}"))
+    })
+    .and_then(|warning| warning.map_or(Ok(()), |msg| warn(&msg)));
     match done {
         Ok(()) => std::ptr::null_mut(),
         // SAFETY: `api` is the frame's.
@@ -548,7 +566,11 @@ fn rows_of(
                 .expect("a new array is contiguous")
                 .copy_from_slice(v);
         }
-        d => return Err(format!("params: dtype code {d}, expected float32 or float64")),
+        d => {
+            return Err(format!(
+                "params: dtype code {d}, expected float32 or float64"
+            ));
+        }
     }
     let mut warning = None;
     for (b, mut row) in out.rows_mut().into_iter().enumerate() {
@@ -623,9 +645,14 @@ fn forward(f: &Frame<'_>, o: Options) -> Result<Option<String>, String> {
     let (x, warning) = rows_of(&reg, &p, rows, &mut bad)?;
     let images = render_rows(&reg.scene, &x.view(), o.background, &opts, &reg.rendered)?;
     let plane = reg.scene.width as usize * reg.scene.height as usize * 4;
-    write_rows(img.output(DTYPE_F32)?, plane, images, &bad, f32::NAN, |c, i| {
-        c.copy_from_slice(i.data.as_flattened())
-    });
+    write_rows(
+        img.output(DTYPE_F32)?,
+        plane,
+        images,
+        &bad,
+        f32::NAN,
+        |c, i| c.copy_from_slice(i.data.as_flattened()),
+    );
     Ok(warning)
 }
 
@@ -661,7 +688,14 @@ fn backward(f: &Frame<'_>, o: Options) -> Result<Option<String>, String> {
     }
     let dview = ArrayView4::from_shape((rows, h, w, 4), owned.as_deref().unwrap_or(dv))
         .map_err(|e| e.to_string())?;
-    let grads = backward_rows(&reg.scene, &x.view(), &dview, o.background, &opts, &reg.rendered)?;
+    let grads = backward_rows(
+        &reg.scene,
+        &x.view(),
+        &dview,
+        o.background,
+        &opts,
+        &reg.rendered,
+    )?;
     let n = reg.n;
     if g.dtype == DTYPE_F32 {
         write_rows(g.output(DTYPE_F32)?, n, grads, &bad, f32::NAN, |c, v| {

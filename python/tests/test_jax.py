@@ -280,7 +280,12 @@ def test_a_background_color_is_recovered():
 # ----- the XLA custom calls (python/src/ffi.rs) -----------------------------------------
 @pytest.mark.parametrize("name", ["02-strokes.svg", "04-radial-gradient.svg", "10-logo.svg"])
 @pytest.mark.parametrize("background", [None, (0.2, 0.4, 0.6, 0.5)])
-def test_custom_calls_give_the_bits_of_render_and_render_backward(name, background):
+@pytest.mark.parametrize("ffi", [True, False])
+def test_custom_calls_give_the_bits_of_render_and_render_backward(name, background, ffi,
+                                                                 monkeypatch):
+    """The custom calls, and the pure_callback fallback (a JAX without the FFI, or a
+    default backend other than the CPU), give diffsvg.render's and render_backward's bits."""
+    monkeypatch.setattr(djax, "_FFI", ffi and djax._FFI)
     scene = diffsvg.Scene.load(SAMPLES / name)
     d = np.random.default_rng(3).normal(0, 1e-3, (scene.height, scene.width, 4)).astype(
         np.float32)
@@ -295,6 +300,19 @@ def test_custom_calls_give_the_bits_of_render_and_render_backward(name, backgrou
         (gx,) = jax.jit(vjp)(jnp.asarray(d))
         assert gx.dtype == dtype
         assert np.array_equal(np.asarray(gx), g.astype(dtype)), (name, dtype)
+    step = jax.make_jaxpr(jax.grad(lambda v: jnp.sum(djax.render(scene, v))))(x)
+    assert _custom_calls(step) == ([("diffsvg_render", ()), ("diffsvg_render_backward", ())]
+                                   if ffi else [])
+
+
+def test_the_fallback_warns_too(monkeypatch):
+    monkeypatch.setattr(djax, "_FFI", False)
+    scene = diffsvg.Scene.load(SAMPLES / "01-curves.svg")
+    x = scene.params()
+    x[3] = np.nan
+    with pytest.warns(djax.DiffsvgWarning, match=r"params value 3 is nan \(not finite\)"):
+        img = jax.jit(lambda v: djax.render(scene, v))(jnp.asarray(x))
+    assert np.isnan(np.asarray(img)).all()
 
 
 def test_a_dropped_scene_leaves_the_registry():
