@@ -4,12 +4,13 @@
 //! **Why `unsafe` here** (the only module of the package that has it): XLA calls a handler
 //! through its C API with raw pointers to a call frame, buffers and attributes, and the
 //! handler must be an exported `extern "C"` function. The alternative,
-//! `jax.pure_callback`, goes through Python on every call (the GIL, numpy wrapping, the
-//! hand-offs between XLA's thread and the Python one): measured with
-//! `python -P python/bench_jax.py --paths 256,1096 --steps 30` on the loaded 2-core
-//! machine, the jitted step was 1.13–1.29× the numpy step at 256 paths (about 1.7 ms of
-//! fixed cost per step) and 1.17–1.20× at 1,096; through these handlers it is within the
-//! numbers docs/python.md ("JAX") gives. Every `unsafe` block reads or writes memory XLA
+//! `jax.pure_callback` (still the fallback where these cannot be registered), goes through
+//! Python on every call (the GIL, numpy wrapping, the hand-offs between XLA's thread and
+//! the Python one). Measured with `python -P python/bench_jax.py --paths 256,1096
+//! --steps 30` on the loaded 2-core machine (load 4.2–7.7, six runs each, alternating),
+//! the jitted step was 1.16–1.43× the numpy step at 256 paths with the callbacks and
+//! 0.96–1.13× with these handlers; 0.99–1.10× and 0.94–1.00× at 1,096 paths
+//! (docs/python.md, "JAX"). Every `unsafe` block reads or writes memory XLA
 //! owns for the duration of the call, with the layout its C header
 //! (`jaxlib/include/xla/ffi/api/c_api.h`, API 0.3) gives; only the structs read are
 //! mirrored here, `#[repr(C)]`.
