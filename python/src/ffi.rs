@@ -97,7 +97,8 @@ pub(crate) fn scene_id(scene: &PyScene) -> u64 {
         return id;
     }
     let id = NEXT.fetch_add(1, Ordering::Relaxed);
-    registry().insert(id, Arc::new(Registered::new(&scene.inner)));
+    let entry = Arc::new(Registered::new(&scene.inner)); // copied before locking
+    registry().insert(id, entry);
     scene.ffi_id.store(id, Ordering::Release);
     id
 }
@@ -106,7 +107,8 @@ pub(crate) fn scene_id(scene: &PyScene) -> u64 {
 pub(crate) fn changed(scene: &PyScene) {
     let id = scene.ffi_id.load(Ordering::Acquire);
     if id != 0 {
-        registry().insert(id, Arc::new(Registered::new(&scene.inner)));
+        let entry = Arc::new(Registered::new(&scene.inner)); // copied before locking
+        registry().insert(id, entry);
     }
 }
 
