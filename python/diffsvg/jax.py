@@ -12,31 +12,42 @@
     g = jax.jit(jax.grad(loss))(x)                       # same shape as x
 
 The parameters are **one flat vector** in the layout of :meth:`diffsvg.Scene.params`, so a
-jitted step has one input and one callback, and compiles in the same time for 10 paths or
-10,000. :func:`params` gives the same vector as a :class:`Params`, a pytree with that one
-leaf that reads per shape (``p["shapes"][3]["points"]``) by slicing; optimizers (optax)
-see one array. A dict in the structure of :meth:`diffsvg.Scene.arrays` is accepted too,
-but it is one leaf per array and its compile time grows with the number of shapes.
+jitted step has one input and two custom calls, and compiles in the same time for 10 paths
+or 10,000. :func:`params` gives the same vector as a :class:`Params`, a pytree with that
+one leaf that reads per shape (``p["shapes"][3]["points"]``) by slicing; optimizers
+(optax) see one array. A dict in the structure of :meth:`diffsvg.Scene.arrays` is accepted
+too, but it is one leaf per array and its compile time grows with the number of shapes.
 
-The forward pass and the exact backward pass run in diffsvg (on the CPU, one
-``jax.pure_callback`` each for the whole scene, so it works under ``jax.jit``); the scene
-gives the topology (paths, segment kinds, paint kinds), the vector the values. Under
-``jax.vmap`` a batch of vectors (scenes of one structure) is one call that renders the
-rows in parallel. ``float32`` vectors keep the scene's ``float64`` values wherever they
-equal their ``float32`` rounding (see :meth:`diffsvg.Scene.set_params`); with
-``jax_enable_x64`` and ``float64`` vectors the values are exact.
+The forward pass and the exact backward pass run in diffsvg on the CPU as two **XLA FFI
+custom calls** (``jax.ffi.ffi_call`` of the handlers in ``python/src/ffi.rs``, registered
+when this module is imported): XLA calls diffsvg directly, without Python, the GIL or
+numpy in between, so the jitted step costs little more than the numpy calls (see
+docs/python.md, "JAX"). The scene gives the topology (paths, segment kinds, paint kinds),
+the vector the values: a scene used here is registered in the native module under an id
+(the calls' ``scene`` attribute) as a copy that follows the scene's changes
+(``set_params``, shapes added, removed, reordered; each then copies the scene once more)
+and is dropped with the scene. Under ``jax.vmap`` a batch of vectors (scenes of one
+structure) is one call that renders the rows in parallel. ``float32`` vectors keep the
+scene's ``float64`` values wherever they equal their ``float32`` rounding (see
+:meth:`diffsvg.Scene.set_params`); with ``jax_enable_x64`` and ``float64`` vectors the
+values are exact; other float dtypes go through ``float32``. The image and the gradient
+are the bits :func:`diffsvg.render` and :func:`diffsvg.render_backward` give.
 
 Errors: everything about the call's structure (the vector's length and dtype, the arrays'
 structure, ``background``, ``tolerance``) is checked while tracing, so a bad call raises
 the package's one-line :class:`diffsvg.DiffsvgError` at the call, under ``jit`` too. Values
 are known only when the step runs: outside ``jit`` a non-finite parameter raises the same
-error; inside ``jit`` (where a callback must not raise) the image and the gradient come out
-NaN, as JAX's own functions do, with a one-line :class:`DiffsvgWarning` naming the slot
-(``jax.config.update("jax_debug_nans", True)`` then stops at that step).
+error; inside ``jit`` the image and the gradient of a row with a non-finite value (or
+``d_image`` value) come out NaN, as JAX's own functions do, with a one-line
+:class:`DiffsvgWarning` naming the slot, which the custom call issues taking the GIL
+(``jax.config.update("jax_debug_nans", True)`` then stops at that step). A failure the
+custom call cannot turn into NaN (a scene whose structure changed after the step was
+compiled) raises ``JaxRuntimeError`` carrying diffsvg's one-line message.
 """
 
 from __future__ import annotations
 
+import ctypes
 import functools
 import warnings
 import weakref
@@ -54,7 +65,8 @@ __all__ = ["render", "render_flat", "over", "params", "Params", "DiffsvgWarning"
 
 
 class DiffsvgWarning(UserWarning):
-    """A value diffsvg refused inside ``jax.jit``, where it renders as NaN instead."""
+    """A value diffsvg refused inside ``jax.jit``, where it renders as NaN instead (issued
+    by the native custom call, which imports this class by name)."""
 
 
 # ----- the per-shape view of the flat vector --------------------------------------------
@@ -206,7 +218,87 @@ def params(scene: Scene, dtype=jnp.float32, arrays: Any = None) -> Params:
     return Params(flat, lay)
 
 
-# ----- the callbacks ----------------------------------------------------------------------
+# ----- the custom calls -------------------------------------------------------------------
+def _register_targets() -> bool:
+    """Registers diffsvg's two XLA FFI handlers (``_native``'s ``diffsvg_ffi_render`` and
+    ``diffsvg_ffi_render_backward``, see ``python/src/ffi.rs``) as CPU custom-call targets;
+    False where this JAX cannot (no ``jax.ffi.ffi_call``: older than the FFI API)."""
+    ffi = getattr(jax, "ffi", None)
+    if ffi is None or not hasattr(ffi, "ffi_call"):
+        return False
+    lib = ctypes.CDLL(_native.__file__)
+    for name in ("render", "render_backward"):
+        ffi.register_ffi_target(f"diffsvg_{name}",
+                                ffi.pycapsule(getattr(lib, f"diffsvg_ffi_{name}")),
+                                platform="cpu")
+    return True
+
+
+#: Whether the custom calls are registered; where they are not, or JAX's default backend
+#: is not the CPU (the handlers are CPU targets), the passes are ``jax.pure_callback``s
+#: into the same native code instead (slower by the Python in between; same bits).
+_FFI = _register_targets()
+
+
+def _use_ffi() -> bool:
+    return _FFI and jax.default_backend() == "cpu"
+
+
+def _attributes(scene: Scene, background: Optional[tuple], tolerance: float) -> dict:
+    """The custom calls' attributes: the scene's id in the native registry (its entry
+    follows the scene's changes and goes when the scene is dropped), ``tolerance`` and
+    ``background`` (straight RGBA, when given)."""
+    attrs = {"scene": np.uint64(_native.ffi_scene(_scene(scene))),
+             "tolerance": np.float64(tolerance)}
+    if background is not None:
+        attrs["background"] = np.asarray(background, np.float32)
+    return attrs
+
+
+def _native_dtype(flat):
+    """``flat`` as the handlers take it: ``float32`` or ``float64`` (others as ``float32``)."""
+    return flat if flat.dtype in (jnp.float32, jnp.float64) else flat.astype(jnp.float32)
+
+
+@functools.partial(jax.custom_vjp, nondiff_argnums=(0, 1, 2))
+def render_flat(scene: Scene, background: Optional[tuple], tolerance: float,
+                flat: jax.Array) -> jax.Array:
+    """:func:`render` of a flat vector with ``background`` (``None`` or straight
+    ``(r, g, b, a)``) and ``tolerance`` given as they are, unchecked: the primitive under
+    :func:`render`, kept for code written against it."""
+    return _forward(scene, background, tolerance, flat)
+
+
+def _forward(scene, background, tolerance, flat):
+    shape = jax.ShapeDtypeStruct((scene.height, scene.width, 4), jnp.float32)
+    if not _use_ffi():
+        cb = _callbacks(scene, background, tolerance)[0]
+        return jax.pure_callback(cb, shape, flat, vmap_method="broadcast_all")
+    call = jax.ffi.ffi_call("diffsvg_render", shape, vmap_method="broadcast_all")
+    return call(_native_dtype(jnp.asarray(flat)), **_attributes(scene, background, tolerance))
+
+
+def _fwd(scene, background, tolerance, flat):
+    return _forward(scene, background, tolerance, flat), flat
+
+
+def _bwd(scene, background, tolerance, flat, d_image):
+    if not _use_ffi():
+        out = jax.ShapeDtypeStruct(flat.shape, flat.dtype)
+        cb = _callbacks(scene, background, tolerance)[1]
+        return (jax.pure_callback(cb, out, flat, d_image, vmap_method="broadcast_all"),)
+    x = _native_dtype(jnp.asarray(flat))
+    out = jax.ShapeDtypeStruct(x.shape, x.dtype)
+    call = jax.ffi.ffi_call("diffsvg_render_backward", out, vmap_method="broadcast_all")
+    d = jnp.asarray(d_image, jnp.float32)
+    g = call(x, d, **_attributes(scene, background, tolerance))
+    return (g.astype(flat.dtype),)
+
+
+render_flat.defvjp(_fwd, _bwd)
+
+
+# ----- the fallback: pure_callbacks into the batch calls ---------------------------------
 def _rows(scene: Scene, v: np.ndarray) -> np.ndarray:
     """Batched vectors as ``(batch, n)`` ``float64``, keeping each ``float64`` value of the
     scene whose ``float32`` rounding a ``float32`` vector holds."""
@@ -272,15 +364,6 @@ def _backward_cb(scene, background, tolerance, v, d):
     return g.reshape(*batch, rows.shape[1]).astype(v.dtype)
 
 
-@functools.partial(jax.custom_vjp, nondiff_argnums=(0, 1, 2))
-def render_flat(scene: Scene, background: Optional[tuple], tolerance: float,
-                flat: jax.Array) -> jax.Array:
-    """:func:`render` of a flat vector with ``background`` (``None`` or straight
-    ``(r, g, b, a)``) and ``tolerance`` given as they are, unchecked: the primitive under
-    :func:`render`, kept for code written against it."""
-    return _forward(scene, background, tolerance, flat)
-
-
 _CALLBACKS: "weakref.WeakKeyDictionary[Scene, dict]" = weakref.WeakKeyDictionary()
 
 
@@ -296,25 +379,6 @@ def _callbacks(scene, background, tolerance):
             lambda v: _forward_cb(ref(), background, tolerance, v),
             lambda v, d: _backward_cb(ref(), background, tolerance, v, d))
     return per_scene[key]
-
-
-def _forward(scene, background, tolerance, flat):
-    shape = jax.ShapeDtypeStruct((scene.height, scene.width, 4), jnp.float32)
-    cb = _callbacks(scene, background, tolerance)[0]
-    return jax.pure_callback(cb, shape, flat, vmap_method="broadcast_all")
-
-
-def _fwd(scene, background, tolerance, flat):
-    return _forward(scene, background, tolerance, flat), flat
-
-
-def _bwd(scene, background, tolerance, flat, d_image):
-    out = jax.ShapeDtypeStruct(flat.shape, flat.dtype)
-    cb = _callbacks(scene, background, tolerance)[1]
-    return (jax.pure_callback(cb, out, flat, d_image, vmap_method="broadcast_all"),)
-
-
-render_flat.defvjp(_fwd, _bwd)
 
 
 # ----- the entry point ---------------------------------------------------------------------

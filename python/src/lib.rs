@@ -11,6 +11,7 @@ mod array;
 mod batch;
 mod build;
 mod error;
+mod ffi;
 mod jobs;
 mod mesh;
 mod output;
@@ -38,6 +39,8 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(render::render_backward, m)?)?;
     m.add_function(wrap_pyfunction!(batch::render_batch, m)?)?;
     m.add_function(wrap_pyfunction!(batch::render_backward_batch, m)?)?;
+    m.add_function(wrap_pyfunction!(ffi::ffi_scene, m)?)?;
+    m.add_function(wrap_pyfunction!(ffi::ffi_registered, m)?)?;
     m.add_function(wrap_pyfunction!(render::loss, m)?)?;
     m.add_function(wrap_pyfunction!(render::load_image, m)?)?;
     m.add_function(wrap_pyfunction!(render::load_target, m)?)?;

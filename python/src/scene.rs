@@ -2,6 +2,7 @@
 
 use std::path::PathBuf;
 use std::sync::Mutex;
+use std::sync::atomic::AtomicU64;
 
 use diffsvg::scene::params::written_point_gradient;
 use diffsvg::scene::project;
@@ -24,6 +25,9 @@ pub(crate) struct PyScene {
     /// the same rows takes them instead of copying and projecting again (`diffsvg.jax`
     /// calls the two in turn). Not part of the scene: a copy starts without.
     pub(crate) rendered: Mutex<Vec<Rendered>>,
+    /// Its id in `ffi`'s registry once `diffsvg.jax` has used it (0: not registered); the
+    /// registered snapshot follows every change and is removed when this is dropped.
+    pub(crate) ffi_id: AtomicU64,
 }
 
 /// A row of parameters and the scene `render_batch` made of it.
@@ -34,7 +38,14 @@ impl From<Scene> for PyScene {
         PyScene {
             inner,
             rendered: Mutex::new(Vec::new()),
+            ffi_id: AtomicU64::new(0),
         }
+    }
+}
+
+impl Drop for PyScene {
+    fn drop(&mut self) {
+        crate::ffi::forget(*self.ffi_id.get_mut());
     }
 }
 
@@ -98,6 +109,7 @@ impl PyScene {
         let path = diffsvg::scene::Path::from_primitive(id, prim);
         let node = crate::build::paint_path(path, fill, stroke, stroke_width, false)?;
         self.inner.nodes.push(node);
+        crate::ffi::changed(self);
         Ok(())
     }
 
@@ -120,6 +132,7 @@ impl PyScene {
         let path = crate::build::cubic_path(&points, &segments, &closed, id)?;
         let node = crate::build::paint_path(path, fill, stroke, stroke_width, evenodd)?;
         self.inner.nodes.push(node);
+        crate::ffi::changed(self);
         Ok(())
     }
 
@@ -139,6 +152,7 @@ impl PyScene {
             )));
         }
         self.inner.nodes.remove(index);
+        crate::ffi::changed(self);
         Ok(())
     }
 
@@ -162,6 +176,7 @@ impl PyScene {
             .iter()
             .map(|&i| slots[i].take().expect("a permutation"))
             .collect();
+        crate::ffi::changed(self);
         Ok(())
     }
 
@@ -169,6 +184,7 @@ impl PyScene {
     /// control points become its parameters).
     fn outline_primitives(&mut self) {
         self.inner.outline_primitives();
+        crate::ffi::changed(self);
     }
 
     /// Loads an SVG or SVGZ file. `width` (with `height`: exactly that size) or `scale`
@@ -284,6 +300,7 @@ impl PyScene {
         let v = vector_in(&values, n, "set_params")?;
         self.inner.set_params(&v);
         project(&mut self.inner);
+        crate::ffi::changed(self);
         Ok(())
     }
 

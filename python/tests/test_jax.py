@@ -1,11 +1,13 @@
 """diffsvg.jax: gradients inside JAX equal `diffsvg grad --json`, bit for bit."""
 
+import gc
 import json
 
 import numpy as np
 import pytest
 
 jax = pytest.importorskip("jax")
+import jax.extend  # noqa: E402  (the jaxpr types of _custom_calls)
 jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp  # noqa: E402
 
@@ -149,37 +151,49 @@ def _step_jaxpr(n, how):
 
 @pytest.mark.parametrize("how", ["flat", "params"])
 def test_the_step_does_not_grow_with_the_shapes(how):
-    """What JAX compiles is the same program for 4 paths or 400: one callback forward, one
-    backward (the per-shape pytree was one slice and one concatenation operand per array,
-    and compiled for 9.9 s at 256 paths)."""
+    """What JAX compiles is the same program for 4 paths or 400: one custom call forward,
+    one backward (the per-shape pytree was one slice and one concatenation operand per
+    array, and compiled for 9.9 s at 256 paths)."""
     small, large = _step_jaxpr(4, how), _step_jaxpr(400, how)
     assert len(small.eqns) == len(large.eqns)
-    text = str(large)
-    assert text.count("pure_callback") == 2, text
+    assert _custom_calls(large) == [("diffsvg_render", ()), ("diffsvg_render_backward", ())]
 
 
-def test_vmap_renders_a_batch_in_one_call(monkeypatch):
+def _custom_calls(closed) -> list:
+    """The diffsvg custom calls of a jaxpr (nested ones too), in order: each its target and
+    the batch dimensions of its params operand."""
+    out = []
+
+    def walk(jaxpr):
+        for eqn in jaxpr.eqns:
+            if eqn.primitive.name == "ffi_call":
+                out.append((eqn.params["target_name"], tuple(eqn.invars[0].aval.shape[:-1])))
+            for v in eqn.params.values():
+                for sub in (v if isinstance(v, (tuple, list)) else (v,)):
+                    if isinstance(sub, jax.extend.core.ClosedJaxpr):
+                        walk(sub.jaxpr)
+                    elif isinstance(sub, jax.extend.core.Jaxpr):
+                        walk(sub)
+    walk(closed.jaxpr)
+    return out
+
+
+def test_vmap_renders_a_batch_in_one_call():
     scene = diffsvg.Scene.load(SAMPLES / "05-translucent-overlap.svg")
     x = scene.params()
     xs = np.stack([x, x + 0.5, x - 0.5])
-    calls = []
-    for name in ("render_batch", "render_backward_batch"):
-        real = getattr(djax._native, name)
-
-        def counted(scene_, rows, *rest, _real=real, _name=name):
-            calls.append((_name, rows.shape[0]))
-            return _real(scene_, rows, *rest)
-        monkeypatch.setattr(djax._native, name, counted)
-    imgs = jax.jit(jax.vmap(lambda v: djax.render(scene, v)))(jnp.asarray(xs))
-    assert calls == [("render_batch", 3)]
+    render = jax.jit(jax.vmap(lambda v: djax.render(scene, v)))
+    assert _custom_calls(jax.make_jaxpr(render)(jnp.asarray(xs))) == [("diffsvg_render", (3,))]
+    imgs = render(jnp.asarray(xs))
     for img, v in zip(imgs, xs):
         s = scene.copy()
         s.set_params(v)
         assert np.array_equal(np.asarray(img), diffsvg.render(s))
-    calls.clear()
     target = jnp.asarray(diffsvg.render(scene), jnp.float64)
-    grads = jax.jit(jax.vmap(jax.grad(_loss_of(scene, target))))(jnp.asarray(xs))
-    assert calls == [("render_batch", 3), ("render_backward_batch", 3)]
+    step = jax.jit(jax.vmap(jax.grad(_loss_of(scene, target))))
+    assert _custom_calls(jax.make_jaxpr(step)(jnp.asarray(xs))) == [
+        ("diffsvg_render", (3,)), ("diffsvg_render_backward", (3,))]
+    grads = step(jnp.asarray(xs))
     for g, v in zip(grads, xs):
         assert np.array_equal(np.asarray(g), np.asarray(jax.grad(_loss_of(scene, target))(v)))
 
@@ -261,3 +275,66 @@ def test_a_background_color_is_recovered():
     for _ in range(200):
         b = b - 2.0 * step(b)
     assert np.allclose(np.asarray(b), [0.9, 0.6, 0.2], atol=1e-3), b
+
+
+# ----- the XLA custom calls (python/src/ffi.rs) -----------------------------------------
+@pytest.mark.parametrize("name", ["02-strokes.svg", "04-radial-gradient.svg", "10-logo.svg"])
+@pytest.mark.parametrize("background", [None, (0.2, 0.4, 0.6, 0.5)])
+@pytest.mark.parametrize("ffi", [True, False])
+def test_custom_calls_give_the_bits_of_render_and_render_backward(name, background, ffi,
+                                                                 monkeypatch):
+    """The custom calls, and the pure_callback fallback (a JAX without the FFI, or a
+    default backend other than the CPU), give diffsvg.render's and render_backward's bits."""
+    monkeypatch.setattr(djax, "_FFI", ffi and djax._FFI)
+    scene = diffsvg.Scene.load(SAMPLES / name)
+    d = np.random.default_rng(3).normal(0, 1e-3, (scene.height, scene.width, 4)).astype(
+        np.float32)
+    img = diffsvg.render(scene, background=background)
+    g = diffsvg.render_backward(scene, d, background=background, structured=False)
+    for dtype in (jnp.float64, jnp.float32):
+        x = jnp.asarray(scene.params(), dtype)
+        f = jax.jit(lambda v: djax.render(scene, v, background))
+        assert np.array_equal(np.asarray(f(x)), img)
+        out, vjp = jax.vjp(f, x)
+        assert np.array_equal(np.asarray(out), img)
+        (gx,) = jax.jit(vjp)(jnp.asarray(d))
+        assert gx.dtype == dtype
+        assert np.array_equal(np.asarray(gx), g.astype(dtype)), (name, dtype)
+    step = jax.make_jaxpr(jax.grad(lambda v: jnp.sum(djax.render(scene, v))))(x)
+    assert _custom_calls(step) == ([("diffsvg_render", ()), ("diffsvg_render_backward", ())]
+                                   if ffi else [])
+
+
+def test_the_fallback_warns_too(monkeypatch):
+    monkeypatch.setattr(djax, "_FFI", False)
+    scene = diffsvg.Scene.load(SAMPLES / "01-curves.svg")
+    x = scene.params()
+    x[3] = np.nan
+    with pytest.warns(djax.DiffsvgWarning, match=r"params value 3 is nan \(not finite\)"):
+        img = jax.jit(lambda v: djax.render(scene, v))(jnp.asarray(x))
+    assert np.isnan(np.asarray(img)).all()
+
+
+def test_a_dropped_scene_leaves_the_registry():
+    scene = diffsvg.Scene.load(SAMPLES / "01-curves.svg")
+    x = jnp.asarray(scene.params(), jnp.float32)
+    f = jax.jit(jax.value_and_grad(lambda v: jnp.sum(djax.render(scene, v))))
+    jax.block_until_ready(f(x))
+    sid = djax._native.ffi_scene(scene._s)
+    assert djax._native.ffi_registered(sid)
+    del scene, f
+    gc.collect()
+    assert not djax._native.ffi_registered(sid)
+
+
+def test_the_custom_calls_follow_the_scenes_changes():
+    scene = diffsvg.Scene.load(SAMPLES / "05-translucent-overlap.svg")
+    f = jax.jit(lambda v: djax.render(scene, v))
+    x = scene.params() * 1.01
+    scene.set_params(x)  # float32 vectors keep the new float64 values
+    assert np.array_equal(np.asarray(f(jnp.asarray(x, jnp.float32))), diffsvg.render(scene))
+    n = x.size
+    scene.remove(0)  # another structure: the compiled step refuses, with diffsvg's message
+    with pytest.raises(Exception, match=rf"diffsvg.jax: params: shape \[{n}\] but the scene "
+                                        rf"has {scene.params().size} parameters"):
+        jax.block_until_ready(f(jnp.asarray(x, jnp.float32)))
