@@ -904,15 +904,7 @@ mod tests {
             anchor_poses,
             ..TrainOptions::default()
         };
-        let error = |poses: &[PoseDelta]| -> (f64, f64) {
-            let mut sum = (0.0, 0.0);
-            for (i, l) in loaded.iter().enumerate() {
-                let cam = poses.get(i).map_or(*l, |d| pose::apply(l, d));
-                let (a, d) = pose::pose_error(&truth[i], &cam);
-                sum = (sum.0 + a / 8.0, sum.1 + d / 8.0);
-            }
-            sum
-        };
+        let error = |poses: &[PoseDelta]| pose::mean_error(&truth, &loaded, poses);
         let mse = |poses: &[PoseDelta]| -> f64 {
             let cams: Vec<Camera> = loaded
                 .iter()
@@ -944,14 +936,7 @@ mod tests {
         let (e0, e1) = (error(&[]), error(&free));
         let (m0, m1) = (mse(&[]), mse(&free));
         eprintln!("pose error {e0:?} → {e1:?}, MSE {m0} → {m1}");
-        assert!(
-            (e0.0 - 1.5).abs() < 1e-3 && (e0.1 - 0.06).abs() < 1e-4,
-            "{e0:?}"
-        );
-        assert!(
-            e1.0 < e0.0 / 3.0 && e1.1 < e0.1 / 3.0,
-            "pose error {e0:?} → {e1:?}"
-        );
+        pose::assert_a_third_is_left(e0, e1, 1.5, 0.06);
         assert!(m1 < 0.5 * m0, "MSE {m0} → {m1}");
         let anchored = run(true);
         let mut again = anchored.clone();
