@@ -197,6 +197,39 @@ pub fn perturb_cameras(
         .collect()
 }
 
+/// The mean pose error ([`pose_error`]) of the cameras `loaded` corrected by `poses`
+/// (none past its end) against `truth`.
+#[cfg(test)]
+pub(crate) fn mean_error(truth: &[Camera], loaded: &[Camera], poses: &[PoseDelta]) -> (f64, f64) {
+    let n = truth.len().min(loaded.len()).max(1) as f64;
+    let mut sum = (0.0, 0.0);
+    for (i, (t, l)) in truth.iter().zip(loaded).enumerate() {
+        let cam = poses.get(i).map_or(*l, |d| apply(l, d));
+        let (a, d) = pose_error(t, &cam);
+        sum = (sum.0 + a / n, sum.1 + d / n);
+    }
+    sum
+}
+
+/// Asserts that a perturbation of `degrees` and `units` gave the mean pose error
+/// `before`, and that refinement brought it below a third of that (`after`).
+#[cfg(test)]
+pub(crate) fn assert_a_third_is_left(
+    before: (f64, f64),
+    after: (f64, f64),
+    degrees: f64,
+    units: f64,
+) {
+    assert!(
+        (before.0 - degrees).abs() < 1e-3 && (before.1 - units).abs() < 1e-4,
+        "{before:?}"
+    );
+    assert!(
+        after.0 < before.0 / 3.0 && after.1 < before.1 / 3.0,
+        "pose error {before:?} → {after:?}"
+    );
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

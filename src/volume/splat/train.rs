@@ -1498,15 +1498,8 @@ mod tests {
             anchor_poses: false,
             ..TrainOptions::default()
         };
-        let error = |poses: &[PoseDelta]| -> (f64, f64) {
-            let mut sum = (0.0, 0.0);
-            for (i, v) in views.iter().enumerate() {
-                let cam = poses.get(i).map_or(v.camera, |d| pose::apply(&v.camera, d));
-                let (a, d) = pose::pose_error(&truth[i], &cam);
-                sum = (sum.0 + a / 8.0, sum.1 + d / 8.0);
-            }
-            sum
-        };
+        let loaded: Vec<_> = views.iter().map(|v| v.camera).collect();
+        let error = |poses: &[PoseDelta]| pose::mean_error(&truth, &loaded, poses);
         let run = |refine| {
             let mut g = cube.clone();
             let (mut first, mut last) = (Vec::new(), Vec::new());
@@ -1528,14 +1521,7 @@ mod tests {
         assert_eq!(with.poses.len(), 8);
         let (e0, e1) = (error(&[]), error(&with.poses));
         eprintln!("pose error {e0:?} → {e1:?}, PSNR {before} → {after} ({after_without} without)");
-        assert!(
-            (e0.0 - 1.5).abs() < 1e-3 && (e0.1 - 0.06).abs() < 1e-4,
-            "{e0:?}"
-        );
-        assert!(
-            e1.0 < e0.0 / 3.0 && e1.1 < e0.1 / 3.0,
-            "pose error {e0:?} → {e1:?}"
-        );
+        pose::assert_a_third_is_left(e0, e1, 1.5, 0.06);
         assert!(after > before + 5.0, "PSNR {before} → {after}");
         assert!(
             after > after_without + 5.0,
