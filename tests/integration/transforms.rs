@@ -165,18 +165,12 @@ fn radial_gradients_under_non_uniform_maps_are_parameters() {
     assert!(ParamLayout::new(&flat).transforms.is_empty());
     let worst = worst_pixel(&scene, &flat);
     assert!(worst <= 1e-5, "as baked: {worst}");
-    let slots = group_transform_slots(&scene);
-    assert_eq!(slots.len(), 16);
-    assert_slots_agree("radial under affine maps: transforms", &scene, &slots);
-    let paint = slots_of(&scene, &[ParamGroup::PaintGeometry, ParamGroup::StopOffset]);
-    assert_slots_agree("radial under affine maps: paint", &scene, &paint);
-    let mut moved = scene.clone();
-    let mut w = scene.params();
-    for &i in &slots {
-        w[i] += 0.03;
-    }
-    moved.set_params(&w);
-    let text = moved.to_svg_string();
+    let (moved, text) = maps_agree_and_move(
+        "radial under affine maps",
+        &scene,
+        16,
+        &[ParamGroup::PaintGeometry, ParamGroup::StopOffset],
+    );
     let back = Scene::from_svg_str(&text, "back.svg", Sizing::Natural).unwrap();
     assert_eq!(kept_transforms(&back), kept_transforms(&scene), "{text}");
     assert_reads_back(&moved, &back, &text);
@@ -585,26 +579,17 @@ fn strokes_under_affine_maps_are_parameters() {
     for (got, want) in v[at..at + 4].iter().zip([1.1, 0.15, 0.4, 0.75]) {
         assert!((got - want).abs() < 1e-6, "{:?}", &v[at..at + 4]);
     }
-    let slots = group_transform_slots(&scene);
-    assert_eq!(slots.len(), 12);
-    assert_slots_agree("affine strokes: transforms", &scene, &slots);
-    let rest = slots_of(
+    // Moved, written, read back.
+    let (moved, text) = maps_agree_and_move(
+        "affine strokes",
         &scene,
+        12,
         &[
             ParamGroup::Points,
             ParamGroup::StrokeWidth,
             ParamGroup::PaintGeometry,
         ],
     );
-    assert_slots_agree("affine strokes: local values", &scene, &rest);
-    // Moved, written, read back.
-    let mut moved = scene.clone();
-    let mut w = v.clone();
-    for &i in &slots {
-        w[i] += 0.03;
-    }
-    moved.set_params(&w);
-    let text = moved.to_svg_string();
     assert!(
         text.contains("<g id=\"slanted\" transform=\"matrix("),
         "{text}"
@@ -736,27 +721,17 @@ fn primitives_under_affine_maps_are_parameters() {
     near(&v[t..t + 4], &[1.1, 0.15, 0.4, 0.75]);
     // Every slot against central differences: the maps', the primitives' own (their
     // angles are in the transform group), the stroke width.
-    let slots = group_transform_slots(&scene);
-    assert_eq!(slots.len(), 18);
-    assert_slots_agree("affine primitives: transforms", &scene, &slots);
-    let own = slots_of(
+    // Moved, written, read back: the elements inside the maps, the same slots.
+    let (moved, text) = maps_agree_and_move(
+        "affine primitives",
         &scene,
+        18,
         &[
             ParamGroup::Points,
             ParamGroup::Transform,
             ParamGroup::StrokeWidth,
         ],
     );
-    let own: Vec<usize> = own.into_iter().filter(|i| !slots.contains(i)).collect();
-    assert_slots_agree("affine primitives: own parameters", &scene, &own);
-    // Moved, written, read back: the elements inside the maps, the same slots.
-    let mut moved = scene.clone();
-    let mut w = v.clone();
-    for &i in &slots {
-        w[i] += 0.03;
-    }
-    moved.set_params(&w);
-    let text = moved.to_svg_string();
     for part in [
         "<g id=\"leaning\" transform=\"matrix(",
         "<circle id=\"dot\" cx=\"",
@@ -813,4 +788,31 @@ fn affine_sample_is_fitted_back_as_itself() {
     let fitted = Scene::load(&out_svg, Sizing::Natural).unwrap();
     assert_eq!(kinds(&fitted), kinds(&scene));
     assert_eq!(kept_transforms(&fitted), kept_transforms(&scene));
+}
+
+/// Checks a scene's `maps` group-transform slots and its other slots of `groups` (the maps'
+/// left out) against central differences, then moves every map slot by 0.03: the moved
+/// scene and its SVG text.
+fn maps_agree_and_move(
+    name: &str,
+    scene: &Scene,
+    maps: usize,
+    groups: &[ParamGroup],
+) -> (Scene, String) {
+    let slots = group_transform_slots(scene);
+    assert_eq!(slots.len(), maps, "{name}");
+    assert_slots_agree(&format!("{name}: transforms"), scene, &slots);
+    let own: Vec<usize> = slots_of(scene, groups)
+        .into_iter()
+        .filter(|i| !slots.contains(i))
+        .collect();
+    assert_slots_agree(&format!("{name}: own parameters"), scene, &own);
+    let mut moved = scene.clone();
+    let mut w = scene.params();
+    for &i in &slots {
+        w[i] += 0.03;
+    }
+    moved.set_params(&w);
+    let text = moved.to_svg_string();
+    (moved, text)
 }
