@@ -333,8 +333,9 @@ impl Rings {
         let mut verts: Vec<Point> = Vec::with_capacity(m + 2 * self.rings.len());
         let mut edges: Vec<u32> = Vec::with_capacity(m);
         // Blocks of up to `CHAIN_BLOCK` consecutive edges of a chain: the `verts` index of
-        // their first vertex, their edge count, and their box.
-        let mut blocks: Vec<(usize, usize, [f64; 4])> = Vec::new();
+        // their first vertex, the `edges` index of their first edge, their edge count, and
+        // their box.
+        let mut blocks: Vec<(usize, usize, usize, [f64; 4])> = Vec::new();
         // Chains: their range of `blocks`, and their box.
         let mut chains: Vec<(usize, usize)> = Vec::new();
         let mut boxes: Vec<[f64; 4]> = Vec::new();
@@ -359,7 +360,7 @@ impl Rings {
                 let dir = up(at(k));
                 let len = (k + 1..n).find(|&j| up(at(j)) != dir).unwrap_or(n) - k;
                 // Vertices in ascending order: the edges' first ends, then the last end.
-                let v0 = verts.len();
+                let (v0, e0) = (verts.len(), edges.len());
                 for j in 0..len {
                     let e = at(if dir { k + j } else { k + len - 1 - j });
                     let (a, b) = self.edge(e);
@@ -399,43 +400,30 @@ impl Rings {
                         chain_box[2].max(bx[2]),
                         chain_box[3].max(bx[3]),
                     ];
-                    blocks.push((v0 + f, t - f, bx));
+                    blocks.push((v0 + f, e0 + f, t - f, bx));
                 }
                 chains.push((b0, blocks.len()));
                 boxes.push(chain_box);
                 k += len;
             }
         }
-        // The `edges` index of the edge starting at `verts[v]` of the chain whose blocks
-        // begin at `b0`: chain `c` holds `c` more vertices before it than edges.
-        let chain_of_block: Vec<u32> = {
-            let mut v = vec![0u32; blocks.len()];
-            for (c, &(b0, b1)) in chains.iter().enumerate() {
-                v[b0..b1].fill(c as u32);
-            }
-            v
-        };
         let mut tangled = vec![false; m];
         let mut work = 0usize;
         let mut scratch = sweep::Scratch::default();
         let end = sweep::overlapping_pairs(&boxes, BUDGET, &mut scratch, |i, j| {
             let ((a0, a1), (b0, b1)) = (chains[i], chains[j]);
             let (ba, bb) = (&blocks[a0..a1], &blocks[b0..b1]);
-            let ends = |&(v, k, _): &(usize, usize, [f64; 4])| (verts[v], verts[v + k]);
+            let ends = |&(v, _, k, _): &(usize, usize, usize, [f64; 4])| (verts[v], verts[v + k]);
             spans_meeting(
                 ba.len(),
                 bb.len(),
                 |i| ends(&ba[i]),
                 |j| ends(&bb[j]),
                 |i, j| {
-                    let ((va, ka, xa), (vb, kb, xb)) = (ba[i], bb[j]);
+                    let ((va, fa, ka, xa), (vb, fb, kb, xb)) = (ba[i], bb[j]);
                     if !overlap(xa, xb) {
                         return;
                     }
-                    let (ca, cb) = (
-                        chain_of_block[a0 + i] as usize,
-                        chain_of_block[b0 + j] as usize,
-                    );
                     spans_meeting(
                         ka,
                         kb,
@@ -448,8 +436,7 @@ impl Rings {
                             // Their (y, x) spans overlap, so their y ranges do.
                             if p[0].min(q[0]) <= u[0].max(v[0]) && u[0].min(v[0]) <= p[0].max(q[0])
                             {
-                                let ea = edges[va + i - ca] as usize;
-                                let eb = edges[vb + j - cb] as usize;
+                                let (ea, eb) = (edges[fa + i] as usize, edges[fb + j] as usize);
                                 if self.meet(ea, eb) {
                                     tangled[ea] = true;
                                     tangled[eb] = true;
