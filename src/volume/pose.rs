@@ -147,6 +147,167 @@ pub(crate) fn remove_common_motion(deltas: &mut [PoseDelta], centers: &[Vec3], s
     }
 }
 
+/// The point nearest, in least squares, to every view's optical axis (the line through
+/// its camera's `center` along its unit `axis`): where an inward-facing capture looks.
+/// `None` when the axes are nearly parallel (a forward-facing capture), where no such
+/// point is well defined.
+pub(crate) fn focus_point(centers: &[Vec3], axes: &[Vec3]) -> Option<Vec3> {
+    use glam::{DMat3, DVec3};
+    let mut m = DMat3::ZERO;
+    let mut rhs = DVec3::ZERO;
+    for (c, f) in centers.iter().zip(axes) {
+        let f = f.as_dvec3().normalize_or_zero();
+        // I − f fᵀ: the part of a vector across the axis.
+        let p = DMat3::IDENTITY - DMat3::from_cols(f * f.x, f * f.y, f * f.z);
+        m += p;
+        rhs += p * c.as_dvec3();
+    }
+    // Parallel axes leave m with a null direction: its determinant, relative to the
+    // scale n³ of a well-spread capture, tells how far from parallel they are.
+    let n = centers.len().min(axes.len()) as f64;
+    if n < 2.0 || m.determinant() < 1e-6 * n * n * n {
+        return None;
+    }
+    let g = m.inverse() * rhs;
+    g.is_finite().then(|| g.as_vec3())
+}
+
+/// The pose corrections of the training views while a model trains, with their Adam
+/// state, stepped one view at a time from each view's local gradient (the renderers'
+/// `∂L/∂[ε, u]`, module documentation).
+///
+/// **Pivoted coordinates.** Adam steps each view's correction as `[ω, u]`: a turn `ω`
+/// about a *pivot* `p` on the view's axis and a move `u`; the stored correction (turn
+/// about the camera's center `c`, then move `v`) is `[ω, u + (exp([ω]×) − I)·(c − p)]`.
+/// The pivot is the point of the axis nearest the capture's [`focus_point`]. A turn about
+/// the camera's center and a move across the axis shift the image alike, so in the
+/// stored coordinates the photos fix their sum well and their difference (the camera
+/// orbiting the object it looks at, which only changes the parallax) barely: a badly
+/// conditioned pair that Adam, scaling each coordinate alone, cannot separate. About the
+/// pivot the two are separate coordinates: the move shifts the image and the turn
+/// orbits. With the model held fixed, 8 cameras perturbed by 1.5° come back to 0.012°
+/// (voxels) and 0.0049° (splats) where the stored coordinates left 0.14° and 0.034°
+/// (the trainers' tests); on lego, docs/3d.md. Without a focus point
+/// (or with the pivot behind a camera) the pivot is the camera's center, the stored
+/// coordinates themselves.
+pub(crate) struct Refiner {
+    /// The stored corrections, as applied to the cameras.
+    deltas: Vec<PoseDelta>,
+    /// The optimized coordinates `[ω, u]`.
+    params: Vec<PoseDelta>,
+    /// `c − p` of each view.
+    offsets: Vec<Vec3>,
+    /// `p` of each view.
+    pivots: Vec<Vec3>,
+    moments: Vec<crate::optim::Moments<f32>>,
+}
+
+impl Refiner {
+    /// Zero corrections for views whose cameras have centers `centers` and unit optical
+    /// axes `axes` (one each); `pivoted: false` steps the stored coordinates instead.
+    pub(crate) fn new(centers: &[Vec3], axes: &[Vec3], pivoted: bool) -> Refiner {
+        let n = centers.len().min(axes.len());
+        let focus = if pivoted {
+            focus_point(centers, axes)
+        } else {
+            None
+        };
+        let offsets: Vec<Vec3> = centers[..n]
+            .iter()
+            .zip(axes)
+            .map(|(&c, &f)| match focus {
+                Some(g) => {
+                    let f = f.normalize_or_zero();
+                    let depth = (g - c).dot(f);
+                    if depth > 0.0 { -f * depth } else { Vec3::ZERO }
+                }
+                None => Vec3::ZERO,
+            })
+            .collect();
+        Refiner {
+            deltas: vec![[0.0; 6]; n],
+            params: vec![[0.0; 6]; n],
+            pivots: centers.iter().zip(&offsets).map(|(&c, &a)| c - a).collect(),
+            offsets,
+            moments: (0..n)
+                .map(|_| {
+                    crate::optim::Moments::new(
+                        crate::optim::Rule::Adam {
+                            beta1: 0.9,
+                            beta2: 0.999,
+                            eps: 1e-15,
+                        },
+                        6,
+                    )
+                })
+                .collect(),
+        }
+    }
+
+    /// The stored corrections, one per view.
+    pub(crate) fn deltas(&self) -> &[PoseDelta] {
+        &self.deltas
+    }
+
+    /// The stored corrections, one per view.
+    pub(crate) fn into_deltas(self) -> Vec<PoseDelta> {
+        self.deltas
+    }
+
+    /// One Adam step of view `view` from its local gradient `local` (`∂L/∂[ε, u]` at its
+    /// corrected camera), with rates `[turn (radians), move (world units)]`.
+    pub(crate) fn step(&mut self, view: usize, local: &[f64; 6], rates: [f32; 2]) {
+        let g = self.gradient(view, local);
+        let mut step = self.moments[view].lazy_step();
+        for (k, &gk) in g.iter().enumerate() {
+            if gk.is_finite() {
+                step.apply(k, &mut self.params[view][k], gk, rates[k / 3]);
+            }
+        }
+        self.deltas[view] = self.delta_of(view, &self.params[view]);
+    }
+
+    /// The gradient with respect to view `view`'s coordinates `[ω, u]` from the local
+    /// gradient `local` at its stored correction. With `v = u + (R(ω) − I)·a`, turning
+    /// `ω` by `δ` moves `v` by `(J δ) × (R a)`, so the turn's gradient gains
+    /// `Jᵀ·((R a) × ∂L/∂v)`.
+    fn gradient(&self, view: usize, local: &[f64; 6]) -> PoseDelta {
+        let d = &self.deltas[view];
+        let ra = rotation(Vec3::new(d[0], d[1], d[2])) * self.offsets[view];
+        let extra = ra
+            .as_dvec3()
+            .cross(glam::DVec3::new(local[3], local[4], local[5]));
+        let mut g = *local;
+        for k in 0..3 {
+            g[k] += extra[k];
+        }
+        delta_gradient(d, &g)
+    }
+
+    /// The stored correction of view `view` at coordinates `p = [ω, u]`.
+    fn delta_of(&self, view: usize, p: &PoseDelta) -> PoseDelta {
+        let r = rotation(Vec3::new(p[0], p[1], p[2]));
+        let a = self.offsets[view];
+        let v = Vec3::new(p[3], p[4], p[5]) + (r * a - a);
+        [p[0], p[1], p[2], v.x, v.y, v.z]
+    }
+
+    /// Removes the corrections' common rigid motion ([`remove_common_motion`], moves in
+    /// units of `scale`), fitted in the optimized coordinates: there a rigid motion of
+    /// every camera is a turn `w` and moves `w × pᵢ + t` about the pivots `pᵢ`. Fitting
+    /// it in the coordinates Adam steps matters: a push that every view feels alike (the
+    /// perturbation's own common part, which the photos ask for and the anchor forbids)
+    /// gives every view the same step there, which this removes exactly; fitted in the
+    /// stored coordinates instead, part of it stayed after each step and the corrections
+    /// drifted away (8 cameras perturbed by 1.5°: 19.8° after 300 steps).
+    pub(crate) fn anchor(&mut self, scale: f32) {
+        remove_common_motion(&mut self.params, &self.pivots, scale);
+        for v in 0..self.params.len() {
+            self.deltas[v] = self.delta_of(v, &self.params[v]);
+        }
+    }
+}
+
 /// How far pose `b` is from pose `a`: the angle of `R_b·R_aᵀ` in degrees and the
 /// distance between the centers in world units.
 pub fn pose_error(a: &Camera, b: &Camera) -> (f64, f64) {
@@ -212,20 +373,22 @@ pub(crate) fn mean_error(truth: &[Camera], loaded: &[Camera], poses: &[PoseDelta
 }
 
 /// Asserts that a perturbation of `degrees` and `units` gave the mean pose error
-/// `before`, and that refinement brought it below a third of that (`after`).
+/// `before`, and that refinement brought both its parts below `fraction` of that
+/// (`after`).
 #[cfg(test)]
-pub(crate) fn assert_a_third_is_left(
+pub(crate) fn assert_fraction_is_left(
     before: (f64, f64),
     after: (f64, f64),
     degrees: f64,
     units: f64,
+    fraction: f64,
 ) {
     assert!(
         (before.0 - degrees).abs() < 1e-3 && (before.1 - units).abs() < 1e-4,
         "{before:?}"
     );
     assert!(
-        after.0 < before.0 / 3.0 && after.1 < before.1 / 3.0,
+        after.0 < before.0 * fraction && after.1 < before.1 * fraction,
         "pose error {before:?} → {after:?}"
     );
 }
@@ -346,6 +509,88 @@ mod tests {
             }
         }
         assert!(alone.iter().flatten().any(|x| x.abs() > 1e-3));
+    }
+
+    /// Cameras around a point looking at it: the focus point is that point; parallel
+    /// axes have none.
+    #[test]
+    fn focus_point_is_where_the_cameras_look() {
+        let target = Vec3::new(0.3, -0.2, 0.5);
+        let cams: Vec<Camera> = (0..7)
+            .map(|i| {
+                let a = i as f32 * 0.9;
+                let eye = target + Vec3::new(4.0 * a.cos(), 4.0 * a.sin(), 1.0 + 0.2 * i as f32);
+                Camera::look_at(eye, target, Vec3::Z, 0.8, 8, 6).unwrap()
+            })
+            .collect();
+        let centers: Vec<Vec3> = cams.iter().map(|c| c.position()).collect();
+        let axes: Vec<Vec3> = cams.iter().map(|c| c.forward()).collect();
+        let g = focus_point(&centers, &axes).unwrap();
+        assert!((g - target).length() < 1e-4, "{g}");
+        let parallel = vec![Vec3::Y; centers.len()];
+        assert!(focus_point(&centers, &parallel).is_none());
+        assert!(focus_point(&centers[..1], &axes[..1]).is_none());
+    }
+
+    /// The pivoted coordinates' gradient against central differences of a loss of the
+    /// corrected camera, `L = Σ q_k · (camera-to-world of p_k)`, whose local gradient is
+    /// `(Σ (R p_k) × q_k, Σ q_k)`; and a pivot at the camera's center (no focus point)
+    /// leaves the coordinates the stored ones.
+    #[test]
+    fn pivoted_gradient_matches_central_differences() {
+        let cams: Vec<Camera> = (0..5)
+            .map(|i| {
+                let a = i as f32 * 1.3;
+                let eye = Vec3::new(4.0 * a.cos(), 4.0 * a.sin(), 1.0);
+                Camera::look_at(eye, Vec3::ZERO, Vec3::Z, 0.8, 8, 6).unwrap()
+            })
+            .collect();
+        let centers: Vec<Vec3> = cams.iter().map(|c| c.position()).collect();
+        let axes: Vec<Vec3> = cams.iter().map(|c| c.forward()).collect();
+        let pts = [Vec3::new(0.2, -0.1, -3.0), Vec3::new(-0.4, 0.3, -4.5)];
+        let qs = [Vec3::new(0.7, -0.2, 0.4), Vec3::new(-0.3, 0.9, 0.1)];
+        let loss = |cam: &Camera| -> f64 {
+            pts.iter()
+                .zip(&qs)
+                .map(|(p, q)| cam.c2w.transform_point3(*p).dot(*q) as f64)
+                .sum()
+        };
+        let mut r = Refiner::new(&centers, &axes, true);
+        assert!(r.pivots.iter().all(|p| p.length() < 1e-4), "{:?}", r.pivots);
+        let view = 2;
+        let p: PoseDelta = [0.02, -0.03, 0.015, 0.05, -0.02, 0.03];
+        r.params[view] = p;
+        r.deltas[view] = r.delta_of(view, &p);
+        let cam = apply(&cams[view], &r.deltas[view]);
+        let rm = Mat3::from(cam.c2w.matrix3);
+        let mut local = [0.0f64; 6];
+        for (pk, qk) in pts.iter().zip(&qs) {
+            let ge = (rm * *pk).cross(*qk);
+            for k in 0..3 {
+                local[k] += ge[k] as f64;
+                local[3 + k] += qk[k] as f64;
+            }
+        }
+        let g = r.gradient(view, &local);
+        let h = 1e-3f32;
+        for k in 0..6 {
+            let (mut a, mut b) = (p, p);
+            a[k] += h;
+            b[k] -= h;
+            let la = loss(&apply(&cams[view], &r.delta_of(view, &a)));
+            let lb = loss(&apply(&cams[view], &r.delta_of(view, &b)));
+            let fd = (la - lb) / (2.0 * h as f64);
+            assert!(
+                (fd - g[k] as f64).abs() < 2e-3 * (1.0 + fd.abs()),
+                "{k}: {} vs {fd}",
+                g[k]
+            );
+        }
+        // Unpivoted: the coordinates are the stored correction.
+        let mut plain = Refiner::new(&centers, &axes, false);
+        plain.step(view, &local, [1e-3, 1e-3]);
+        assert_eq!(plain.params[view], plain.deltas[view]);
+        assert_ne!(plain.deltas[view], [0.0; 6]);
     }
 
     #[test]

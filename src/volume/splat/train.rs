@@ -198,6 +198,11 @@ pub struct TrainOptions {
     /// and 0.04 units: 29.34 dB held out without, 30.30 dB with; docs/3d.md). Turn it
     /// off when the model is held fixed and fixes the frame itself.
     pub anchor_poses: bool,
+    /// With `refine_poses`, step each correction as a turn about a pivot ahead of the
+    /// camera and a move ([`crate::volume::pose`]'s pivoted coordinates), which the
+    /// photos tell apart far better than a turn about the camera's center and a move;
+    /// `false` steps the stored coordinates (the behaviour before).
+    pub pivot_poses: bool,
 }
 
 impl Default for TrainOptions {
@@ -223,6 +228,7 @@ impl Default for TrainOptions {
             refine_poses: false,
             lr_poses: [1e-3, 1e-5],
             anchor_poses: true,
+            pivot_poses: true,
         }
     }
 }
@@ -483,11 +489,12 @@ pub fn train(
         exposures: Vec::new(),
         poses: Vec::new(),
     };
-    let mut poses = vec![[0.0f32; 6]; if opts.refine_poses { views.len() } else { 0 }];
-    let mut pose_moments: Vec<Moments<f32>> =
-        (0..poses.len()).map(|_| Moments::new(ADAM, 6)).collect();
-    // The loaded cameras' centers, for `anchor_poses`.
+    // The loaded cameras' centers, for the pivots and `anchor_poses`.
     let centers: Vec<glam::Vec3> = views.iter().map(|v| v.camera.position()).collect();
+    let mut poses = opts.refine_poses.then(|| {
+        let axes: Vec<glam::Vec3> = views.iter().map(|v| v.camera.forward()).collect();
+        pose::Refiner::new(&centers, &axes, opts.pivot_poses)
+    });
     let mut exposures = vec![exposure::IDENTITY; if opts.exposure { views.len() } else { 0 }];
     let mut exposure_moments: Vec<Moments<f32>> = (0..exposures.len())
         .map(|_| Moments::new(ADAM, 12))
@@ -512,7 +519,7 @@ pub fn train(
         }
         let vi = order.pop().expect("refilled above");
         let view = &views[vi];
-        let camera = match poses.get(vi) {
+        let camera = match poses.as_ref().map(|p| &p.deltas()[vi]) {
             Some(delta) => pose::apply(&view.camera, delta),
             None => view.camera,
         };
@@ -544,13 +551,11 @@ pub fn train(
         lap(1, &mut outcome);
         backward_into(gaussians, &camera, &opts.render, &out, &d_img, &mut grads)
             .map_err(invalid)?;
-        if let Some(delta) = poses.get_mut(vi) {
-            let g = pose::delta_gradient(delta, &grads.pose);
+        if let Some(poses) = &mut poses {
             let lr = exponential(opts.lr_poses, frac);
-            let rates = [lr, lr * opts.extent];
-            adam(&mut pose_moments[vi], delta, &g, |j| rates[j / 3]);
+            poses.step(vi, &grads.pose, [lr, lr * opts.extent]);
             if opts.anchor_poses {
-                pose::remove_common_motion(&mut poses, &centers, opts.extent);
+                poses.anchor(opts.extent);
             }
         }
         // View-space gradient statistics for densification.
@@ -619,7 +624,7 @@ pub fn train(
     }
     outcome.seconds = (start.elapsed() - observing).as_secs_f32();
     outcome.exposures = exposures;
-    outcome.poses = poses;
+    outcome.poses = poses.map_or_else(Vec::new, pose::Refiner::into_deltas);
     Ok(outcome)
 }
 
@@ -1437,8 +1442,9 @@ mod tests {
     /// cameras around it on a sphere of radius 3, 48 × 40, white background; but the
     /// cameras perturbed by 1.5° and 0.06 units. Starting from the true model (held
     /// fixed, so that only the poses can explain the photos), pose refinement brings the
-    /// cameras back (the mean pose error falls to a third) and the photos' PSNR rises;
-    /// without it nothing moves.
+    /// cameras back (the mean pose error falls below a hundredth: 0.0049° and 7.5e-5
+    /// units; stepped in the stored coordinates instead of the pivoted ones, 0.034° and
+    /// 1.0e-3) and the photos' PSNR rises; without it nothing moves.
     #[test]
     fn pose_refinement_recovers_perturbed_cameras() {
         let mut cube = Gaussians::new(0);
@@ -1521,7 +1527,7 @@ mod tests {
         assert_eq!(with.poses.len(), 8);
         let (e0, e1) = (error(&[]), error(&with.poses));
         eprintln!("pose error {e0:?} → {e1:?}, PSNR {before} → {after} ({after_without} without)");
-        pose::assert_a_third_is_left(e0, e1, 1.5, 0.06);
+        pose::assert_fraction_is_left(e0, e1, 1.5, 0.06, 0.01);
         assert!(after > before + 5.0, "PSNR {before} → {after}");
         assert!(
             after > after_without + 5.0,

@@ -102,6 +102,11 @@ pub struct TrainOptions {
     /// [`crate::volume::splat::TrainOptions::anchor_poses`]). Turn it off when the grid is
     /// held fixed and fixes the frame itself.
     pub anchor_poses: bool,
+    /// With `refine_poses`, step each correction as a turn about a pivot ahead of the
+    /// camera and a move ([`crate::volume::pose`]'s pivoted coordinates), which the
+    /// photos tell apart far better than a turn about the camera's center and a move;
+    /// `false` steps the stored coordinates (the behaviour before).
+    pub pivot_poses: bool,
 }
 
 impl Default for TrainOptions {
@@ -141,6 +146,7 @@ impl Default for TrainOptions {
             refine_poses: false,
             lr_poses: [1e-3, 1e-5],
             anchor_poses: true,
+            pivot_poses: true,
         }
     }
 }
@@ -238,22 +244,27 @@ pub fn train_with_poses(
     } else {
         0
     };
-    let mut poses = Poses::new(n_views);
     let extent = (grid.max() - grid.min()).max_element();
-    // Each view's center (the mean origin of its rays), for `anchor_poses`.
-    let centers: Vec<glam::Vec3> = if opts.refine_poses && opts.anchor_poses {
-        let mut sums = vec![(glam::DVec3::ZERO, 0u64); n_views];
+    // Each view's center and axis (the mean origin and direction of its rays), for the
+    // pivots and `anchor_poses`.
+    let (centers, axes): (Vec<glam::Vec3>, Vec<glam::Vec3>) = if opts.refine_poses {
+        let mut sums = vec![(glam::DVec3::ZERO, glam::DVec3::ZERO, 0u64); n_views];
         for (ray, &v) in rays.iter().zip(view_of_ray) {
             let s = &mut sums[v as usize];
             s.0 += ray.origin.as_dvec3();
-            s.1 += 1;
+            s.1 += ray.dir.as_dvec3();
+            s.2 += 1;
         }
         sums.iter()
-            .map(|&(s, n)| (s / n.max(1) as f64).as_vec3())
-            .collect()
+            .map(|&(o, d, n)| {
+                let c = (o / n.max(1) as f64).as_vec3();
+                (c, d.normalize_or_zero().as_vec3())
+            })
+            .unzip()
     } else {
-        Vec::new()
+        (Vec::new(), Vec::new())
     };
+    let mut poses = Poses::new(pose::Refiner::new(&centers, &axes, opts.pivot_poses));
     let threads = rayon::current_num_threads().max(1);
     let mut schedule = opts.upsample.clone();
     schedule.sort_by_key(|u| u.0);
@@ -357,7 +368,7 @@ pub fn train_with_poses(
             let lr = exponential(opts.lr_poses, frac);
             poses.step(&batch, view_of_ray, [lr, lr * extent]);
             if opts.anchor_poses {
-                poses.anchor(&centers, extent);
+                poses.anchor(extent);
             }
         }
         let secs = t_step.elapsed().as_secs_f32();
@@ -384,13 +395,12 @@ pub fn train_with_poses(
         prune_in_place(grid, rays, &poses, view_of_ray, opts, &mut rng, &mut state);
     }
     outcome.seconds = (start.elapsed() - observing).as_secs_f32();
-    Ok((outcome, poses.deltas))
+    Ok((outcome, poses.refiner.into_deltas()))
 }
 
 /// The pose corrections of the views while training, with their optimizer state.
 struct Poses {
-    deltas: Vec<PoseDelta>,
-    moments: Vec<Moments<f32>>,
+    refiner: pose::Refiner,
     /// `rotation(ω)` and `v` of each correction, for moving rays.
     rotations: Vec<glam::Mat3>,
     moves: Vec<glam::Vec3>,
@@ -399,21 +409,10 @@ struct Poses {
 }
 
 impl Poses {
-    fn new(views: usize) -> Poses {
+    fn new(refiner: pose::Refiner) -> Poses {
+        let views = refiner.deltas().len();
         Poses {
-            deltas: vec![[0.0; 6]; views],
-            moments: (0..views)
-                .map(|_| {
-                    Moments::new(
-                        Rule::Adam {
-                            beta1: 0.9,
-                            beta2: 0.999,
-                            eps: 1e-15,
-                        },
-                        6,
-                    )
-                })
-                .collect(),
+            refiner,
             rotations: vec![glam::Mat3::IDENTITY; views],
             moves: vec![glam::Vec3::ZERO; views],
             grads: Vec::new(),
@@ -422,29 +421,35 @@ impl Poses {
 
     /// Ray `i` as its view's corrected camera sees it (unchanged without corrections).
     fn ray(&self, rays: &[Ray], view_of_ray: &[u32], i: usize) -> Ray {
-        if self.deltas.is_empty() {
+        if self.rotations.is_empty() {
             return rays[i];
         }
         let v = view_of_ray[i] as usize;
         pose::apply_to_ray(&rays[i], &self.rotations[v], self.moves[v])
     }
 
-    /// Sums the batch's gradients per view (in batch order), steps each view that had
-    /// rays with rates `[rotation, translation]`, and refreshes the rotations.
-    /// Removes the corrections' common rigid motion about the views' `centers`
-    /// (`pose::remove_common_motion`, moves in units of `scale`) and refreshes the
-    /// rotations.
-    fn anchor(&mut self, centers: &[glam::Vec3], scale: f32) {
-        pose::remove_common_motion(&mut self.deltas, centers, scale);
-        for (v, d) in self.deltas.iter().enumerate() {
-            self.rotations[v] = pose::rotation(glam::Vec3::new(d[0], d[1], d[2]));
-            self.moves[v] = glam::Vec3::new(d[3], d[4], d[5]);
+    /// Refreshes view `v`'s rotation and move from its correction.
+    fn refresh(&mut self, v: usize) {
+        let d = self.refiner.deltas()[v];
+        self.rotations[v] = pose::rotation(glam::Vec3::new(d[0], d[1], d[2]));
+        self.moves[v] = glam::Vec3::new(d[3], d[4], d[5]);
+    }
+
+    /// Removes the corrections' common rigid motion (`pose::Refiner::anchor`, moves in
+    /// units of `scale`).
+    fn anchor(&mut self, scale: f32) {
+        self.refiner.anchor(scale);
+        for v in 0..self.rotations.len() {
+            self.refresh(v);
         }
     }
 
+    /// Sums the batch's gradients per view (in batch order) and steps each view that had
+    /// rays with rates `[rotation, translation]`.
     fn step(&mut self, batch: &[u32], view_of_ray: &[u32], rates: [f32; 2]) {
-        let mut sums = vec![[0.0f64; 6]; self.deltas.len()];
-        let mut seen = vec![false; self.deltas.len()];
+        let n = self.rotations.len();
+        let mut sums = vec![[0.0f64; 6]; n];
+        let mut seen = vec![false; n];
         for (&i, g) in batch.iter().zip(&self.grads) {
             let v = view_of_ray[i as usize] as usize;
             seen[v] = true;
@@ -452,15 +457,9 @@ impl Poses {
                 sums[v][k] += g[k] as f64;
             }
         }
-        for v in (0..self.deltas.len()).filter(|&v| seen[v]) {
-            let g = pose::delta_gradient(&self.deltas[v], &sums[v]);
-            let mut step = self.moments[v].lazy_step();
-            for k in 0..6 {
-                step.apply(k, &mut self.deltas[v][k], g[k], rates[k / 3]);
-            }
-            let d = self.deltas[v];
-            self.rotations[v] = pose::rotation(glam::Vec3::new(d[0], d[1], d[2]));
-            self.moves[v] = glam::Vec3::new(d[3], d[4], d[5]);
+        for v in (0..n).filter(|&v| seen[v]) {
+            self.refiner.step(v, &sums[v], rates);
+            self.refresh(v);
         }
     }
 }
@@ -528,7 +527,7 @@ fn prune_mask(
     rng: &mut Rng,
 ) -> Vec<bool> {
     let weights = if opts.prune_rays == 0 || opts.prune_rays >= rays.len() {
-        if poses.deltas.is_empty() {
+        if poses.rotations.is_empty() {
             max_weights(grid, rays, &opts.render)
         } else {
             let moved: Vec<Ray> = (0..rays.len())
@@ -857,10 +856,12 @@ mod tests {
     }
 
     /// With the grid held fixed (so that only the poses can explain the pixels), pose
-    /// refinement brings perturbed cameras back: the mean pose error falls below a third
-    /// and the pixels' error by more than half. Anchored, the same run's corrections
-    /// keep no common rigid motion (removing it again changes nothing) and the cameras
-    /// still come closer.
+    /// refinement brings perturbed cameras back: the mean pose error falls below a
+    /// thirtieth (0.012° and 4e-7 units; stepped in the stored coordinates instead of the
+    /// pivoted ones, 0.14° and 0.0064) and the pixels' error by more than half.
+    /// Anchored, the same run's corrections keep no common rigid motion in the pivoted
+    /// coordinates (removing it again changes nothing) and the cameras still come closer
+    /// (0.71°: the perturbation's common part stays).
     #[test]
     fn pose_refinement_recovers_perturbed_cameras() {
         use crate::volume::camera::Camera;
@@ -939,15 +940,37 @@ mod tests {
         let (e0, e1) = (error(&[]), error(&free));
         let (m0, m1) = (mse(&[]), mse(&free));
         eprintln!("pose error {e0:?} → {e1:?}, MSE {m0} → {m1}");
-        pose::assert_a_third_is_left(e0, e1, 1.5, 0.06);
+        pose::assert_fraction_is_left(e0, e1, 1.5, 0.06, 1.0 / 30.0);
         assert!(m1 < 0.5 * m0, "MSE {m0} → {m1}");
         let anchored = run(true);
-        let mut again = anchored.clone();
+        // Anchored in the pivoted coordinates (`pose::Refiner::anchor`, each view's axis
+        // the mean direction of its rays): no common motion is left there.
         let centers: Vec<Vec3> = loaded.iter().map(|c| c.position()).collect();
-        pose::remove_common_motion(&mut again, &centers, 2.0);
-        for (a, b) in anchored.iter().zip(&again) {
+        let axes: Vec<Vec3> = loaded
+            .iter()
+            .map(|c| c.rays().iter().map(|r| r.dir).sum::<Vec3>().normalize())
+            .collect();
+        let focus = pose::focus_point(&centers, &axes).unwrap();
+        let (mut params, mut pivots) = (Vec::new(), Vec::new());
+        for ((d, &c), &f) in anchored.iter().zip(&centers).zip(&axes) {
+            let p = c + f * (focus - c).dot(f);
+            let a = c - p;
+            let moved = pose::rotation(Vec3::new(d[0], d[1], d[2])) * a - a;
+            params.push([
+                d[0],
+                d[1],
+                d[2],
+                d[3] - moved.x,
+                d[4] - moved.y,
+                d[5] - moved.z,
+            ]);
+            pivots.push(p);
+        }
+        let mut again = params.clone();
+        pose::remove_common_motion(&mut again, &pivots, 2.0);
+        for (a, b) in params.iter().zip(&again) {
             for k in 0..6 {
-                assert!((a[k] - b[k]).abs() < 1e-5, "{a:?} vs {b:?}");
+                assert!((a[k] - b[k]).abs() < 1e-4, "{a:?} vs {b:?}");
             }
         }
         let e2 = error(&anchored);
