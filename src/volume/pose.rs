@@ -187,7 +187,10 @@ pub(crate) fn focus_point(centers: &[Vec3], axes: &[Vec3]) -> Option<Vec3> {
 /// pivot the two are separate coordinates: the move shifts the image and the turn
 /// orbits. With the model held fixed, 8 cameras perturbed by 1.5° come back to 0.012°
 /// (voxels) and 0.0049° (splats) where the stored coordinates left 0.14° and 0.034°
-/// (the trainers' tests); on lego, docs/3d.md. Without a focus point
+/// (the trainers' tests). Trained together with a model, though, the orbit wanders
+/// while the model is rough, and on lego the pivoted coordinates lost on average over
+/// three seeds (docs/3d.md), so the trainers leave them off by default
+/// (`TrainOptions::pivot_poses`). Without a focus point
 /// (or with the pivot behind a camera) the pivot is the camera's center, the stored
 /// coordinates themselves.
 pub(crate) struct Refiner {

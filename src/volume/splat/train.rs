@@ -199,9 +199,13 @@ pub struct TrainOptions {
     /// off when the model is held fixed and fixes the frame itself.
     pub anchor_poses: bool,
     /// With `refine_poses`, step each correction as a turn about a pivot ahead of the
-    /// camera and a move ([`crate::volume::pose`]'s pivoted coordinates), which the
-    /// photos tell apart far better than a turn about the camera's center and a move;
-    /// `false` steps the stored coordinates (the behaviour before).
+    /// camera and a move (pivoted coordinates, `pose::Refiner`), which the photos tell
+    /// apart far better than a turn about the camera's center and a move: with the model
+    /// held fixed the cameras come back ten times closer (the tests). Off by default:
+    /// trained together with the model, the weakly seen orbit about the pivot wanders
+    /// while the model is still rough, and on lego 100² (poses perturbed by 0.5° and
+    /// 0.04 units, seeds 0–2) the held-out PSNR averaged 28.28 dB for splats and 29.04 dB
+    /// for voxels against 29.43 and 29.38 dB without (docs/3d.md).
     pub pivot_poses: bool,
 }
 
@@ -228,7 +232,7 @@ impl Default for TrainOptions {
             refine_poses: false,
             lr_poses: [1e-3, 1e-5],
             anchor_poses: true,
-            pivot_poses: true,
+            pivot_poses: false,
         }
     }
 }
@@ -1499,6 +1503,7 @@ mod tests {
             },
             refine_poses,
             lr_poses: [1e-2, 1e-4],
+            pivot_poses: true,
             // The model is held fixed: it fixes the frame, and the 8 perturbations'
             // common part is to be undone too.
             anchor_poses: false,

@@ -103,9 +103,13 @@ pub struct TrainOptions {
     /// held fixed and fixes the frame itself.
     pub anchor_poses: bool,
     /// With `refine_poses`, step each correction as a turn about a pivot ahead of the
-    /// camera and a move ([`crate::volume::pose`]'s pivoted coordinates), which the
-    /// photos tell apart far better than a turn about the camera's center and a move;
-    /// `false` steps the stored coordinates (the behaviour before).
+    /// camera and a move (pivoted coordinates, `pose::Refiner`), which the photos tell
+    /// apart far better than a turn about the camera's center and a move: with the model
+    /// held fixed the cameras come back ten times closer (the tests). Off by default:
+    /// trained together with the model, the weakly seen orbit about the pivot wanders
+    /// while the model is still rough, and on lego 100² (poses perturbed by 0.5° and
+    /// 0.04 units, seeds 0–2) the held-out PSNR averaged 28.28 dB for splats and 29.04 dB
+    /// for voxels against 29.43 and 29.38 dB without (docs/3d.md).
     pub pivot_poses: bool,
 }
 
@@ -146,7 +150,7 @@ impl Default for TrainOptions {
             refine_poses: false,
             lr_poses: [1e-3, 1e-5],
             anchor_poses: true,
-            pivot_poses: true,
+            pivot_poses: false,
         }
     }
 }
@@ -905,6 +909,7 @@ mod tests {
             prune_threshold: 0.0,
             refine_poses: true,
             lr_poses: [1e-2, 1e-4],
+            pivot_poses: true,
             anchor_poses,
             ..TrainOptions::default()
         };
