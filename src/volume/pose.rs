@@ -188,9 +188,9 @@ pub(crate) fn focus_point(centers: &[Vec3], axes: &[Vec3]) -> Option<Vec3> {
 /// orbits. With the model held fixed, 8 cameras perturbed by 1.5° come back to 0.012°
 /// (voxels) and 0.0049° (splats) where the stored coordinates left 0.14° and 0.034°
 /// (the trainers' tests). Trained together with a model, though, the orbit wanders
-/// while the model is rough, and on lego the pivoted coordinates lost on average over
-/// three seeds (docs/3d.md), so the trainers leave them off by default
-/// (`TrainOptions::pivot_poses`). Without a focus point
+/// while the model is rough: on lego the pivoted coordinates from the start lost on
+/// average over three seeds, and the voxels switch to them half-way instead (the splats
+/// never; `TrainOptions::pivot_poses_from`, docs/3d.md). Without a focus point
 /// (or with the pivot behind a camera) the pivot is the camera's center, the stored
 /// coordinates themselves.
 pub(crate) struct Refiner {
@@ -245,6 +245,27 @@ impl Refiner {
                 })
                 .collect(),
         }
+    }
+
+    /// Switches to pivoted coordinates (a no-op without a focus point), keeping the
+    /// stored corrections; Adam's moments start afresh. `centers` and `axes` as in
+    /// [`Refiner::new`].
+    pub(crate) fn pivot(&mut self, centers: &[Vec3], axes: &[Vec3]) {
+        let mut r = Refiner::new(centers, axes, true);
+        r.deltas.clone_from(&self.deltas);
+        for (v, d) in r.deltas.iter().enumerate() {
+            let a = r.offsets[v];
+            let u = Vec3::new(d[3], d[4], d[5]) - (rotation(Vec3::new(d[0], d[1], d[2])) * a - a);
+            r.params[v] = [d[0], d[1], d[2], u.x, u.y, u.z];
+        }
+        *self = r;
+    }
+
+    /// The iteration of a run of `iterations` at which a trainer switches to pivoted
+    /// coordinates when asked to from the fraction `from` of its run (0: from the start;
+    /// 1 or more, or not a number: never).
+    pub(crate) fn pivot_iteration(from: f32, iterations: usize) -> Option<usize> {
+        (from < 1.0).then(|| (from.max(0.0) * iterations as f32) as usize)
     }
 
     /// The stored corrections, one per view.
@@ -594,6 +615,22 @@ mod tests {
         plain.step(view, &local, [1e-3, 1e-3]);
         assert_eq!(plain.params[view], plain.deltas[view]);
         assert_ne!(plain.deltas[view], [0.0; 6]);
+        // Switching to pivoted coordinates keeps the stored corrections.
+        let before = plain.deltas.clone();
+        plain.pivot(&centers, &axes);
+        assert_eq!(plain.deltas, before);
+        for (v, d) in before.iter().enumerate() {
+            let back = plain.delta_of(v, &plain.params[v]);
+            assert!(
+                (0..6).all(|k| (back[k] - d[k]).abs() < 1e-6),
+                "{back:?} vs {d:?}"
+            );
+        }
+        assert_ne!(plain.params[view], plain.deltas[view]);
+        assert_eq!(Refiner::pivot_iteration(0.5, 3000), Some(1500));
+        assert_eq!(Refiner::pivot_iteration(-1.0, 3000), Some(0));
+        assert_eq!(Refiner::pivot_iteration(1.0, 3000), None);
+        assert_eq!(Refiner::pivot_iteration(f32::NAN, 3000), None);
     }
 
     #[test]
