@@ -91,9 +91,10 @@ pub struct TrainOptions {
     /// Learning rate of the corrections' rotation (radians per step), first and last
     /// iteration (exponential decay between); the translation's is this times the
     /// grid's largest side. Default 1e-3 → 1e-5, the splats' rate. On lego 100² with
-    /// poses perturbed by 0.5° and 0.04 units, seeds 0, 1, 2, it gives 27.22, 30.07 and
-    /// 30.84 dB held out (mean 29.38), and a tenth of it 30.11, 28.45 and 29.07 dB (mean
-    /// 29.21, the default for one session, chosen on seed 0 alone); docs/3d.md.
+    /// poses perturbed by 0.5° and 0.04 units, seeds 0, 1, 2, stepped in the stored
+    /// coordinates throughout (`pivot_poses_from` 1), it gave 27.22, 30.07 and 30.84 dB
+    /// held out (mean 29.38), and a tenth of it 30.11, 28.45 and 29.07 dB (mean 29.21,
+    /// the default for one session, chosen on seed 0 alone); docs/3d.md.
     pub lr_poses: [f32; 2],
     /// With `refine_poses`, remove the corrections' common rigid motion after every step
     /// (`pose::remove_common_motion` about the views' centers, the mean origin of their
