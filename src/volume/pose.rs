@@ -206,59 +206,58 @@ pub(crate) struct Refiner {
 }
 
 impl Refiner {
-    /// Zero corrections for views whose cameras have centers `centers` and unit optical
-    /// axes `axes` (one each); `pivoted: false` steps the stored coordinates instead.
-    pub(crate) fn new(centers: &[Vec3], axes: &[Vec3], pivoted: bool) -> Refiner {
-        let n = centers.len().min(axes.len());
-        let focus = if pivoted {
-            focus_point(centers, axes)
-        } else {
-            None
+    /// Zero corrections, stepped in the stored coordinates, for views whose cameras are
+    /// centered at `centers`.
+    pub(crate) fn new(centers: &[Vec3]) -> Refiner {
+        let n = centers.len();
+        Refiner {
+            deltas: vec![[0.0; 6]; n],
+            params: vec![[0.0; 6]; n],
+            offsets: vec![Vec3::ZERO; n],
+            pivots: centers.to_vec(),
+            moments: Self::fresh_moments(n),
+        }
+    }
+
+    fn fresh_moments(n: usize) -> Vec<crate::optim::Moments<f32>> {
+        let adam = crate::optim::Rule::Adam {
+            beta1: 0.9,
+            beta2: 0.999,
+            eps: 1e-15,
         };
-        let offsets: Vec<Vec3> = centers[..n]
+        (0..n)
+            .map(|_| crate::optim::Moments::new(adam, 6))
+            .collect()
+    }
+
+    /// Switches to pivoted coordinates, the views' cameras looking along the unit
+    /// `axes` (one each), keeping the stored corrections; Adam's moments start afresh.
+    /// Without a focus point (or for a view whose pivot would lie behind its camera) the
+    /// pivot is the camera's center and the coordinates stay the stored ones.
+    pub(crate) fn pivot(&mut self, axes: &[Vec3]) {
+        let centers: Vec<Vec3> = self
+            .pivots
             .iter()
-            .zip(axes)
-            .map(|(&c, &f)| match focus {
-                Some(g) => {
+            .zip(&self.offsets)
+            .map(|(&p, &a)| p + a)
+            .collect();
+        let focus = focus_point(&centers, axes);
+        for (v, &c) in centers.iter().enumerate() {
+            let a = match (focus, axes.get(v)) {
+                (Some(g), Some(f)) => {
                     let f = f.normalize_or_zero();
                     let depth = (g - c).dot(f);
                     if depth > 0.0 { -f * depth } else { Vec3::ZERO }
                 }
-                None => Vec3::ZERO,
-            })
-            .collect();
-        Refiner {
-            deltas: vec![[0.0; 6]; n],
-            params: vec![[0.0; 6]; n],
-            pivots: centers.iter().zip(&offsets).map(|(&c, &a)| c - a).collect(),
-            offsets,
-            moments: (0..n)
-                .map(|_| {
-                    crate::optim::Moments::new(
-                        crate::optim::Rule::Adam {
-                            beta1: 0.9,
-                            beta2: 0.999,
-                            eps: 1e-15,
-                        },
-                        6,
-                    )
-                })
-                .collect(),
-        }
-    }
-
-    /// Switches to pivoted coordinates (a no-op without a focus point), keeping the
-    /// stored corrections; Adam's moments start afresh. `centers` and `axes` as in
-    /// [`Refiner::new`].
-    pub(crate) fn pivot(&mut self, centers: &[Vec3], axes: &[Vec3]) {
-        let mut r = Refiner::new(centers, axes, true);
-        r.deltas.clone_from(&self.deltas);
-        for (v, d) in r.deltas.iter().enumerate() {
-            let a = r.offsets[v];
+                _ => Vec3::ZERO,
+            };
+            self.offsets[v] = a;
+            self.pivots[v] = c - a;
+            let d = self.deltas[v];
             let u = Vec3::new(d[3], d[4], d[5]) - (rotation(Vec3::new(d[0], d[1], d[2])) * a - a);
-            r.params[v] = [d[0], d[1], d[2], u.x, u.y, u.z];
+            self.params[v] = [d[0], d[1], d[2], u.x, u.y, u.z];
         }
-        *self = r;
+        self.moments = Self::fresh_moments(centers.len());
     }
 
     /// The iteration of a run of `iterations` at which a trainer switches to pivoted
@@ -579,7 +578,8 @@ mod tests {
                 .map(|(p, q)| cam.c2w.transform_point3(*p).dot(*q) as f64)
                 .sum()
         };
-        let mut r = Refiner::new(&centers, &axes, true);
+        let mut r = Refiner::new(&centers);
+        r.pivot(&axes);
         assert!(r.pivots.iter().all(|p| p.length() < 1e-4), "{:?}", r.pivots);
         let view = 2;
         let p: PoseDelta = [0.02, -0.03, 0.015, 0.05, -0.02, 0.03];
@@ -611,13 +611,13 @@ mod tests {
             );
         }
         // Unpivoted: the coordinates are the stored correction.
-        let mut plain = Refiner::new(&centers, &axes, false);
+        let mut plain = Refiner::new(&centers);
         plain.step(view, &local, [1e-3, 1e-3]);
         assert_eq!(plain.params[view], plain.deltas[view]);
         assert_ne!(plain.deltas[view], [0.0; 6]);
         // Switching to pivoted coordinates keeps the stored corrections.
         let before = plain.deltas.clone();
-        plain.pivot(&centers, &axes);
+        plain.pivot(&axes);
         assert_eq!(plain.deltas, before);
         for (v, d) in before.iter().enumerate() {
             let back = plain.delta_of(v, &plain.params[v]);

@@ -191,7 +191,7 @@ pub struct TrainOptions {
     /// extent.
     pub lr_poses: [f32; 2],
     /// With `refine_poses`, remove the corrections' common rigid motion after every step
-    /// (`pose::remove_common_motion`, moves in units of `extent`), so that the training
+    /// (`pose::Refiner::anchor`, moves in units of `extent`), so that the training
     /// cameras stay in the loaded poses' frame, where the held-out views are. Photos
     /// cannot tell the scene and all its cameras moved together from where they were;
     /// without this, the corrections drift together (lego 100², poses perturbed by 0.5°
@@ -494,11 +494,9 @@ pub fn train(
         exposures: Vec::new(),
         poses: Vec::new(),
     };
-    // The loaded cameras' centers, for the pivots and `anchor_poses`.
-    let centers: Vec<glam::Vec3> = views.iter().map(|v| v.camera.position()).collect();
     let mut poses = opts.refine_poses.then(|| {
-        let axes: Vec<glam::Vec3> = views.iter().map(|v| v.camera.forward()).collect();
-        pose::Refiner::new(&centers, &axes, false)
+        let centers: Vec<glam::Vec3> = views.iter().map(|v| v.camera.position()).collect();
+        pose::Refiner::new(&centers)
     });
     let pivot_at = pose::Refiner::pivot_iteration(opts.pivot_poses_from, opts.iterations);
     let mut exposures = vec![exposure::IDENTITY; if opts.exposure { views.len() } else { 0 }];
@@ -560,7 +558,7 @@ pub fn train(
         if let Some(poses) = &mut poses {
             if pivot_at == Some(it) {
                 let axes: Vec<glam::Vec3> = views.iter().map(|v| v.camera.forward()).collect();
-                poses.pivot(&centers, &axes);
+                poses.pivot(&axes);
             }
             let lr = exponential(opts.lr_poses, frac);
             poses.step(vi, &grads.pose, [lr, lr * opts.extent]);

@@ -97,8 +97,9 @@ pub struct TrainOptions {
     /// the default for one session, chosen on seed 0 alone); docs/3d.md.
     pub lr_poses: [f32; 2],
     /// With `refine_poses`, remove the corrections' common rigid motion after every step
-    /// (`pose::remove_common_motion` about the views' centers, the mean origin of their
-    /// rays, moves in units of the grid's largest side), so that the training cameras
+    /// (`pose::Refiner::anchor`, about the views' centers, the mean origin of their rays,
+    /// or their pivots once pivoted; moves in units of the grid's largest side), so that
+    /// the training cameras
     /// stay in the loaded poses' frame, where the held-out views are (as
     /// [`crate::volume::splat::TrainOptions::anchor_poses`]). Turn it off when the grid is
     /// held fixed and fixes the frame itself.
@@ -271,7 +272,7 @@ pub fn train_with_poses(
     } else {
         (Vec::new(), Vec::new())
     };
-    let mut poses = Poses::new(pose::Refiner::new(&centers, &axes, false));
+    let mut poses = Poses::new(pose::Refiner::new(&centers));
     let pivot_at = pose::Refiner::pivot_iteration(opts.pivot_poses_from, opts.iterations);
     let threads = rayon::current_num_threads().max(1);
     let mut schedule = opts.upsample.clone();
@@ -374,7 +375,7 @@ pub fn train_with_poses(
         state.update(grid, lr);
         if refine {
             if pivot_at == Some(it) {
-                poses.refiner.pivot(&centers, &axes);
+                poses.refiner.pivot(&axes);
             }
             let lr = exponential(opts.lr_poses, frac);
             poses.step(&batch, view_of_ray, [lr, lr * extent]);
