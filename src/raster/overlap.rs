@@ -1109,14 +1109,18 @@ fn ring_is_y_monotone_simple(ring: &[Point]) -> bool {
     let (Some(a), Some(b)) = (side(1), side(n - 1)) else {
         return false;
     };
-    // x of a side at height y (first edge reaching it).
-    let x_at = |s: &[Point], y: f64| -> f64 {
-        for w in s.windows(2) {
-            if w[1][1] >= y && w[1][1] > w[0][1] {
-                return w[0][0] + (y - w[0][1]) / (w[1][1] - w[0][1]) * (w[1][0] - w[0][0]);
-            }
+    // x of a side at height y (its first edge reaching y that is not horizontal), read
+    // from the edge `at` on: that edge only moves on as y grows, so the walk along one
+    // side reads the other side once (a scan from its start each time made a long ring
+    // cost the square of its length).
+    let x_at = |s: &[Point], y: f64, at: &mut usize| -> f64 {
+        while *at + 1 < s.len() && !(s[*at + 1][1] >= y && s[*at + 1][1] > s[*at][1]) {
+            *at += 1;
         }
-        s[s.len() - 1][0]
+        match (s.get(*at), s.get(*at + 1)) {
+            (Some(a), Some(b)) => a[0] + (y - a[1]) / (b[1] - a[1]) * (b[0] - a[0]),
+            _ => s[s.len() - 1][0],
+        }
     };
     // Where each side leaves the top and reaches the bottom: apart there too, or the same
     // point.
@@ -1141,11 +1145,12 @@ fn ring_is_y_monotone_simple(ring: &[Point]) -> bool {
         }
     }
     for (s, o, flip) in [(&a, &b, 1.0), (&b, &a, -1.0)] {
+        let mut at = 0;
         for q in s.iter() {
             if q[1] <= ymin || q[1] >= ymax {
                 continue;
             }
-            let d = flip * (q[0] - x_at(o, q[1]));
+            let d = flip * (q[0] - x_at(o, q[1], &mut at));
             if !(d != 0.0) || (sign != 0.0 && (d > 0.0) != (sign > 0.0)) {
                 return false;
             }
@@ -1651,6 +1656,20 @@ mod tests {
             })
             .collect();
         assert!(!ring_is_y_monotone_simple(&star));
+        // A long wiggly ring monotone in y, its two sides at heights that interleave, and
+        // the same with its sides made to cross near the bottom: each side is read
+        // against the other at every height, far from where the reading starts.
+        let n = 20_000;
+        let side = |x0: f64, f: f64, dy: f64| -> Vec<Point> {
+            (0..n)
+                .map(|i| [x0 + (i as f64 * f).sin(), i as f64 * 0.01 + dy])
+                .collect()
+        };
+        let mut wiggle = side(0.0, 0.37, 0.0);
+        wiggle.extend(side(5.0, 0.41, 0.004).into_iter().rev());
+        assert!(!ring_is_convex(&wiggle) && ring_is_y_monotone_simple(&wiggle));
+        wiggle[n - 50][0] = 7.0;
+        assert!(!ring_is_y_monotone_simple(&wiggle));
         // Rings apart, and rings sharing a pixel.
         let pts = [
             [0.2, 0.2],
