@@ -933,8 +933,11 @@ def recon_voxel(scene, output, *, res: int = 128, iters: int = 3000, batch: int 
     about its center and a move); test views keep theirs. ``perturb_poses=(degrees,
     units)``: a testing aid that first moves every training camera by a random turn and
     move of those sizes; the dict's ``pose_error`` is then ``{"before": (degrees, units),
-    "after": (degrees, units)}``, the mean distance of the training poses from the loaded
-    ones before and after training (else ``None``).
+    "after": (degrees, units), "after_in_frame": …, "frame": …}``, the mean distance of the
+    training poses from the loaded ones before and after training, after it once the
+    whole scene's rigid motion that photos cannot tell is removed, and that motion's size
+    (else ``None``); ``test_psnr_in_frame`` is the test PSNR with the test cameras carried
+    by that motion into the model's frame (else ``None``).
     """
     return _native.recon_voxel(
         os.fspath(scene), os.fspath(output), _whole(res, "res"), _whole(iters, "iters", _U64),

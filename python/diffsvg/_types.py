@@ -160,6 +160,7 @@ class ReconInfo(TypedDict):
     parameters: NotRequired[int]
     occupied: NotRequired[float]
     pose_error: Optional[Dict[str, Tuple[float, float]]]
+    test_psnr_in_frame: NotRequired[Optional[float]]
 
 
 class Depth(TypedDict):

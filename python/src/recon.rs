@@ -148,6 +148,7 @@ pub(crate) fn recon_voxel<'py>(
     d.set_item("allocated", out.grid.allocated())?;
     d.set_item("batch", out.batch)?;
     set_pose_error(&d, &out.pose_error)?;
+    d.set_item("test_psnr_in_frame", out.test_psnr_in_frame)?;
     Ok(d)
 }
 
@@ -235,6 +236,7 @@ pub(crate) fn recon_splat<'py>(
     d.set_item("gaussians", out.model.len())?;
     d.set_item("undistorted", out.undistorted)?;
     set_pose_error(&d, &out.pose_error)?;
+    d.set_item("test_psnr_in_frame", out.test_psnr_in_frame)?;
     Ok(d)
 }
 
@@ -419,6 +421,8 @@ fn set_pose_error(
             let inner = PyDict::new(d.py());
             inner.set_item("before", (e.before[0], e.before[1]))?;
             inner.set_item("after", (e.after[0], e.after[1]))?;
+            inner.set_item("after_in_frame", (e.after_in_frame[0], e.after_in_frame[1]))?;
+            inner.set_item("frame", (e.frame[0], e.frame[1]))?;
             d.set_item("pose_error", inner)
         }
         None => d.set_item("pose_error", d.py().None()),

@@ -553,7 +553,7 @@ fn run_fit(a: FitArgs) -> Result<()> {
             run.steps,
             psnr_from_mse(run.fitted.mse),
             test.len(),
-            super::recon_report::pose_error_text(&pose_error),
+            super::recon_report::pose_error_text(&pose_error, None),
             a.output.display()
         );
     }

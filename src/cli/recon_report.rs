@@ -51,12 +51,27 @@ fn parse_perturbation(s: &str) -> std::result::Result<[f32; 2], String> {
     Ok([deg, units])
 }
 
-/// The pose error line of the summary, when poses were perturbed.
-pub(super) fn pose_error_text(e: &Option<diffsvg::volume::recon::PoseError>) -> String {
+/// The pose error line of the summary, when poses were perturbed, with the test PSNR in
+/// the model's frame (`in_frame`) where there is one.
+pub(super) fn pose_error_text(
+    e: &Option<diffsvg::volume::recon::PoseError>,
+    in_frame: Option<f64>,
+) -> String {
+    let in_frame = in_frame
+        .map(|p| format!(" ({p:.2} dB with the test cameras in the model's frame)"))
+        .unwrap_or_default();
     match e {
         Some(e) => format!(
-            "; training poses off by {:.3}° and {:.4} units before, {:.3}° and {:.4} after",
-            e.before[0], e.before[1], e.after[0], e.after[1]
+            "{in_frame}; training poses off by {:.3}° and {:.4} units before, {:.3}° and {:.4} after \
+             ({:.3}° and {:.4} in the model's frame, which is off by {:.3}° and {:.4})",
+            e.before[0],
+            e.before[1],
+            e.after[0],
+            e.after[1],
+            e.after_in_frame[0],
+            e.after_in_frame[1],
+            e.frame[0],
+            e.frame[1]
         ),
         None => String::new(),
     }
@@ -66,7 +81,9 @@ pub(super) fn pose_error_text(e: &Option<diffsvg::volume::recon::PoseError>) -> 
 pub(super) fn pose_error_json(e: &Option<diffsvg::volume::recon::PoseError>) -> serde_json::Value {
     match e {
         Some(e) => serde_json::json!({"before": {"degrees": e.before[0], "units": e.before[1]},
-            "after": {"degrees": e.after[0], "units": e.after[1]}}),
+            "after": {"degrees": e.after[0], "units": e.after[1]},
+            "after_in_frame": {"degrees": e.after_in_frame[0], "units": e.after_in_frame[1]},
+            "frame": {"degrees": e.frame[0], "units": e.frame[1]}}),
         None => serde_json::Value::Null,
     }
 }

@@ -162,7 +162,7 @@ pub fn run(a: SplatArgs) -> Result<()> {
             "{}",
             json!({"done": true, "output": a.output, "iterations": outcome.iterations,
                 "seconds": outcome.seconds, "load_seconds": out.load_seconds,
-                "test_psnr": out.test_psnr, "gaussians": model.len(), "stopped": outcome.stopped,
+                "test_psnr": out.test_psnr, "test_psnr_in_frame": out.test_psnr_in_frame, "gaussians": model.len(), "stopped": outcome.stopped,
                 "pose_error": super::recon_report::pose_error_json(&out.pose_error),
                 "seconds_per_part": {"render": r, "loss": l, "backward": b, "update": u,
                     "density_control": d}})
@@ -180,7 +180,7 @@ pub fn run(a: SplatArgs) -> Result<()> {
             100.0 * d / outcome.seconds,
             model.len(),
             psnr_text(out.test_psnr),
-            super::recon_report::pose_error_text(&out.pose_error),
+            super::recon_report::pose_error_text(&out.pose_error, out.test_psnr_in_frame),
             a.output.display()
         );
     }

@@ -245,7 +245,7 @@ fn run_voxel(a: VoxelArgs) -> Result<()> {
             "{}",
             json!({"done": true, "output": a.output, "iterations": outcome.iterations,
                 "seconds": outcome.seconds, "load_seconds": out.load_seconds,
-                "test_psnr": out.test_psnr, "allocated": grid.allocated(), "dense": dense,
+                "test_psnr": out.test_psnr, "test_psnr_in_frame": out.test_psnr_in_frame, "allocated": grid.allocated(), "dense": dense,
                 "res": grid.res(), "stopped": outcome.stopped,
                 "pose_error": super::recon_report::pose_error_json(&out.pose_error)})
         );
@@ -260,7 +260,7 @@ fn run_voxel(a: VoxelArgs) -> Result<()> {
             dense,
             100.0 * grid.allocated() as f64 / dense as f64,
             psnr_text(out.test_psnr),
-            super::recon_report::pose_error_text(&out.pose_error),
+            super::recon_report::pose_error_text(&out.pose_error, out.test_psnr_in_frame),
             a.output.display()
         );
     }

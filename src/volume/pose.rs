@@ -109,10 +109,30 @@ pub(crate) fn apply_to_ray(ray: &Ray, rot: &Mat3, v: Vec3) -> Ray {
 /// from the held-out ones, which keep their loaded poses. Linear in the corrections
 /// (exact to first order in `ω`).
 pub(crate) fn remove_common_motion(deltas: &mut [PoseDelta], centers: &[Vec3], scale: f32) {
+    let Some((w, t)) = common_motion(deltas, centers, scale) else {
+        return;
+    };
+    for (d, c) in deltas.iter_mut().zip(centers) {
+        let dv = w.cross(c.as_dvec3()) + t;
+        for k in 0..3 {
+            d[k] = (d[k] as f64 - w[k]) as f32;
+            d[3 + k] = (d[3 + k] as f64 - dv[k]) as f32;
+        }
+    }
+}
+
+/// The common rigid motion of [`remove_common_motion`]: the turn `w` about the world
+/// origin and the move `t` (each camera then turns by `w` and moves by `w × c + t`) that
+/// best explain the corrections; `None` for no cameras or a singular fit.
+fn common_motion(
+    deltas: &[PoseDelta],
+    centers: &[Vec3],
+    scale: f32,
+) -> Option<(glam::DVec3, glam::DVec3)> {
     use glam::{DMat3, DVec3};
     let n = deltas.len().min(centers.len());
     if n == 0 {
-        return;
+        return None;
     }
     let w2 = 1.0 / (scale as f64 * scale as f64);
     let omega = |d: &PoseDelta| DVec3::new(d[0] as f64, d[1] as f64, d[2] as f64);
@@ -134,17 +154,112 @@ pub(crate) fn remove_common_motion(deltas: &mut [PoseDelta], centers: &[Vec3], s
         rhs += omega(d) + di.cross(v(d) - v_mean) * w2;
     }
     let w = m.inverse() * rhs;
-    if !w.is_finite() {
-        return;
-    }
     let t = v_mean + c_mean.cross(w);
-    for (d, c) in deltas[..n].iter_mut().zip(centers) {
-        let dv = w.cross(c.as_dvec3()) + t;
-        for k in 0..3 {
-            d[k] = (d[k] as f64 - w[k]) as f32;
-            d[3 + k] = (d[3 + k] as f64 - dv[k]) as f32;
+    (w.is_finite() && t.is_finite()).then_some((w, t))
+}
+
+/// A rigid motion of the world, `x ↦ rotation·x + translation` (world units).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RigidMotion {
+    /// The turn, about the world origin.
+    pub rotation: Mat3,
+    /// The move after the turn.
+    pub translation: Vec3,
+}
+
+impl RigidMotion {
+    /// No motion.
+    pub const IDENTITY: RigidMotion = RigidMotion {
+        rotation: Mat3::IDENTITY,
+        translation: Vec3::ZERO,
+    };
+
+    /// `camera` carried along with the world: rotation `rotation·R`, center
+    /// `rotation·c + translation`.
+    pub fn move_camera(&self, camera: &Camera) -> Camera {
+        let c2w = Affine3A {
+            matrix3: Mat3A::from(self.rotation) * camera.c2w.matrix3,
+            translation: (self.rotation * camera.position() + self.translation).into(),
+        };
+        Camera { c2w, ..*camera }
+    }
+
+    /// The motion that undoes this one.
+    pub fn inverse(&self) -> RigidMotion {
+        let rotation = self.rotation.transpose();
+        RigidMotion {
+            rotation,
+            translation: -(rotation * self.translation),
         }
     }
+
+    /// `self` after `first`.
+    fn after(&self, first: &RigidMotion) -> RigidMotion {
+        RigidMotion {
+            rotation: self.rotation * first.rotation,
+            translation: self.rotation * first.translation + self.translation,
+        }
+    }
+
+    /// Its angle in degrees and how far it moves the point `at` (world units).
+    pub fn size(&self, at: Vec3) -> (f64, f64) {
+        let angle = rotation_vector(self.rotation).length().to_degrees();
+        let moved = (self.rotation * at + self.translation).distance(at);
+        (angle, moved as f64)
+    }
+}
+
+/// The rotation vector `ω` of a rotation matrix (`rotation(ω) = r`), in f64.
+fn rotation_vector(r: Mat3) -> glam::DVec3 {
+    let q = glam::DQuat::from_mat3(&r.as_dmat3()).normalize();
+    let q = if q.w < 0.0 { -q } else { q };
+    let s = q.xyz().length();
+    if s < 1e-12 {
+        return q.xyz() * 2.0;
+    }
+    q.xyz() * (2.0 * s.atan2(q.w) / s)
+}
+
+/// The rigid motion of the world that best carries the cameras `cams` onto `truth`
+/// (pairwise, in least squares: turns in radians, moves in units of the cameras' spread
+/// about their mean center): the *frame* a model trained with `cams` lives in, against
+/// the truth's. Photos fix cameras only up to such a motion of the scene and every
+/// camera together (bundle adjustment's gauge freedom), so a model trained on refined
+/// cameras is compared with views from true cameras carried into its frame by the
+/// inverse of this. Fitted by [`common_motion`] to first order and refined by three
+/// passes, each on what the last left.
+pub fn frame_motion(truth: &[Camera], cams: &[Camera]) -> RigidMotion {
+    let n = truth.len().min(cams.len());
+    let centers: Vec<Vec3> = cams[..n].iter().map(Camera::position).collect();
+    let mean = centers.iter().copied().sum::<Vec3>() / n.max(1) as f32;
+    let spread = (centers.iter().map(|c| c.distance_squared(mean)).sum::<f32>()
+        / n.max(1) as f32)
+        .sqrt()
+        .max(1e-6);
+    let mut motion = RigidMotion::IDENTITY;
+    for _ in 0..3 {
+        let moved: Vec<Camera> = cams[..n].iter().map(|c| motion.move_camera(c)).collect();
+        let deltas: Vec<PoseDelta> = moved
+            .iter()
+            .zip(truth)
+            .map(|(c, t)| {
+                let r = Mat3::from(t.c2w.matrix3) * Mat3::from(c.c2w.matrix3).transpose();
+                let w = rotation_vector(r);
+                let v = t.position() - c.position();
+                [w.x as f32, w.y as f32, w.z as f32, v.x, v.y, v.z]
+            })
+            .collect();
+        let centers: Vec<Vec3> = moved.iter().map(Camera::position).collect();
+        let Some((w, t)) = common_motion(&deltas, &centers, spread) else {
+            break;
+        };
+        let step = RigidMotion {
+            rotation: rotation(w.as_vec3()),
+            translation: t.as_vec3(),
+        };
+        motion = step.after(&motion);
+    }
+    motion
 }
 
 /// The point nearest, in least squares, to every view's optical axis (the line through
@@ -333,13 +448,17 @@ impl Refiner {
 
 /// How far pose `b` is from pose `a`: the angle of `R_b·R_aᵀ` in degrees and the
 /// distance between the centers in world units.
+/// The angle is that of the rotation vector, in f64 (the arc cosine of the trace, in f32,
+/// could not tell angles below about 0.03° from zero).
 pub fn pose_error(a: &Camera, b: &Camera) -> (f64, f64) {
-    let ra = Mat3::from(a.c2w.matrix3);
-    let rb = Mat3::from(b.c2w.matrix3);
-    let rel = rb * ra.transpose();
-    let trace = (rel.x_axis.x + rel.y_axis.y + rel.z_axis.z) as f64;
-    let angle = ((trace - 1.0) / 2.0).clamp(-1.0, 1.0).acos().to_degrees();
-    (angle, a.position().distance(b.position()) as f64)
+    let ra = Mat3::from(a.c2w.matrix3).as_dmat3();
+    let rb = Mat3::from(b.c2w.matrix3).as_dmat3();
+    let q = glam::DQuat::from_mat3(&(rb * ra.transpose())).normalize();
+    let angle = 2.0 * q.xyz().length().atan2(q.w.abs());
+    (
+        angle.to_degrees(),
+        a.position().as_dvec3().distance(b.position().as_dvec3()),
+    )
 }
 
 /// Moves each view's camera by a random correction of exactly `degrees` of rotation
@@ -631,6 +750,55 @@ mod tests {
         assert_eq!(Refiner::pivot_iteration(-1.0, 3000), Some(0));
         assert_eq!(Refiner::pivot_iteration(1.0, 3000), None);
         assert_eq!(Refiner::pivot_iteration(f32::NAN, 3000), None);
+    }
+
+    /// Cameras on a ring around the origin, looking at it.
+    fn ring(n: usize) -> Vec<Camera> {
+        (0..n)
+            .map(|i| {
+                let a = i as f32 * std::f32::consts::TAU / n as f32;
+                let eye = Vec3::new(4.0 * a.cos(), 4.0 * a.sin(), 1.0 + 0.3 * (3.0 * a).sin());
+                Camera::look_at(eye, Vec3::ZERO, Vec3::Z, 0.8, 32, 24).unwrap()
+            })
+            .collect()
+    }
+
+    #[test]
+    fn frame_motion_finds_the_scene_s_motion() {
+        let truth = ring(12);
+        let g = RigidMotion {
+            rotation: rotation(Vec3::new(0.02, -0.03, 0.05)),
+            translation: Vec3::new(0.1, -0.05, 0.2),
+        };
+        // Cameras carried by `g` alone: the frame is `g`'s inverse, to f32 round-off, and
+        // nothing is left in it.
+        let moved: Vec<Camera> = truth.iter().map(|c| g.move_camera(c)).collect();
+        let f = frame_motion(&truth, &moved);
+        let back = f.after(&g);
+        let (angle, dist) = back.size(Vec3::new(0.0, 0.0, 1.0));
+        assert!(angle < 1e-4 && dist < 1e-5, "{angle} {dist}");
+        let (ga, gd) = g.size(Vec3::ZERO);
+        let (fa, fd) = f.size(Vec3::ZERO);
+        assert!((ga - fa).abs() < 1e-4 && (gd - fd).abs() < 1e-5, "{ga} {fa} {gd} {fd}");
+        for (t, c) in truth.iter().zip(&moved) {
+            let (a, d) = pose_error(t, &f.move_camera(c));
+            assert!(a < 1e-3 && d < 1e-5, "{a} {d}");
+        }
+        // With each camera also perturbed on its own, the frame removes the common part
+        // only: the per-view errors left are about the perturbation's size, less than
+        // with the motion.
+        let mut noisy = moved.clone();
+        perturb_cameras(&mut noisy, 0.2, 0.01, 5);
+        let f = frame_motion(&truth, &noisy);
+        let mean = |cams: &[Camera]| {
+            truth.iter().zip(cams).map(|(t, c)| pose_error(t, c).0).sum::<f64>() / 12.0
+        };
+        let before = mean(&noisy);
+        let in_frame: Vec<Camera> = noisy.iter().map(|c| f.move_camera(c)).collect();
+        let after = mean(&in_frame);
+        assert!(before > 1.5 && after < 0.25, "{before} {after}");
+        let (angle, _) = f.after(&g).size(Vec3::ZERO);
+        assert!(angle < 0.2, "{angle}");
     }
 
     #[test]

@@ -484,6 +484,10 @@ pub struct VoxelResult {
     /// Mean PSNR (dB, capped at 99 per view) of the test views at the end; `None` when
     /// the dataset has none.
     pub test_psnr: Option<f64>,
+    /// With [`VoxelJob::perturb_poses`], the same with the test cameras carried into the
+    /// model's frame ([`PoseError::frame`]): the score a perfect refinement could reach
+    /// however the perturbation's common part fell. `None` otherwise.
+    pub test_psnr_in_frame: Option<f64>,
     /// Seconds spent loading the photos.
     pub load_seconds: f64,
     /// Rays per iteration used: the job's, or the number of training pixels if fewer.
@@ -505,6 +509,13 @@ pub struct PoseError {
     pub before: [f64; 2],
     /// The same after training, with the learned corrections applied.
     pub after: [f64; 2],
+    /// The rigid motion of the whole scene that best carries the corrected cameras onto
+    /// the loaded ones ([`pose::frame_motion`]): its angle (degrees) and how far it moves
+    /// the cameras' mean center (world units). Photos cannot tell it (bundle adjustment's
+    /// gauge freedom): it is the perturbation's common part that anchoring keeps.
+    pub frame: [f64; 2],
+    /// [`after`](Self::after) once that motion is removed: what the photos can tell.
+    pub after_in_frame: [f64; 2],
 }
 
 /// Fitted Gaussians and how the run went.
@@ -521,6 +532,8 @@ pub struct SplatResult {
     pub log: Vec<(splat::TrainStep, Option<f64>)>,
     /// Mean PSNR of the test views at the end; `None` when the dataset has none.
     pub test_psnr: Option<f64>,
+    /// As [`VoxelResult::test_psnr_in_frame`].
+    pub test_psnr_in_frame: Option<f64>,
     /// Seconds spent loading (and undistorting) the photos.
     pub load_seconds: f64,
     /// When the photos had lens distortion: the fraction of undistorted pixels that fell
@@ -578,7 +591,8 @@ pub fn mean_pose_error(
     given: &[crate::volume::camera::Camera],
     poses: &[PoseDelta],
 ) -> PoseError {
-    let mean = |f: &dyn Fn(usize) -> crate::volume::camera::Camera| {
+    use crate::volume::camera::Camera;
+    let mean = |f: &dyn Fn(usize) -> Camera| {
         let mut sum = [0.0f64; 2];
         for (i, l) in loaded.iter().enumerate() {
             let (a, d) = pose::pose_error(l, &f(i));
@@ -587,13 +601,46 @@ pub fn mean_pose_error(
         }
         sum.map(|v| v / loaded.len().max(1) as f64)
     };
-    PoseError {
-        before: mean(&|i| given[i]),
-        after: mean(&|i| match poses.get(i) {
+    let corrected: Vec<Camera> = (0..loaded.len().min(given.len()))
+        .map(|i| match poses.get(i) {
             Some(d) => pose::apply(&given[i], d),
             None => given[i],
-        }),
+        })
+        .collect();
+    let frame = pose::frame_motion(loaded, &corrected);
+    let center = corrected.iter().map(Camera::position).sum::<Vec3>() / corrected.len().max(1) as f32;
+    let (angle, moved) = frame.size(center);
+    PoseError {
+        before: mean(&|i| given[i]),
+        after: mean(&|i| corrected[i]),
+        frame: [angle, moved],
+        after_in_frame: mean(&|i| frame.move_camera(&corrected[i])),
     }
+}
+
+/// The `views` with their cameras carried into the frame of a model trained on
+/// perturbed and corrected cameras, given the loaded ones (`loaded`) and the learned
+/// corrections (`poses`) of the training views `train` ([`pose::frame_motion`], inverted):
+/// the held-out views as that model places them.
+fn views_in_frame(
+    views: &[View],
+    loaded: &[crate::volume::camera::Camera],
+    train: &[View],
+    poses: &[PoseDelta],
+) -> Vec<View> {
+    let corrected: Vec<_> = train
+        .iter()
+        .enumerate()
+        .map(|(i, v)| poses.get(i).map_or(v.camera, |d| pose::apply(&v.camera, d)))
+        .collect();
+    let into = pose::frame_motion(loaded, &corrected).inverse();
+    views
+        .iter()
+        .map(|v| View {
+            camera: into.move_camera(&v.camera),
+            ..v.clone()
+        })
+        .collect()
 }
 
 /// An option error naming `name` (a field of the job).
@@ -808,9 +855,17 @@ pub(crate) fn fit_voxel(
     };
     let (outcome, poses) =
         voxel::train_with_poses(&mut grid, &rays, &colors, &view_of_ray, &opts, observe)?;
-    let pose_error = loaded.map(|l| pose_error_of(&l, &data.train, &poses));
     let test_psnr = (final_test && !data.test.is_empty())
         .then(|| voxel_psnr(&grid, &test_rays, &data.test, &render));
+    let test_psnr_in_frame = match &loaded {
+        Some(l) if final_test && !data.test.is_empty() => {
+            let moved = views_in_frame(&data.test, l, &data.train, &poses);
+            let rays: Vec<Vec<Ray>> = moved.iter().map(|v| v.camera.rays()).collect();
+            Some(voxel_psnr(&grid, &rays, &moved, &render))
+        }
+        _ => None,
+    };
+    let pose_error = loaded.map(|l| pose_error_of(&l, &data.train, &poses));
     if let Some(s) = last {
         // The last row carries the final test PSNR (and the size after the final prune).
         log.retain(|r| r.0.iteration != s.iteration);
@@ -826,6 +881,7 @@ pub(crate) fn fit_voxel(
         outcome,
         log,
         test_psnr,
+        test_psnr_in_frame,
         load_seconds,
         batch,
         poses,
@@ -937,8 +993,16 @@ pub(crate) fn fit_splat(
         Some(splat_psnr(&model, &data.test, &settings)?)
     };
     log.retain(|r| r.0.iteration != outcome.iterations);
+    let test_psnr_in_frame = match &loaded {
+        Some(l) if final_test && !data.test.is_empty() => {
+            let moved = views_in_frame(&data.test, l, &data.train, &outcome.poses);
+            Some(splat_psnr(&model, &moved, &settings)?)
+        }
+        _ => None,
+    };
     let pose_error = loaded.map(|l| pose_error_of(&l, &data.train, &outcome.poses));
     Ok(SplatResult {
+        test_psnr_in_frame,
         poses: outcome.poses.clone(),
         pose_error,
         warnings: data.warnings.clone(),
