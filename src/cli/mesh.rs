@@ -506,7 +506,10 @@ fn run_fit(a: FitArgs) -> Result<()> {
     let run = fit_with_progress(&mut model, &train, &opts, a.quiet || a.json, Some(eval))?;
     let pose_error = a.poses.perturb_poses.map(|_| {
         let given: Vec<Camera> = train.iter().map(|(c, _)| *c).collect();
-        diffsvg::volume::recon::mean_pose_error(&loaded, &given, &run.fitted.poses)
+        let (lo, hi) = model.bounds();
+        let corner = |p: [f64; 3]| glam::Vec3::new(p[0] as f32, p[1] as f32, p[2] as f32);
+        let points = diffsvg::volume::pose::lattice(corner(lo), corner(hi), 5);
+        diffsvg::volume::recon::mean_pose_error(&loaded, &given, &run.fitted.poses, &points)
     });
     write_mesh(&model, &a.output)?;
     run.write_log(&a.output)?;

@@ -578,18 +578,22 @@ fn pose_error_of(
     loaded: &[crate::volume::camera::Camera],
     views: &[View],
     poses: &[PoseDelta],
+    points: &[Vec3],
 ) -> PoseError {
     let given: Vec<_> = views.iter().map(|v| v.camera).collect();
-    mean_pose_error(loaded, &given, poses)
+    mean_pose_error(loaded, &given, poses, points)
 }
 
 /// [`PoseError`] of cameras `given` (perturbed) against `loaded` (where they belong),
 /// before and after the corrections `poses` (`pose::apply`; a missing one counts as
-/// zero): the mean rotation angle (degrees) and center distance (world units).
+/// zero): the mean rotation angle (degrees) and center distance (world units); the
+/// frame and the error in it ([`PoseError::frame`]) judged at `points`, where the scene
+/// is ([`pose::frame_motion`]).
 pub fn mean_pose_error(
     loaded: &[crate::volume::camera::Camera],
     given: &[crate::volume::camera::Camera],
     poses: &[PoseDelta],
+    points: &[Vec3],
 ) -> PoseError {
     use crate::volume::camera::Camera;
     let mean = |f: &dyn Fn(usize) -> Camera| {
@@ -607,7 +611,7 @@ pub fn mean_pose_error(
             None => given[i],
         })
         .collect();
-    let frame = pose::frame_motion(loaded, &corrected);
+    let frame = pose::frame_motion(loaded, &corrected, points);
     let center = corrected.iter().map(Camera::position).sum::<Vec3>() / corrected.len().max(1) as f32;
     let (angle, moved) = frame.size(center);
     PoseError {
@@ -620,20 +624,21 @@ pub fn mean_pose_error(
 
 /// The `views` with their cameras carried into the frame of a model trained on
 /// perturbed and corrected cameras, given the loaded ones (`loaded`) and the learned
-/// corrections (`poses`) of the training views `train` ([`pose::frame_motion`], inverted):
-/// the held-out views as that model places them.
+/// corrections (`poses`) of the training views `train` ([`pose::frame_motion`] judged at
+/// `points`, inverted): the held-out views as that model places them.
 fn views_in_frame(
     views: &[View],
     loaded: &[crate::volume::camera::Camera],
     train: &[View],
     poses: &[PoseDelta],
+    points: &[Vec3],
 ) -> Vec<View> {
     let corrected: Vec<_> = train
         .iter()
         .enumerate()
         .map(|(i, v)| poses.get(i).map_or(v.camera, |d| pose::apply(&v.camera, d)))
         .collect();
-    let into = pose::frame_motion(loaded, &corrected).inverse();
+    let into = pose::frame_motion(loaded, &corrected, points).inverse();
     views
         .iter()
         .map(|v| View {
@@ -811,6 +816,8 @@ pub(crate) fn fit_voxel(
     let test_rays: Vec<Vec<Ray>> = data.test.iter().map(|v| v.camera.rays()).collect();
     let defaults = Defaults::for_dataset(&data);
     let (center, half) = scene_box(scene, &data, job.bound, defaults.box_factor)?;
+    // Where the scene is, to judge a model's frame by (`pose::frame_motion`).
+    let points = pose::lattice(center - Vec3::splat(half), center + Vec3::splat(half), 5);
     let load_seconds = t_load.elapsed().as_secs_f64();
 
     let levels = levels(job.res);
@@ -859,13 +866,13 @@ pub(crate) fn fit_voxel(
         .then(|| voxel_psnr(&grid, &test_rays, &data.test, &render));
     let test_psnr_in_frame = match &loaded {
         Some(l) if final_test && !data.test.is_empty() => {
-            let moved = views_in_frame(&data.test, l, &data.train, &poses);
+            let moved = views_in_frame(&data.test, l, &data.train, &poses, &points);
             let rays: Vec<Vec<Ray>> = moved.iter().map(|v| v.camera.rays()).collect();
             Some(voxel_psnr(&grid, &rays, &moved, &render))
         }
         _ => None,
     };
-    let pose_error = loaded.map(|l| pose_error_of(&l, &data.train, &poses));
+    let pose_error = loaded.map(|l| pose_error_of(&l, &data.train, &poses, &points));
     if let Some(s) = last {
         // The last row carries the final test PSNR (and the size after the final prune).
         log.retain(|r| r.0.iteration != s.iteration);
@@ -926,6 +933,8 @@ pub(crate) fn fit_splat(
     };
     let box_factor = Defaults::for_dataset(&data).box_factor;
     let (center, half) = scene_box(scene, &data, job.bound, box_factor)?;
+    // Where the scene is, to judge a model's frame by (`pose::frame_motion`).
+    let points = pose::lattice(center - Vec3::splat(half), center + Vec3::splat(half), 5);
     let mut model = match (splat::find_point_cloud(scene), &data.points) {
         (Some(path), _) => splat::from_point_cloud(&path, job.degree)?,
         (None, Some(points)) => splat::from_points(points, job.degree),
@@ -995,12 +1004,12 @@ pub(crate) fn fit_splat(
     log.retain(|r| r.0.iteration != outcome.iterations);
     let test_psnr_in_frame = match &loaded {
         Some(l) if final_test && !data.test.is_empty() => {
-            let moved = views_in_frame(&data.test, l, &data.train, &outcome.poses);
+            let moved = views_in_frame(&data.test, l, &data.train, &outcome.poses, &points);
             Some(splat_psnr(&model, &moved, &settings)?)
         }
         _ => None,
     };
-    let pose_error = loaded.map(|l| pose_error_of(&l, &data.train, &outcome.poses));
+    let pose_error = loaded.map(|l| pose_error_of(&l, &data.train, &outcome.poses, &points));
     Ok(SplatResult {
         test_psnr_in_frame,
         poses: outcome.poses.clone(),
