@@ -862,7 +862,10 @@ mod tests {
         assert!(angle < 1e-4 && dist < 1e-5, "{angle} {dist}");
         let (ga, gd) = g.size(Vec3::ZERO);
         let (fa, fd) = f.size(Vec3::ZERO);
-        assert!((ga - fa).abs() < 1e-4 && (gd - fd).abs() < 1e-5, "{ga} {fa} {gd} {fd}");
+        assert!(
+            (ga - fa).abs() < 1e-4 && (gd - fd).abs() < 1e-5,
+            "{ga} {fa} {gd} {fd}"
+        );
         for (t, c) in truth.iter().zip(&moved) {
             let (a, d) = pose_error(t, &f.move_camera(c));
             assert!(a < 1e-3 && d < 1e-5, "{a} {d}");
@@ -874,7 +877,12 @@ mod tests {
         perturb_cameras(&mut noisy, 0.2, 0.01, 5);
         let f = frame_motion(&truth, &noisy, &box_points());
         let mean = |cams: &[Camera]| {
-            truth.iter().zip(cams).map(|(t, c)| pose_error(t, c).0).sum::<f64>() / 12.0
+            truth
+                .iter()
+                .zip(cams)
+                .map(|(t, c)| pose_error(t, c).0)
+                .sum::<f64>()
+                / 12.0
         };
         let before = mean(&noisy);
         let in_frame: Vec<Camera> = noisy.iter().map(|c| f.move_camera(c)).collect();

@@ -612,7 +612,8 @@ pub fn mean_pose_error(
         })
         .collect();
     let frame = pose::frame_motion(loaded, &corrected, points);
-    let center = corrected.iter().map(Camera::position).sum::<Vec3>() / corrected.len().max(1) as f32;
+    let center =
+        corrected.iter().map(Camera::position).sum::<Vec3>() / corrected.len().max(1) as f32;
     let (angle, moved) = frame.size(center);
     PoseError {
         before: mean(&|i| given[i]),
@@ -1253,6 +1254,53 @@ fn camera_extent(views: &[View]) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn held_out_views_are_carried_into_the_model_s_frame() {
+        use crate::volume::camera::Camera;
+        use crate::volume::pose::RigidMotion;
+        let cam = |i: usize| {
+            let a = i as f32 * 0.7;
+            let eye = Vec3::new(4.0 * a.cos(), 4.0 * a.sin(), 1.0);
+            Camera::look_at(eye, Vec3::ZERO, Vec3::Z, 0.8, 8, 6).unwrap()
+        };
+        let view = |camera: Camera| View {
+            name: String::new(),
+            camera,
+            width: 8,
+            height: 6,
+            rgb: vec![[0.0; 3]; 48],
+        };
+        // Training cameras that moved with the whole scene by `g` (and learned nothing):
+        // a model trained on them sees the scene moved by `g`, so a held-out view is
+        // where `g` takes it.
+        let g = RigidMotion {
+            rotation: pose::rotation(Vec3::new(0.01, 0.0, -0.02)),
+            translation: Vec3::new(0.05, 0.02, 0.0),
+        };
+        let loaded: Vec<Camera> = (0..8).map(cam).collect();
+        let train: Vec<View> = loaded.iter().map(|c| view(g.move_camera(c))).collect();
+        let test = [view(cam(20))];
+        let points = pose::lattice(Vec3::splat(-1.0), Vec3::ONE, 3);
+        let moved = views_in_frame(&test, &loaded, &train, &[], &points);
+        let (angle, dist) = pose::pose_error(&g.move_camera(&test[0].camera), &moved[0].camera);
+        assert!(angle < 1e-3 && dist < 1e-5, "{angle} {dist}");
+        // Corrections that bring the training cameras home leave nothing to carry.
+        let back: Vec<PoseDelta> = train
+            .iter()
+            .zip(&loaded)
+            .map(|(v, l)| {
+                let r = glam::Mat3::from(l.c2w.matrix3)
+                    * glam::Mat3::from(v.camera.c2w.matrix3).transpose();
+                let w = glam::Quat::from_mat3(&r).to_scaled_axis();
+                let m = l.position() - v.camera.position();
+                [w.x, w.y, w.z, m.x, m.y, m.z]
+            })
+            .collect();
+        let moved = views_in_frame(&test, &loaded, &train, &back, &points);
+        let (angle, dist) = pose::pose_error(&test[0].camera, &moved[0].camera);
+        assert!(angle < 1e-3 && dist < 1e-5, "{angle} {dist}");
+    }
 
     #[test]
     fn coarse_to_fine_levels_start_at_64_and_double() {

@@ -288,6 +288,17 @@ fn mesh_fit_refines_perturbed_poses_and_fits_lights() {
     );
     assert!((before - 1.0).abs() < 1e-3, "{summary}");
     assert!(after < 0.5 * before, "{summary}");
+    // The scene's motion photos cannot tell, and the error left in the model's frame.
+    for key in ["frame", "after_in_frame"] {
+        for part in ["degrees", "units"] {
+            let v = e[key][part].as_f64().unwrap_or(f64::NAN);
+            assert!(v.is_finite() && v >= 0.0, "{key} {part}: {summary}");
+        }
+    }
+    assert!(
+        e["after_in_frame"]["degrees"].as_f64().unwrap() < 0.5 * before,
+        "{summary}"
+    );
     // One correction per training view; the held-out views keep their cameras.
     assert_eq!(summary["pose_corrections"], 4, "{summary}");
     // Lights: the reference lit from (0.3, 0.8, 0.5), the model's light starting 34.9°
