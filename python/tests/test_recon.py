@@ -71,6 +71,23 @@ def test_recon_voxel_equals_the_cli(tmp_path):
     run_cli("view", tmp_path / "py.vox", "--scene", scene, "-o", tmp_path / "views")
 
 
+def test_perturbed_poses_report_the_frame_as_the_cli_does(tmp_path):
+    scene = write_scene(tmp_path / "ball")
+    info = diffsvg.recon_voxel(scene, tmp_path / "py.vox", res=16, iters=30, batch=256,
+                               perturb_poses=(0.5, 0.02), refine_poses=True)
+    cli = cli_summary("recon", "voxel", "--scene", scene, "-o", tmp_path / "cli.vox",
+                      "--res", "16", "--iters", "30", "--batch", "256",
+                      "--perturb-poses", "0.5,0.02", "--refine-poses")
+    assert info["test_psnr_in_frame"] == cli["test_psnr_in_frame"]
+    assert np.isfinite(info["test_psnr_in_frame"])
+    e = info["pose_error"]
+    for key in ("before", "after", "after_in_frame", "frame"):
+        assert e[key] == (cli["pose_error"][key]["degrees"], cli["pose_error"][key]["units"])
+    assert abs(e["before"][0] - 0.5) < 1e-3 and 0 <= e["frame"][0] < 0.5
+    plain = diffsvg.recon_voxel(scene, tmp_path / "plain.vox", res=16, iters=2, batch=256)
+    assert plain["test_psnr_in_frame"] is None and plain["pose_error"] is None
+
+
 def test_recon_splat_equals_the_cli_and_stops(tmp_path):
     scene = write_scene(tmp_path / "ball")
     info = diffsvg.recon_splat(scene, tmp_path / "py.ply", iters=40, initial=200, seed=3)
