@@ -109,30 +109,10 @@ pub(crate) fn apply_to_ray(ray: &Ray, rot: &Mat3, v: Vec3) -> Ray {
 /// from the held-out ones, which keep their loaded poses. Linear in the corrections
 /// (exact to first order in `ω`).
 pub(crate) fn remove_common_motion(deltas: &mut [PoseDelta], centers: &[Vec3], scale: f32) {
-    let Some((w, t)) = common_motion(deltas, centers, scale) else {
-        return;
-    };
-    for (d, c) in deltas.iter_mut().zip(centers) {
-        let dv = w.cross(c.as_dvec3()) + t;
-        for k in 0..3 {
-            d[k] = (d[k] as f64 - w[k]) as f32;
-            d[3 + k] = (d[3 + k] as f64 - dv[k]) as f32;
-        }
-    }
-}
-
-/// The common rigid motion of [`remove_common_motion`]: the turn `w` about the world
-/// origin and the move `t` (each camera then turns by `w` and moves by `w × c + t`) that
-/// best explain the corrections; `None` for no cameras or a singular fit.
-fn common_motion(
-    deltas: &[PoseDelta],
-    centers: &[Vec3],
-    scale: f32,
-) -> Option<(glam::DVec3, glam::DVec3)> {
     use glam::{DMat3, DVec3};
     let n = deltas.len().min(centers.len());
     if n == 0 {
-        return None;
+        return;
     }
     let w2 = 1.0 / (scale as f64 * scale as f64);
     let omega = |d: &PoseDelta| DVec3::new(d[0] as f64, d[1] as f64, d[2] as f64);
@@ -154,8 +134,17 @@ fn common_motion(
         rhs += omega(d) + di.cross(v(d) - v_mean) * w2;
     }
     let w = m.inverse() * rhs;
+    if !w.is_finite() {
+        return;
+    }
     let t = v_mean + c_mean.cross(w);
-    (w.is_finite() && t.is_finite()).then_some((w, t))
+    for (d, c) in deltas[..n].iter_mut().zip(centers) {
+        let dv = w.cross(c.as_dvec3()) + t;
+        for k in 0..3 {
+            d[k] = (d[k] as f64 - w[k]) as f32;
+            d[3 + k] = (d[3 + k] as f64 - dv[k]) as f32;
+        }
+    }
 }
 
 /// A rigid motion of the world, `x ↦ rotation·x + translation` (world units).
@@ -203,15 +192,24 @@ impl RigidMotion {
 
     /// Its angle in degrees and how far it moves the point `at` (world units).
     pub fn size(&self, at: Vec3) -> (f64, f64) {
-        let angle = rotation_vector(self.rotation).length().to_degrees();
+        let angle = rotation_vector(self.rotation.as_dmat3())
+            .length()
+            .to_degrees();
         let moved = (self.rotation * at + self.translation).distance(at);
         (angle, moved as f64)
     }
 }
 
+/// `R_b·R_aᵀ`, the turn from camera `a`'s orientation to `b`'s, in f64.
+fn relative_rotation(a: &Camera, b: &Camera) -> glam::DMat3 {
+    let ra = Mat3::from(a.c2w.matrix3).as_dmat3();
+    let rb = Mat3::from(b.c2w.matrix3).as_dmat3();
+    rb * ra.transpose()
+}
+
 /// The rotation vector `ω` of a rotation matrix (`rotation(ω) = r`), in f64.
-fn rotation_vector(r: Mat3) -> glam::DVec3 {
-    let q = glam::DQuat::from_mat3(&r.as_dmat3()).normalize();
+fn rotation_vector(r: glam::DMat3) -> glam::DVec3 {
+    let q = glam::DQuat::from_mat3(&r).normalize();
     let q = if q.w < 0.0 { -q } else { q };
     let s = q.xyz().length();
     if s < 1e-12 {
@@ -243,8 +241,7 @@ pub fn frame_motion(truth: &[Camera], cams: &[Camera], points: &[Vec3]) -> Rigid
         let mut rhs = [0.0f64; 6];
         for (cam, t) in cams[..n].iter().zip(truth) {
             let cam = motion.move_camera(cam);
-            let r = Mat3::from(t.c2w.matrix3) * Mat3::from(cam.c2w.matrix3).transpose();
-            let omega = rotation_vector(r);
+            let omega = rotation_vector(relative_rotation(&cam, t));
             let c = cam.position().as_dvec3();
             let v = t.position().as_dvec3() - c;
             for x in points {
@@ -529,10 +526,7 @@ impl Refiner {
 /// The angle is that of the rotation vector, in f64 (the arc cosine of the trace, in f32,
 /// could not tell angles below about 0.03° from zero).
 pub fn pose_error(a: &Camera, b: &Camera) -> (f64, f64) {
-    let ra = Mat3::from(a.c2w.matrix3).as_dmat3();
-    let rb = Mat3::from(b.c2w.matrix3).as_dmat3();
-    let q = glam::DQuat::from_mat3(&(rb * ra.transpose())).normalize();
-    let angle = 2.0 * q.xyz().length().atan2(q.w.abs());
+    let angle = rotation_vector(relative_rotation(a, b)).length();
     (
         angle.to_degrees(),
         a.position().as_dvec3().distance(b.position().as_dvec3()),

@@ -485,8 +485,8 @@ pub struct VoxelResult {
     /// the dataset has none.
     pub test_psnr: Option<f64>,
     /// With [`VoxelJob::perturb_poses`], the same with the test cameras carried into the
-    /// model's frame ([`PoseError::frame`]): the score a perfect refinement could reach
-    /// however the perturbation's common part fell. `None` otherwise.
+    /// model's frame ([`PoseError::frame`]), so that the perturbation's common part, which
+    /// no refinement can see, costs nothing. `None` otherwise.
     pub test_psnr_in_frame: Option<f64>,
     /// Seconds spent loading the photos.
     pub load_seconds: f64,
@@ -579,9 +579,9 @@ fn pose_error_of(
     views: &[View],
     poses: &[PoseDelta],
     points: &[Vec3],
-) -> PoseError {
+) -> (PoseError, pose::RigidMotion) {
     let given: Vec<_> = views.iter().map(|v| v.camera).collect();
-    mean_pose_error(loaded, &given, poses, points)
+    pose_report(loaded, &given, poses, points)
 }
 
 /// [`PoseError`] of cameras `given` (perturbed) against `loaded` (where they belong),
@@ -595,6 +595,16 @@ pub fn mean_pose_error(
     poses: &[PoseDelta],
     points: &[Vec3],
 ) -> PoseError {
+    pose_report(loaded, given, poses, points).0
+}
+
+/// [`mean_pose_error`] and the frame motion itself.
+fn pose_report(
+    loaded: &[crate::volume::camera::Camera],
+    given: &[crate::volume::camera::Camera],
+    poses: &[PoseDelta],
+    points: &[Vec3],
+) -> (PoseError, pose::RigidMotion) {
     use crate::volume::camera::Camera;
     let mean = |f: &dyn Fn(usize) -> Camera| {
         let mut sum = [0.0f64; 2];
@@ -615,31 +625,21 @@ pub fn mean_pose_error(
     let center =
         corrected.iter().map(Camera::position).sum::<Vec3>() / corrected.len().max(1) as f32;
     let (angle, moved) = frame.size(center);
-    PoseError {
+    let error = PoseError {
         before: mean(&|i| given[i]),
         after: mean(&|i| corrected[i]),
         frame: [angle, moved],
         after_in_frame: mean(&|i| frame.move_camera(&corrected[i])),
-    }
+    };
+    (error, frame)
 }
 
 /// The `views` with their cameras carried into the frame of a model trained on
-/// perturbed and corrected cameras, given the loaded ones (`loaded`) and the learned
-/// corrections (`poses`) of the training views `train` ([`pose::frame_motion`] judged at
-/// `points`, inverted): the held-out views as that model places them.
-fn views_in_frame(
-    views: &[View],
-    loaded: &[crate::volume::camera::Camera],
-    train: &[View],
-    poses: &[PoseDelta],
-    points: &[Vec3],
-) -> Vec<View> {
-    let corrected: Vec<_> = train
-        .iter()
-        .enumerate()
-        .map(|(i, v)| poses.get(i).map_or(v.camera, |d| pose::apply(&v.camera, d)))
-        .collect();
-    let into = pose::frame_motion(loaded, &corrected, points).inverse();
+/// perturbed and corrected cameras, whose motion against the truth is `frame`
+/// ([`pose::frame_motion`]; carried by its inverse): the held-out views as that model
+/// places them.
+fn views_in_frame(views: &[View], frame: &pose::RigidMotion) -> Vec<View> {
+    let into = frame.inverse();
     views
         .iter()
         .map(|v| View {
@@ -865,15 +865,16 @@ pub(crate) fn fit_voxel(
         voxel::train_with_poses(&mut grid, &rays, &colors, &view_of_ray, &opts, observe)?;
     let test_psnr = (final_test && !data.test.is_empty())
         .then(|| voxel_psnr(&grid, &test_rays, &data.test, &render));
-    let test_psnr_in_frame = match &loaded {
-        Some(l) if final_test && !data.test.is_empty() => {
-            let moved = views_in_frame(&data.test, l, &data.train, &poses, &points);
+    let report = loaded.map(|l| pose_error_of(&l, &data.train, &poses, &points));
+    let test_psnr_in_frame = match &report {
+        Some((_, frame)) if final_test && !data.test.is_empty() => {
+            let moved = views_in_frame(&data.test, frame);
             let rays: Vec<Vec<Ray>> = moved.iter().map(|v| v.camera.rays()).collect();
             Some(voxel_psnr(&grid, &rays, &moved, &render))
         }
         _ => None,
     };
-    let pose_error = loaded.map(|l| pose_error_of(&l, &data.train, &poses, &points));
+    let pose_error = report.map(|r| r.0);
     if let Some(s) = last {
         // The last row carries the final test PSNR (and the size after the final prune).
         log.retain(|r| r.0.iteration != s.iteration);
@@ -1003,14 +1004,16 @@ pub(crate) fn fit_splat(
         Some(splat_psnr(&model, &data.test, &settings)?)
     };
     log.retain(|r| r.0.iteration != outcome.iterations);
-    let test_psnr_in_frame = match &loaded {
-        Some(l) if final_test && !data.test.is_empty() => {
-            let moved = views_in_frame(&data.test, l, &data.train, &outcome.poses, &points);
-            Some(splat_psnr(&model, &moved, &settings)?)
-        }
+    let report = loaded.map(|l| pose_error_of(&l, &data.train, &outcome.poses, &points));
+    let test_psnr_in_frame = match &report {
+        Some((_, frame)) if final_test && !data.test.is_empty() => Some(splat_psnr(
+            &model,
+            &views_in_frame(&data.test, frame),
+            &settings,
+        )?),
         _ => None,
     };
-    let pose_error = loaded.map(|l| pose_error_of(&l, &data.train, &outcome.poses, &points));
+    let pose_error = report.map(|r| r.0);
     Ok(SplatResult {
         test_psnr_in_frame,
         poses: outcome.poses.clone(),
@@ -1282,7 +1285,8 @@ mod tests {
         let train: Vec<View> = loaded.iter().map(|c| view(g.move_camera(c))).collect();
         let test = [view(cam(20))];
         let points = pose::lattice(Vec3::splat(-1.0), Vec3::ONE, 3);
-        let moved = views_in_frame(&test, &loaded, &train, &[], &points);
+        let frame = pose_error_of(&loaded, &train, &[], &points).1;
+        let moved = views_in_frame(&test, &frame);
         let (angle, dist) = pose::pose_error(&g.move_camera(&test[0].camera), &moved[0].camera);
         assert!(angle < 1e-3 && dist < 1e-5, "{angle} {dist}");
         // Corrections that bring the training cameras home leave nothing to carry.
@@ -1297,7 +1301,8 @@ mod tests {
                 [w.x, w.y, w.z, m.x, m.y, m.z]
             })
             .collect();
-        let moved = views_in_frame(&test, &loaded, &train, &back, &points);
+        let frame = pose_error_of(&loaded, &train, &back, &points).1;
+        let moved = views_in_frame(&test, &frame);
         let (angle, dist) = pose::pose_error(&test[0].camera, &moved[0].camera);
         assert!(angle < 1e-3 && dist < 1e-5, "{angle} {dist}");
     }
