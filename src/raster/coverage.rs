@@ -61,9 +61,34 @@ impl<T: Copy + Default> Cells<T> {
 /// left of the canvas still carries its cover into the row; right of it nothing shows),
 /// and rows outside `acc` are skipped.
 pub(crate) fn accumulate_line(acc: &mut Cells<f32>, p0: Point, p1: Point, x_max: f64) {
+    accumulate_line_visiting(acc, p0, p1, x_max, &mut ());
+}
+
+/// What [`accumulate_line_visiting`] tells about the cells a segment crosses.
+pub(crate) trait CellVisitor {
+    /// The piece of the segment in row `row` (local) crosses the interiors of columns
+    /// `c0..=c1` (local; a piece on a vertical grid line is given the cell on its right).
+    fn piece(&mut self, row: usize, c0: usize, c1: usize);
+}
+
+impl CellVisitor for () {
+    #[inline(always)]
+    fn piece(&mut self, _: usize, _: usize, _: usize) {}
+}
+
+/// [`accumulate_line`], telling `v` which cells the segment's pieces cross (those inside
+/// the canvas's columns; pieces clamped onto `x = 0` or `x = x_max` cross none).
+#[inline]
+pub(crate) fn accumulate_line_visiting<V: CellVisitor>(
+    acc: &mut Cells<f32>,
+    p0: Point,
+    p1: Point,
+    x_max: f64,
+    v: &mut V,
+) {
     if p0[0] >= 0.0 && p0[0] <= x_max && p1[0] >= 0.0 && p1[0] <= x_max {
         // Inside the canvas's columns (the common case): nothing to split or clamp.
-        return line_local(acc, p0, p1);
+        return line_local(acc, p0, p1, v);
     }
     // Split at x = 0 and x = x_max so that the clamped pieces stay exact.
     let mut pieces = [(p0, p1); 3];
@@ -73,9 +98,14 @@ pub(crate) fn accumulate_line(acc: &mut Cells<f32>, p0: Point, p1: Point, x_max:
         n += 1;
     });
     for &(a, b) in &pieces[..n] {
+        let inside = (0.0..=x_max).contains(&(0.5 * (a[0] + b[0])));
         let a = [a[0].clamp(0.0, x_max), a[1]];
         let b = [b[0].clamp(0.0, x_max), b[1]];
-        line_local(acc, a, b);
+        if inside {
+            line_local(acc, a, b, v);
+        } else {
+            line_local(acc, a, b, &mut ());
+        }
     }
 }
 
@@ -151,7 +181,8 @@ fn split_x(p0: Point, p1: Point, lo: f64, hi: f64, f: &mut dyn FnMut(Point, Poin
 }
 
 /// Exact-area accumulation of one segment already clamped to the buffer's columns.
-fn line_local(acc: &mut Cells<f32>, p0: Point, p1: Point) {
+#[inline(always)]
+fn line_local<V: CellVisitor>(acc: &mut Cells<f32>, p0: Point, p1: Point, v: &mut V) {
     let Some(([ax, ay], [bx, by], dir)) = downward_local(acc, p0, p1) else {
         return;
     };
@@ -168,10 +199,11 @@ fn line_local(acc: &mut Cells<f32>, p0: Point, p1: Point) {
         if by <= r + 1.0 {
             let row = to_index(r);
             let line = &mut acc.data[row * w..(row + 1) * w];
-            return row_piece(line, ax, bx, (by - ay) * dir, max_col);
+            let (c0, c1) = row_piece(line, ax, bx, (by - ay) * dir, max_col);
+            return v.piece(row, c0, c1);
         }
     }
-    line_rows(acc, [ax, ay], [bx, by], dir);
+    line_rows(acc, [ax, ay], [bx, by], dir, v);
 }
 
 /// The segment in `acc`'s local coordinates, top end first, with the sign of its
@@ -199,7 +231,13 @@ fn downward_local(acc: &Cells<f32>, p0: Point, p1: Point) -> Option<(Point, Poin
 
 /// [`line_local`]'s general case: `a` above `b` (`ay < by`, local coordinates), `dir` the
 /// sign of the original segment's direction; row by row, clipped to the buffer's rows.
-fn line_rows(acc: &mut Cells<f32>, [ax, ay]: Point, [bx, by]: Point, dir: f64) {
+fn line_rows<V: CellVisitor>(
+    acc: &mut Cells<f32>,
+    [ax, ay]: Point,
+    [bx, by]: Point,
+    dir: f64,
+    v: &mut V,
+) {
     let (w, h) = (acc.w, from_index(acc.h));
     let max_col = from_index(w - 1);
     let dxdy = (bx - ax) / (by - ay);
@@ -220,7 +258,8 @@ fn line_rows(acc: &mut Cells<f32>, [ax, ay]: Point, [bx, by]: Point, dir: f64) {
             ax + (ybot - ay) * dxdy
         };
         let line = &mut acc.data[row * w..(row + 1) * w];
-        row_piece(line, x, xnext, dy * dir, max_col);
+        let (c0, c1) = row_piece(line, x, xnext, dy * dir, max_col);
+        v.piece(row, c0, c1);
         x = xnext;
         row += 1;
     }
@@ -228,9 +267,10 @@ fn line_rows(acc: &mut Cells<f32>, [ax, ay]: Point, [bx, by]: Point, dir: f64) {
 
 /// Adds the piece of a segment crossing one row from `x` to `xnext` (local columns) with
 /// signed height `d` to that row's deltas `line`: each cell it crosses gets the area right
-/// of the piece, the next cell the rest of the height.
+/// of the piece, the next cell the rest of the height. Returns the first and last columns
+/// whose interiors the piece crosses.
 #[inline(always)]
-fn row_piece(line: &mut [f32], x: f64, xnext: f64, d: f64, max_col: f64) {
+fn row_piece(line: &mut [f32], x: f64, xnext: f64, d: f64, max_col: f64) -> (usize, usize) {
     let w = line.len();
     let (xl, xr) = if x < xnext { (x, xnext) } else { (xnext, x) };
     let xl = xl.clamp(0.0, max_col);
@@ -246,6 +286,7 @@ fn row_piece(line: &mut [f32], x: f64, xnext: f64, d: f64, max_col: f64) {
         if xli + 1 < w {
             line[xli + 1] += (d * xm) as f32;
         }
+        (xli, xli)
     } else {
         // Across several cells: the piece's height is spread uniformly over x.
         let s = 1.0 / (xr - xl);
@@ -269,6 +310,7 @@ fn row_piece(line: &mut [f32], x: f64, xnext: f64, d: f64, max_col: f64) {
         if xri < w {
             line[xri] += (d * am) as f32;
         }
+        (xli, xri - 1)
     }
 }
 
@@ -865,7 +907,7 @@ mod tests {
     /// [`line_local`] without its one-row shortcut: the general row loop for every segment.
     fn line_local_by_rows(acc: &mut Cells<f32>, p0: Point, p1: Point) {
         if let Some((a, b, dir)) = downward_local(acc, p0, p1) {
-            line_rows(acc, a, b, dir);
+            line_rows(acc, a, b, dir, &mut ());
         }
     }
 
@@ -897,7 +939,7 @@ mod tests {
                 let p0 = [ox + coord(0.0, 8.0).abs(), coord(-1.0, 7.0) + y0 as f64];
                 let near = coord(-1.2, 1.2);
                 let p1 = [(p0[0] + coord(-2.0, 2.0)).clamp(ox, ox + 8.0), p0[1] + near];
-                line_local(&mut fast, p0, p1);
+                line_local(&mut fast, p0, p1, &mut ());
                 line_local_by_rows(&mut slow, p0, p1);
                 let (ay, by) = (p0[1].min(p1[1]) - y0 as f64, p0[1].max(p1[1]) - y0 as f64);
                 if ay >= 0.0 && by <= 6.0 && ay.floor() + 1.0 >= by && ay < by {

@@ -42,7 +42,6 @@ pub(crate) mod prepare;
 pub(crate) mod render;
 pub(crate) mod stroke;
 pub(crate) mod sweep;
-pub(crate) mod tangles;
 
 pub(crate) use backward::backward_prepared;
 pub use backward::{

@@ -7,15 +7,16 @@
 //! over-covers (two coincident half-covering rectangles in one path give 1.0, not 0.5).
 //!
 //! **Which cells.** Only items that can overlap look ([`Item::can_overlap`]: anything but
-//! simple rings, convex or monotone in y, that share no pixel with each other), and only
-//! inside their danger boxes ([`tangles`](super::tangles): where a ring that meets another
-//! edge, or whose sides do not wind 0 and the item's one other value, can share a cell with
-//! another run of edges; a glyph with its counters wound the other way has none). While a
-//! band is accumulated, each cell an edge crosses keeps the
-//! chain of consecutive edges of one ring that passed through it: a second chain, or a
-//! chain that turns back in both x and y, makes the cell a candidate. (One chain monotone
-//! in x or in y crosses the cell once and splits it into two regions of adjacent winding:
-//! the integral is exact there.)
+//! simple rings, convex or monotone in y, that share no pixel with each other). While such
+//! an item is accumulated ([`accumulate_line_visiting`](super::coverage::accumulate_line_visiting)),
+//! each cell an edge crosses keeps the chain of consecutive edges of one ring that passed
+//! through it ([`ChainTags`]): a second chain, or a chain that turns back in both x and
+//! y, makes the cell a candidate. (One chain monotone in x or in y crosses the cell once
+//! and splits it into two regions of adjacent winding: the integral is exact there.) Two
+//! chains that do not meet inside the cell and lie each on the same side of the other (a
+//! thin stroke's two sides, a narrow stem) leave the two outer regions one winding and
+//! the one between them an adjacent one: such a cell is judged exact once the
+//! item is done ([`chains_wind_alike`]), without a search.
 //!
 //! **Exact area.** In a candidate cell the edges are clipped to the cell and the cell is
 //! cut into horizontal strips at every piece's end and every crossing of two pieces. In a
@@ -46,18 +47,19 @@
 //! a horizontal piece is the nearest one of some height (a piece ending within rounding of
 //! a side leaves a sliver).
 //!
-//! **Which rows.** Before walking any edge, the item's danger boxes (found once per item)
-//! mark the columns of each row where a candidate can be. Only the flagged cells of each
-//! edge are walked (and the cells beyond the box's right and bottom lines beside them); a
-//! band without any walks none. A forward pass leaves out the cells that are candidates
-//! only for a neighbour's piece on a grid line: they hold two windings, and only their
-//! gradient needs the portions.
+//! **Which edges.** Only the candidate cells are searched, and only the edges with a piece
+//! in one: each candidate's chains (recorded as their first and last edges when the cell
+//! became one) and every edge seen in it afterwards, in ring order. The search walks them
+//! through the candidate cells again, with the same rule, to keep every piece. For the
+//! backward pass the cells beside pieces on grid lines are searched too (their gradient
+//! needs the portions), with every edge of the item. A forward pass leaves out the cells
+//! that are candidates only for a neighbour's piece on a grid line: they hold two
+//! windings, and only their gradient needs the portions.
 //!
-//! **Off by default** ([`RenderOptions::exact_overlaps`](super::RenderOptions)): on, the
-//! bundled drawings whose paths do overlap themselves (a self-crossing stroke, a star,
-//! dashes' caps) still take up to about 3× as long: the even-odd star's long crossing
-//! edges give danger boxes that cover most of it (docs/performance.md); off, the clamped
-//! winding integral everywhere, as before issue 29.
+//! **Off by default** ([`RenderOptions::exact_overlaps`](super::RenderOptions)): on, text
+//! and the bundled drawings take about a fifth longer (the tags are written for every
+//! cell an edge crosses; docs/performance.md); off, the clamped winding integral
+//! everywhere, as before issue 29.
 //!
 //! **Bounds.** A cell with up to [`EXACT_PIECES`] pieces is exact (its pairwise crossings
 //! are `O(k²)`, its strips `O(k²)` sorts of `k`). Up to [`SAMPLED_PIECES`] the cell is
@@ -330,6 +332,11 @@ pub(crate) struct Overlaps {
     left: Vec<(f64, i32)>,
     /// The cells of the box where a candidate can be ([`flag_rows`](Self::flag_rows)).
     flags: Flags,
+    /// The chains in each cell, recorded while the item is accumulated.
+    pub(crate) tags: ChainTags,
+    /// Tests' reference: every cell searched.
+    #[cfg(test)]
+    pub(crate) everywhere: bool,
 }
 
 impl Overlaps {
@@ -345,8 +352,9 @@ impl Overlaps {
     }
 
     /// Finds the candidate cells of `item` inside the box of cells `cols × rows` whose
-    /// first cell is device pixel `(x0, y0)`, and their areas by relative winding;
-    /// with `portions`, also what the backward pass needs.
+    /// first cell is device pixel `origin`, and their areas by relative winding; with
+    /// `portions`, also what the backward pass needs. The item was just accumulated into
+    /// that box with [`tags`](Self::tags) recording the chains in each cell.
     pub(crate) fn find(
         &mut self,
         item: &Item,
@@ -356,14 +364,39 @@ impl Overlaps {
         portions: bool,
     ) {
         self.clear();
-        if !item.can_overlap || cols == 0 || rows == 0 {
+        if cols == 0 || rows == 0 {
             return;
         }
+        self.tags.judge_twos(&item.pts, &item.rings);
+        #[cfg(test)]
+        if self.everywhere {
+            // The reference of the tests: every cell of the box searched, every edge walked.
+            self.flags.reset(origin.0 as f64, cols, rows);
+            for r in 0..rows {
+                self.flags
+                    .mark(r, origin.0 as f64, (origin.0 + cols as i64) as f64);
+            }
+            self.tags.edge_list.clear();
+            return self.search(item, origin, cols, rows, portions);
+        }
+        if !self.tags.flag(&mut self.flags, origin.0 as f64, cols, rows) {
+            return;
+        }
+        self.tags.collect_edges(&item.rings);
+        self.search(item, origin, cols, rows, portions);
+    }
+
+    /// Finds the candidate cells among the flagged ones and integrates them.
+    fn search(
+        &mut self,
+        item: &Item,
+        origin: (i64, i64),
+        cols: usize,
+        rows: usize,
+        portions: bool,
+    ) {
         let (x0, y0) = (origin.0 as f64, origin.1 as f64);
         let bx = [x0, y0, x0 + cols as f64, y0 + rows as f64];
-        if !self.flag_rows(item, bx, rows) {
-            return;
-        }
         if self.state.len() < cols * rows {
             self.state.resize(cols * rows, CellState::default());
         }
@@ -382,7 +415,8 @@ impl Overlaps {
         let (state, touched) = (&mut self.state, &mut self.touched);
         let all = &mut self.all;
         all.clear();
-        item.for_each_edge_near(bx[1], bx[3], |ia, ib| {
+        let edges = std::mem::take(&mut self.tags.edge_list);
+        let mut on_edge = |ia: usize, ib: usize| {
             let (p, q) = (item.pts[ia], item.pts[ib]);
             // Only the rows where a candidate can be (every edge touching them).
             let (r0, r1) = (row_of(p[1].min(q[1])), row_of(p[1].max(q[1])));
@@ -469,7 +503,15 @@ impl Overlaps {
                     });
                 });
             }
-        });
+        };
+        if edges.is_empty() {
+            item.for_each_edge_near(bx[1], bx[3], on_edge);
+        } else {
+            for &(ia, ib) in &edges {
+                on_edge(ia as usize, ib as usize);
+            }
+        }
+        self.tags.edge_list = edges;
         let found = &mut self.found;
         found.clear();
         for &k in touched.iter() {
@@ -539,29 +581,6 @@ impl Overlaps {
             self.state[k as usize] = CellState::default();
         }
         self.touched.clear();
-    }
-
-    /// Flags the cells of the box `bx` (`rows` of them) where a candidate cell can be: the
-    /// item's danger boxes ([`Item::danger`], [`danger_boxes`](super::tangles::danger_boxes)).
-    /// Returns whether any cell is flagged.
-    fn flag_rows(&mut self, item: &Item, bx: [f64; 4], rows: usize) -> bool {
-        let (rlo, rhi) = (bx[1], bx[3] - 1.0);
-        if item.danger.near_rows(rlo, rhi).next().is_none() {
-            return false;
-        }
-        let flags = &mut self.flags;
-        flags.reset(bx[0], (bx[2] - bx[0]) as usize, rows);
-        let mut any = false;
-        for c in item.danger.near_rows(rlo, rhi) {
-            let (a, b) = (c[1].max(rlo), c[3].min(rhi));
-            if a <= b && c[0] <= bx[2] && c[2] >= bx[0] - 1.0 {
-                any = true;
-                for r in (a - rlo) as usize..=(b - rlo) as usize {
-                    flags.mark(r, c[0], c[2]);
-                }
-            }
-        }
-        any
     }
 
     /// Areas (and portions) of one candidate cell at device pixel `cell` from
@@ -945,6 +964,470 @@ pub(crate) fn portion_weight(w: i32, evenodd: bool) -> f64 {
     inside(w.saturating_add(1), evenodd) as i32 as f64 - inside(w, evenodd) as i32 as f64
 }
 
+/// No vertex, in [`TagCell`].
+const NO_VERTEX: u32 = u32::MAX;
+/// [`TagCell::meta`]: more than one chain, or a chain monotone in neither x nor y.
+const TAG_CANDIDATE: u32 = 1 << 4;
+/// [`TagCell::meta`]: two chains, not yet judged; the first chain's direction bits are
+/// kept above [`TAG_FIRST_DIRS`].
+const TAG_TWO: u32 = 1 << 5;
+/// [`TagCell::meta`]: shift of the first chain's direction bits, with [`TAG_TWO`].
+const TAG_FIRST_DIRS: u32 = 6;
+/// [`TagCell::meta`]: the generation is kept above this bit.
+const TAG_GEN_SHIFT: u32 = 16;
+
+/// One cell's chain: its end vertices (when inside the cell) and what [`ChainTags`] knows.
+#[derive(Clone, Copy, Default)]
+struct TagCell {
+    head: u32,
+    tail: u32,
+    /// Start vertices of the chain's first and last edges.
+    first: u32,
+    last: u32,
+    /// With [`TAG_TWO`]: the start vertices of the first chain's first and last edges
+    /// (the fields above are the second chain's).
+    other: u32,
+    other_last: u32,
+    /// Direction bits (+x, −x, +y, −y), [`TAG_CANDIDATE`], generation above
+    /// [`TAG_GEN_SHIFT`].
+    meta: u32,
+}
+
+/// Which cells of an item's box can hold three winding values, recorded while its edges are
+/// accumulated ([`accumulate_line_visiting`](super::coverage::accumulate_line_visiting)):
+/// each cell keeps the chain of consecutive edges that crossed its interior; a second
+/// chain, or a chain monotone in neither x nor y, makes it a candidate (the rule of
+/// [`Overlaps::search`]'s walk, which then looks at the candidates alone). Entries carry a
+/// generation, so nothing is cleared between items.
+#[derive(Default)]
+pub(crate) struct ChainTags {
+    cells: Vec<TagCell>,
+    generation: u32,
+    w: usize,
+    h: usize,
+    x0: f64,
+    y0: f64,
+    /// Candidate cells (local, row-major index), each once.
+    cands: Vec<u32>,
+    /// Cells that got a second chain.
+    twos: Vec<u32>,
+    /// Scratch of [`judge_twos`](Self::judge_twos): the two chains' edges.
+    chain_a: Vec<(Point, Point)>,
+    chain_b: Vec<(Point, Point)>,
+    /// `(row, c0, c1)`: cells beside a piece on a grid line (for the backward pass).
+    lines: Vec<(u32, u32, u32)>,
+    /// Chains of the candidate cells, as `(first, last)` edges, before they were.
+    chains: Vec<(u32, u32)>,
+    /// Edges with a piece in a candidate cell once it was one, and edges on grid lines.
+    edges: Vec<(u32, u32)>,
+    /// Every edge with a piece in a candidate cell, in ring order, once each
+    /// ([`collect_edges`](Self::collect_edges)); empty to search every edge.
+    pub(crate) edge_list: Vec<(u32, u32)>,
+    for_backward: bool,
+    /// The current edge's vertices, direction bits and the cells of its ends.
+    ia: u32,
+    ic: u32,
+    bits: u32,
+    cell_a: usize,
+    cell_c: usize,
+    on_v: bool,
+}
+
+impl ChainTags {
+    /// Starts an item accumulated into the box of `w × h` cells whose first is device
+    /// pixel `(x0, y0)`.
+    pub(crate) fn begin(&mut self, x0: i64, y0: i64, w: usize, h: usize, for_backward: bool) {
+        self.generation += 1;
+        if self.generation >= 1 << (32 - TAG_GEN_SHIFT) {
+            self.cells.clear();
+            self.generation = 1;
+        }
+        if self.cells.len() < w * h {
+            self.cells.resize(w * h, TagCell::default());
+        }
+        (self.w, self.h, self.x0, self.y0) = (w, h, x0 as f64, y0 as f64);
+        self.cands.clear();
+        self.twos.clear();
+        self.lines.clear();
+        self.chains.clear();
+        self.edges.clear();
+        self.for_backward = for_backward;
+    }
+
+    /// The local cell index of device point `q`, or `usize::MAX` outside the box.
+    #[inline]
+    fn cell_of(&self, q: Point) -> usize {
+        let (c, r) = (floor_f64(q[0] - self.x0), floor_f64(q[1] - self.y0));
+        if c >= 0.0 && r >= 0.0 && c < self.w as f64 && r < self.h as f64 {
+            r as usize * self.w + c as usize
+        } else {
+            usize::MAX
+        }
+    }
+
+    /// Starts edge `ia → ic` (`a → c`, device pixels) before it is accumulated.
+    #[inline]
+    pub(crate) fn edge(&mut self, ia: usize, ic: usize, a: Point, c: Point) {
+        self.ia = ia as u32;
+        self.ic = ic as u32;
+        self.bits = dir_bits(c[0] - a[0], c[1] - a[1]) as u32;
+        self.cell_a = self.cell_of(a);
+        self.cell_c = self.cell_of(c);
+        self.on_v = a[0] == c[0] && a[0] == floor_f64(a[0]);
+    }
+
+    /// A horizontal edge `ia → ic` (`a → c`), which accumulating skips: it still parts the
+    /// cells it crosses. One on a grid line crosses none (the cells beside it are kept for
+    /// the backward pass). `x_max` is the canvas's width.
+    pub(crate) fn horizontal(&mut self, ia: usize, ic: usize, a: Point, c: Point, x_max: f64) {
+        let y = a[1] - self.y0;
+        let (xl, xr) = (
+            a[0].min(c[0]).clamp(0.0, x_max) - self.x0,
+            a[0].max(c[0]).clamp(0.0, x_max) - self.x0,
+        );
+        if xl == xr && (a[0] < 0.0 || a[0] > x_max) {
+            return;
+        }
+        let last = self.w as f64 - 1.0;
+        let c0 = floor_f64(xl).clamp(0.0, last);
+        let c1 = (super::coverage::ceil_f64(xr) - 1.0).clamp(c0, last);
+        if y == floor_f64(y) {
+            self.edges.push((ia as u32, ic as u32));
+            if self.for_backward {
+                for r in [y - 1.0, y] {
+                    if r >= 0.0 && r < self.h as f64 {
+                        self.lines
+                            .push((r as u32, c0 as u32, (c1 + 1.0).min(last) as u32));
+                    }
+                }
+            }
+            return;
+        }
+        if y < 0.0 || y >= self.h as f64 {
+            return;
+        }
+        self.edge(ia, ic, a, c);
+        super::coverage::CellVisitor::piece(self, y as usize, c0 as usize, c1 as usize);
+    }
+
+    /// Judges the cells of two chains once the item is done: where the chains do not meet
+    /// inside the cell and each lies on the same side of the other (so the windings
+    /// beside them are equal and the one between differs by one,
+    /// [`chains_wind_alike`]), the cell holds two adjacent windings; anything else makes
+    /// it a candidate.
+    fn judge_twos(&mut self, pts: &[Point], rings: &[(usize, usize)]) {
+        for i in 0..self.twos.len() {
+            let k = self.twos[i] as usize;
+            let t = self.cells[k];
+            if t.meta & TAG_CANDIDATE != 0 {
+                continue;
+            }
+            let cell = [self.x0 + (k % self.w) as f64, self.y0 + (k / self.w) as f64];
+            let (a, b) = (&mut self.chain_a, &mut self.chain_b);
+            chain_edges(pts, rings, t.other, t.other_last, a);
+            chain_edges(pts, rings, t.first, t.last, b);
+            if !chains_wind_alike(a, b, cell) {
+                self.cells[k].meta |= TAG_CANDIDATE;
+                self.cands.push(k as u32);
+                self.chains.push((t.other, t.other_last));
+                self.chains.push((t.first, t.last));
+            }
+        }
+    }
+
+    /// Fills [`edge_list`](Self::edge_list) with every edge that has a piece in a
+    /// candidate cell (each chain's edges, and the edges seen once the cell was one), and
+    /// every edge on a grid line, sorted by their first vertex (ring order), once each.
+    /// For the backward pass, whose flags also hold cells beside pieces on grid lines,
+    /// the list stays empty: every edge is searched.
+    fn collect_edges(&mut self, rings: &[(usize, usize)]) {
+        let list = &mut self.edge_list;
+        list.clear();
+        if self.for_backward {
+            return;
+        }
+        list.extend_from_slice(&self.edges);
+        for &(first, last) in &self.chains {
+            // The ring holding the chain (rings are in order of their first vertex).
+            let at = rings.partition_point(|r| r.0 <= first as usize) - 1;
+            let (s, n) = rings[at];
+            let next = |e: u32| {
+                if e as usize + 1 == s + n {
+                    s as u32
+                } else {
+                    e + 1
+                }
+            };
+            let mut e = first;
+            loop {
+                list.push((e, next(e)));
+                if e == last || list.len() > self.cells.len() + self.edges.len() {
+                    break;
+                }
+                e = next(e);
+            }
+        }
+        list.sort_unstable();
+        list.dedup();
+    }
+
+    /// Flags the candidate cells (and, for the backward pass, the cells beside pieces on
+    /// grid lines) in `flags`, over the box's first `cols` columns (first device column
+    /// `x0`) and `rows` rows. Returns whether any is flagged.
+    fn flag(&self, flags: &mut Flags, x0: f64, cols: usize, rows: usize) -> bool {
+        if self.cands.is_empty() && self.lines.is_empty() {
+            return false;
+        }
+        flags.reset(x0, cols, rows);
+        let mut any = false;
+        for &k in &self.cands {
+            let (r, c) = (k as usize / self.w, k as usize % self.w);
+            if c < cols && r < rows {
+                flags.mark(r, x0 + c as f64, x0 + c as f64);
+                any = true;
+            }
+        }
+        for &(r, c0, c1) in &self.lines {
+            if (c0 as usize) < cols && (r as usize) < rows {
+                flags.mark(r as usize, x0 + c0 as f64, x0 + c1 as f64);
+                any = true;
+            }
+        }
+        any
+    }
+}
+
+impl super::coverage::CellVisitor for ChainTags {
+    #[inline(always)]
+    fn piece(&mut self, row: usize, c0: usize, c1: usize) {
+        let gen_bits = self.generation << TAG_GEN_SHIFT;
+        let first = row * self.w;
+        for k in first + c0..=first + c1 {
+            let t = self.cells[k];
+            if t.meta >> TAG_GEN_SHIFT != self.generation {
+                self.cells[k] = TagCell {
+                    head: if k == self.cell_a { self.ia } else { NO_VERTEX },
+                    tail: if k == self.cell_c { self.ic } else { NO_VERTEX },
+                    first: self.ia,
+                    last: self.ia,
+                    other: NO_VERTEX,
+                    other_last: NO_VERTEX,
+                    meta: gen_bits | self.bits,
+                };
+                continue;
+            }
+            if t.meta & TAG_CANDIDATE != 0 {
+                self.edges.push((self.ia, self.ic));
+                continue;
+            }
+            let mut n = t;
+            n.meta |= self.bits;
+            if t.tail != NO_VERTEX && t.tail == self.ia {
+                n.tail = if k == self.cell_c { self.ic } else { NO_VERTEX };
+                n.last = self.ia;
+            } else if t.head != NO_VERTEX && t.head == self.ic && k == self.cell_c {
+                n.head = if k == self.cell_a { self.ia } else { NO_VERTEX };
+                n.first = self.ia;
+            } else if t.meta & TAG_TWO == 0 {
+                // A second chain: judged when the item is done. The low direction bits are
+                // the second chain's from here on.
+                n.meta =
+                    (t.meta & !0b1111) | TAG_TWO | self.bits | (t.meta & 0b1111) << TAG_FIRST_DIRS;
+                (n.other, n.other_last) = (t.first, t.last);
+                n.head = if k == self.cell_a { self.ia } else { NO_VERTEX };
+                n.tail = if k == self.cell_c { self.ic } else { NO_VERTEX };
+                (n.first, n.last) = (self.ia, self.ia);
+                self.twos.push(k as u32);
+            } else {
+                n.meta |= TAG_CANDIDATE;
+            }
+            if n.meta & 0b1111 == 0b1111 {
+                n.meta |= TAG_CANDIDATE;
+            }
+            if n.meta & TAG_CANDIDATE != 0 {
+                self.cands.push(k as u32);
+                if t.meta & TAG_TWO != 0 {
+                    self.chains.push((t.other, t.other_last));
+                }
+                self.chains.push((t.first, t.last));
+                self.edges.push((self.ia, self.ic));
+            }
+            self.cells[k] = n;
+        }
+        if self.on_v {
+            self.edges.push((self.ia, self.ic));
+            if self.for_backward {
+                self.lines
+                    .push((row as u32, c0.saturating_sub(1) as u32, c0 as u32));
+            }
+        }
+    }
+}
+
+/// The edges of a chain from the one starting at vertex `first` to the one starting at
+/// `last`, in ring order, into `out` (at most [`EXACT_PIECES`]; more leaves `out` empty).
+fn chain_edges(
+    pts: &[Point],
+    rings: &[(usize, usize)],
+    first: u32,
+    last: u32,
+    out: &mut Vec<(Point, Point)>,
+) {
+    out.clear();
+    let at = rings.partition_point(|r| r.0 <= first as usize) - 1;
+    let (s, n) = rings[at];
+    let mut e = first as usize;
+    loop {
+        let c = if e + 1 == s + n { s } else { e + 1 };
+        out.push((pts[e], pts[c]));
+        if e == last as usize {
+            return;
+        }
+        if out.len() > EXACT_PIECES {
+            out.clear();
+            return;
+        }
+        e = c;
+    }
+}
+
+/// Whether chains `a` and `b` (edges in ring order), each crossing the unit cell whose
+/// first corner is `cell` from side to side, part it into three regions whose windings
+/// the two outer ones share: no piece of one meets a piece of the other inside the
+/// (closed) cell, and each chain lies on the same side (left or right) of the other.
+/// `false` when unsure.
+fn chains_wind_alike(a: &[(Point, Point)], b: &[(Point, Point)], cell: Point) -> bool {
+    let bx = [cell[0], cell[1], cell[0] + 1.0, cell[1] + 1.0];
+    let clip = |&(p, q): &(Point, Point)| {
+        let (dx, dy) = (q[0] - p[0], q[1] - p[1]);
+        clip_to_box(p, dx, dy, bx).map(|(t0, t1)| {
+            (
+                [p[0] + dx * t0, p[1] + dy * t0],
+                [p[0] + dx * t1, p[1] + dy * t1],
+            )
+        })
+    };
+    let mut pa = [([0.0; 2], [0.0; 2]); EXACT_PIECES];
+    let mut pb = [([0.0; 2], [0.0; 2]); EXACT_PIECES];
+    let mut pieces = |chain: &[(Point, Point)], out: &mut [(Point, Point); EXACT_PIECES]| {
+        if chain.is_empty() || chain.len() > EXACT_PIECES {
+            return None;
+        }
+        for (o, e) in out.iter_mut().zip(chain) {
+            *o = clip(e)?;
+        }
+        Some(chain.len())
+    };
+    let (Some(na), Some(nb)) = (pieces(a, &mut pa), pieces(b, &mut pb)) else {
+        return false;
+    };
+    let (pa, pb) = (&pa[..na], &pb[..nb]);
+    // Each chain enters and leaves through the cell's sides.
+    let on_side = |p: Point| {
+        let e = 1e-9;
+        p[0] <= bx[0] + e || p[0] >= bx[2] - e || p[1] <= bx[1] + e || p[1] >= bx[3] - e
+    };
+    if !on_side(pa[0].0) || !on_side(pa[na - 1].1) || !on_side(pb[0].0) || !on_side(pb[nb - 1].1) {
+        return false;
+    }
+    for &(p, q) in pa {
+        for &(r, t) in pb {
+            if segments_meet(p, q, r, t) {
+                return false;
+            }
+        }
+    }
+    let mid = |s: &[(Point, Point)]| {
+        let (p, q) = s[s.len() / 2];
+        [0.5 * (p[0] + q[0]), 0.5 * (p[1] + q[1])]
+    };
+    match (side_region(pa, mid(pb), bx), side_region(pb, mid(pa), bx)) {
+        (Some(x), Some(y)) => x == y,
+        _ => false,
+    }
+}
+
+/// Orientation of `r` against the line `p → q`: the sign of the cross product, `0` when
+/// within rounding of the line.
+#[inline]
+fn orient(p: Point, q: Point, r: Point) -> i32 {
+    let (dx, dy) = (q[0] - p[0], q[1] - p[1]);
+    let c = dx * (r[1] - p[1]) - dy * (r[0] - p[0]);
+    let scale = (dx.abs() + dy.abs()) * ((r[0] - p[0]).abs() + (r[1] - p[1]).abs());
+    if c > 1e-12 * scale {
+        1
+    } else if c < -1e-12 * scale {
+        -1
+    } else {
+        0
+    }
+}
+
+/// Whether segments `p → q` and `r → t` meet (touching, or collinear and near, counts).
+fn segments_meet(p: Point, q: Point, r: Point, t: Point) -> bool {
+    let (d1, d2) = (orient(r, t, p), orient(r, t, q));
+    let (d3, d4) = (orient(p, q, r), orient(p, q, t));
+    d1 * d2 <= 0 && d3 * d4 <= 0
+}
+
+/// Whether `q` lies in the region that the chain of pieces `chain` (from the box's side
+/// back to its side) closes with the box's sides walked clockwise on screen from the
+/// chain's end to its start: the same side of every chain, so two chains that lie each
+/// on the same side of the other give the same answer. `None` when `q` is on a side.
+fn side_region(chain: &[(Point, Point)], q: Point, bx: [f64; 4]) -> Option<bool> {
+    let e = 1e-9;
+    if q[0] <= bx[0] + e || q[0] >= bx[2] - e || q[1] <= bx[1] + e || q[1] >= bx[3] - e {
+        return None;
+    }
+    // Position along the sides, clockwise on screen from the first corner: top 0–1,
+    // right 1–2, bottom 2–3, left 3–4.
+    let along = |p: Point| {
+        let d = [p[1] - bx[1], bx[2] - p[0], bx[3] - p[1], p[0] - bx[0]];
+        let side = (0..4)
+            .min_by(|&i, &j| d[i].abs().total_cmp(&d[j].abs()))
+            .unwrap_or(0);
+        match side {
+            0 => p[0] - bx[0],
+            1 => 1.0 + (p[1] - bx[1]),
+            2 => 2.0 + (bx[2] - p[0]),
+            _ => 3.0 + (bx[3] - p[1]),
+        }
+    };
+    let corner = |m: usize| match m % 4 {
+        0 => [bx[0], bx[1]],
+        1 => [bx[2], bx[1]],
+        2 => [bx[2], bx[3]],
+        _ => [bx[0], bx[3]],
+    };
+    let (start, end) = (chain[0].0, chain[chain.len() - 1].1);
+    let (s_end, mut s_start) = (along(end), along(start));
+    if s_start <= s_end {
+        s_start += 4.0;
+    }
+    let mut inside = false;
+    let mut cross = |u: Point, v: Point| {
+        if (u[1] > q[1]) != (v[1] > q[1])
+            && q[0] < u[0] + (q[1] - u[1]) * (v[0] - u[0]) / (v[1] - u[1])
+        {
+            inside = !inside;
+        }
+    };
+    for &(u, v) in chain {
+        cross(u, v);
+    }
+    // The sides from the chain's end, clockwise, back to its start.
+    let mut at = end;
+    let mut m = s_end.floor() as usize + 1;
+    while (m as f64) < s_start {
+        let c = corner(m);
+        cross(at, c);
+        at = c;
+        m += 1;
+    }
+    cross(at, start);
+    Some(inside)
+}
+
 /// Marks cell `k` as beside a piece on a grid line, touched.
 #[inline]
 fn mark_on_line(state: &mut [CellState], touched: &mut Vec<u32>, k: usize) {
@@ -1218,10 +1701,28 @@ mod tests {
     use super::*;
     use crate::Image;
     use crate::raster::render::BandRenderer;
-    use crate::raster::tangles::tests::{polygon, rect};
     use crate::raster::{RenderOptions, render, render_backward};
     use crate::rng::Rng;
     use crate::scene::{Fill, FillRule, Node, Paint, Path, Scene};
+
+    pub(crate) fn rect(x0: f64, y0: f64, x1: f64, y1: f64) -> Vec<Point> {
+        vec![[x0, y0], [x1, y0], [x1, y1], [x0, y1]]
+    }
+
+    /// A regular polygon of `n` vertices around `c`, counterclockwise in `(x, y)` when
+    /// `ccw`.
+    pub(crate) fn polygon(c: Point, r: f64, n: usize, ccw: bool) -> Vec<Point> {
+        let mut v: Vec<Point> = (0..n)
+            .map(|k| {
+                let t = std::f64::consts::TAU * k as f64 / n as f64;
+                [c[0] + r * t.cos(), c[1] + r * t.sin()]
+            })
+            .collect();
+        if !ccw {
+            v.reverse();
+        }
+        v
+    }
 
     /// The options with exact overlaps on.
     fn exact() -> RenderOptions {
@@ -1322,18 +1823,19 @@ mod tests {
         count
     }
 
-    /// Outside the danger boxes ([`tangles`](crate::raster::tangles)) the clamped
-    /// integral is the exact coverage: random rings (a polygon with a hole close to it,
-    /// random polygons, a row of glyph-like rings two of which overlap) render, pixel for
-    /// pixel, as the same item searched everywhere.
+    /// Outside the cells that the chain tags make candidates the clamped integral is the
+    /// exact coverage: random rings (a polygon with a hole close to it, random polygons, a
+    /// spike folding back beside a shared side, a row of glyph-like rings two of which
+    /// overlap, a thin ring like a stroke's two sides, wound either way) render, pixel
+    /// for pixel, as the same item searched in every cell.
     #[test]
-    fn searching_the_danger_boxes_alone_is_exact() {
+    fn searching_the_tagged_cells_alone_is_exact() {
         let mut rng = Rng::new(29);
-        let (mut empty, mut partial) = (0, 0);
-        for case in 0..120 {
+        let (mut none, mut fewer) = (0, 0);
+        for case in 0..150 {
             let n = 3 + rng.below(9);
             let c = [rng.range(8.0, 12.0), rng.range(8.0, 12.0)];
-            let rings = match case % 4 {
+            let rings = match case % 5 {
                 0 => vec![
                     polygon(c, 6.0, n + 8, true),
                     // A hole within a pixel or two of the outer ring, wound either way
@@ -1363,6 +1865,21 @@ mod tests {
                         rect(b, rng.range(a, b), b + 2.0, b),
                     ]
                 }
+                4 => {
+                    // A thin ring, as a stroke's two sides; wound the same way, the pixels
+                    // between them hold three windings.
+                    let r = rng.range(4.0, 7.0);
+                    let inner = [c[0] + rng.range(-0.1, 0.1), c[1]];
+                    vec![
+                        polygon(c, r, 3 * n + 12, true),
+                        polygon(
+                            inner,
+                            r - rng.range(0.1, 0.9),
+                            3 * n + 12,
+                            rng.below(3) != 0,
+                        ),
+                    ]
+                }
                 _ => {
                     // Letters with counters, a little apart, the last two overlapping by a
                     // random amount (or touching).
@@ -1381,17 +1898,12 @@ mod tests {
             for evenodd in [false, true] {
                 let s = scene(20, 20, &rings, evenodd);
                 let mut p = crate::raster::Prepared::new(&s, &exact());
-                if p.items[0].danger.is_empty() {
-                    empty += 1;
-                } else if case % 4 == 2 {
-                    partial += 1;
-                }
                 let got = crate::raster::render_prepared(&p);
+                let tagged = candidate_cells(&p);
                 // The reference: the same item searched in every cell.
-                let it = &mut p.items[0];
-                it.can_overlap = true;
-                it.danger = crate::raster::tangles::Danger::everywhere();
+                p.search_everywhere = true;
                 let truth = crate::raster::render_prepared(&p);
+                let everywhere = candidate_cells(&p);
                 let worst = got
                     .data
                     .iter()
@@ -1402,13 +1914,110 @@ mod tests {
                     worst < 1e-5,
                     "case {case} even-odd {evenodd}: off by {worst}"
                 );
+                none += (tagged == 0) as usize;
+                fewer += (tagged < everywhere) as usize;
             }
         }
-        assert!(empty >= 20, "only {empty} of 240 need no search");
+        assert!(none >= 20, "only {none} of 300 need no search");
         assert!(
-            partial >= 20,
-            "only {partial} rows of letters searched in part"
+            fewer >= 150,
+            "only {fewer} of 300 search fewer cells than all"
         );
+    }
+
+    /// Cells whose pieces are searched, over the whole canvas.
+    fn candidate_cells(p: &crate::raster::Prepared) -> usize {
+        let mut count = 0;
+        for y0 in (0..p.height as usize).step_by(16) {
+            let rows = 16.min(p.height as usize - y0);
+            let mut r = BandRenderer::new(p, y0, rows);
+            for item in &p.items {
+                if r.deltas(item) {
+                    count += r.overlaps.cells.len();
+                    // Every row taken, which leaves the band's buffers clear.
+                    for row in 0..r.acc.h {
+                        r.take_row(row);
+                    }
+                }
+            }
+        }
+        count
+    }
+
+    /// A thin ring wound against its outer ring, as a stroke's two sides, shares every
+    /// pixel between the two sides but holds two windings: cells crossed by one edge of
+    /// each side are judged without a search (`chains_wind_alike`; cells holding a vertex
+    /// of either side are still searched); wound the same way they are all searched.
+    #[test]
+    fn thin_rings_wound_apart_are_judged_without_a_search() {
+        let count = |ccw: bool| {
+            let rings = [
+                polygon([10.0, 10.0], 6.0, 24, true),
+                polygon([10.0, 10.0], 5.7, 24, ccw),
+            ];
+            let p = crate::raster::Prepared::new(&scene(20, 20, &rings, false), &exact());
+            candidate_cells(&p)
+        };
+        let (apart, alike) = (count(false), count(true));
+        assert!(alike > 20, "{alike} cells searched for rings wound alike");
+        assert!(
+            apart * 5 < alike,
+            "{apart} searched, against {alike} wound alike"
+        );
+    }
+
+    /// Two chains crossing a cell: apart and wound against each other (a stroke's sides),
+    /// wound alike, crossing, touching; bent chains of several edges too.
+    #[test]
+    fn chains_wind_alike_only_when_apart_and_opposite() {
+        let cell = [0.0, 0.0];
+        let alike = |a: &[Point], b: &[Point]| {
+            let edges = |v: &[Point]| v.windows(2).map(|w| (w[0], w[1])).collect::<Vec<_>>();
+            chains_wind_alike(&edges(a), &edges(b), cell)
+        };
+        // Across the cell at y = 0.3 to the right and at y = 0.7 to the left.
+        assert!(alike(
+            &[[-1.0, 0.3], [2.0, 0.3]],
+            &[[2.0, 0.7], [-1.0, 0.7]]
+        ));
+        // Both to the right: windings w, w + 1, w + 2.
+        assert!(!alike(
+            &[[-1.0, 0.3], [2.0, 0.3]],
+            &[[-1.0, 0.7], [2.0, 0.7]]
+        ));
+        // Crossing inside the cell, and touching on its side.
+        assert!(!alike(
+            &[[-1.0, -1.0], [2.0, 2.0]],
+            &[[2.0, 0.0], [-1.0, 1.0]]
+        ));
+        assert!(!alike(
+            &[[0.0, -1.0], [0.0, 2.0]],
+            &[[1.0, 2.0], [0.0, 0.5]]
+        ));
+        // Crossing outside the cell only: apart inside it.
+        assert!(alike(
+            &[[-2.0, 0.5], [3.0, 0.5]],
+            &[[3.0, 0.85], [-2.0, 0.35]]
+        ));
+        // One of them missing the cell.
+        assert!(!alike(
+            &[[-1.0, 0.3], [2.0, 0.3]],
+            &[[-1.0, 3.0], [2.0, 3.0]]
+        ));
+        // Bent: down the cell on the left, and back up on the right, each through a
+        // vertex inside it; wound the same way, or bent across each other.
+        let left = [[0.2, -0.5], [0.4, 0.5], [0.2, 1.5]];
+        let right_up = [[0.8, 1.5], [0.6, 0.5], [0.8, -0.5]];
+        let right_down = [[0.8, -0.5], [0.6, 0.5], [0.8, 1.5]];
+        let across = [[0.8, 1.5], [0.1, 0.5], [0.8, -0.5]];
+        assert!(alike(&left, &right_up));
+        assert!(!alike(&left, &right_down));
+        assert!(!alike(&left, &across));
+        // A chain from the top side to the left side (a corner cut off) beside one
+        // across the cell, wound either way.
+        let corner = [[0.5, -0.5], [0.3, 0.3], [-0.5, 0.5]];
+        assert!(alike(&corner, &[[-0.5, 0.9], [1.5, 0.6]]));
+        assert!(!alike(&corner, &[[1.5, 0.6], [-0.5, 0.9]]));
     }
 
     /// Issue 29: two coincident rectangles in one path, each covering the left half of

@@ -56,10 +56,6 @@ pub(crate) struct Item {
     /// ([`rings_cannot_overlap`](super::overlap::rings_cannot_overlap)). Only such items look for the cells whose
     /// coverage [`overlap`](super::overlap) computes exactly.
     pub(crate) can_overlap: bool,
-    /// Where its cells can hold three winding values (found with
-    /// [`can_overlap`](Self::can_overlap)): which cells of a band the search for cells of
-    /// exact coverage needs to walk ([`Danger`](super::tangles::Danger)).
-    pub(crate) danger: super::tangles::Danger,
     /// Drawn without anti-aliasing ([`Path::crisp`](crate::scene::Path::crisp)): the
     /// deltas are winding numbers at pixel centers
     /// ([`accumulate_centers`](super::coverage::accumulate_centers)), and its edges get
@@ -237,6 +233,9 @@ pub struct Prepared {
     pub(crate) tolerance: f64,
     /// [`RenderOptions::exact_overlaps`](super::RenderOptions::exact_overlaps).
     pub(crate) exact_overlaps: bool,
+    /// Tests' reference for exact overlaps: every cell of every item searched.
+    #[cfg(test)]
+    pub(crate) search_everywhere: bool,
     /// [`RenderOptions::exact_filters`](super::RenderOptions::exact_filters).
     pub(crate) exact_filters: bool,
     /// The groups with filters, in the order of their [`Op::Push`]es.
@@ -259,13 +258,9 @@ impl Prepared {
         self.exact_overlaps = on;
         if on {
             for it in &mut self.items {
-                it.danger = if it.crisp || super::overlap::rings_cannot_overlap(&it.pts, &it.rings)
-                {
-                    Default::default()
-                } else {
-                    super::tangles::Danger::of(&it.pts, &it.rings)
-                };
-                it.can_overlap = !it.danger.is_empty();
+                // A crisp item's winding numbers at pixel centers are exact already.
+                it.can_overlap =
+                    !it.crisp && !super::overlap::rings_cannot_overlap(&it.pts, &it.rings);
             }
         }
     }
@@ -348,6 +343,8 @@ fn prepare_with(
         for_backward,
         tolerance,
         exact_overlaps: false,
+        #[cfg(test)]
+        search_everywhere: false,
         exact_filters,
         filters: Vec::new(),
     };
@@ -935,7 +932,6 @@ fn item(
         row_crossings,
         // Found by `Prepared::set_exact_overlaps` when it is asked for.
         can_overlap: true,
-        danger: Default::default(),
         crisp: false,
         path,
         kind,

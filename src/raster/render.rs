@@ -3,7 +3,8 @@
 use rayon::prelude::*;
 
 use super::coverage::{
-    Cells, accumulate_centers, accumulate_line, ceil_f64, coverage_row, floor_f64, integrate_rows,
+    Cells, accumulate_centers, accumulate_line, accumulate_line_visiting, ceil_f64, coverage_row,
+    floor_f64, integrate_rows,
 };
 use super::layer::{apply_mask, composite_layer};
 use super::overlap::Overlaps;
@@ -23,7 +24,7 @@ pub struct RenderOptions {
     /// central differences in `tests/hard_cases.rs`). Off (the default): the clamped
     /// winding integral there, which over-covers such pixels (two coincident
     /// half-covering rectangles in one path give 1.0, not 0.5). Off by default because
-    /// its search costs up to 2.5× on thin strokes and glyphs (docs/performance.md).
+    /// it makes text about a fifth slower (docs/performance.md).
     pub exact_overlaps: bool,
     /// Evaluate filters as the SVG specification defines them rather than as resvg
     /// approximates them: feGaussianBlur (and feDropShadow's blur) as a true Gaussian
@@ -347,6 +348,30 @@ impl<'a> BandRenderer<'a> {
                     accumulate_centers(acc, a, c, w);
                 }
             });
+        } else if exact && item.can_overlap && self.p.exact_overlaps {
+            // Accumulated while each cell keeps the chain of edges crossing it: the cells
+            // that can hold three windings come out of the same pass.
+            let tags = &mut self.overlaps.tags;
+            tags.begin(acc.x0, acc.y0, acc.w, acc.h, self.for_backward);
+            item.for_each_edge_near(ylo, yhi, |ia, ic| {
+                let (a, c) = (item.pts[ia], item.pts[ic]);
+                if a[1] == c[1] {
+                    if a[1] >= ylo && a[1] <= yhi {
+                        tags.horizontal(ia, ic, a, c, w);
+                    }
+                } else if near(a, c) {
+                    tags.edge(ia, ic, a, c);
+                    accumulate_line_visiting(acc, a, c, w, tags);
+                }
+            });
+            let cols = acc.w.min(self.p.width as usize - acc.x0 as usize);
+            let (origin, rows) = ((acc.x0, acc.y0), acc.h);
+            #[cfg(test)]
+            {
+                self.overlaps.everywhere = self.p.search_everywhere;
+            }
+            self.overlaps
+                .find(item, origin, cols, rows, self.for_backward);
         } else {
             item.for_each_edge_near(ylo, yhi, |ia, ic| {
                 let (a, c) = (item.pts[ia], item.pts[ic]);
@@ -354,14 +379,6 @@ impl<'a> BandRenderer<'a> {
                     accumulate_line(acc, a, c, w);
                 }
             });
-        }
-        // A crisp item's winding numbers at pixel centers are exact already.
-        if exact && item.can_overlap && !item.crisp && self.p.exact_overlaps {
-            let cols = acc.w.min(self.p.width as usize - acc.x0 as usize);
-            let (origin, rows) = ((acc.x0, acc.y0), acc.h);
-            self.overlaps
-                .find(item, origin, cols, rows, self.for_backward);
-        } else {
             self.overlaps.clear();
         }
         true
