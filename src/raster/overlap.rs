@@ -332,8 +332,10 @@ pub(crate) struct Overlaps {
     left: Vec<(f64, i32)>,
     /// The cells of the box where a candidate can be ([`flag_rows`](Self::flag_rows)).
     flags: Flags,
-    /// The chains in each cell, recorded while the item is accumulated.
-    pub(crate) tags: ChainTags,
+    /// The chains in each cell, recorded while the item is accumulated ([`tags`](Self::tags)):
+    /// boxed and made on first use, so that the band buffers, moved in and out of each
+    /// thread's store once a band, stay small when exact overlaps are off.
+    tags: Option<Box<ChainTags>>,
     /// Tests' reference: every cell searched.
     #[cfg(test)]
     pub(crate) everywhere: bool,
@@ -367,7 +369,8 @@ impl Overlaps {
         if cols == 0 || rows == 0 {
             return;
         }
-        self.tags.judge_twos(&item.pts, &item.rings);
+        let tags = self.tags();
+        tags.judge_twos(&item.pts, &item.rings);
         #[cfg(test)]
         if self.everywhere {
             // The reference of the tests: every cell of the box searched, every edge walked.
@@ -376,17 +379,26 @@ impl Overlaps {
                 self.flags
                     .mark(r, origin.0 as f64, (origin.0 + cols as i64) as f64);
             }
-            self.tags.edge_list.clear();
-            return self.search(item, origin, cols, rows, portions);
+            return self.search(item, origin, cols, rows, portions, &[]);
         }
-        if !self.tags.flag(&mut self.flags, origin.0 as f64, cols, rows) {
+        let tags = self.tags.as_deref_mut().expect("made above");
+        if !tags.flag(&mut self.flags, origin.0 as f64, cols, rows) {
             return;
         }
-        self.tags.collect_edges(&item.rings);
-        self.search(item, origin, cols, rows, portions);
+        tags.collect_edges(&item.rings);
+        let edges = std::mem::take(&mut tags.edge_list);
+        self.search(item, origin, cols, rows, portions, &edges);
+        self.tags().edge_list = edges;
     }
 
-    /// Finds the candidate cells among the flagged ones and integrates them.
+    /// The chain tags of the item being accumulated, made on first use.
+    #[inline]
+    pub(crate) fn tags(&mut self) -> &mut ChainTags {
+        self.tags.get_or_insert_with(Default::default)
+    }
+
+    /// Finds the candidate cells among the flagged ones and integrates them, walking
+    /// `edges` (every edge of the item when empty).
     fn search(
         &mut self,
         item: &Item,
@@ -394,6 +406,7 @@ impl Overlaps {
         cols: usize,
         rows: usize,
         portions: bool,
+        edges: &[(u32, u32)],
     ) {
         let (x0, y0) = (origin.0 as f64, origin.1 as f64);
         let bx = [x0, y0, x0 + cols as f64, y0 + rows as f64];
@@ -415,7 +428,6 @@ impl Overlaps {
         let (state, touched) = (&mut self.state, &mut self.touched);
         let all = &mut self.all;
         all.clear();
-        let edges = std::mem::take(&mut self.tags.edge_list);
         let mut on_edge = |ia: usize, ib: usize| {
             let (p, q) = (item.pts[ia], item.pts[ib]);
             // Only the rows where a candidate can be (every edge touching them).
@@ -507,11 +519,10 @@ impl Overlaps {
         if edges.is_empty() {
             item.for_each_edge_near(bx[1], bx[3], on_edge);
         } else {
-            for &(ia, ib) in &edges {
+            for &(ia, ib) in edges {
                 on_edge(ia as usize, ib as usize);
             }
         }
-        self.tags.edge_list = edges;
         let found = &mut self.found;
         found.clear();
         for &k in touched.iter() {
@@ -1022,7 +1033,7 @@ pub(crate) struct ChainTags {
     edges: Vec<(u32, u32)>,
     /// Every edge with a piece in a candidate cell, in ring order, once each
     /// ([`collect_edges`](Self::collect_edges)); empty to search every edge.
-    pub(crate) edge_list: Vec<(u32, u32)>,
+    edge_list: Vec<(u32, u32)>,
     for_backward: bool,
     /// The current edge's vertices, direction bits and the cells of its ends.
     ia: u32,
@@ -1309,7 +1320,7 @@ fn chains_wind_alike(a: &[(Point, Point)], b: &[(Point, Point)], cell: Point) ->
     };
     let mut pa = [([0.0; 2], [0.0; 2]); EXACT_PIECES];
     let mut pb = [([0.0; 2], [0.0; 2]); EXACT_PIECES];
-    let mut pieces = |chain: &[(Point, Point)], out: &mut [(Point, Point); EXACT_PIECES]| {
+    let pieces = |chain: &[(Point, Point)], out: &mut [(Point, Point); EXACT_PIECES]| {
         if chain.is_empty() || chain.len() > EXACT_PIECES {
             return None;
         }

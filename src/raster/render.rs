@@ -348,30 +348,10 @@ impl<'a> BandRenderer<'a> {
                     accumulate_centers(acc, a, c, w);
                 }
             });
+            // A crisp item's winding numbers at pixel centers are exact already.
+            self.overlaps.clear();
         } else if exact && item.can_overlap && self.p.exact_overlaps {
-            // Accumulated while each cell keeps the chain of edges crossing it: the cells
-            // that can hold three windings come out of the same pass.
-            let tags = &mut self.overlaps.tags;
-            tags.begin(acc.x0, acc.y0, acc.w, acc.h, self.for_backward);
-            item.for_each_edge_near(ylo, yhi, |ia, ic| {
-                let (a, c) = (item.pts[ia], item.pts[ic]);
-                if a[1] == c[1] {
-                    if a[1] >= ylo && a[1] <= yhi {
-                        tags.horizontal(ia, ic, a, c, w);
-                    }
-                } else if near(a, c) {
-                    tags.edge(ia, ic, a, c);
-                    accumulate_line_visiting(acc, a, c, w, tags);
-                }
-            });
-            let cols = acc.w.min(self.p.width as usize - acc.x0 as usize);
-            let (origin, rows) = ((acc.x0, acc.y0), acc.h);
-            #[cfg(test)]
-            {
-                self.overlaps.everywhere = self.p.search_everywhere;
-            }
-            self.overlaps
-                .find(item, origin, cols, rows, self.for_backward);
+            self.deltas_tagged(item, ylo, yhi);
         } else {
             item.for_each_edge_near(ylo, yhi, |ia, ic| {
                 let (a, c) = (item.pts[ia], item.pts[ic]);
@@ -382,6 +362,39 @@ impl<'a> BandRenderer<'a> {
             self.overlaps.clear();
         }
         true
+    }
+
+    /// [`deltas_with`](Self::deltas_with)'s accumulation of an item that can overlap
+    /// itself, exact overlaps on, over rows `ylo..yhi` of the sized and zeroed `acc`: each
+    /// cell keeps the chain of edges crossing it as the edges are accumulated, so the cells
+    /// that can hold three windings come out of the same pass, and are searched. Out of
+    /// line: inlined, it made the plain accumulation's caller slower.
+    #[inline(never)]
+    fn deltas_tagged(&mut self, item: &Item, ylo: f64, yhi: f64) {
+        let w = self.p.width as f64;
+        let acc = &mut self.acc;
+        let near = |a: [f64; 2], c: [f64; 2]| a[1].max(c[1]) > ylo && a[1].min(c[1]) < yhi;
+        let tags = self.overlaps.tags();
+        tags.begin(acc.x0, acc.y0, acc.w, acc.h, self.for_backward);
+        item.for_each_edge_near(ylo, yhi, |ia, ic| {
+            let (a, c) = (item.pts[ia], item.pts[ic]);
+            if a[1] == c[1] {
+                if a[1] >= ylo && a[1] <= yhi {
+                    tags.horizontal(ia, ic, a, c, w);
+                }
+            } else if near(a, c) {
+                tags.edge(ia, ic, a, c);
+                accumulate_line_visiting(acc, a, c, w, tags);
+            }
+        });
+        let cols = acc.w.min(self.p.width as usize - acc.x0 as usize);
+        let (origin, rows) = ((acc.x0, acc.y0), acc.h);
+        #[cfg(test)]
+        {
+            self.overlaps.everywhere = self.p.search_everywhere;
+        }
+        self.overlaps
+            .find(item, origin, cols, rows, self.for_backward);
     }
 
     /// The winding integrals of row `r` of `acc` (after [`deltas`](Self::deltas)), over
