@@ -379,7 +379,7 @@ impl Overlaps {
                 self.flags
                     .mark(r, origin.0 as f64, (origin.0 + cols as i64) as f64);
             }
-            return self.search(item, origin, cols, rows, portions, &[]);
+            return self.search(item, origin, (cols, rows), portions, &[]);
         }
         let tags = self.tags.as_deref_mut().expect("made above");
         if !tags.flag(&mut self.flags, origin.0 as f64, cols, rows) {
@@ -387,7 +387,7 @@ impl Overlaps {
         }
         tags.collect_edges(&item.rings);
         let edges = std::mem::take(&mut tags.edge_list);
-        self.search(item, origin, cols, rows, portions, &edges);
+        self.search(item, origin, (cols, rows), portions, &edges);
         self.tags().edge_list = edges;
     }
 
@@ -397,14 +397,14 @@ impl Overlaps {
         self.tags.get_or_insert_with(Default::default)
     }
 
-    /// Finds the candidate cells among the flagged ones and integrates them, walking
-    /// `edges` (every edge of the item when empty).
+    /// Finds the candidate cells among the flagged ones of the box of `(cols, rows)` cells
+    /// whose first is device pixel `origin`, and integrates them, walking `edges` (every
+    /// edge of the item when empty).
     fn search(
         &mut self,
         item: &Item,
         origin: (i64, i64),
-        cols: usize,
-        rows: usize,
+        (cols, rows): (usize, usize),
         portions: bool,
         edges: &[(u32, u32)],
     ) {
@@ -1986,35 +1986,23 @@ mod tests {
             let edges = |v: &[Point]| v.windows(2).map(|w| (w[0], w[1])).collect::<Vec<_>>();
             chains_wind_alike(&edges(a), &edges(b), cell)
         };
-        // Across the cell at y = 0.3 to the right and at y = 0.7 to the left.
-        assert!(alike(
-            &[[-1.0, 0.3], [2.0, 0.3]],
-            &[[2.0, 0.7], [-1.0, 0.7]]
-        ));
-        // Both to the right: windings w, w + 1, w + 2.
-        assert!(!alike(
-            &[[-1.0, 0.3], [2.0, 0.3]],
-            &[[-1.0, 0.7], [2.0, 0.7]]
-        ));
-        // Crossing inside the cell, and touching on its side.
-        assert!(!alike(
-            &[[-1.0, -1.0], [2.0, 2.0]],
-            &[[2.0, 0.0], [-1.0, 1.0]]
-        ));
-        assert!(!alike(
-            &[[0.0, -1.0], [0.0, 2.0]],
-            &[[1.0, 2.0], [0.0, 0.5]]
-        ));
-        // Crossing outside the cell only: apart inside it.
-        assert!(alike(
-            &[[-2.0, 0.5], [3.0, 0.5]],
-            &[[3.0, 0.85], [-2.0, 0.35]]
-        ));
-        // One of them missing the cell.
-        assert!(!alike(
-            &[[-1.0, 0.3], [2.0, 0.3]],
-            &[[-1.0, 3.0], [2.0, 3.0]]
-        ));
+        let line = |x0: f64, y0: f64, x1: f64, y1: f64| vec![[x0, y0], [x1, y1]];
+        let cases = [
+            // Across the cell at y = 0.3 to the right and at y = 0.7 to the left.
+            (line(-1.0, 0.3, 2.0, 0.3), line(2.0, 0.7, -1.0, 0.7), true),
+            // Both to the right: windings w, w + 1, w + 2.
+            (line(-1.0, 0.3, 2.0, 0.3), line(-1.0, 0.7, 2.0, 0.7), false),
+            // Crossing inside the cell, and touching on its side.
+            (line(-1.0, -1.0, 2.0, 2.0), line(2.0, 0.0, -1.0, 1.0), false),
+            (line(0.0, -1.0, 0.0, 2.0), line(1.0, 2.0, 0.0, 0.5), false),
+            // Crossing outside the cell only: apart inside it.
+            (line(-2.0, 0.5, 3.0, 0.5), line(3.0, 0.85, -2.0, 0.35), true),
+            // One of them missing the cell.
+            (line(-1.0, 0.3, 2.0, 0.3), line(-1.0, 3.0, 2.0, 3.0), false),
+        ];
+        for (a, b, want) in &cases {
+            assert_eq!(alike(a, b), *want, "{a:?} and {b:?}");
+        }
         // Bent: down the cell on the left, and back up on the right, each through a
         // vertex inside it; wound the same way, or bent across each other.
         let left = [[0.2, -0.5], [0.4, 0.5], [0.2, 1.5]];
