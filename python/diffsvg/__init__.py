@@ -115,6 +115,14 @@ def _whole(v: Any, name: str, top: int = _U32) -> int:
     return n
 
 
+def _flag(v: Any, name: str) -> bool:
+    """``v`` if it is ``True`` or ``False``, else a one-line ``TypeError`` naming ``name``
+    (a truthy string or number would otherwise pass silently)."""
+    if not isinstance(v, bool):
+        raise TypeError(f"{name} must be True or False, got {v!r}")
+    return v
+
+
 def _path_or_none(v: Any) -> Optional[str]:
     return None if v is None else os.fspath(v)
 
@@ -626,33 +634,41 @@ def _scene(scene) -> "_native.Scene":
 
 # ----- rendering ------------------------------------------------------------------------
 def render(scene: Scene, width: Optional[int] = None, height: Optional[int] = None,
-           background: Color = None, tolerance: float = 0.02) -> np.ndarray:
+           background: Color = None, tolerance: float = 0.02,
+           exact_overlaps: bool = False) -> np.ndarray:
     """Renders ``scene`` into a ``(height, width, 4)`` ``float32`` array of
     **premultiplied** RGBA in ``[0, 1]``, y down.
 
     ``width`` (and ``height``) render at another size: the scene is scaled uniformly by
     ``width / scene.width``. ``background`` (straight (r, g, b[, a])) is composited under
-    the drawing. ``tolerance`` is the largest curve-to-chord distance in pixels. The GIL
-    is released while rendering; the pixels are moved into numpy, not copied.
+    the drawing. ``tolerance`` is the largest curve-to-chord distance in pixels.
+    ``exact_overlaps`` integrates exactly the pixels where a path overlaps itself (two
+    coincident half-pixel rectangles in one path cover half the pixel, not all of it),
+    as ``diffsvg render --exact-overlaps`` does; off by default, as it costs about a
+    fifth more time on text. The GIL is released while rendering; the pixels are moved
+    into numpy, not copied.
     """
     return _native.render(_scene(scene), _whole_or_none(width, "width"),
                           _whole_or_none(height, "height"), _color(background, "background"),
-                          tolerance)
+                          tolerance, _flag(exact_overlaps, "exact_overlaps"))
 
 
 def render_backward(scene: Scene, d_image, background: Color = None,
                     tolerance: float = 0.02, structured: bool = True,
-                    dtype=np.float32) -> Union[Arrays, np.ndarray]:
+                    dtype=np.float32, exact_overlaps: bool = False) -> Union[Arrays, np.ndarray]:
     """The exact gradient of a loss with respect to every parameter of ``scene``, given
     ``d_image = dL/d(image)`` (``(height, width, 4)``, the scene's size).
 
     With ``background``, ``d_image`` is the gradient with respect to the image composited
-    over it (as :func:`render` returns it). Returns the structure of
-    :meth:`Scene.arrays` (of ``dtype``), or with ``structured=False`` a ``float64`` vector
-    in :meth:`Scene.params` layout. The GIL is released while it runs.
+    over it (as :func:`render` returns it). With ``exact_overlaps``, the gradient of the
+    exact coverage where a path overlaps itself (as :func:`render` draws it with the same
+    flag). Returns the structure of :meth:`Scene.arrays` (of ``dtype``), or with
+    ``structured=False`` a ``float64`` vector in :meth:`Scene.params` layout. The GIL is
+    released while it runs.
     """
     g = _native.render_backward(_scene(scene), _image(d_image, "d_image"),
-                                _color(background, "background"), tolerance)
+                                _color(background, "background"), tolerance,
+                                _flag(exact_overlaps, "exact_overlaps"))
     return scene.unflatten(g, dtype) if structured else g
 
 
@@ -1061,8 +1077,7 @@ def view(model, scene=None, *, split: str = "test", orbit: int = 0, elevation: f
     ``(h, w)`` ``float32`` depth images in world units along the viewing axis (0 where
     nothing was hit), the values ``diffsvg view --depth`` writes as ``.npy``.
     """
-    if not isinstance(depth, bool):
-        raise TypeError(f"depth must be True or False, got {depth!r}")
+    _flag(depth, "depth")
     return _native.view(os.fspath(model), None if scene is None else os.fspath(scene),
                         split, _whole(orbit, "orbit", _U64), elevation,
                         _whole(downscale, "downscale"), step, depth,

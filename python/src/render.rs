@@ -33,9 +33,10 @@ pub(crate) fn options(tolerance: f64) -> PyResult<RenderOptions> {
 /// in `[0, 1]`, y down. `width` (and optionally `height`) render at another size: the
 /// scene is scaled uniformly by `width / scene.width`, the canvas is `width × height`
 /// (height by default in proportion). `background` (straight RGBA) is composited under
-/// the drawing. The GIL is released while rendering.
+/// the drawing. `exact_overlaps` integrates exactly the pixels where a path overlaps
+/// itself ([`RenderOptions::exact_overlaps`]). The GIL is released while rendering.
 #[pyfunction]
-#[pyo3(signature = (scene, width=None, height=None, background=None, tolerance=0.02))]
+#[pyo3(signature = (scene, width=None, height=None, background=None, tolerance=0.02, exact_overlaps=false))]
 pub(crate) fn render<'py>(
     py: Python<'py>,
     scene: PyRef<'py, PyScene>,
@@ -43,9 +44,13 @@ pub(crate) fn render<'py>(
     height: Option<u32>,
     background: Option<[f32; 4]>,
     tolerance: f64,
+    exact_overlaps: bool,
 ) -> PyResult<Bound<'py, PyArray3<f32>>> {
     let bg = color_in(background, "background")?;
-    let opts = options(tolerance)?;
+    let opts = RenderOptions {
+        exact_overlaps,
+        ..options(tolerance)?
+    };
     let s = &scene.inner;
     let sized = match (width, height) {
         (None, None) => None,
@@ -78,18 +83,24 @@ pub(crate) fn render<'py>(
 /// The gradient of a loss with respect to every parameter of `scene` (`params()` layout,
 /// `float64`), given `d_image = ∂L/∂image` as a `(height, width, 4)` `float32` array of
 /// the scene's size. With `background`, `d_image` is the gradient with respect to the
-/// image composited over it. The GIL is released while it runs.
+/// image composited over it. `exact_overlaps` differentiates the exact coverage of the
+/// pixels where a path overlaps itself, as [`render`] draws it. The GIL is released while
+/// it runs.
 #[pyfunction]
-#[pyo3(signature = (scene, d_image, background=None, tolerance=0.02))]
+#[pyo3(signature = (scene, d_image, background=None, tolerance=0.02, exact_overlaps=false))]
 pub(crate) fn render_backward<'py>(
     py: Python<'py>,
     scene: PyRef<'py, PyScene>,
     d_image: PyReadonlyArrayDyn<'py, f32>,
     background: Option<[f32; 4]>,
     tolerance: f64,
+    exact_overlaps: bool,
 ) -> PyResult<Bound<'py, PyArray1<f64>>> {
     let bg = color_in(background, "background")?;
-    let opts = options(tolerance)?;
+    let opts = RenderOptions {
+        exact_overlaps,
+        ..options(tolerance)?
+    };
     let mut d = image_in(&d_image, "d_image")?;
     let s = &scene.inner;
     if (d.width, d.height) != (s.width, s.height) {
