@@ -330,7 +330,7 @@ pub(crate) struct Overlaps {
     order: Vec<(f64, usize)>,
     last_portion: Vec<u32>,
     left: Vec<(f64, i32)>,
-    /// The cells of the box where a candidate can be ([`flag_rows`](Self::flag_rows)).
+    /// The cells of the box where a candidate can be ([`ChainTags::flag`]).
     flags: Flags,
     /// The chains in each cell, recorded while the item is accumulated ([`tags`](Self::tags)):
     /// boxed and made on first use, so that the band buffers, moved in and out of each
@@ -1159,24 +1159,9 @@ impl ChainTags {
         }
         list.extend_from_slice(&self.edges);
         for &(first, last) in &self.chains {
-            // The ring holding the chain (rings are in order of their first vertex).
-            let at = rings.partition_point(|r| r.0 <= first as usize) - 1;
-            let (s, n) = rings[at];
-            let next = |e: u32| {
-                if e as usize + 1 == s + n {
-                    s as u32
-                } else {
-                    e + 1
-                }
-            };
-            let mut e = first;
-            loop {
-                list.push((e, next(e)));
-                if e == last || list.len() > self.cells.len() + self.edges.len() {
-                    break;
-                }
-                e = next(e);
-            }
+            for_chain_edges(rings, first, last, usize::MAX, |a, c| {
+                list.push((a as u32, c as u32))
+            });
         }
         list.sort_unstable();
         list.dedup();
@@ -1275,6 +1260,32 @@ impl super::coverage::CellVisitor for ChainTags {
     }
 }
 
+/// Calls `f(a, c)` for each edge `a → c` of a chain, from the one starting at vertex
+/// `first` to the one starting at `last`, in ring order (round the end of the ring that
+/// holds `first`). Returns `false`, having stopped, after `max` edges or a whole ring
+/// without reaching `last`.
+fn for_chain_edges(
+    rings: &[(usize, usize)],
+    first: u32,
+    last: u32,
+    max: usize,
+    mut f: impl FnMut(usize, usize),
+) -> bool {
+    // The ring holding the chain (rings are in order of their first vertex).
+    let at = rings.partition_point(|r| r.0 <= first as usize) - 1;
+    let (s, n) = rings[at];
+    let mut e = first as usize;
+    for _ in 0..max.min(n) {
+        let c = if e + 1 == s + n { s } else { e + 1 };
+        f(e, c);
+        if e == last as usize {
+            return true;
+        }
+        e = c;
+    }
+    false
+}
+
 /// The edges of a chain from the one starting at vertex `first` to the one starting at
 /// `last`, in ring order, into `out` (at most [`EXACT_PIECES`]; more leaves `out` empty).
 fn chain_edges(
@@ -1285,20 +1296,10 @@ fn chain_edges(
     out: &mut Vec<(Point, Point)>,
 ) {
     out.clear();
-    let at = rings.partition_point(|r| r.0 <= first as usize) - 1;
-    let (s, n) = rings[at];
-    let mut e = first as usize;
-    loop {
-        let c = if e + 1 == s + n { s } else { e + 1 };
-        out.push((pts[e], pts[c]));
-        if e == last as usize {
-            return;
-        }
-        if out.len() > EXACT_PIECES {
-            out.clear();
-            return;
-        }
-        e = c;
+    if !for_chain_edges(rings, first, last, EXACT_PIECES, |a, c| {
+        out.push((pts[a], pts[c]))
+    }) {
+        out.clear();
     }
 }
 
