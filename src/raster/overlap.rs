@@ -975,33 +975,31 @@ pub(crate) fn portion_weight(w: i32, evenodd: bool) -> f64 {
     inside(w.saturating_add(1), evenodd) as i32 as f64 - inside(w, evenodd) as i32 as f64
 }
 
-/// No vertex, in [`TagCell`].
-const NO_VERTEX: u32 = u32::MAX;
 /// [`TagCell::meta`]: more than one chain, or a chain monotone in neither x nor y.
 const TAG_CANDIDATE: u32 = 1 << 4;
-/// [`TagCell::meta`]: two chains, not yet judged; the first chain's direction bits are
-/// kept above [`TAG_FIRST_DIRS`].
+/// [`TagCell::meta`]: two chains, not yet judged (the first one's ends are in
+/// [`ChainTags::twos`] at [`TagCell::slot`]).
 const TAG_TWO: u32 = 1 << 5;
-/// [`TagCell::meta`]: shift of the first chain's direction bits, with [`TAG_TWO`].
-const TAG_FIRST_DIRS: u32 = 6;
+/// [`TagCell::meta`] and [`ChainTags::bits`]: an edge that closes its ring (it ends at
+/// the ring's first vertex), so that no edge continues it.
+const TAG_CLOSES: u32 = 1 << 6;
 /// [`TagCell::meta`]: the generation is kept above this bit.
 const TAG_GEN_SHIFT: u32 = 16;
 
-/// One cell's chain: its end vertices (when inside the cell) and what [`ChainTags`] knows.
+/// One cell's latest chain, as the start vertices of its first and last edges, and what
+/// [`ChainTags`] knows of the cell. The chain's end vertices need not be kept: edges come
+/// in ring order, so an edge continues the chain when it starts where the last one ended
+/// (`last + 1`, unless the last closed its ring) inside the cell, and extends it backward
+/// when it ends where the first one started inside the cell (a ring's closing edge).
 #[derive(Clone, Copy, Default)]
 struct TagCell {
-    head: u32,
-    tail: u32,
-    /// Start vertices of the chain's first and last edges.
     first: u32,
     last: u32,
-    /// With [`TAG_TWO`]: the start vertices of the first chain's first and last edges
-    /// (the fields above are the second chain's).
-    other: u32,
-    other_last: u32,
-    /// Direction bits (+x, −x, +y, −y), [`TAG_CANDIDATE`], generation above
-    /// [`TAG_GEN_SHIFT`].
+    /// Direction bits (+x, −x, +y, −y), [`TAG_CANDIDATE`], [`TAG_TWO`], [`TAG_CLOSES`],
+    /// generation above [`TAG_GEN_SHIFT`].
     meta: u32,
+    /// With [`TAG_TWO`]: the cell's index in [`ChainTags::twos`].
+    slot: u32,
 }
 
 /// Which cells of an item's box can hold three winding values, recorded while its edges are
@@ -1020,8 +1018,8 @@ pub(crate) struct ChainTags {
     y0: f64,
     /// Candidate cells (local, row-major index), each once.
     cands: Vec<u32>,
-    /// Cells that got a second chain.
-    twos: Vec<u32>,
+    /// Cells that got a second chain, with the first chain's first and last edges.
+    twos: Vec<(u32, u32, u32)>,
     /// Scratch of [`judge_twos`](Self::judge_twos): the two chains' edges.
     chain_a: Vec<(Point, Point)>,
     chain_b: Vec<(Point, Point)>,
@@ -1077,11 +1075,12 @@ impl ChainTags {
     }
 
     /// Starts edge `ia → ic` (`a → c`, device pixels) before it is accumulated.
-    #[inline]
+    #[inline(always)]
     pub(crate) fn edge(&mut self, ia: usize, ic: usize, a: Point, c: Point) {
         self.ia = ia as u32;
         self.ic = ic as u32;
-        self.bits = dir_bits(c[0] - a[0], c[1] - a[1]) as u32;
+        self.bits = dir_bits(c[0] - a[0], c[1] - a[1]) as u32
+            | if ic <= ia { TAG_CLOSES } else { 0 };
         self.cell_a = self.cell_of(a);
         self.cell_c = self.cell_of(c);
         self.on_v = a[0] == c[0] && a[0] == floor_f64(a[0]);
@@ -1128,19 +1127,20 @@ impl ChainTags {
     /// it a candidate.
     fn judge_twos(&mut self, pts: &[Point], rings: &[(usize, usize)]) {
         for i in 0..self.twos.len() {
-            let k = self.twos[i] as usize;
+            let (k, other, other_last) = self.twos[i];
+            let k = k as usize;
             let t = self.cells[k];
             if t.meta & TAG_CANDIDATE != 0 {
                 continue;
             }
             let cell = [self.x0 + (k % self.w) as f64, self.y0 + (k / self.w) as f64];
             let (a, b) = (&mut self.chain_a, &mut self.chain_b);
-            chain_edges(pts, rings, t.other, t.other_last, a);
+            chain_edges(pts, rings, other, other_last, a);
             chain_edges(pts, rings, t.first, t.last, b);
             if !chains_wind_alike(a, b, cell) {
                 self.cells[k].meta |= TAG_CANDIDATE;
                 self.cands.push(k as u32);
-                self.chains.push((t.other, t.other_last));
+                self.chains.push((other, other_last));
                 self.chains.push((t.first, t.last));
             }
         }
@@ -1202,13 +1202,10 @@ impl super::coverage::CellVisitor for ChainTags {
             let t = self.cells[k];
             if t.meta >> TAG_GEN_SHIFT != self.generation {
                 self.cells[k] = TagCell {
-                    head: if k == self.cell_a { self.ia } else { NO_VERTEX },
-                    tail: if k == self.cell_c { self.ic } else { NO_VERTEX },
                     first: self.ia,
                     last: self.ia,
-                    other: NO_VERTEX,
-                    other_last: NO_VERTEX,
                     meta: gen_bits | self.bits,
+                    slot: 0,
                 };
                 continue;
             }
@@ -1218,22 +1215,19 @@ impl super::coverage::CellVisitor for ChainTags {
             }
             let mut n = t;
             n.meta |= self.bits;
-            if t.tail != NO_VERTEX && t.tail == self.ia {
-                n.tail = if k == self.cell_c { self.ic } else { NO_VERTEX };
+            if t.last.wrapping_add(1) == self.ia && t.meta & TAG_CLOSES == 0 && k == self.cell_a {
+                // The last edge ended where this one starts, inside the cell.
                 n.last = self.ia;
-            } else if t.head != NO_VERTEX && t.head == self.ic && k == self.cell_c {
-                n.head = if k == self.cell_a { self.ia } else { NO_VERTEX };
+            } else if t.first == self.ic && k == self.cell_c {
+                // This edge ends where the first one started, inside the cell.
                 n.first = self.ia;
             } else if t.meta & TAG_TWO == 0 {
-                // A second chain: judged when the item is done. The low direction bits are
+                // A second chain: judged when the item is done. The direction bits are
                 // the second chain's from here on.
-                n.meta =
-                    (t.meta & !0b1111) | TAG_TWO | self.bits | (t.meta & 0b1111) << TAG_FIRST_DIRS;
-                (n.other, n.other_last) = (t.first, t.last);
-                n.head = if k == self.cell_a { self.ia } else { NO_VERTEX };
-                n.tail = if k == self.cell_c { self.ic } else { NO_VERTEX };
+                n.meta = (t.meta & !0b1111 & !TAG_CLOSES) | TAG_TWO | self.bits;
+                n.slot = self.twos.len() as u32;
+                self.twos.push((k as u32, t.first, t.last));
                 (n.first, n.last) = (self.ia, self.ia);
-                self.twos.push(k as u32);
             } else {
                 n.meta |= TAG_CANDIDATE;
             }
@@ -1243,7 +1237,8 @@ impl super::coverage::CellVisitor for ChainTags {
             if n.meta & TAG_CANDIDATE != 0 {
                 self.cands.push(k as u32);
                 if t.meta & TAG_TWO != 0 {
-                    self.chains.push((t.other, t.other_last));
+                    let (_, other, other_last) = self.twos[t.slot as usize];
+                    self.chains.push((other, other_last));
                 }
                 self.chains.push((t.first, t.last));
                 self.edges.push((self.ia, self.ic));
