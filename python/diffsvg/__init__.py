@@ -792,7 +792,8 @@ def fit(scene: Scene, target, iters: int = 500, *, lr_points: float = 1.0,
         lr_paint: float = 0.5, lr_stops: float = 0.005, lr_transform: float = 0.5,
         lr_filter: float = 0.1, exact_filters: bool = False, schedule: str = "constant", loss: str = "mse", background: Color = None,
         pyramid: int = 1, until_psnr: Optional[float] = None, tolerance: float = 0.02,
-        fit_background: bool = False, progress: Progress = None) -> Tuple["Scene", FitInfo]:
+        fit_background: bool = False, progress: Progress = None,
+        exact_overlaps: bool = False) -> Tuple["Scene", FitInfo]:
     """Refines every parameter of ``scene`` toward ``target`` with exact gradients and
     Adam (as ``diffsvg fit``); returns ``(best scene, info)``.
 
@@ -804,6 +805,8 @@ def fit(scene: Scene, target, iters: int = 500, *, lr_points: float = 1.0,
     and feComposite's k a tenth of it). ``exact_filters`` evaluates filters as the SVG
     specification defines them (true Gaussian blurs, fractional offsets), so that blur
     deviations and offsets get a gradient (as ``diffsvg fit --exact-filters``).
+    ``exact_overlaps`` renders and differentiates the exact coverage where a path overlaps
+    itself (as :func:`render` with ``exact_overlaps``, and ``diffsvg fit --exact-overlaps``).
     ``background`` (straight RGB[A]) is composited under render and target before
     comparing (opaque: over RGB only); with ``fit_background`` an opaque background's
     color is fitted too (as ``diffsvg fit --fit-background``) and returned as
@@ -818,7 +821,9 @@ def fit(scene: Scene, target, iters: int = 500, *, lr_points: float = 1.0,
     options = dict(lr_points=lr_points, lr_color=lr_color, lr_opacity=lr_opacity,
                    lr_width=lr_width, lr_paint=lr_paint, lr_stops=lr_stops,
                    lr_transform=lr_transform, lr_filter=lr_filter,
-                   exact_filters=bool(exact_filters), schedule=schedule, loss=loss,
+                   exact_filters=bool(exact_filters),
+                   exact_overlaps=_flag(exact_overlaps, "exact_overlaps"),
+                   schedule=schedule, loss=loss,
                    background=_color(background, "background"),
                    pyramid=_whole(pyramid, "pyramid", _U64), tolerance=tolerance,
                    fit_background=bool(fit_background))

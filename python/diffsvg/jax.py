@@ -58,7 +58,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from . import DiffsvgError, Scene, _color, _native, _scene
+from . import DiffsvgError, Scene, _color, _flag, _native, _scene
 from ._types import Arrays
 
 __all__ = ["render", "render_flat", "over", "params", "Params", "DiffsvgWarning"]
@@ -244,14 +244,17 @@ def _use_ffi() -> bool:
     return _FFI and jax.default_backend() == "cpu"
 
 
-def _attributes(scene: Scene, background: Optional[tuple], tolerance: float) -> dict:
+def _attributes(scene: Scene, background: Optional[tuple], tolerance: float,
+                exact: bool) -> dict:
     """The custom calls' attributes: the scene's id in the native registry (its entry
-    follows the scene's changes and goes when the scene is dropped), ``tolerance`` and
-    ``background`` (straight RGBA, when given)."""
+    follows the scene's changes and goes when the scene is dropped), ``tolerance``,
+    ``background`` (straight RGBA, when given) and ``exact_overlaps`` (1, when on)."""
     attrs = {"scene": np.uint64(_native.ffi_scene(_scene(scene))),
              "tolerance": np.float64(tolerance)}
     if background is not None:
         attrs["background"] = np.asarray(background, np.float32)
+    if exact:
+        attrs["exact_overlaps"] = np.int64(1)
     return attrs
 
 
@@ -260,42 +263,49 @@ def _native_dtype(flat):
     return flat if flat.dtype in (jnp.float32, jnp.float64) else flat.astype(jnp.float32)
 
 
-@functools.partial(jax.custom_vjp, nondiff_argnums=(0, 1, 2))
 def render_flat(scene: Scene, background: Optional[tuple], tolerance: float,
                 flat: jax.Array) -> jax.Array:
     """:func:`render` of a flat vector with ``background`` (``None`` or straight
     ``(r, g, b, a)``) and ``tolerance`` given as they are, unchecked: the primitive under
     :func:`render`, kept for code written against it."""
-    return _forward(scene, background, tolerance, flat)
+    return _render_flat(scene, background, tolerance, False, flat)
 
 
-def _forward(scene, background, tolerance, flat):
+@functools.partial(jax.custom_vjp, nondiff_argnums=(0, 1, 2, 3))
+def _render_flat(scene: Scene, background: Optional[tuple], tolerance: float, exact: bool,
+                 flat: jax.Array) -> jax.Array:
+    """:func:`render_flat` with ``exact`` (``exact_overlaps``)."""
+    return _forward(scene, background, tolerance, exact, flat)
+
+
+def _forward(scene, background, tolerance, exact, flat):
     shape = jax.ShapeDtypeStruct((scene.height, scene.width, 4), jnp.float32)
     if not _use_ffi():
-        cb = _callbacks(scene, background, tolerance)[0]
+        cb = _callbacks(scene, background, tolerance, exact)[0]
         return jax.pure_callback(cb, shape, flat, vmap_method="broadcast_all")
     call = jax.ffi.ffi_call("diffsvg_render", shape, vmap_method="broadcast_all")
-    return call(_native_dtype(jnp.asarray(flat)), **_attributes(scene, background, tolerance))
+    return call(_native_dtype(jnp.asarray(flat)),
+                **_attributes(scene, background, tolerance, exact))
 
 
-def _fwd(scene, background, tolerance, flat):
-    return _forward(scene, background, tolerance, flat), flat
+def _fwd(scene, background, tolerance, exact, flat):
+    return _forward(scene, background, tolerance, exact, flat), flat
 
 
-def _bwd(scene, background, tolerance, flat, d_image):
+def _bwd(scene, background, tolerance, exact, flat, d_image):
     if not _use_ffi():
         out = jax.ShapeDtypeStruct(flat.shape, flat.dtype)
-        cb = _callbacks(scene, background, tolerance)[1]
+        cb = _callbacks(scene, background, tolerance, exact)[1]
         return (jax.pure_callback(cb, out, flat, d_image, vmap_method="broadcast_all"),)
     x = _native_dtype(jnp.asarray(flat))
     out = jax.ShapeDtypeStruct(x.shape, x.dtype)
     call = jax.ffi.ffi_call("diffsvg_render_backward", out, vmap_method="broadcast_all")
     d = jnp.asarray(d_image, jnp.float32)
-    g = call(x, d, **_attributes(scene, background, tolerance))
+    g = call(x, d, **_attributes(scene, background, tolerance, exact))
     return (g.astype(flat.dtype),)
 
 
-render_flat.defvjp(_fwd, _bwd)
+_render_flat.defvjp(_fwd, _bwd)
 
 
 # ----- the fallback: pure_callbacks into the batch calls ---------------------------------
@@ -321,11 +331,11 @@ def _warn_non_finite(bad: np.ndarray, rows: np.ndarray, what: str) -> None:
         "is NaN"), stacklevel=3)
 
 
-def _forward_cb(scene, background, tolerance, v):
+def _forward_cb(scene, background, tolerance, exact, v):
     batch = v.shape[:-1]
     rows = _rows(scene, v)
     try:
-        img = _native.render_batch(_scene(scene), rows, background, tolerance)
+        img = _native.render_batch(_scene(scene), rows, background, tolerance, exact)
     except DiffsvgError:
         # Inside jit a callback must not raise: rows with a non-finite value render NaN.
         bad = ~np.isfinite(rows).all(axis=1)
@@ -334,18 +344,19 @@ def _forward_cb(scene, background, tolerance, v):
         _warn_non_finite(bad, rows, "params")
         rows = rows.copy()
         rows[bad] = scene._current()
-        img = _native.render_batch(_scene(scene), rows, background, tolerance)
+        img = _native.render_batch(_scene(scene), rows, background, tolerance, exact)
         img[bad] = np.nan
     return img.reshape(*batch, scene.height, scene.width, 4)
 
 
-def _backward_cb(scene, background, tolerance, v, d):
+def _backward_cb(scene, background, tolerance, exact, v, d):
     batch = v.shape[:-1]
     rows = _rows(scene, v)
     d = np.ascontiguousarray(np.broadcast_to(d, (*batch, scene.height, scene.width, 4)),
                              dtype=np.float32).reshape(-1, scene.height, scene.width, 4)
     try:
-        g = _native.render_backward_batch(_scene(scene), rows, d, background, tolerance)
+        g = _native.render_backward_batch(_scene(scene), rows, d, background, tolerance,
+                                          exact)
     except DiffsvgError:
         bad_p = ~np.isfinite(rows).all(axis=1)
         bad_d = ~np.isfinite(d).all(axis=(1, 2, 3))
@@ -359,7 +370,8 @@ def _backward_cb(scene, background, tolerance, v, d):
         rows, d = rows.copy(), d.copy()
         rows[bad] = scene._current()
         d[bad] = 0
-        g = _native.render_backward_batch(_scene(scene), rows, d, background, tolerance)
+        g = _native.render_backward_batch(_scene(scene), rows, d, background, tolerance,
+                                          exact)
         g[bad] = np.nan
     return g.reshape(*batch, rows.shape[1]).astype(v.dtype)
 
@@ -367,17 +379,17 @@ def _backward_cb(scene, background, tolerance, v, d):
 _CALLBACKS: "weakref.WeakKeyDictionary[Scene, dict]" = weakref.WeakKeyDictionary()
 
 
-def _callbacks(scene, background, tolerance):
+def _callbacks(scene, background, tolerance, exact):
     """The forward and backward callbacks of one scene and options, the same objects on
     every call: JAX caches what it compiles for a callback by the callable, so outside
     ``jit`` a new one per call would compile each step anew."""
     per_scene = _CALLBACKS.setdefault(scene, {})
-    key = (background, tolerance)
+    key = (background, tolerance, exact)
     if key not in per_scene:
         ref = weakref.ref(scene)  # not the scene itself: the cache must not keep it alive
         per_scene[key] = (
-            lambda v: _forward_cb(ref(), background, tolerance, v),
-            lambda v, d: _backward_cb(ref(), background, tolerance, v, d))
+            lambda v: _forward_cb(ref(), background, tolerance, exact, v),
+            lambda v, d: _backward_cb(ref(), background, tolerance, exact, v, d))
     return per_scene[key]
 
 
@@ -422,7 +434,7 @@ def _options(background, tolerance) -> Tuple[Optional[tuple], float]:
 
 
 def render(scene: Scene, params: Any, background: Any = None,
-           tolerance: float = 0.02) -> jax.Array:
+           tolerance: float = 0.02, exact_overlaps: bool = False) -> jax.Array:
     """Renders ``scene`` with the values of ``params``: a ``(height, width, 4)``
     ``float32`` premultiplied image, differentiable with respect to ``params``.
 
@@ -433,13 +445,15 @@ def render(scene: Scene, params: Any, background: Any = None,
     drawing: a tuple (straight RGB[A]) is a fixed color; a JAX array is a parameter, with
     gradients — a straight color ``(3,)``/``(4,)`` or a straight image
     ``(height, width, 3 or 4)`` (see :func:`over`). Under ``jax.vmap`` a batch of vectors
-    is one call, rendered in parallel."""
+    is one call, rendered in parallel. ``exact_overlaps`` renders and differentiates the
+    exact coverage where a path overlaps itself, as :func:`diffsvg.render` does with it."""
+    exact = _flag(exact_overlaps, "exact_overlaps")
     if isinstance(background, jax.Array):
         _, t = _options(None, tolerance)
-        img = render_flat(scene, None, t, _flat_of(scene, params))
+        img = _render_flat(scene, None, t, exact, _flat_of(scene, params))
         return over(img, background)
     bg, t = _options(background, tolerance)
-    return render_flat(scene, bg, t, _flat_of(scene, params))
+    return _render_flat(scene, bg, t, exact, _flat_of(scene, params))
 
 
 def over(image: jax.Array, background: Any) -> jax.Array:

@@ -145,18 +145,20 @@ pub(crate) fn backward_rows(
 
 /// Renders `scene` with each row of `params` (`(batch, n)` `float64`, the layout of
 /// `Scene.params()`): `(batch, height, width, 4)` `float32` premultiplied, the rows in
-/// parallel. `background` (straight RGBA) is composited under each.
+/// parallel. `background` (straight RGBA) is composited under each; `exact_overlaps` as
+/// for `render`.
 #[pyfunction]
-#[pyo3(signature = (scene, params, background=None, tolerance=0.02))]
+#[pyo3(signature = (scene, params, background=None, tolerance=0.02, exact_overlaps=false))]
 pub(crate) fn render_batch<'py>(
     py: Python<'py>,
     scene: PyRef<'py, PyScene>,
     params: PyReadonlyArray2<'py, f64>,
     background: Option<[f32; 4]>,
     tolerance: f64,
+    exact_overlaps: bool,
 ) -> PyResult<Bound<'py, PyArray4<f32>>> {
     let bg = color_in(background, "background")?;
-    let opts = options(tolerance)?;
+    let opts = options(tolerance, exact_overlaps)?;
     let s = &scene.inner;
     let p = params.as_array();
     check_params(s, &p)?;
@@ -182,9 +184,10 @@ pub(crate) fn render_batch<'py>(
 
 /// The gradients of a loss with respect to each row of `params` (`(batch, n)`, as in
 /// `render_batch`), given `d_images = ∂L/∂image` per row (`(batch, height, width, 4)`
-/// `float32`): `(batch, n)` `float64`, the rows in parallel.
+/// `float32`): `(batch, n)` `float64`, the rows in parallel; `exact_overlaps` as for
+/// `render_backward`.
 #[pyfunction]
-#[pyo3(signature = (scene, params, d_images, background=None, tolerance=0.02))]
+#[pyo3(signature = (scene, params, d_images, background=None, tolerance=0.02, exact_overlaps=false))]
 pub(crate) fn render_backward_batch<'py>(
     py: Python<'py>,
     scene: PyRef<'py, PyScene>,
@@ -192,9 +195,10 @@ pub(crate) fn render_backward_batch<'py>(
     d_images: PyReadonlyArray4<'py, f32>,
     background: Option<[f32; 4]>,
     tolerance: f64,
+    exact_overlaps: bool,
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
     let bg = color_in(background, "background")?;
-    let opts = options(tolerance)?;
+    let opts = options(tolerance, exact_overlaps)?;
     let s = &scene.inner;
     let p = params.as_array();
     check_params(s, &p)?;

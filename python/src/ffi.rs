@@ -310,6 +310,8 @@ struct Options {
     scene: u64,
     tolerance: f64,
     background: Option<[f32; 4]>,
+    /// The optional attribute `exact_overlaps` (an integer scalar, non-zero: on).
+    exact_overlaps: bool,
 }
 
 /// A call frame XLA passed to a handler: made only in [`handle`], so its pointers are
@@ -359,6 +361,7 @@ impl Frame<'_> {
         let mut scene = None;
         let mut tolerance = None;
         let mut background = None;
+        let mut exact_overlaps = false;
         for i in 0..usize::try_from(attrs.size).unwrap_or(0) {
             // SAFETY: `types`, `names` and `attrs` hold `size` entries; a name is a byte
             // span (not NUL-terminated); a SCALAR attribute points to an `XLA_FFI_Scalar`
@@ -384,6 +387,14 @@ impl Frame<'_> {
                             tolerance = Some(*(s.value as *const f64));
                         }
                     }
+                    (b"exact_overlaps", ATTR_SCALAR) => {
+                        let s = &*(attr as *const Scalar);
+                        exact_overlaps = match s.dtype {
+                            DTYPE_S64 => *(s.value as *const i64) != 0,
+                            DTYPE_U64 => *(s.value as *const u64) != 0,
+                            _ => false,
+                        };
+                    }
                     (b"background", ATTR_ARRAY) => {
                         let a = &*(attr as *const AttrArray);
                         if a.dtype == DTYPE_F32 && a.size == 4 {
@@ -399,6 +410,7 @@ impl Frame<'_> {
             scene: scene.ok_or("the attribute scene (u64) is missing")?,
             tolerance: tolerance.ok_or("the attribute tolerance (f64) is missing")?,
             background,
+            exact_overlaps,
         })
     }
 }
@@ -612,7 +624,7 @@ fn check_image(reg: &Registered, op: &Operand, rows: usize, what: &str) -> Resul
 }
 
 fn render_options(o: &Options) -> Result<RenderOptions, String> {
-    crate::render::options(o.tolerance).map_err(|e| e.to_string())
+    crate::render::options(o.tolerance, o.exact_overlaps).map_err(|e| e.to_string())
 }
 
 /// Writes `values` row by row into `out` (`rows × per_row`), NaN for the rows marked bad.

@@ -89,7 +89,8 @@ fn step_dict(d: &Bound<'_, PyDict>, s: &Step) -> PyResult<()> {
 
 /// The options shared by `fit` and `vectorize`, from a dict (unknown keys refused):
 /// `lr_points`, `lr_color`, `lr_opacity`, `lr_width`, `lr_paint`, `lr_stops`,
-/// `lr_transform`, `lr_filter` (finite, ≥ 0), `exact_filters` (bool), `schedule`, `loss`, `background` (straight RGBA), `pyramid`, `tolerance`,
+/// `lr_transform`, `lr_filter` (finite, ≥ 0), `exact_filters` and `exact_overlaps`
+/// (bools), `schedule`, `loss`, `background` (straight RGBA), `pyramid`, `tolerance`,
 /// `fit_background` (bool; `fit` only).
 fn fit_setup(
     target: &PyReadonlyArrayDyn<'_, f32>,
@@ -97,7 +98,7 @@ fn fit_setup(
     until_psnr: Option<f64>,
     options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<(Objective, FitOptions)> {
-    const KEYS: [&str; 15] = [
+    const KEYS: [&str; 16] = [
         "lr_points",
         "lr_color",
         "lr_opacity",
@@ -107,6 +108,7 @@ fn fit_setup(
         "lr_transform",
         "lr_filter",
         "exact_filters",
+        "exact_overlaps",
         "schedule",
         "loss",
         "background",
@@ -152,6 +154,7 @@ fn fit_setup(
     let tolerance: f64 = get("tolerance")?.map_or(Ok(0.02), |v| v.extract())?;
     let fit_background: bool = get("fit_background")?.map_or(Ok(false), |v| v.extract())?;
     let exact_filters: bool = get("exact_filters")?.map_or(Ok(false), |v| v.extract())?;
+    let exact_overlaps: bool = get("exact_overlaps")?.map_or(Ok(false), |v| v.extract())?;
     let target = image_in(target, "target")?;
     if target.width == 0 || target.height == 0 {
         return Err(bad("target: the image is empty"));
@@ -164,7 +167,7 @@ fn fit_setup(
         until_psnr,
         render: RenderOptions {
             exact_filters,
-            ..options_for(tolerance)?
+            ..options_for(tolerance, exact_overlaps)?
         },
         fit_background,
         ..FitOptions::default()

@@ -17,7 +17,7 @@ use crate::scene::PyScene;
 
 /// Rasterizer settings from the keyword `tolerance` (pixels between a curve and its
 /// chords).
-pub(crate) fn options(tolerance: f64) -> PyResult<RenderOptions> {
+pub(crate) fn options(tolerance: f64, exact_overlaps: bool) -> PyResult<RenderOptions> {
     if !(tolerance > 0.0 && tolerance <= 10.0) {
         return Err(bad(format!(
             "tolerance {tolerance} must be in (0, 10] pixels"
@@ -25,6 +25,7 @@ pub(crate) fn options(tolerance: f64) -> PyResult<RenderOptions> {
     }
     Ok(RenderOptions {
         tolerance,
+        exact_overlaps,
         ..RenderOptions::default()
     })
 }
@@ -48,8 +49,7 @@ pub(crate) fn render<'py>(
 ) -> PyResult<Bound<'py, PyArray3<f32>>> {
     let bg = color_in(background, "background")?;
     let opts = RenderOptions {
-        exact_overlaps,
-        ..options(tolerance)?
+        ..options(tolerance, exact_overlaps)?
     };
     let s = &scene.inner;
     let sized = match (width, height) {
@@ -98,8 +98,7 @@ pub(crate) fn render_backward<'py>(
 ) -> PyResult<Bound<'py, PyArray1<f64>>> {
     let bg = color_in(background, "background")?;
     let opts = RenderOptions {
-        exact_overlaps,
-        ..options(tolerance)?
+        ..options(tolerance, exact_overlaps)?
     };
     let mut d = image_in(&d_image, "d_image")?;
     let s = &scene.inner;

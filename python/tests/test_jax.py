@@ -305,6 +305,39 @@ def test_custom_calls_give_the_bits_of_render_and_render_backward(name, backgrou
                                    if ffi else [])
 
 
+OVERLAPPING = """<svg xmlns="http://www.w3.org/2000/svg" width="12" height="12">
+  <path d="M 2.3 2.2 L 7.6 2.2 L 7.6 7.4 L 2.3 7.4 Z M 4.1 2.5 L 9.2 2.5 L 9.2 8.6 L 4.1 8.6 Z"
+        fill="#3366cc" fill-opacity="0.8"/></svg>"""
+
+
+@pytest.mark.parametrize("ffi", [True, False])
+def test_exact_overlaps_reach_the_custom_calls(ffi, monkeypatch):
+    """With exact_overlaps the custom calls (and the fallback, through render_batch and
+    render_backward_batch) give the bits of render and render_backward with it, which
+    differ from the clamped coverage's where the two squares of one path overlap."""
+    monkeypatch.setattr(djax, "_FFI", ffi and djax._FFI)
+    scene = diffsvg.Scene.from_svg(OVERLAPPING)
+    d = np.random.default_rng(5).normal(0, 1e-2, (12, 12, 4)).astype(np.float32)
+    img = diffsvg.render(scene, exact_overlaps=True)
+    g = diffsvg.render_backward(scene, d, structured=False, exact_overlaps=True)
+    assert not np.array_equal(img, diffsvg.render(scene))
+    x = jnp.asarray(scene.params(), jnp.float64)
+    f = jax.jit(lambda v: djax.render(scene, v, exact_overlaps=True))
+    out, vjp = jax.vjp(f, x)
+    assert np.array_equal(np.asarray(out), img)
+    (gx,) = jax.jit(vjp)(jnp.asarray(d))
+    assert np.array_equal(np.asarray(gx), g)
+    # Off, the clamped coverage's bits, as before.
+    plain = jax.jit(lambda v: djax.render(scene, v))(x)
+    assert np.array_equal(np.asarray(plain), diffsvg.render(scene))
+    # A batch renders each row with the option.
+    rows = np.stack([scene.params(), scene.params()])
+    batch = diffsvg._native.render_batch(diffsvg._scene(scene), rows, None, 0.02, True)
+    assert np.array_equal(batch[1], img)
+    with pytest.raises(TypeError, match="exact_overlaps must be True or False"):
+        djax.render(scene, x, exact_overlaps="yes")
+
+
 def test_the_fallback_warns_too(monkeypatch):
     monkeypatch.setattr(djax, "_FFI", False)
     scene = diffsvg.Scene.load(SAMPLES / "01-curves.svg")

@@ -156,6 +156,19 @@ def test_exact_overlaps_render_and_differentiate():
     assert np.abs(g - numeric).max() <= 2e-3 * np.abs(numeric).max() + 1e-7
 
 
+def test_fit_with_exact_overlaps_differentiates_the_exact_coverage():
+    """A fit of a self-overlapping path toward its own exact rendering starts at the
+    optimum with the option (loss 0, nothing moves) and away from it without."""
+    s = diffsvg.Scene.from_svg(OVERLAPPING)
+    target = diffsvg.render(s, exact_overlaps=True)
+    _, exact = diffsvg.fit(s, target, iters=5, exact_overlaps=True)
+    _, clamped = diffsvg.fit(s, target, iters=5)
+    assert exact["history"][0][1] == 0.0
+    assert clamped["history"][0][1] > 0.0
+    with pytest.raises(TypeError, match="exact_overlaps must be True or False"):
+        diffsvg.fit(s, target, iters=1, exact_overlaps=None)
+
+
 def test_the_gil_is_released_while_rendering():
     s = diffsvg.random_blobs(512, 1024, 1024, seed=1)
     d = np.full((1024, 1024, 4), 1e-6, np.float32)

@@ -150,6 +150,11 @@ pub struct Args {
     /// are (resvg's box blurs and whole-pixel offsets are piecewise constant in them).
     #[arg(long)]
     exact_filters: bool,
+    /// Render and differentiate the exact coverage where a path overlaps itself or two
+    /// of its subpaths share a pixel (as `render --exact-overlaps`); without it those
+    /// pixels take the clamped winding integral, which over-covers them.
+    #[arg(long)]
+    exact_overlaps: bool,
     #[command(flatten)]
     optim: OptimArgs,
     #[command(flatten)]
@@ -168,6 +173,7 @@ pub fn run(a: Args) -> Result<()> {
     let mut opts = a.optim.fit_options(a.iters)?;
     opts.fit_background = a.fit_background;
     opts.render.exact_filters = a.exact_filters;
+    opts.render.exact_overlaps = a.exact_overlaps;
     let fonts = a.fonts.fonts();
     let target = load_target_with(&a.target, None, &fonts)?;
     let objective = a.optim.objective(&target)?;

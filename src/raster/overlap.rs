@@ -1079,8 +1079,8 @@ impl ChainTags {
     pub(crate) fn edge(&mut self, ia: usize, ic: usize, a: Point, c: Point) {
         self.ia = ia as u32;
         self.ic = ic as u32;
-        self.bits = dir_bits(c[0] - a[0], c[1] - a[1]) as u32
-            | if ic <= ia { TAG_CLOSES } else { 0 };
+        self.bits =
+            dir_bits(c[0] - a[0], c[1] - a[1]) as u32 | if ic <= ia { TAG_CLOSES } else { 0 };
         self.cell_a = self.cell_of(a);
         self.cell_c = self.cell_of(c);
         self.on_v = a[0] == c[0] && a[0] == floor_f64(a[0]);
