@@ -1,6 +1,8 @@
 //! `diffsvg fit`: refinement recovers perturbed drawings, runs are reproducible, bad input
 //! fails cleanly.
 
+use std::path::Path;
+
 use diffsvg::raster::{RenderOptions, render};
 use diffsvg::scene::random::perturb;
 use diffsvg::{Scene, Sizing};
@@ -272,6 +274,38 @@ fn fit_background_recovers_the_backdrop() {
     );
 }
 
+/// A fit toward a rendering made with an exactness flag: renders `truth` into `dir` with
+/// `flag` (`--exact-filters`, `--exact-overlaps`), and returns a function that fits
+/// `init` toward it with `args`, adding `flag` when asked, and gives the fitted SVG, the
+/// standard output and the standard error.
+fn fit_toward<'a>(
+    dir: &'a Path,
+    truth: &str,
+    init: &str,
+    flag: &'a str,
+) -> impl Fn(&[&str], bool) -> (String, String, String) + 'a {
+    let truth = write(dir, "truth.svg", truth);
+    let init = write(dir, "init.svg", init);
+    let target = dir.join("target.png");
+    let o = diffsvg(&["render", s(&truth), "-o", s(&target), flag]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let out = dir.join("fitted.svg");
+    move |extra: &[&str], with_flag: bool| {
+        let mut args = vec!["fit", s(&init), s(&target), "-o", s(&out)];
+        args.extend_from_slice(extra);
+        if with_flag {
+            args.push(flag);
+        }
+        let o = diffsvg(&args);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        (
+            std::fs::read_to_string(&out).unwrap(),
+            String::from_utf8_lossy(&o.stdout).into_owned(),
+            String::from_utf8_lossy(&o.stderr).into_owned(),
+        )
+    }
+}
+
 /// A drop shadow's offset and blur fitted from the command line: the target is rendered
 /// with `render --exact-filters`, the fit starts from a small, near shadow and moves only
 /// the filter, and the written SVG holds the recovered numbers. Without
@@ -289,42 +323,26 @@ fn fit_exact_filters_recovers_a_drop_shadow() {
               <circle cx="36" cy="28" r="9" fill="rgb(230,80,40)"/></g></svg>"#
         )
     };
-    let truth = write(&dir, "truth.svg", &svg(4.0, 5.0, 2.5));
-    let init = write(&dir, "init.svg", &svg(1.5, 1.5, 1.2));
-    let target = dir.join("target.png");
-    let o = diffsvg(&["render", s(&truth), "-o", s(&target), "--exact-filters"]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let out = dir.join("fitted.svg");
-    let fit = |exact: bool| {
-        let mut args = vec![
-            "fit",
-            s(&init),
-            s(&target),
-            "-o",
-            s(&out),
-            "--iters",
-            "200",
-            "--freeze",
-            "points,colors,opacities",
-            "--lr-filter",
-            "0.2",
-        ];
-        if exact {
-            args.push("--exact-filters");
-        }
-        let o = diffsvg(&args);
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        (
-            std::fs::read_to_string(&out).unwrap(),
-            String::from_utf8_lossy(&o.stderr).into_owned(),
-        )
-    };
+    let fit = fit_toward(
+        &dir,
+        &svg(4.0, 5.0, 2.5),
+        &svg(1.5, 1.5, 1.2),
+        "--exact-filters",
+    );
+    let args = [
+        "--iters",
+        "200",
+        "--freeze",
+        "points,colors,opacities",
+        "--lr-filter",
+        "0.2",
+    ];
     let number = |text: &str, attr: &str| -> f64 {
         let at = text.find(&format!(" {attr}=\"")).expect(attr) + attr.len() + 3;
         let end = text[at..].find(['"', ' ']).unwrap();
         text[at..at + end].parse().unwrap()
     };
-    let (fitted, _) = fit(true);
+    let (fitted, _, _) = fit(&args, true);
     for (attr, want) in [("dx", 4.0), ("dy", 5.0), ("stdDeviation", 2.5)] {
         let got = number(&fitted, attr);
         assert!(
@@ -332,16 +350,16 @@ fn fit_exact_filters_recovers_a_drop_shadow() {
             "{attr}: {got}, want {want}\n{fitted}"
         );
     }
-    let (unmoved, note) = fit(false);
+    let (unmoved, _, note) = fit(&args, false);
     assert!(note.contains("--exact-filters"), "{note}");
     assert_eq!(number(&unmoved, "dx"), 1.5, "{unmoved}");
 }
 
-/// A path whose two subpaths overlap, fitted from the command line toward its own
-/// rendering with `render --exact-overlaps`: with `fit --exact-overlaps` the fit renders
-/// and differentiates the same exact coverage and recovers the drawing; without, the
-/// clamped winding integral over-covers the pixels on the coincident edges, and the fit
-/// ends further off.
+/// A path whose subpaths overlap, fitted from the command line toward its own rendering
+/// with `render --exact-overlaps`: with `fit --exact-overlaps` the fit renders and
+/// differentiates the same exact coverage and recovers the drawing; without, the clamped
+/// winding integral over-covers the pixels on the coincident edges, and the fit ends
+/// further off.
 #[test]
 fn fit_exact_overlaps_matches_an_exact_target() {
     let dir = scratch("fit-exact-overlaps");
@@ -354,30 +372,10 @@ fn fit_exact_overlaps_matches_an_exact_target() {
                   fill="rgb(40,110,220)"/></svg>"#
         )
     };
-    let truth = write(&dir, "truth.svg", &svg(4.3));
-    let init = write(&dir, "init.svg", &svg(5.6));
-    let target = dir.join("target.png");
-    let o = diffsvg(&["render", s(&truth), "-o", s(&target), "--exact-overlaps"]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let out = dir.join("fitted.svg");
+    let fit = fit_toward(&dir, &svg(4.3), &svg(5.6), "--exact-overlaps");
     let psnr = |exact: bool| {
-        let mut args = vec![
-            "fit",
-            s(&init),
-            s(&target),
-            "-o",
-            s(&out),
-            "--iters",
-            "150",
-            "--json",
-        ];
-        if exact {
-            args.push("--exact-overlaps");
-        }
-        let o = diffsvg(&args);
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        let text = String::from_utf8_lossy(&o.stdout);
-        let line = text.lines().last().expect("a JSON line");
+        let (_, out, _) = fit(&["--iters", "150", "--json"], exact);
+        let line = out.lines().last().expect("a JSON line");
         let v: serde_json::Value = serde_json::from_str(line).expect(line);
         v["psnr"].as_f64().expect("psnr")
     };
