@@ -34,6 +34,19 @@ pub struct Common {
     /// Composite the render over this color before comparing (default: transparent).
     #[arg(long, value_parser = parse_color)]
     background: Option<[f32; 4]>,
+    /// Render (and differentiate) the exact coverage where a path overlaps itself, as
+    /// `render --exact-overlaps`.
+    #[arg(long)]
+    exact_overlaps: bool,
+}
+
+impl Common {
+    fn options(&self) -> RenderOptions {
+        RenderOptions {
+            exact_overlaps: self.exact_overlaps,
+            ..RenderOptions::default()
+        }
+    }
 }
 
 /// Arguments of `diffsvg loss`.
@@ -110,7 +123,7 @@ fn load(c: &Common) -> Result<Job> {
 /// Runs `diffsvg loss`.
 pub fn run_loss(a: LossArgs) -> Result<()> {
     let job = load(&a.common)?;
-    let mut img = render(&job.scene, &RenderOptions::default());
+    let mut img = render(&job.scene, &a.common.options());
     if let Some(bg) = job.background {
         img.over_background(bg);
     }
@@ -125,7 +138,7 @@ pub fn run_grad(a: GradArgs) -> Result<GradOutcome> {
         bail!("--tolerance {} must be a positive number", a.tolerance);
     }
     let job = load(&a.common)?;
-    let opts = RenderOptions::default();
+    let opts = a.common.options();
     diffsvg::raster::check_backward_memory(&job.scene, &opts, &a.common.input)?;
     let (loss, mut grad) = analytic(&job.scene, &job.target, job.loss, &opts, job.background);
     if let Some(i) = a.corrupt {
