@@ -15,8 +15,8 @@ use crate::error::{bad, to_py};
 use crate::on_pool;
 use crate::scene::PyScene;
 
-/// Rasterizer settings from the keyword `tolerance` (pixels between a curve and its
-/// chords).
+/// Rasterizer settings from the keywords `tolerance` (pixels between a curve and its
+/// chords) and `exact_overlaps`.
 pub(crate) fn options(tolerance: f64, exact_overlaps: bool) -> PyResult<RenderOptions> {
     if !(tolerance > 0.0 && tolerance <= 10.0) {
         return Err(bad(format!(
@@ -48,9 +48,7 @@ pub(crate) fn render<'py>(
     exact_overlaps: bool,
 ) -> PyResult<Bound<'py, PyArray3<f32>>> {
     let bg = color_in(background, "background")?;
-    let opts = RenderOptions {
-        ..options(tolerance, exact_overlaps)?
-    };
+    let opts = options(tolerance, exact_overlaps)?;
     let s = &scene.inner;
     let sized = match (width, height) {
         (None, None) => None,
@@ -97,9 +95,7 @@ pub(crate) fn render_backward<'py>(
     exact_overlaps: bool,
 ) -> PyResult<Bound<'py, PyArray1<f64>>> {
     let bg = color_in(background, "background")?;
-    let opts = RenderOptions {
-        ..options(tolerance, exact_overlaps)?
-    };
+    let opts = options(tolerance, exact_overlaps)?;
     let mut d = image_in(&d_image, "d_image")?;
     let s = &scene.inner;
     if (d.width, d.height) != (s.width, s.height) {

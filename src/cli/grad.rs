@@ -41,6 +41,7 @@ pub struct Common {
 }
 
 impl Common {
+    /// The render options these arguments ask for (`--exact-overlaps`).
     fn options(&self) -> RenderOptions {
         RenderOptions {
             exact_overlaps: self.exact_overlaps,
