@@ -67,7 +67,8 @@ fn summary<'py>(
 #[pyfunction]
 #[pyo3(signature = (scene, output, res=128, iters=3000, batch=8192, downscale=1, degree=2,
     bound=None, step=0.5, tv_density=None, tv_sh=None, sparsity=None, seed=0, eval_every=0,
-    test_every=None, test_list=None, refine_poses=false, perturb_poses=None, progress=None))]
+    test_every=None, test_list=None, refine_poses=false, perturb_poses=None,
+    align_test_poses=false, progress=None))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn recon_voxel<'py>(
     py: Python<'py>,
@@ -89,6 +90,7 @@ pub(crate) fn recon_voxel<'py>(
     test_list: Option<PathBuf>,
     refine_poses: bool,
     perturb_poses: Option<(f32, f32)>,
+    align_test_poses: bool,
     progress: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     check_output(&output, "vox")?;
@@ -109,6 +111,7 @@ pub(crate) fn recon_voxel<'py>(
         test_list,
         refine_poses,
         perturb_poses: perturb_poses.map(|(d, u)| [d, u]),
+        align_test_poses,
     };
     job.validate().map_err(to_py)?;
     let mut prog = Progress::new(progress);
@@ -149,6 +152,8 @@ pub(crate) fn recon_voxel<'py>(
     d.set_item("batch", out.batch)?;
     set_pose_error(&d, &out.pose_error)?;
     d.set_item("test_psnr_in_frame", out.test_psnr_in_frame)?;
+    d.set_item("test_psnr_aligned", out.test_psnr_aligned.map(|a| a.0))?;
+    d.set_item("test_pose_turn", out.test_psnr_aligned.map(|a| a.1))?;
     Ok(d)
 }
 

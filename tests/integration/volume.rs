@@ -365,6 +365,35 @@ fn recon(scene: &Path, out: &Path, extra: &[&str]) -> Output {
 }
 
 #[test]
+fn recon_voxel_scores_the_test_views_aligned_when_asked() {
+    let dir = scratch("volume_align_test_poses");
+    let scene = small_scene(&dir, "scene");
+    let plain = summary(&recon(&scene, &dir.join("a"), &["--json"]));
+    assert_eq!(plain["test_psnr_aligned"], json!(null), "{plain}");
+    let r = recon(&scene, &dir.join("b"), &["--json", "--align-test-poses"]);
+    assert!(r.status.success(), "{}", stderr(&r));
+    let sum = summary(&r);
+    let (held, aligned) = (
+        sum["test_psnr"].as_f64().unwrap(),
+        sum["test_psnr_aligned"]
+            .as_f64()
+            .expect("a number with the flag"),
+    );
+    let turn = sum["test_pose_turn"].as_f64().unwrap();
+    // The same model as without the flag; its test camera aligned to it only gains.
+    assert_eq!(sum["test_psnr"], plain["test_psnr"], "{sum}");
+    assert!(aligned >= held - 0.05, "{held} dB → {aligned} dB");
+    assert!(turn.is_finite() && turn >= 0.0, "{sum}");
+    // The summary line says it.
+    let r = recon(&scene, &dir.join("c"), &["--align-test-poses"]);
+    assert!(
+        stdout(&r).contains("with the test cameras aligned"),
+        "{}",
+        stdout(&r)
+    );
+}
+
+#[test]
 fn recon_rejects_bad_scenes_cleanly() {
     let dir = scratch("volume_bad_scenes");
     let out = dir.join("out");
