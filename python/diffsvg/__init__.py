@@ -929,6 +929,7 @@ def recon_voxel(scene, output, *, res: int = 128, iters: int = 3000, batch: int 
                 seed: int = 0, eval_every: int = 0, test_every: Optional[int] = None,
                 test_list=None, refine_poses: bool = False,
                 perturb_poses: Optional[Tuple[float, float]] = None,
+                align_test_poses: bool = False,
                 progress: Progress = None) -> ReconInfo:
     """Fits a sparse voxel grid of density and spherical-harmonic color (Plenoxels) to
     the posed photos in the folder ``scene`` and writes it to ``output`` (``.vox``),
@@ -959,6 +960,12 @@ def recon_voxel(scene, output, *, res: int = 128, iters: int = 3000, batch: int 
     whole scene's rigid motion that photos cannot tell is removed, and that motion's size
     (else ``None``); ``test_psnr_in_frame`` is the test PSNR with the test cameras carried
     by that motion into the model's frame (else ``None``).
+
+    ``align_test_poses``: after training, also score the test views with each camera
+    aligned to the model held fixed (test-time pose alignment, the protocol of
+    pose-refining reconstructions; score the runs you compare alike):
+    ``test_psnr_aligned`` (dB) and ``test_pose_turn`` (the mean turn it took, degrees),
+    else ``None``.
     """
     return _native.recon_voxel(
         os.fspath(scene), os.fspath(output), _whole(res, "res"), _whole(iters, "iters", _U64),
@@ -966,7 +973,7 @@ def recon_voxel(scene, output, *, res: int = 128, iters: int = 3000, batch: int 
         bound, step, tv_density, tv_sh, sparsity, _whole(seed, "seed", _U64),
         _whole(eval_every, "eval_every", _U64),
         _whole_or_none(test_every, "test_every", _U64), _path_or_none(test_list),
-        bool(refine_poses), _pair(perturb_poses), progress)
+        bool(refine_poses), _pair(perturb_poses), bool(align_test_poses), progress)
 
 
 def recon_splat(scene, output, *, iters: int = 5000, downscale: int = 1,

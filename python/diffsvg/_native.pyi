@@ -167,6 +167,7 @@ def recon_voxel(scene: str | PathLike[str], output: str | PathLike[str], res: in
                 test_list: Optional[str | PathLike[str]] = None,
                 refine_poses: bool = False,
                 perturb_poses: Optional[Tuple[float, float]] = None,
+                align_test_poses: bool = False,
                 progress: Progress = None) -> ReconInfo: ...
 def recon_splat(scene: str | PathLike[str], output: str | PathLike[str], iters: int = 5000,
                 downscale: int = 1, max_gaussians: int = 300000, initial: int = 50000,

@@ -161,6 +161,8 @@ class ReconInfo(TypedDict):
     occupied: NotRequired[float]
     pose_error: Optional[Dict[str, Tuple[float, float]]]
     test_psnr_in_frame: NotRequired[Optional[float]]
+    test_psnr_aligned: NotRequired[Optional[float]]
+    test_pose_turn: NotRequired[Optional[float]]
 
 
 class Depth(TypedDict):

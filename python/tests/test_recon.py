@@ -86,6 +86,18 @@ def test_perturbed_poses_report_the_frame_as_the_cli_does(tmp_path):
     assert abs(e["before"][0] - 0.5) < 1e-3 and 0 <= e["frame"][0] < 0.5
     plain = diffsvg.recon_voxel(scene, tmp_path / "plain.vox", res=16, iters=2, batch=256)
     assert plain["test_psnr_in_frame"] is None and plain["pose_error"] is None
+    assert plain["test_psnr_aligned"] is None and plain["test_pose_turn"] is None
+
+
+def test_aligned_test_poses_are_scored_as_the_cli_does(tmp_path):
+    scene = write_scene(tmp_path / "ball")
+    info = diffsvg.recon_voxel(scene, tmp_path / "py.vox", res=16, iters=30, batch=256,
+                               align_test_poses=True)
+    cli = cli_summary("recon", "voxel", "--scene", scene, "-o", tmp_path / "cli.vox",
+                      "--res", "16", "--iters", "30", "--batch", "256", "--align-test-poses")
+    assert info["test_psnr_aligned"] == cli["test_psnr_aligned"]
+    assert info["test_pose_turn"] == cli["test_pose_turn"]
+    assert info["test_psnr_aligned"] >= info["test_psnr"] - 0.05
 
 
 def test_recon_splat_equals_the_cli_and_stops(tmp_path):
