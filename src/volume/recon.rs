@@ -944,15 +944,11 @@ pub fn align_voxel_views(
         batch_size: 8192.min(rays.len()),
         seed,
         render: *render,
-        lr_density: [0.0; 2],
-        lr_sh: [0.0; 2],
-        prune_threshold: 0.0,
-        refine_poses: true,
         lr_poses: [2e-3, 2e-5],
-        pivot_poses_from: 0.0,
         anchor_poses: false,
         ..voxel::TrainOptions::default()
-    };
+    }
+    .poses_only();
     let mut held = grid.clone();
     let (_, poses) = voxel::train_with_poses(
         &mut held,
@@ -1390,24 +1386,7 @@ mod tests {
     #[test]
     fn test_views_aligned_to_a_fixed_grid_come_back() {
         use crate::volume::camera::Camera;
-        // Eight colored balls at a cube's corners, in a fixed grid.
-        let corners: Vec<Vec3> = (0..8)
-            .map(|k| Vec3::new((k & 1) as f32, ((k >> 1) & 1) as f32, ((k >> 2) & 1) as f32))
-            .map(|b| b - 0.5)
-            .collect();
-        let ball = |p: Vec3| corners.iter().position(|c| c.distance(p) < 0.3);
-        let mut grid = Grid::from_fn(Vec3::splat(-1.0), Vec3::splat(1.0), 24, 0, |p| {
-            ball(p).map(|_| 30.0)
-        });
-        let positions: Vec<Vec3> = (0..grid.allocated()).map(|s| grid.position(s)).collect();
-        for (s, p) in positions.iter().enumerate() {
-            let k = ball(*p).unwrap_or(0) as f32;
-            grid.sh_mut()[3 * s..3 * s + 3].copy_from_slice(&[
-                8.0 * (k / 7.0 - 0.5),
-                6.0 * p.x,
-                8.0 - 2.0 * k,
-            ]);
-        }
+        let grid = voxel::train::eight_balls();
         let render = RenderSettings::default();
         let truth: Vec<Camera> = (0..4)
             .map(|i| {

@@ -44,7 +44,7 @@
 mod grid;
 pub mod io;
 pub mod render;
-mod train;
+pub(crate) mod train;
 
 pub use grid::{Grid, MAX_RES};
 pub use io::{load, save};

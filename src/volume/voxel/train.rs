@@ -117,6 +117,22 @@ pub struct TrainOptions {
     pub pivot_poses_from: f32,
 }
 
+impl TrainOptions {
+    /// These options with the grid held fixed and only the poses learned: density and SH
+    /// rates zero, no pruning, pose refinement on, pivoted from the start (aligning
+    /// cameras to a finished model, as [`crate::volume::recon::align_voxel_views`] does).
+    pub fn poses_only(self) -> Self {
+        TrainOptions {
+            lr_density: [0.0; 2],
+            lr_sh: [0.0; 2],
+            prune_threshold: 0.0,
+            refine_poses: true,
+            pivot_poses_from: 0.0,
+            ..self
+        }
+    }
+}
+
 impl Default for TrainOptions {
     /// The values measured best on NeRF-synthetic lego at 200×200 (see the module doc):
     /// 3000 iterations of 8192 rays; Adam (β₁ = 0.9, β₂ = 0.99, ε = 1e-8) on densities
@@ -786,6 +802,28 @@ fn add_tv(grid: &Grid, acc: &mut Accum, slots: &[usize], tv_density: f32, tv_sh:
     }
 }
 
+/// A test scene for pose refinement: eight colored balls (radius 0.3) at the corners of
+/// the cube `[−0.5, 0.5]³`, in a 24³ grid of degree 0 over `[−1, 1]³`.
+#[cfg(test)]
+pub(crate) fn eight_balls() -> Grid {
+    use glam::Vec3;
+    let corners: Vec<Vec3> = (0..8)
+        .map(|k| Vec3::new((k & 1) as f32, ((k >> 1) & 1) as f32, ((k >> 2) & 1) as f32))
+        .map(|b| b - 0.5)
+        .collect();
+    let ball = |p: Vec3| corners.iter().position(|c| c.distance(p) < 0.3);
+    let mut grid = Grid::from_fn(Vec3::splat(-1.0), Vec3::splat(1.0), 24, 0, |p| {
+        ball(p).map(|_| 30.0)
+    });
+    let positions: Vec<Vec3> = (0..grid.allocated()).map(|s| grid.position(s)).collect();
+    for (s, p) in positions.iter().enumerate() {
+        let k = ball(*p).unwrap_or(0) as f32;
+        let sh = &mut grid.sh_mut()[3 * s..3 * s + 3];
+        sh.copy_from_slice(&[8.0 * (k / 7.0 - 0.5), 6.0 * p.x, 8.0 - 2.0 * k]);
+    }
+    grid
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -877,21 +915,7 @@ mod tests {
     #[test]
     fn pose_refinement_recovers_perturbed_cameras() {
         use crate::volume::camera::Camera;
-        // Eight colored balls at a cube's corners, in a fixed grid.
-        let corners: Vec<Vec3> = (0..8)
-            .map(|k| Vec3::new((k & 1) as f32, ((k >> 1) & 1) as f32, ((k >> 2) & 1) as f32))
-            .map(|b| b * 1.0 - 0.5)
-            .collect();
-        let ball = |p: Vec3| corners.iter().position(|c| c.distance(p) < 0.3);
-        let mut grid = Grid::from_fn(Vec3::splat(-1.0), Vec3::splat(1.0), 24, 0, |p| {
-            ball(p).map(|_| 30.0)
-        });
-        let positions: Vec<Vec3> = (0..grid.allocated()).map(|s| grid.position(s)).collect();
-        for (s, p) in positions.iter().enumerate() {
-            let k = ball(*p).unwrap_or(0) as f32;
-            let sh = &mut grid.sh_mut()[3 * s..3 * s + 3];
-            sh.copy_from_slice(&[8.0 * (k / 7.0 - 0.5), 6.0 * p.x, 8.0 - 2.0 * k]);
-        }
+        let grid = super::eight_balls();
         let settings = RenderSettings::default();
         let truth: Vec<Camera> = (0..8)
             .map(|i| {
@@ -908,18 +932,16 @@ mod tests {
             rays.extend(l.rays());
             view_of_ray.extend(std::iter::repeat_n(v as u32, 32 * 28));
         }
-        let opts = |anchor_poses| TrainOptions {
-            iterations: 300,
-            batch_size: 2048,
-            render: settings,
-            lr_density: [0.0; 2],
-            lr_sh: [0.0; 2],
-            prune_threshold: 0.0,
-            refine_poses: true,
-            lr_poses: [1e-2, 1e-4],
-            pivot_poses_from: 0.0,
-            anchor_poses,
-            ..TrainOptions::default()
+        let opts = |anchor_poses| {
+            TrainOptions {
+                iterations: 300,
+                batch_size: 2048,
+                render: settings,
+                lr_poses: [1e-2, 1e-4],
+                anchor_poses,
+                ..TrainOptions::default()
+            }
+            .poses_only()
         };
         let error = |poses: &[PoseDelta]| pose::mean_error(&truth, &loaded, poses);
         let mse = |poses: &[PoseDelta]| -> f64 {
