@@ -814,12 +814,8 @@ pub(crate) fn fit_voxel(
     }
     let loaded = perturb_training(&mut data, job.perturb_poses, job.seed);
     let (rays, colors) = pixels(&data.train);
-    let view_of_ray: Vec<u32> = if job.refine_poses {
-        data.train
-            .iter()
-            .enumerate()
-            .flat_map(|(i, v)| std::iter::repeat_n(i as u32, v.rgb.len()))
-            .collect()
+    let view_of_ray = if job.refine_poses {
+        view_of_each_pixel(&data.train)
     } else {
         Vec::new()
     };
@@ -934,11 +930,7 @@ pub fn align_voxel_views(
     seed: u64,
 ) -> Result<(Vec<View>, f64)> {
     let (rays, colors) = pixels(views);
-    let view_of_ray: Vec<u32> = views
-        .iter()
-        .enumerate()
-        .flat_map(|(i, v)| std::iter::repeat_n(i as u32, v.rgb.len()))
-        .collect();
+    let view_of_ray = view_of_each_pixel(views);
     let opts = voxel::TrainOptions {
         iterations: 600,
         batch_size: 8192.min(rays.len()),
@@ -1284,6 +1276,16 @@ fn pixels(views: &[View]) -> (Vec<Ray>, Vec<[f32; 3]>) {
         colors.extend_from_slice(&v.rgb);
     }
     (rays, colors)
+}
+
+/// The index in `views` of each pixel of [`pixels`]`(views)`: what pose refinement
+/// reads to know whose camera a ray came from.
+fn view_of_each_pixel(views: &[View]) -> Vec<u32> {
+    views
+        .iter()
+        .enumerate()
+        .flat_map(|(i, v)| std::iter::repeat_n(i as u32, v.rgb.len()))
+        .collect()
 }
 
 /// Mean PSNR (dB, capped at 99 per view) of `views`, each rendered along its rays
