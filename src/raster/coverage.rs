@@ -238,15 +238,33 @@ fn line_rows<V: CellVisitor>(
     dir: f64,
     v: &mut V,
 ) {
+    let h = from_index(acc.h);
+    let ytop = ay.max(0.0);
+    let ybot = by.min(h);
+    // Both are non-negative here (`ytop ≥ 0`, `ybot > ytop`): floor and ceil by casts.
+    let rows = to_index(floor_non_negative(ytop))..to_index(ceil_non_negative(ybot)).min(acc.h);
+    if ax == bx && ax.is_finite() {
+        return vertical_rows(acc, ax, ytop, ybot, dir, rows, v);
+    }
+    sloped_rows(acc, [ax, ay], [bx, by], dir, rows, v);
+}
+
+/// [`line_rows`]'s loop, for any segment.
+fn sloped_rows<V: CellVisitor>(
+    acc: &mut Cells<f32>,
+    [ax, ay]: Point,
+    [bx, by]: Point,
+    dir: f64,
+    rows: std::ops::Range<usize>,
+    v: &mut V,
+) {
     let (w, h) = (acc.w, from_index(acc.h));
     let max_col = from_index(w - 1);
     let dxdy = (bx - ax) / (by - ay);
     let ytop = ay.max(0.0);
     let ybot = by.min(h);
     let mut x = ax + (ytop - ay) * dxdy;
-    // Both are non-negative here (`ytop ≥ 0`, `ybot > ytop`): floor and ceil by casts.
-    let mut row = to_index(floor_non_negative(ytop));
-    let last = to_index(ceil_non_negative(ybot)).min(acc.h);
+    let (mut row, last) = (rows.start, rows.end);
     while row < last {
         let r = from_index(row);
         let dy = (r + 1.0).min(ybot) - r.max(ytop);
@@ -262,6 +280,44 @@ fn line_rows<V: CellVisitor>(
         v.piece(row, c0, c1);
         x = xnext;
         row += 1;
+    }
+}
+
+/// [`line_rows`] for a vertical segment at local column position `x`, over `rows` (its
+/// clipped span `ytop..ybot`). Every whole row gets the same two values, so they are
+/// worked out once: the loop's own values, since its `x` never moves (`x + 0·dy`) and its
+/// `dy` is exactly 1 there; the end rows go through [`row_piece`] as in the loop. Frames,
+/// rectangles and flags' stripes are mostly such edges, hundreds of rows long.
+fn vertical_rows<V: CellVisitor>(
+    acc: &mut Cells<f32>,
+    x: f64,
+    ytop: f64,
+    ybot: f64,
+    dir: f64,
+    rows: std::ops::Range<usize>,
+    v: &mut V,
+) {
+    let w = acc.w;
+    let max_col = from_index(w - 1);
+    let xl = x.clamp(0.0, max_col);
+    let xlf = floor_non_negative(xl);
+    let col = to_index(xlf);
+    let xm = 0.5 * (xl + xl) - xlf;
+    let (left, right) = ((dir * (1.0 - xm)) as f32, (dir * xm) as f32);
+    for row in rows {
+        let r = from_index(row);
+        let line = &mut acc.data[row * w..(row + 1) * w];
+        if r >= ytop && r + 1.0 <= ybot {
+            line[col] += left;
+            if col + 1 < w {
+                line[col + 1] += right;
+            }
+            v.piece(row, col, col);
+        } else {
+            let dy = (r + 1.0).min(ybot) - r.max(ytop);
+            let (c0, c1) = row_piece(line, x, x, dy * dir, max_col);
+            v.piece(row, c0, c1);
+        }
     }
 }
 
@@ -950,6 +1006,50 @@ mod tests {
             assert_eq!(bits(&fast), bits(&slow), "case {case}");
         }
         assert!(shortcuts > 10_000, "only {shortcuts} one-row segments");
+    }
+
+    #[test]
+    fn vertical_segments_have_the_bits_of_the_row_loop() {
+        let mut rng = crate::scene::random::Rng::new(12);
+        let (mut fast, mut slow) = (Cells::default(), Cells::default());
+        let mut whole_rows = 0;
+        for case in 0..20_000 {
+            let (x0, y0) = if case % 2 == 0 { (0, 0) } else { (3, -2) };
+            fast.reset(x0, y0, 9, 12);
+            slow.reset(x0, y0, 9, 12);
+            // Columns inside, on grid lines, on the last column and beyond it (clamped);
+            // ends inside, on grid lines and beyond the rows.
+            let x = match case % 5 {
+                0 => rng.range(0.0, 8.0).round(),
+                1 => 8.0 + rng.range(0.0, 3.0),
+                _ => rng.range(0.0, 8.0),
+            } + x0 as f64;
+            let mut y = || match rng.next_u64() % 4 {
+                0 => rng.range(-3.0, 15.0).round(),
+                _ => rng.range(-3.0, 15.0),
+            } + y0 as f64;
+            let (ya, yb) = (y(), y());
+            for (c, by_loop) in [(&mut fast, false), (&mut slow, true)] {
+                let Some((a, b, dir)) = downward_local(c, [x, ya], [x, yb]) else {
+                    continue;
+                };
+                if by_loop {
+                    let rows = to_index(floor_non_negative(a[1].max(0.0)))
+                        ..to_index(ceil_non_negative(b[1].min(12.0))).min(12);
+                    sloped_rows(c, a, b, dir, rows, &mut ());
+                } else {
+                    line_rows(c, a, b, dir, &mut ());
+                    whole_rows += (b[1].min(12.0).floor() - a[1].max(0.0).ceil()).max(0.0) as usize;
+                }
+            }
+            let bits = |c: &Cells<f32>| c.data.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+            assert_eq!(
+                bits(&fast),
+                bits(&slow),
+                "case {case}: x {x}, y {ya} → {yb}"
+            );
+        }
+        assert!(whole_rows > 50_000, "only {whole_rows} whole rows");
     }
 
     #[test]

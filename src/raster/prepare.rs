@@ -236,6 +236,9 @@ pub struct Prepared {
     /// Tests' reference for exact overlaps: every cell of every item searched.
     #[cfg(test)]
     pub(crate) search_everywhere: bool,
+    /// Tests' reference for the sparse rows of solid items: every row drawn whole.
+    #[cfg(test)]
+    pub(crate) dense_rows: bool,
     /// [`RenderOptions::exact_filters`](super::RenderOptions::exact_filters).
     pub(crate) exact_filters: bool,
     /// The groups with filters, in the order of their [`Op::Push`]es.
@@ -345,6 +348,8 @@ fn prepare_with(
         exact_overlaps: false,
         #[cfg(test)]
         search_everywhere: false,
+        #[cfg(test)]
+        dense_rows: false,
         exact_filters,
         filters: Vec::new(),
     };
