@@ -1520,31 +1520,38 @@ fn walk(p0: Point, p1: Point, bx: [f64; 4], f: &mut impl FnMut(usize, usize, f64
 }
 
 /// Whether no pixel can hold three winding values: every ring is simple (convex, or
-/// monotone in y with its two sides apart) and no two rings share a pixel. `false` when
-/// unsure (many rings close together, a ring neither convex nor y-monotone).
+/// monotone in y with its two sides apart), and any two rings that can share a pixel (by
+/// their boxes) are one convex ring holding the other strictly inside, wound the other
+/// way: a stroke's outline around a convex shape (every file's frame), a ring with a
+/// hole. Then a pixel holds the windings of at most two adjacent regions, 0 and that of
+/// the space between. `false` when unsure (many rings close together, a ring neither
+/// convex nor y-monotone, rings nested and wound alike, which give three values).
 pub(crate) fn rings_cannot_overlap(pts: &[Point], rings: &[(usize, usize)]) -> bool {
     /// Pairs of rings compared at most, before giving up.
     const MAX_PAIRS: usize = 4096;
-    if !rings
-        .iter()
-        .all(|&(s, n)| ring_is_convex(&pts[s..s + n]) || ring_is_y_monotone_simple(&pts[s..s + n]))
-    {
+    /// Vertex-against-edge tests of nested rings at most, before giving up.
+    const MAX_INSIDE_TESTS: usize = 1 << 16;
+    let ring = |i: usize| {
+        let (s, n) = rings[i];
+        &pts[s..s + n]
+    };
+    let convex: Vec<bool> = (0..rings.len()).map(|i| ring_is_convex(ring(i))).collect();
+    if !(0..rings.len()).all(|i| convex[i] || ring_is_y_monotone_simple(ring(i))) {
         return false;
     }
     if rings.len() == 1 {
         return true;
     }
     // The cells each ring's box touches, `[x0, y0, x1, y1]` inclusive.
-    let boxes: Vec<[f64; 4]> = rings
-        .iter()
-        .map(|&(s, n)| {
+    let boxes: Vec<[f64; 4]> = (0..rings.len())
+        .map(|i| {
             let mut b = [
                 f64::INFINITY,
                 f64::INFINITY,
                 f64::NEG_INFINITY,
                 f64::NEG_INFINITY,
             ];
-            for q in &pts[s..s + n] {
+            for q in ring(i) {
                 b = [
                     b[0].min(q[0]),
                     b[1].min(q[1]),
@@ -1555,9 +1562,43 @@ pub(crate) fn rings_cannot_overlap(pts: &[Point], rings: &[(usize, usize)]) -> b
             b.map(floor_f64)
         })
         .collect();
-    // Any two sharing a cell, or too many to tell.
+    // Any two sharing a cell that are not nested apart, or too many to tell.
+    let mut tests = MAX_INSIDE_TESTS;
+    let mut nested_apart = |i: usize, j: usize| {
+        let (a, b) = (ring(i), ring(j));
+        let (sa, sb) = (ring_area(a), ring_area(b));
+        if !(sa * sb < 0.0) || a.len() * b.len() > tests {
+            return false;
+        }
+        tests -= a.len() * b.len();
+        (convex[i] && b.iter().all(|&q| strictly_inside_convex(a, sa, q)))
+            || (convex[j] && a.iter().all(|&q| strictly_inside_convex(b, sb, q)))
+    };
     let mut scratch = sweep::Scratch::default();
-    sweep::overlapping_pairs(&boxes, MAX_PAIRS, &mut scratch, |_, _| false) == sweep::Pairs::All
+    sweep::overlapping_pairs(&boxes, MAX_PAIRS, &mut scratch, &mut nested_apart)
+        == sweep::Pairs::All
+}
+
+/// Twice the signed area of a ring (shoelace; positive when it turns from +x to +y).
+fn ring_area(ring: &[Point]) -> f64 {
+    let n = ring.len();
+    (0..n)
+        .map(|k| {
+            let (a, b) = (ring[k], ring[(k + 1) % n]);
+            a[0] * b[1] - b[0] * a[1]
+        })
+        .sum()
+}
+
+/// Whether `q` lies strictly inside the convex ring `ring`, whose signed area
+/// ([`ring_area`]) is `area`: strictly on the inner side of every edge of non-zero length.
+fn strictly_inside_convex(ring: &[Point], area: f64, q: Point) -> bool {
+    let n = ring.len();
+    (0..n).all(|k| {
+        let (a, b) = (ring[k], ring[(k + 1) % n]);
+        let e = [b[0] - a[0], b[1] - a[1]];
+        (e[0] == 0.0 && e[1] == 0.0) || area * (e[0] * (q[1] - a[1]) - e[1] * (q[0] - a[0])) > 0.0
+    })
 }
 
 /// Whether a ring is monotone in y (its direction's y component changes sign twice, with
@@ -2294,5 +2335,41 @@ mod tests {
             [3.8, 1.8],
         ];
         assert!(!rings_cannot_overlap(&near, &[(0, 3), (3, 3)]));
+        // A frame: one ring inside the other, a pixel apart, wound the other way (a
+        // stroke's outline): two windings in any pixel. Wound alike, the inner region
+        // winds twice; the inner ring touching the outer or poking out of it, or an outer
+        // ring that is not convex, leave it unsure.
+        let rect = |x0: f64, y0: f64, x1: f64, y1: f64, cw: bool| {
+            let r = vec![[x0, y0], [x1, y0], [x1, y1], [x0, y1]];
+            if cw {
+                r
+            } else {
+                r.into_iter().rev().collect::<Vec<Point>>()
+            }
+        };
+        let frame = |inner: Vec<Point>, outer_cw: bool| {
+            let mut pts = rect(0.5, 0.5, 199.5, 199.5, outer_cw);
+            let n = inner.len();
+            pts.extend(inner);
+            rings_cannot_overlap(&pts, &[(0, 4), (4, n)])
+                && rings_cannot_overlap(&pts, &[(4, n), (0, 4)])
+        };
+        assert!(frame(rect(1.5, 1.5, 198.5, 198.5, false), true));
+        assert!(frame(rect(1.5, 1.5, 198.5, 198.5, true), false));
+        assert!(!frame(rect(1.5, 1.5, 198.5, 198.5, true), true));
+        assert!(!frame(rect(0.5, 1.5, 198.5, 198.5, false), true));
+        assert!(!frame(rect(1.5, 1.5, 200.0, 198.5, false), true));
+        let mut notched = rect(1.5, 1.5, 198.5, 198.5, false);
+        notched.insert(2, [100.0, 150.0]);
+        assert!(
+            frame(notched.clone(), true),
+            "a y-monotone hole in a convex ring"
+        );
+        let mut pts = notched;
+        pts.extend(rect(10.0, 160.0, 20.0, 170.0, true));
+        assert!(
+            !rings_cannot_overlap(&pts, &[(0, 5), (5, 4)]),
+            "a ring inside a ring that is not convex"
+        );
     }
 }
