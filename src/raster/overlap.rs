@@ -1879,7 +1879,7 @@ mod tests {
     #[test]
     fn searching_the_tagged_cells_alone_is_exact() {
         let mut rng = Rng::new(29);
-        let (mut none, mut fewer) = (0, 0);
+        let (mut none, mut fewer, mut searched) = (0, 0, 0);
         for case in 0..150 {
             let n = 3 + rng.below(9);
             let c = [rng.range(8.0, 12.0), rng.range(8.0, 12.0)];
@@ -1963,13 +1963,17 @@ mod tests {
                     "case {case} even-odd {evenodd}: off by {worst}"
                 );
                 none += (tagged == 0) as usize;
-                fewer += (tagged < everywhere) as usize;
+                // Items that `rings_cannot_overlap` settles are searched in neither.
+                if p.items.iter().any(|it| it.can_overlap) {
+                    searched += 1;
+                    fewer += (tagged < everywhere) as usize;
+                }
             }
         }
         assert!(none >= 20, "only {none} of 300 need no search");
         assert!(
-            fewer >= 150,
-            "only {fewer} of 300 search fewer cells than all"
+            searched >= 200 && fewer >= searched / 2,
+            "only {fewer} of the {searched} searched search fewer cells than all"
         );
     }
 
