@@ -26,13 +26,20 @@ pub(crate) fn chord_count(p: &[Point; 4], tolerance: f64, visible: [f64; 4]) -> 
     {
         return 1;
     }
-    let dd = |a: &Point, b: &Point, c: &Point| {
-        let x = a[0] - 2.0 * b[0] + c[0];
-        let y = a[1] - 2.0 * b[1] + c[1];
-        x.hypot(y)
+    // The second differences' larger length, through its square: `hypot` and `ceil` are
+    // library calls on baseline x86-64, and this runs for every cubic of every render
+    // (a twentieth of a line of text's). A square that overflows takes `hypot`.
+    let second = |a: &Point, b: &Point, c: &Point| {
+        [a[0] - 2.0 * b[0] + c[0], a[1] - 2.0 * b[1] + c[1]]
     };
-    let d = dd(&p[0], &p[1], &p[2]).max(dd(&p[1], &p[2], &p[3]));
-    let n = (0.75 * d / tolerance.max(1e-6)).sqrt().ceil();
+    let (u, v) = (second(&p[0], &p[1], &p[2]), second(&p[1], &p[2], &p[3]));
+    let dd = (u[0] * u[0] + u[1] * u[1]).max(v[0] * v[0] + v[1] * v[1]);
+    let d = if dd < 1e300 {
+        dd.sqrt()
+    } else {
+        u[0].hypot(u[1]).max(v[0].hypot(v[1]))
+    };
+    let n = crate::raster::coverage::ceil_f64((0.75 * d / tolerance.max(1e-6)).sqrt());
     if n.is_finite() {
         (n as u32).clamp(1, crate::limits::MAX_CHORDS)
     } else {
