@@ -477,36 +477,43 @@ impl BandRenderer<'_> {
         let spans = &mut self.scratch.spans;
         spans.clear();
         let mut s = 0.0f32;
+        // The start of the stretch being drawn, if any.
+        let mut open: Option<usize> = None;
         let full = w - w % LANES;
-        for k in (0..full).step_by(LANES) {
-            let d = &mut deltas[k..k + LANES];
+        let (d_full, d_rest) = deltas.split_at_mut(full);
+        let (o_full, o_rest) = out.split_at_mut(full);
+        for (i, (d, o)) in d_full
+            .chunks_exact_mut(LANES)
+            .zip(o_full.chunks_exact_mut(LANES))
+            .enumerate()
+        {
             if all_zero(d) {
                 if s == 0.0 {
+                    if let Some(a) = open.take() {
+                        spans.push((a, i * LANES));
+                    }
                     continue;
                 }
-                out[k..k + LANES].fill(s);
+                o.fill(s);
             } else {
-                for (c, o) in d.iter_mut().zip(&mut out[k..k + LANES]) {
+                for (c, o) in d.iter_mut().zip(o) {
                     s += *c;
                     *c = 0.0;
                     *o = s;
                 }
             }
-            match spans.last_mut() {
-                Some(last) if last.1 == k => last.1 = k + LANES,
-                _ => spans.push((k, k + LANES)),
-            }
+            open.get_or_insert(i * LANES);
         }
         if full < w {
-            for (c, o) in deltas[full..].iter_mut().zip(&mut out[full..]) {
+            for (c, o) in d_rest.iter_mut().zip(o_rest) {
                 s += *c;
                 *c = 0.0;
                 *o = s;
             }
-            match spans.last_mut() {
-                Some(last) if last.1 == full => last.1 = w,
-                _ => spans.push((full, w)),
-            }
+            open.get_or_insert(full);
+        }
+        if let Some(a) = open {
+            spans.push((a, w));
         }
         let cols = dst.len();
         let sc = &mut self.scratch;

@@ -29,9 +29,8 @@ pub(crate) fn chord_count(p: &[Point; 4], tolerance: f64, visible: [f64; 4]) -> 
     // The second differences' larger length, through its square: `hypot` and `ceil` are
     // library calls on baseline x86-64, and this runs for every cubic of every render
     // (a twentieth of a line of text's). A square that overflows takes `hypot`.
-    let second = |a: &Point, b: &Point, c: &Point| {
-        [a[0] - 2.0 * b[0] + c[0], a[1] - 2.0 * b[1] + c[1]]
-    };
+    let second =
+        |a: &Point, b: &Point, c: &Point| [a[0] - 2.0 * b[0] + c[0], a[1] - 2.0 * b[1] + c[1]];
     let (u, v) = (second(&p[0], &p[1], &p[2]), second(&p[1], &p[2], &p[3]));
     let dd = (u[0] * u[0] + u[1] * u[1]).max(v[0] * v[0] + v[1] * v[1]);
     let d = if dd < 1e300 {
