@@ -49,7 +49,7 @@ pub(crate) struct Contour {
 pub(crate) struct Flattened {
     /// Vertices in device pixels.
     pub(crate) pts: Vec<Point>,
-    /// Provenance of each vertex.
+    /// Provenance of each vertex (empty when not asked for, see [`flatten`]).
     pub(crate) src: Vec<FlatSource>,
     /// Whether vertex `i` ends an original segment (a corner where a join is drawn) rather
     /// than lying inside a flattened curve.
@@ -63,12 +63,14 @@ pub(crate) struct Flattened {
 pub(crate) type ChordCounts = Vec<u32>;
 
 /// Flattens `path`. With `counts`, uses those chord counts (one per segment, as returned
-/// in the second value) instead of computing them.
+/// in the second value) instead of computing them. Without `sources`, [`Flattened::src`]
+/// stays empty (a forward render never reads it).
 pub(crate) fn flatten(
     path: &Path,
     tolerance: f64,
     visible: [f64; 4],
     counts: Option<&[u32]>,
+    sources: bool,
 ) -> (Flattened, ChordCounts) {
     // Chord counts first, so that the vertex lists are allocated once.
     let mut used = Vec::with_capacity(path.subpaths.iter().map(|sp| sp.segments()).sum());
@@ -83,7 +85,7 @@ pub(crate) fn flatten(
     let verts = path.subpaths.len() + used.iter().map(|&n| n as usize).sum::<usize>();
     let mut out = Flattened {
         pts: Vec::with_capacity(verts),
-        src: Vec::with_capacity(verts),
+        src: Vec::with_capacity(if sources { verts } else { 0 }),
         corner: Vec::with_capacity(verts),
         contours: Vec::with_capacity(path.subpaths.len()),
     };
@@ -91,10 +93,12 @@ pub(crate) fn flatten(
     for sp in &path.subpaths {
         let start = out.pts.len();
         out.pts.push(path.points[sp.start]);
-        out.src.push(FlatSource {
-            first: sp.start as u32,
-            t: 0.0,
-        });
+        if sources {
+            out.src.push(FlatSource {
+                first: sp.start as u32,
+                t: 0.0,
+            });
+        }
         out.corner.push(true);
         for k in 0..sp.segments() {
             let first = sp.start + 3 * k;
@@ -104,10 +108,12 @@ pub(crate) fn flatten(
             for j in 1..=n {
                 let t = j as f64 / n as f64;
                 out.pts.push(if j == n { p[3] } else { eval(&p, t) });
-                out.src.push(FlatSource {
-                    first: first as u32,
-                    t,
-                });
+                if sources {
+                    out.src.push(FlatSource {
+                        first: first as u32,
+                        t,
+                    });
+                }
                 out.corner.push(j == n);
             }
         }
@@ -166,7 +172,7 @@ mod tests {
         path.cubic_to([30.0, 0.0], [30.0, 30.0], [0.0, 30.0]);
         path.line_to([0.0, 10.0]);
         path.close();
-        let (f, counts) = flatten(&path, 0.1, CANVAS, None);
+        let (f, counts) = flatten(&path, 0.1, CANVAS, None, true);
         assert_eq!(counts.len(), 2);
         assert_eq!(counts[1], 1);
         assert_eq!(f.pts.len(), 1 + counts[0] as usize + 1);
@@ -182,7 +188,7 @@ mod tests {
             assert!((e[0] - q[0]).abs() < 1e-9 && (e[1] - q[1]).abs() < 1e-9);
         }
         assert!(f.contours[0].closed);
-        let (g, _) = flatten(&path, 0.1, CANVAS, Some(&[3, 1]));
+        let (g, _) = flatten(&path, 0.1, CANVAS, Some(&[3, 1]), true);
         assert_eq!(g.pts.len(), 5);
     }
 }

@@ -514,7 +514,7 @@ fn path_dash_cost(
     }
     let inv = frame_inverse(s)?;
     let visible = flatten_rect(path, width, height);
-    let (flat, _) = flatten(path, tolerance, visible, fixed);
+    let (flat, _) = flatten(path, tolerance, visible, fixed, false);
     let fpts: Vec<Point> = flat
         .pts
         .iter()
@@ -786,7 +786,7 @@ fn build_path(
     cut_dashes: bool,
 ) -> Built {
     let visible = flatten_rect(path, width, height);
-    let (flat, counts) = flatten(path, tolerance, visible, fixed);
+    let (flat, counts) = flatten(path, tolerance, visible, fixed, keep);
     let mut geom = PathGeom {
         flat,
         counts,
