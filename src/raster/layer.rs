@@ -33,12 +33,29 @@ pub(crate) fn apply_mask(
     mask: Option<(&[[f32; 4]], Area)>,
     kind: MaskKind,
 ) {
+    let scale = |c: &mut [f32; 4], m: f32| {
+        for v in c.iter_mut() {
+            *v *= m;
+        }
+    };
     for y in ca.y0..ca.y0 + ca.h {
-        for x in ca.x0..ca.x0 + ca.w {
-            let m = factor_at(mask, x, y, kind);
-            let c = &mut content[ca.index(x, y)];
-            for v in c.iter_mut() {
-                *v *= m;
+        let row = &mut content[ca.index(ca.x0, y)..][..ca.w];
+        // The columns `lo..hi` (device) of this row inside the mask; outside, factor 0.
+        let (lo, hi) = match mask {
+            Some((_, ma)) if y >= ma.y0 && y < ma.y0 + ma.h => {
+                let lo = ma.x0.clamp(ca.x0, ca.x0 + ca.w);
+                (lo, (ma.x0 + ma.w).clamp(lo, ca.x0 + ca.w))
+            }
+            _ => (ca.x0, ca.x0),
+        };
+        let (left, rest) = row.split_at_mut(lo - ca.x0);
+        let (mid, right) = rest.split_at_mut(hi - lo);
+        for c in left.iter_mut().chain(right) {
+            scale(c, 0.0);
+        }
+        if let Some((m, ma)) = mask.filter(|_| lo < hi) {
+            for (c, &px) in mid.iter_mut().zip(&m[ma.index(lo, y)..][..hi - lo]) {
+                scale(c, mask_factor(px, kind));
             }
         }
     }
@@ -113,7 +130,19 @@ pub(crate) fn composite_layer(
         let src = &top[r * ta.w..][..ta.w];
         let dst = &mut below[ba.index(ta.x0, ta.y0 + r)..][..ta.w];
         if blend == BlendMode::Normal {
-            for (d, s) in dst.iter_mut().zip(src) {
+            // Eight transparent pixels of the layer leave the ones below as they are
+            // (`over` of a zero source is `0 + d·1`): skipped.
+            let mut dd = dst.chunks_exact_mut(8);
+            let mut ss = src.chunks_exact(8);
+            for (d8, s8) in (&mut dd).zip(&mut ss) {
+                if s8.iter().all(|p| super::render::all_zero(p)) {
+                    continue;
+                }
+                for (d, s) in d8.iter_mut().zip(s8) {
+                    over(d, *s, opacity);
+                }
+            }
+            for (d, s) in dd.into_remainder().iter_mut().zip(ss.remainder()) {
                 over(d, *s, opacity);
             }
             continue;
