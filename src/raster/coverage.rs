@@ -638,22 +638,8 @@ fn ceil_non_negative(x: f64) -> f64 {
     if t < x { t + 1.0 } else { t }
 }
 
-/// `x.floor()` for any `x`, without the library call that baseline x86-64 makes of it.
-#[inline]
-pub(crate) fn floor_f64(x: f64) -> f64 {
-    if x.abs() < 4.5e15 {
-        let t = (x as i64) as f64;
-        if t > x { t - 1.0 } else { t }
-    } else {
-        x.floor()
-    }
-}
-
-/// `x.ceil()` for any `x`, as `−floor(−x)` (exact), without a library call.
-#[inline]
-pub(crate) fn ceil_f64(x: f64) -> f64 {
-    -floor_f64(-x)
-}
+/// (`floor` and `ceil` of any `f64` live beside the curve math, which uses them too.)
+pub(crate) use crate::scene::geom::{ceil_f64, floor_f64};
 
 /// `x.floor()`, without the library call that baseline x86-64 makes of it.
 #[inline]
@@ -960,6 +946,11 @@ mod tests {
         }
     }
 
+    /// The bits of every value of `c`.
+    fn bits(c: &Cells<f32>) -> Vec<u32> {
+        c.data.iter().map(|v| v.to_bits()).collect()
+    }
+
     /// [`line_local`] without its one-row shortcut: the general row loop for every segment.
     fn line_local_by_rows(acc: &mut Cells<f32>, p0: Point, p1: Point) {
         if let Some((a, b, dir)) = downward_local(acc, p0, p1) {
@@ -1002,7 +993,6 @@ mod tests {
                     shortcuts += 1;
                 }
             }
-            let bits = |c: &Cells<f32>| c.data.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
             assert_eq!(bits(&fast), bits(&slow), "case {case}");
         }
         assert!(shortcuts > 10_000, "only {shortcuts} one-row segments");
@@ -1042,7 +1032,6 @@ mod tests {
                     whole_rows += (b[1].min(12.0).floor() - a[1].max(0.0).ceil()).max(0.0) as usize;
                 }
             }
-            let bits = |c: &Cells<f32>| c.data.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
             assert_eq!(
                 bits(&fast),
                 bits(&slow),

@@ -8,6 +8,26 @@
 
 use super::Point;
 
+// ---- rounding without library calls --------------------------------------------------
+
+/// `x.floor()` for any `x`, without the library call that baseline x86-64 makes of it
+/// (truncating casts are single instructions; huge and non-finite values take `floor`).
+#[inline]
+pub(crate) fn floor_f64(x: f64) -> f64 {
+    if x.abs() < 4.5e15 {
+        let t = (x as i64) as f64;
+        if t > x { t - 1.0 } else { t }
+    } else {
+        x.floor()
+    }
+}
+
+/// `x.ceil()` for any `x`, as `−floor(−x)` (exact), without a library call.
+#[inline]
+pub(crate) fn ceil_f64(x: f64) -> f64 {
+    -floor_f64(-x)
+}
+
 // ---- how finely the rasterizer flattens and strokes (also counted at load) ----------
 
 /// The rasterizer's default flattening tolerance, device pixels
@@ -38,7 +58,7 @@ pub(crate) fn chord_count(p: &[Point; 4], tolerance: f64, visible: [f64; 4]) -> 
     } else {
         u[0].hypot(u[1]).max(v[0].hypot(v[1]))
     };
-    let n = crate::raster::coverage::ceil_f64((0.75 * d / tolerance.max(1e-6)).sqrt());
+    let n = ceil_f64((0.75 * d / tolerance.max(1e-6)).sqrt());
     if n.is_finite() {
         (n as u32).clamp(1, crate::limits::MAX_CHORDS)
     } else {
