@@ -13,7 +13,7 @@ use diffsvg::choice::Choice as _;
 use diffsvg::fit::load_target_with;
 use diffsvg::fit::vectorize::{Event, Mode, VectorizeOptions, vectorize};
 use diffsvg::image_io::side_by_side;
-use diffsvg::raster::{RenderOptions, render};
+use diffsvg::raster::render;
 
 /// Arguments of `diffsvg vectorize`.
 #[derive(clap::Args, Debug)]
@@ -54,6 +54,11 @@ pub struct Args {
     /// Also write `<output>.compare.png`: target and result side by side.
     #[arg(long)]
     compare: bool,
+    /// Render and differentiate the exact coverage where a path overlaps itself (as
+    /// `fit --exact-overlaps`); without it those pixels take the clamped winding
+    /// integral, which over-covers them.
+    #[arg(long)]
+    exact_overlaps: bool,
     #[command(flatten)]
     optim: OptimArgs,
     /// The fonts of an SVG target's `<text>`.
@@ -96,7 +101,8 @@ pub fn run(a: Args) -> Result<()> {
         (Some(_), None) => a.max_paths.unwrap_or(512),
         (None, p) => p.unwrap_or(64),
     };
-    let fit = a.optim.fit_options(a.iters)?;
+    let mut fit = a.optim.fit_options(a.iters)?;
+    fit.render.exact_overlaps = a.exact_overlaps;
     let defaults = VectorizeOptions::default();
     let opts = VectorizeOptions {
         mode,
@@ -140,7 +146,7 @@ pub fn run(a: Args) -> Result<()> {
     reporter.finish()?;
     let out = out?;
     let compare = a.compare.then(|| {
-        let img = objective.composite(&render(&out.scene, &RenderOptions::default()));
+        let img = objective.composite(&render(&out.scene, &opts.fit.render));
         side_by_side(&[objective.target(), &img])
     });
     out.scene.save_svg(&a.output)?;

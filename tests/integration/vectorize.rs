@@ -165,6 +165,75 @@ fn adaptive_beats_painterly_on_a_photo() {
     assert!(mse[0] < mse[1], "adaptive {} painterly {}", mse[0], mse[1]);
 }
 
+/// `--exact-overlaps` reaches vectorize's renders: with no steps the same random paths
+/// come out either way, and each run's error is that of its own rendering of them, as
+/// `diffsvg loss` measures it with and without the option (over RGBA, so ⁴⁄₃ of the
+/// summary's RGB mean where the target and the render over it are opaque).
+#[test]
+fn vectorize_exact_overlaps_scores_the_exact_coverage() {
+    let dir = scratch("vectorize-exact");
+    let target = dir.join("star.png");
+    let star = root().join("svg-samples/06-evenodd-star.svg");
+    let args = [
+        s(&star),
+        "-o",
+        s(&target),
+        "--width",
+        "48",
+        "--background",
+        "white",
+    ];
+    assert!(diffsvg(&[&["render"][..], &args].concat()).status.success());
+    let mut mse = Vec::new();
+    for flag in [None, Some("--exact-overlaps")] {
+        let out = dir.join(format!("out{}.svg", flag.is_some()));
+        let mut args = vec![
+            "vectorize",
+            s(&target),
+            "-o",
+            s(&out),
+            "--mode",
+            "fixed",
+            "--paths",
+            "8",
+            "--seed",
+            "2",
+            "--iters",
+            "0",
+            "--background",
+            "white",
+            "--json",
+        ];
+        args.extend(flag);
+        let summary = json_summary(&diffsvg(&args))["mse"].as_f64().unwrap();
+        let mut args = vec!["loss", s(&out), s(&target), "--background", "white"];
+        args.extend(flag);
+        let loss = diffsvg(&args);
+        assert!(
+            loss.status.success(),
+            "{}",
+            String::from_utf8_lossy(&loss.stderr)
+        );
+        let rgba: f64 = String::from_utf8_lossy(&loss.stdout)
+            .trim()
+            .parse()
+            .unwrap();
+        assert!(
+            (summary - rgba * 4.0 / 3.0).abs() < 1e-6 * summary,
+            "{flag:?}: summary {summary}, loss {rgba}"
+        );
+        mse.push((summary, std::fs::read(&out).unwrap()));
+    }
+    assert_eq!(mse[0].1, mse[1].1, "the same paths either way");
+    // Some of the random paths cross themselves: the two coverages differ there.
+    assert!(
+        (mse[0].0 - mse[1].0).abs() > 1e-5 * mse[0].0,
+        "clamped {}, exact {}",
+        mse[0].0,
+        mse[1].0
+    );
+}
+
 #[test]
 fn vectorize_bad_inputs_fail_cleanly() {
     let dir = scratch("vectorize-bad");
