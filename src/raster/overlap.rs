@@ -1535,9 +1535,13 @@ pub(crate) fn rings_cannot_overlap(pts: &[Point], rings: &[(usize, usize)]) -> b
         let (s, n) = rings[i];
         &pts[s..s + n]
     };
-    let convex: Vec<bool> = (0..rings.len()).map(|i| ring_is_convex(ring(i))).collect();
-    if !(0..rings.len()).all(|i| convex[i] || ring_is_y_monotone_simple(ring(i))) {
-        return false;
+    let mut convex = Vec::with_capacity(rings.len());
+    for i in 0..rings.len() {
+        let c = ring_is_convex(ring(i));
+        if !c && !ring_is_y_monotone_simple(ring(i)) {
+            return false;
+        }
+        convex.push(c);
     }
     if rings.len() == 1 {
         return true;

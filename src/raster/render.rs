@@ -455,9 +455,7 @@ impl<'a> BandRenderer<'a> {
             }
         }
     }
-}
 
-impl BandRenderer<'_> {
     /// [`draw`](Self::draw)'s row `r` of a solid item without exact cells, onto `dst`
     /// (device pixels from `(x0, y)`, as many as the row has inside the canvas): the
     /// running sum, the coverages and the compositing only over the stretches of eight
@@ -476,6 +474,9 @@ impl BandRenderer<'_> {
         let out = &mut self.row[..w];
         let spans = &mut self.scratch.spans;
         spans.clear();
+        // `running_sum_clearing`'s loop, skipping runs where the sum stays zero. One
+        // function for both with a switch measured slower (masking + text 1.33× → 1.29×
+        // resvg by default), so the two loops are kept apart.
         let mut s = 0.0f32;
         // The start of the stretch being drawn, if any.
         let mut open: Option<usize> = None;
